@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# The checks CI runs: formatting, then the whole test suite on lavapipe.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash ci/setup.sh
+if cargo fmt --version >/dev/null 2>&1; then
+    cargo fmt --all -- --check
+else
+    echo "ci/test.sh: rustfmt not installed, format check skipped"
+fi
+cargo test --all-targets

@@ -1,0 +1,12 @@
+// Scene bindings, group 0, shared by every pass that traces rays.
+// Keep in sync with SceneBuffers::layout in src/render/mod.rs.
+#import shared/types
+
+@group(0) @binding(0) var<storage, read> nodes: array<BvhNode>;
+@group(0) @binding(1) var<storage, read> tri_positions: array<vec4f>;
+@group(0) @binding(2) var<storage, read> tri_shading: array<TriShading>;
+@group(0) @binding(3) var<storage, read> materials: array<Material>;
+@group(0) @binding(4) var<storage, read> texels: array<u32>;
+@group(0) @binding(5) var<storage, read> lights: array<Light>;
+@group(0) @binding(6) var<storage, read> env: array<f32>;
+@group(0) @binding(7) var<uniform> scene: SceneInfo;

@@ -1,0 +1,95 @@
+// GPU structs shared by every pass. Keep in sync with src/render/layout.rs.
+
+const PI: f32 = 3.14159265358979;
+const INV_PI: f32 = 0.318309886183791;
+const NONE: u32 = 0xffffffffu;
+
+// BVH node: a leaf when count > 0 (triangles left_first .. left_first+count), otherwise an
+// inner node whose children are left_first and left_first + 1.
+struct BvhNode {
+    bmin: vec3f,
+    left_first: u32,
+    bmax: vec3f,
+    count: u32,
+}
+
+// Shading data of one triangle (BVH order). light: index into lights[] when emissive, else NONE.
+struct TriShading {
+    n0: vec4f,
+    n1: vec4f,
+    n2: vec4f,
+    uv01: vec4f,
+    uv2: vec2f,
+    material: u32,
+    light: u32,
+}
+
+// A texture as used by one material slot. offset: first texel in texels[], NONE when absent.
+// flags: bits 0-1 wrap s, bits 2-3 wrap t (0 repeat, 1 clamp, 2 mirror), bit 4 sRGB, bit 5 nearest.
+struct TexRef {
+    offset: u32,
+    width: u32,
+    height: u32,
+    flags: u32,
+}
+
+struct Material {
+    base_color: vec4f,
+    emissive: vec3f,
+    metallic: f32,
+    roughness: f32,
+    double_sided: u32,
+    _pad0: u32,
+    _pad1: u32,
+    base_color_tex: TexRef,
+    mr_tex: TexRef,
+    emissive_tex: TexRef,
+    // Per slot (base color, metallic-roughness, emissive) a 2x3 UV transform, two rows each.
+    uv_xf: array<vec4f, 6>,
+}
+
+const LIGHT_POINT: u32 = 0u;
+const LIGHT_SPOT: u32 = 1u;
+const LIGHT_DIRECTIONAL: u32 = 2u;
+const LIGHT_AREA: u32 = 3u;
+const LIGHT_ENV: u32 = 4u;
+
+// intensity: color x intensity (cd for point/spot, lux for directional). direction: where the
+// light points (spot, directional). tri: the emissive triangle of an area light.
+// pmf / cdf: probability of choosing this light for NEE, and the running sum up to it.
+struct Light {
+    position: vec3f,
+    kind: u32,
+    direction: vec3f,
+    tri: u32,
+    intensity: vec3f,
+    range: f32,
+    spot_scale: f32,
+    spot_offset: f32,
+    pmf: f32,
+    cdf: f32,
+}
+
+// Scene-wide constants. env[] holds RGB radiance (3 floats per texel), then the marginal CDF
+// over rows (height+1 floats), then one conditional CDF per row (width+1 floats each).
+struct SceneInfo {
+    n_nodes: u32,
+    n_tris: u32,
+    n_lights: u32,
+    env_light: u32,
+    env_width: u32,
+    env_height: u32,
+    env_marginal: u32,
+    env_conditional: u32,
+    env_scale: f32,
+    env_total: f32,
+    scene_radius: f32,
+    _pad: u32,
+}
+
+struct Hit {
+    t: f32,
+    tri: u32,
+    b1: f32,
+    b2: f32,
+}

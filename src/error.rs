@@ -1,0 +1,53 @@
+//! The library's error type.
+use std::path::PathBuf;
+
+/// Everything that can go wrong in psrestir, with enough context to act on.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A scene, image or task file is unreadable or invalid.
+    #[error("{}: {msg}", path.display())]
+    File {
+        /// The file at fault.
+        path: PathBuf,
+        /// What is wrong with it.
+        msg: String,
+    },
+    /// No usable GPU adapter.
+    #[error("{0}")]
+    NoAdapter(String),
+    /// The adapter lacks a feature or limit that psrestir needs.
+    #[error("GPU adapter unsuitable: {0}")]
+    Unsuitable(String),
+    /// A GPU operation failed (validation error, out of memory, device lost).
+    #[error("GPU error in {label}: {msg}")]
+    Gpu {
+        /// The pass or buffer involved.
+        label: String,
+        /// What wgpu reported.
+        msg: String,
+    },
+    /// A WGSL shader failed to compose or validate.
+    #[error("shader {name}: {msg}")]
+    Shader {
+        /// The pass the shader belongs to.
+        name: String,
+        /// The parse or validation error.
+        msg: String,
+    },
+    /// An argument is out of range or inconsistent.
+    #[error("{0}")]
+    Invalid(String),
+}
+
+impl Error {
+    /// Shorthand for [`Error::File`].
+    pub fn file(path: impl Into<PathBuf>, msg: impl Into<String>) -> Self {
+        Error::File {
+            path: path.into(),
+            msg: msg.into(),
+        }
+    }
+}
+
+/// Result with the library's [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -1,0 +1,361 @@
+//! Headless device creation, named buffers, compute passes and readback.
+//!
+//! On Linux the Vulkan backend is chosen explicitly: without it wgpu may pick a GL adapter with
+//! far fewer features and say nothing.
+
+pub mod shaders;
+
+use crate::{Error, Result};
+use std::sync::{Arc, Mutex};
+use wgpu::util::DeviceExt;
+
+/// Storage buffers that the largest pass binds at once (scene group plus pass group).
+pub const REQUIRED_STORAGE_BUFFERS: u32 = 12;
+
+const INSTALL_HINT: &str = "psrestir needs a Vulkan driver (or Metal/DX12 on other systems). \
+On Debian/Ubuntu without a GPU, install the CPU driver lavapipe: \
+`sudo apt-get install mesa-vulkan-drivers libvulkan1` (or run `bash ci/setup.sh`).";
+
+/// A device and queue with the adapter they came from.
+#[derive(Clone)]
+pub struct Gpu {
+    /// The wgpu device.
+    pub device: wgpu::Device,
+    /// Its queue.
+    pub queue: wgpu::Queue,
+    /// Adapter name, backend and driver.
+    pub info: wgpu::AdapterInfo,
+    /// Uncaptured errors, recorded instead of panicking; checked after each submission.
+    errors: Arc<Mutex<Vec<String>>>,
+}
+
+impl std::fmt::Debug for Gpu {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Gpu({})", self.describe())
+    }
+}
+
+fn backends() -> wgpu::Backends {
+    if let Ok(s) = std::env::var("WGPU_BACKEND") {
+        return wgpu::Backends::from_comma_list(&s);
+    }
+    if cfg!(target_os = "linux") || cfg!(target_os = "windows") {
+        wgpu::Backends::VULKAN
+    } else {
+        wgpu::Backends::PRIMARY
+    }
+}
+
+impl Gpu {
+    /// Create a headless device on the best adapter of the platform's primary backend.
+    pub fn new() -> Result<Gpu> {
+        pollster::block_on(Self::new_async())
+    }
+
+    async fn new_async() -> Result<Gpu> {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.backends = backends();
+        let instance = wgpu::Instance::new(desc);
+        let adapter = instance
+            .request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                force_fallback_adapter: false,
+                compatible_surface: None,
+                ..Default::default()
+            })
+            .await
+            .map_err(|e| Error::NoAdapter(format!("no GPU adapter found ({e}). {INSTALL_HINT}")))?;
+        let info = adapter.get_info();
+        let limits = Self::required_limits(&adapter.limits())?;
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("psrestir"),
+                required_features: wgpu::Features::empty(),
+                required_limits: limits,
+                ..Default::default()
+            })
+            .await
+            .map_err(|e| Error::Unsuitable(format!("{}: {e}", info.name)))?;
+        let gpu = Gpu::from_device(device, queue, info);
+        log::info!("GPU adapter: {}", gpu.describe());
+        Ok(gpu)
+    }
+
+    /// The limits psrestir asks for: the defaults, raised to what the adapter offers for
+    /// buffer sizes, and enough storage buffers per stage.
+    pub fn required_limits(adapter: &wgpu::Limits) -> Result<wgpu::Limits> {
+        if adapter.max_storage_buffers_per_shader_stage < REQUIRED_STORAGE_BUFFERS {
+            return Err(Error::Unsuitable(format!(
+                "the adapter allows {} storage buffers per shader stage, psrestir needs {}",
+                adapter.max_storage_buffers_per_shader_stage, REQUIRED_STORAGE_BUFFERS
+            )));
+        }
+        Ok(wgpu::Limits {
+            max_storage_buffers_per_shader_stage: REQUIRED_STORAGE_BUFFERS,
+            max_storage_buffer_binding_size: adapter.max_storage_buffer_binding_size,
+            max_buffer_size: adapter.max_buffer_size,
+            max_compute_workgroups_per_dimension: adapter.max_compute_workgroups_per_dimension,
+            ..wgpu::Limits::default()
+        })
+    }
+
+    /// Wrap a device that the application already owns.
+    pub fn from_device(device: wgpu::Device, queue: wgpu::Queue, info: wgpu::AdapterInfo) -> Gpu {
+        let errors: Arc<Mutex<Vec<String>>> = Arc::default();
+        let sink = errors.clone();
+        device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+            if let Ok(mut v) = sink.lock() {
+                v.push(e.to_string());
+            }
+        }));
+        Gpu {
+            device,
+            queue,
+            info,
+            errors,
+        }
+    }
+
+    /// "name (backend, driver driver_info)".
+    pub fn describe(&self) -> String {
+        format!(
+            "{} ({:?}, {} {})",
+            self.info.name, self.info.backend, self.info.driver, self.info.driver_info
+        )
+    }
+
+    /// Return the first uncaptured error since the last call, if any.
+    pub fn check(&self, label: &str) -> Result<()> {
+        let mut v = self.errors.lock().map_err(|_| Error::Gpu {
+            label: label.into(),
+            msg: "error sink poisoned".into(),
+        })?;
+        if let Some(first) = v.first().cloned() {
+            v.clear();
+            return Err(Error::Gpu {
+                label: label.into(),
+                msg: first,
+            });
+        }
+        Ok(())
+    }
+
+    /// A storage buffer initialised with `data` (at least 16 bytes, so that empty arrays bind).
+    pub fn storage(&self, label: &str, data: &[u8], extra: wgpu::BufferUsages) -> wgpu::Buffer {
+        let mut bytes = data.to_vec();
+        if bytes.len() < 16 {
+            bytes.resize(16, 0);
+        }
+        while bytes.len() % 4 != 0 {
+            bytes.push(0);
+        }
+        self.device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: &bytes,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
+            })
+    }
+
+    /// A zeroed storage buffer of `size` bytes that can be copied from.
+    pub fn storage_zeroed(&self, label: &str, size: u64) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: size.max(16).next_multiple_of(4),
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// A uniform buffer holding `data`.
+    pub fn uniform(&self, label: &str, data: &[u8]) -> wgpu::Buffer {
+        self.device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: data,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            })
+    }
+
+    /// Wait for all submitted work.
+    pub fn wait(&self, label: &str) -> Result<()> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| Error::Gpu {
+                label: label.into(),
+                msg: e.to_string(),
+            })?;
+        self.check(label)
+    }
+
+    /// Copy `buffer` back to the CPU (waits for the GPU).
+    pub fn read_buffer(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>> {
+        let label = "readback";
+        let size = buffer.size();
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback staging"),
+            size,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("readback"),
+            });
+        enc.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+        self.queue.submit([enc.finish()]);
+        let slice = staging.slice(..);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.wait(label)?;
+        rx.recv()
+            .map_err(|e| Error::Gpu {
+                label: label.into(),
+                msg: e.to_string(),
+            })?
+            .map_err(|e| Error::Gpu {
+                label: label.into(),
+                msg: e.to_string(),
+            })?;
+        let data = slice
+            .get_mapped_range()
+            .map_err(|e| Error::Gpu {
+                label: label.into(),
+                msg: e.to_string(),
+            })?
+            .to_vec();
+        staging.unmap();
+        Ok(data)
+    }
+
+    /// Read a buffer as a vector of plain-old-data values.
+    pub fn read_pod<T: bytemuck::Pod>(&self, buffer: &wgpu::Buffer) -> Result<Vec<T>> {
+        let bytes = self.read_buffer(buffer)?;
+        let n = bytes.len() / std::mem::size_of::<T>();
+        Ok(bytemuck::pod_collect_to_vec(
+            &bytes[..n * std::mem::size_of::<T>()],
+        ))
+    }
+
+    /// Compile a compute pass from its WGSL file (composed with `shaders/shared`), with the
+    /// given bind group layouts, catching validation errors as [`Error::Shader`].
+    pub fn compute_pipeline(
+        &self,
+        pass: &str,
+        layouts: &[&wgpu::BindGroupLayout],
+    ) -> Result<wgpu::ComputePipeline> {
+        let source = shaders::compose(pass)?;
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = self
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(pass),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
+            });
+        let layouts: Vec<Option<&wgpu::BindGroupLayout>> =
+            layouts.iter().map(|l| Some(*l)).collect();
+        let layout = self
+            .device
+            .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(pass),
+                bind_group_layouts: &layouts,
+                immediate_size: 0,
+            });
+        let pipeline = self
+            .device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(pass),
+                layout: Some(&layout),
+                module: &module,
+                entry_point: Some("main"),
+                compilation_options: Default::default(),
+                cache: None,
+            });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(Error::Shader {
+                name: pass.into(),
+                msg: e.to_string(),
+            });
+        }
+        Ok(pipeline)
+    }
+
+    /// A bind group layout of storage buffers (read-only unless listed in `writable`) and
+    /// uniform buffers, bindings numbered in order.
+    pub fn layout(&self, label: &str, kinds: &[Binding]) -> wgpu::BindGroupLayout {
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = kinds
+            .iter()
+            .enumerate()
+            .map(|(i, k)| wgpu::BindGroupLayoutEntry {
+                binding: i as u32,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: match k {
+                        Binding::Uniform => wgpu::BufferBindingType::Uniform,
+                        Binding::Storage => wgpu::BufferBindingType::Storage { read_only: true },
+                        Binding::StorageRw => wgpu::BufferBindingType::Storage { read_only: false },
+                    },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            })
+            .collect();
+        self.device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(label),
+                entries: &entries,
+            })
+    }
+
+    /// A bind group binding whole buffers in order.
+    pub fn bind_group(
+        &self,
+        label: &str,
+        layout: &wgpu::BindGroupLayout,
+        buffers: &[&wgpu::Buffer],
+    ) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout,
+            entries: &entries,
+        })
+    }
+}
+
+/// Kind of a buffer binding in a [`Gpu::layout`].
+#[derive(Clone, Copy, Debug)]
+pub enum Binding {
+    /// `var<uniform>`.
+    Uniform,
+    /// `var<storage, read>`.
+    Storage,
+    /// `var<storage, read_write>`.
+    StorageRw,
+}
+
+/// Workgroups for `n` invocations of size `wg`, as a 2D grid that respects the per-dimension
+/// limit (lavapipe: 65535). Shaders recover the linear index as `id.x + id.y * stride`, where
+/// stride is `grid.0 * wg`.
+pub fn grid_2d(n: u32, wg: u32, max_dim: u32) -> (u32, u32) {
+    let groups = n.div_ceil(wg).max(1);
+    if groups <= max_dim {
+        (groups, 1)
+    } else {
+        let y = groups.div_ceil(max_dim);
+        (groups.div_ceil(y), y)
+    }
+}

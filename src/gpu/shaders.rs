@@ -1,0 +1,143 @@
+//! WGSL composition and validation.
+//!
+//! Each pass is one file under `shaders/`, named after the pass. A line `#import shared/NAME`
+//! pastes `shaders/shared/NAME.wgsl` in place, once per composed module (later imports of the
+//! same file are dropped), so shared code stays in one place. The composed source is validated
+//! with naga by `cargo test` without any GPU.
+use crate::{Error, Result};
+
+macro_rules! sources {
+    ($($name:literal),* $(,)?) => {
+        &[$(($name, include_str!(concat!("../../shaders/", $name, ".wgsl")))),*]
+    };
+}
+
+/// Every WGSL file of the project: (path under `shaders/` without extension, source).
+pub const SOURCES: &[(&str, &str)] = sources!(
+    "shared/types",
+    "shared/rng",
+    "shared/sampling",
+    "shared/scene",
+    "shared/bvh",
+    "shared/texture",
+    "shared/brdf",
+    "shared/lights",
+    "shared/camera",
+    "shared/integrator",
+    "render",
+    "trace_rays",
+);
+
+/// The passes (top-level WGSL files with an entry point `main`).
+pub fn passes() -> impl Iterator<Item = &'static str> {
+    SOURCES
+        .iter()
+        .map(|(n, _)| *n)
+        .filter(|n| !n.starts_with("shared/"))
+}
+
+fn source(name: &str) -> Option<&'static str> {
+    SOURCES.iter().find(|(n, _)| *n == name).map(|(_, s)| *s)
+}
+
+/// The full WGSL of a pass with its imports pasted in.
+pub fn compose(pass: &str) -> Result<String> {
+    let mut out = String::new();
+    let mut seen = Vec::new();
+    include(pass, &mut out, &mut seen, 0)?;
+    Ok(out)
+}
+
+fn include(name: &str, out: &mut String, seen: &mut Vec<String>, depth: u32) -> Result<()> {
+    if seen.iter().any(|s| s == name) {
+        return Ok(());
+    }
+    if depth > 16 {
+        return Err(Error::Shader {
+            name: name.into(),
+            msg: "imports nested more than 16 deep".into(),
+        });
+    }
+    seen.push(name.to_string());
+    let src = source(name).ok_or_else(|| Error::Shader {
+        name: name.into(),
+        msg: "no such WGSL file under shaders/".into(),
+    })?;
+    out.push_str(&format!("// ---- {name}.wgsl\n"));
+    for line in src.lines() {
+        if let Some(dep) = line.trim().strip_prefix("#import ") {
+            include(dep.trim(), out, seen, depth + 1)?;
+            out.push_str(&format!("// ---- (back in) {name}.wgsl\n"));
+        } else {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    Ok(())
+}
+
+/// Parse and validate a composed pass with naga; errors carry the pass name and location.
+pub fn validate(pass: &str) -> Result<naga::Module> {
+    let src = compose(pass)?;
+    let module = naga::front::wgsl::parse_str(&src).map_err(|e| Error::Shader {
+        name: pass.into(),
+        msg: e.emit_to_string(&src),
+    })?;
+    let mut validator = naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::empty(),
+    );
+    validator.validate(&module).map_err(|e| Error::Shader {
+        name: pass.into(),
+        msg: e.emit_to_string(&src),
+    })?;
+    if !module.entry_points.iter().any(|e| e.name == "main") {
+        return Err(Error::Shader {
+            name: pass.into(),
+            msg: "no entry point `main`".into(),
+        });
+    }
+    Ok(module)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_pass_validates_with_naga() {
+        let mut n = 0;
+        for pass in passes() {
+            if let Err(e) = validate(pass) {
+                panic!("{e}");
+            }
+            n += 1;
+        }
+        assert!(n >= 2);
+    }
+
+    #[test]
+    fn every_wgsl_file_is_registered() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/shaders");
+        let mut files = Vec::new();
+        for sub in ["", "shared/"] {
+            for e in std::fs::read_dir(format!("{dir}/{sub}")).unwrap() {
+                let p = e.unwrap().path();
+                if p.extension().is_some_and(|x| x == "wgsl") {
+                    let stem = p.file_stem().unwrap().to_string_lossy().to_string();
+                    files.push(format!("{sub}{stem}"));
+                }
+            }
+        }
+        for f in files {
+            assert!(source(&f).is_some(), "shaders/{f}.wgsl is not in SOURCES");
+        }
+    }
+
+    #[test]
+    fn a_broken_shader_is_reported_with_its_name() {
+        let src = "fn main( { }";
+        assert!(naga::front::wgsl::parse_str(src).is_err());
+        assert!(matches!(compose("no_such_pass"), Err(Error::Shader { .. })));
+    }
+}

@@ -1,0 +1,141 @@
+//! Float images and their output: OpenEXR (linear) or PNG (sRGB), written atomically.
+use crate::{Error, Result};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// A linear RGB float image, row 0 at the top.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Pixels, row-major.
+    pub rgb: Vec<[f32; 3]>,
+}
+
+/// Linear to sRGB transfer function.
+pub fn linear_to_srgb(x: f32) -> f32 {
+    let x = x.clamp(0.0, 1.0);
+    if x <= 0.0031308 {
+        12.92 * x
+    } else {
+        1.055 * x.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// sRGB to linear transfer function.
+pub fn srgb_to_linear(x: f32) -> f32 {
+    if x <= 0.04045 {
+        x / 12.92
+    } else {
+        ((x + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+fn temp_path(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into());
+    path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
+}
+
+/// Write `bytes` to `path` through a temporary file and a rename, so that `path` is never
+/// seen half-written.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_atomic_with(path, |tmp| {
+        let mut f = std::fs::File::create(tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()
+    })
+}
+
+/// Run `write` on a temporary path beside `path`, then rename it over `path`.
+pub fn write_atomic_with(
+    path: &Path,
+    write: impl FnOnce(&Path) -> std::io::Result<()>,
+) -> Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
+    }
+    let tmp = temp_path(path);
+    let result = write(&tmp).and_then(|_| std::fs::rename(&tmp, path));
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(Error::file(path, e.to_string()));
+    }
+    Ok(())
+}
+
+impl Image {
+    /// A black image.
+    pub fn new(width: u32, height: u32) -> Image {
+        Image {
+            width,
+            height,
+            rgb: vec![[0.0; 3]; (width * height) as usize],
+        }
+    }
+
+    /// Pixel at (x, y).
+    pub fn at(&self, x: u32, y: u32) -> [f32; 3] {
+        self.rgb[(y * self.width + x) as usize]
+    }
+
+    /// Mean of all pixels.
+    pub fn mean(&self) -> [f64; 3] {
+        let mut s = [0f64; 3];
+        for p in &self.rgb {
+            for c in 0..3 {
+                s[c] += p[c] as f64;
+            }
+        }
+        let n = self.rgb.len().max(1) as f64;
+        s.map(|v| v / n)
+    }
+
+    /// Save as `.exr` (linear float) or `.png` (sRGB 8-bit), chosen by the extension.
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let ext = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
+        match ext.as_str() {
+            "exr" => self.save_exr(path),
+            "png" => self.save_png(path),
+            _ => Err(Error::file(
+                path,
+                "output must end in .exr (linear) or .png (sRGB)",
+            )),
+        }
+    }
+
+    fn save_exr(&self, path: &Path) -> Result<()> {
+        let (w, h) = (self.width as usize, self.height as usize);
+        write_atomic_with(path, |tmp| {
+            exr::prelude::write_rgb_file(tmp, w, h, |x, y| {
+                let p = self.rgb[y * w + x];
+                (p[0], p[1], p[2])
+            })
+            .map_err(std::io::Error::other)
+        })
+    }
+
+    /// The image as sRGB-encoded 8-bit RGB bytes.
+    pub fn to_srgb8(&self) -> Vec<u8> {
+        self.rgb
+            .iter()
+            .flat_map(|p| p.map(|v| (linear_to_srgb(v) * 255.0 + 0.5) as u8))
+            .collect()
+    }
+
+    fn save_png(&self, path: &Path) -> Result<()> {
+        let img = image::RgbImage::from_raw(self.width, self.height, self.to_srgb8())
+            .ok_or_else(|| Error::file(path, "image size does not match its pixels"))?;
+        write_atomic_with(path, |tmp| {
+            img.save_with_format(tmp, image::ImageFormat::Png)
+                .map_err(std::io::Error::other)
+        })
+    }
+}

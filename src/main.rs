@@ -1,0 +1,242 @@
+//! The `psrestir` command-line tool.
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use psrestir::gpu::Gpu;
+use psrestir::render::{RenderSettings, Renderer, Techniques};
+use psrestir::scene::{self, EnvMap};
+use std::path::PathBuf;
+
+#[derive(Parser)]
+#[command(
+    name = "psrestir",
+    version,
+    about = "Inverse texture optimization with parameter-space ReSTIR gradients, on wgpu"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum TechniqueArg {
+    /// Light and BSDF sampling combined by MIS (power heuristic).
+    Mis,
+    /// Light sampling (next-event estimation) only.
+    Nee,
+    /// BSDF sampling only (delta lights still use light sampling).
+    Bsdf,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a glTF scene with direct lighting.
+    Render {
+        /// The scene (.gltf or .glb).
+        scene: PathBuf,
+        /// Camera, by name or index (default: the first).
+        #[arg(long)]
+        camera: Option<String>,
+        /// Samples per pixel.
+        #[arg(long, default_value_t = 64)]
+        spp: u32,
+        /// Image size WxH (default: 512 wide, height from the camera's aspect ratio).
+        #[arg(long, value_parser = parse_size)]
+        size: Option<(u32, u32)>,
+        /// Environment light: an equirectangular .exr or .hdr image.
+        #[arg(long)]
+        env: Option<PathBuf>,
+        /// Multiplier for the environment light.
+        #[arg(long, default_value_t = 1.0)]
+        env_scale: f32,
+        /// Random seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u32,
+        /// Sampling techniques for area and environment lights.
+        #[arg(long, value_enum, default_value = "mis")]
+        technique: TechniqueArg,
+        /// Output image: .exr (linear) or .png (sRGB).
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+    /// Print what a scene holds: triangles, materials, textures, cameras, lights.
+    Info {
+        /// The scene (.gltf or .glb).
+        scene: PathBuf,
+    },
+    /// Regenerate the bundled scenes (scenes/default).
+    #[command(hide = true)]
+    MakeScenes {
+        /// Output folder.
+        #[arg(default_value = "scenes")]
+        dir: PathBuf,
+    },
+}
+
+fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("`{s}` is not WxH, e.g. 256x256"))?;
+    let w: u32 = w
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad width in `{s}`"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad height in `{s}`"))?;
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(format!("size `{s}` out of range (1..16384)"));
+    }
+    Ok((w, h))
+}
+
+fn main() {
+    // Mesa's Vulkan loader complains on stderr when this is unset (headless machines, CI).
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
+    }
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("psrestir=info"))
+        .format_timestamp(None)
+        .init();
+    let cli = Cli::parse();
+    if let Err(e) = run(cli) {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Render {
+            scene: path,
+            camera,
+            spp,
+            size,
+            env,
+            env_scale,
+            seed,
+            technique,
+            output,
+        } => {
+            let ext = output
+                .extension()
+                .map(|e| e.to_string_lossy().to_ascii_lowercase());
+            if !matches!(ext.as_deref(), Some("exr") | Some("png")) {
+                bail!(
+                    "{}: output must end in .exr (linear) or .png (sRGB)",
+                    output.display()
+                );
+            }
+            if spp == 0 {
+                bail!("--spp must be at least 1");
+            }
+            if !(env_scale.is_finite() && env_scale >= 0.0) {
+                bail!("--env-scale must be a finite number >= 0");
+            }
+            let mut sc = scene::load(&path)?;
+            if let Some(env) = env {
+                let mut map = EnvMap::load(&env)?;
+                map.scale = env_scale;
+                sc.env = Some(map);
+            }
+            let cam = sc.camera(camera.as_deref())?;
+            let (width, height) = size.unwrap_or_else(|| {
+                let aspect = sc.cameras[cam].aspect.unwrap_or(1.0).clamp(0.05, 20.0);
+                (512, ((512.0 / aspect).round() as u32).max(1))
+            });
+            let gpu = Gpu::new()?;
+            let renderer = Renderer::new(&gpu, &sc)
+                .with_context(|| format!("preparing {} for the GPU", path.display()))?;
+            let bar = ProgressBar::new(spp as u64).with_style(
+                ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} spp, ETA {eta}")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            );
+            bar.set_message("rendering");
+            let out = renderer.render(
+                &RenderSettings {
+                    width,
+                    height,
+                    spp,
+                    seed,
+                    camera: cam,
+                    techniques: match technique {
+                        TechniqueArg::Mis => Techniques::Mis,
+                        TechniqueArg::Nee => Techniques::NeeOnly,
+                        TechniqueArg::Bsdf => Techniques::BsdfOnly,
+                    },
+                },
+                |done| bar.set_position(done as u64),
+            )?;
+            bar.finish_and_clear();
+            out.image.save(&output)?;
+            if out.dropped > 0 {
+                log::warn!("{} non-finite samples were dropped", out.dropped);
+            }
+            println!(
+                "wrote {} ({width}x{height}, {spp} spp, camera `{}`) in {:.2} s: {:.2} M rays/s \
+                 ({} camera, {} shadow, {} BSDF rays; {} triangles)",
+                output.display(),
+                sc.cameras[cam].name,
+                out.seconds,
+                out.rays_per_second() / 1e6,
+                out.camera_rays,
+                out.shadow_rays,
+                out.bsdf_rays,
+                sc.triangles.len()
+            );
+        }
+        Command::Info { scene: path } => {
+            let sc = scene::load(&path)?;
+            println!("{}", path.display());
+            println!("  triangles: {}", sc.triangles.len());
+            println!("  materials: {}", sc.materials.len());
+            for m in &sc.materials {
+                println!(
+                    "    {}: base color {:?}{}, metallic {}, roughness {}{}, emissive {:?}{}",
+                    m.name,
+                    m.base_color.to_array(),
+                    if m.base_color_texture.is_some() {
+                        " x texture"
+                    } else {
+                        ""
+                    },
+                    m.metallic,
+                    m.roughness,
+                    if m.metallic_roughness_texture.is_some() {
+                        " x texture"
+                    } else {
+                        ""
+                    },
+                    m.emissive.to_array(),
+                    if m.double_sided { ", double-sided" } else { "" },
+                );
+            }
+            println!("  images: {}", sc.images.len());
+            for i in &sc.images {
+                println!("    {}: {}x{}", i.name, i.width, i.height);
+            }
+            println!("  cameras: {}", sc.cameras.len());
+            for (i, c) in sc.cameras.iter().enumerate() {
+                println!("    {i}: {} (yfov {:.3} rad)", c.name, c.yfov);
+            }
+            println!("  punctual lights: {}", sc.lights.len());
+            for l in &sc.lights {
+                println!(
+                    "    {}: {:?}, intensity {:?}",
+                    l.name,
+                    l.kind,
+                    l.intensity.to_array()
+                );
+            }
+            for w in &sc.warnings {
+                println!("  warning: {w}");
+            }
+        }
+        Command::MakeScenes { dir } => {
+            scene::bundled::write_default_scene(&dir.join("default"))?;
+            println!("wrote {}", dir.join("default").display());
+        }
+    }
+    Ok(())
+}

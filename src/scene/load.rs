@@ -1,0 +1,511 @@
+//! glTF 2.0 loading (`.gltf` and `.glb`) into a world-space [`Scene`].
+//!
+//! External files are read only from the scene's folder and below: absolute paths, `..` and
+//! URIs with a scheme other than `data:` are refused.
+use super::{
+    images, Camera, Material, PunctualKind, PunctualLight, Scene, TextureSlot, Triangle, Wrap,
+};
+use crate::{Error, Result};
+use base64::Engine;
+use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
+use std::collections::HashMap;
+use std::path::{Component, Path, PathBuf};
+
+/// Largest scene, buffer or image file psrestir reads (bytes).
+pub const MAX_FILE_BYTES: u64 = 4 << 30;
+/// Most triangles psrestir loads.
+pub const MAX_TRIANGLES: usize = 64 << 20;
+
+/// Load a `.gltf` or `.glb` file.
+pub fn load(path: &Path) -> Result<Scene> {
+    let bytes = read_file(path)?;
+    let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| gltf_error(path, e))?;
+    let base = path
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."));
+    let mut loader = Loader {
+        path,
+        base: &base,
+        doc: &gltf.document,
+        blob: gltf.blob.as_deref(),
+        buffers: Vec::new(),
+        scene: Scene {
+            source: path.to_path_buf(),
+            ..Default::default()
+        },
+        image_map: HashMap::new(),
+        default_material: None,
+    };
+    loader.load_buffers()?;
+    loader.load_materials()?;
+    loader.load_nodes()?;
+    for w in &loader.scene.warnings {
+        log::warn!("{}: {w}", path.display());
+    }
+    Ok(loader.scene)
+}
+
+fn read_file(path: &Path) -> Result<Vec<u8>> {
+    let meta = std::fs::metadata(path).map_err(|e| Error::file(path, e.to_string()))?;
+    if meta.len() > MAX_FILE_BYTES {
+        return Err(Error::file(
+            path,
+            format!(
+                "file is {} bytes, over the limit of {MAX_FILE_BYTES}",
+                meta.len()
+            ),
+        ));
+    }
+    std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))
+}
+
+fn gltf_error(path: &Path, e: gltf::Error) -> Error {
+    let msg = match e {
+        gltf::Error::Validation(errs) => {
+            let list: Vec<String> = errs
+                .iter()
+                .take(5)
+                .map(|(p, err)| format!("{}: {err}", p.as_str()))
+                .collect();
+            format!("invalid glTF: {}", list.join("; "))
+        }
+        gltf::Error::Deserialize(e) => format!("malformed glTF JSON: {e}"),
+        gltf::Error::Binary(e) => format!("malformed GLB: {e:?}"),
+        other => format!("cannot read glTF: {other}"),
+    };
+    Error::file(path, msg)
+}
+
+struct Loader<'a> {
+    path: &'a Path,
+    base: &'a Path,
+    doc: &'a gltf::Document,
+    blob: Option<&'a [u8]>,
+    buffers: Vec<Vec<u8>>,
+    scene: Scene,
+    image_map: HashMap<usize, usize>,
+    default_material: Option<u32>,
+}
+
+fn percent_decode(s: &str) -> String {
+    let b = s.as_bytes();
+    let hex = |c: u8| (c as char).to_digit(16).map(|d| d as u8);
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%' && i + 2 < b.len() {
+            if let (Some(h), Some(l)) = (hex(b[i + 1]), hex(b[i + 2])) {
+                out.push(h * 16 + l);
+                i += 3;
+                continue;
+            }
+        }
+        out.push(b[i]);
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+impl<'a> Loader<'a> {
+    fn err(&self, msg: impl Into<String>) -> Error {
+        Error::file(self.path, msg)
+    }
+
+    /// Bytes behind a URI: a base64 data URI or a file inside the scene's folder.
+    fn read_uri(&self, uri: &str, what: &str) -> Result<Vec<u8>> {
+        if let Some(rest) = uri.strip_prefix("data:") {
+            let (header, payload) = rest
+                .split_once(',')
+                .ok_or_else(|| self.err(format!("{what}: malformed data URI")))?;
+            if !header.ends_with(";base64") {
+                return Err(self.err(format!("{what}: data URI is not base64")));
+            }
+            return base64::engine::general_purpose::STANDARD
+                .decode(payload.trim())
+                .map_err(|e| self.err(format!("{what}: bad base64 in data URI: {e}")));
+        }
+        let first_sep = uri.find('/').unwrap_or(uri.len());
+        if uri[..first_sep].contains(':') {
+            return Err(self.err(format!(
+                "{what}: URI `{uri}` refused: psrestir reads only files beside the scene and data URIs"
+            )));
+        }
+        let rel = PathBuf::from(percent_decode(uri));
+        if rel.is_absolute()
+            || uri.starts_with('/')
+            || uri.starts_with('\\')
+            || rel
+                .components()
+                .any(|c| !matches!(c, Component::Normal(_) | Component::CurDir))
+        {
+            return Err(self.err(format!(
+                "{what}: URI `{uri}` refused: it leaves the scene's folder"
+            )));
+        }
+        let full = self.base.join(&rel);
+        // Symbolic links must not lead out of the folder either.
+        if let (Ok(cb), Ok(cf)) = (self.base.canonicalize(), full.canonicalize()) {
+            if !cf.starts_with(&cb) {
+                return Err(self.err(format!(
+                    "{what}: URI `{uri}` refused: it resolves outside the scene's folder"
+                )));
+            }
+        }
+        read_file(&full).map_err(|e| match e {
+            Error::File { msg, .. } => self.err(format!("{what} `{}`: {msg}", full.display())),
+            other => other,
+        })
+    }
+
+    fn load_buffers(&mut self) -> Result<()> {
+        for b in self.doc.buffers() {
+            let what = format!("buffer {}", b.index());
+            let data = match b.source() {
+                gltf::buffer::Source::Bin => self
+                    .blob
+                    .ok_or_else(|| {
+                        self.err(format!(
+                            "{what} refers to a GLB binary chunk that is missing"
+                        ))
+                    })?
+                    .to_vec(),
+                gltf::buffer::Source::Uri(uri) => self.read_uri(uri, &what)?,
+            };
+            if data.len() < b.length() {
+                return Err(self.err(format!(
+                    "{what} declares {} bytes but holds {}",
+                    b.length(),
+                    data.len()
+                )));
+            }
+            self.buffers.push(data);
+        }
+        Ok(())
+    }
+
+    fn image(&mut self, img: gltf::Image) -> Result<usize> {
+        if let Some(&i) = self.image_map.get(&img.index()) {
+            return Ok(i);
+        }
+        let name = img
+            .name()
+            .map(str::to_string)
+            .unwrap_or_else(|| format!("image {}", img.index()));
+        let (bytes, at) = match img.source() {
+            gltf::image::Source::View { view, .. } => {
+                let buf = &self.buffers[view.buffer().index()];
+                let end = view.offset() + view.length();
+                if end > buf.len() {
+                    return Err(self.err(format!("image `{name}`: buffer view out of range")));
+                }
+                (buf[view.offset()..end].to_vec(), self.path.to_path_buf())
+            }
+            gltf::image::Source::Uri { uri, .. } => {
+                let bytes = self.read_uri(uri, &format!("image `{name}`"))?;
+                let at = if uri.starts_with("data:") {
+                    self.path.to_path_buf()
+                } else {
+                    self.base.join(percent_decode(uri))
+                };
+                (bytes, at)
+            }
+        };
+        let decoded = images::decode_texture(&bytes, &at, &name)?;
+        self.scene.images.push(decoded);
+        let i = self.scene.images.len() - 1;
+        self.image_map.insert(img.index(), i);
+        Ok(i)
+    }
+
+    fn slot(
+        &mut self,
+        tex: gltf::Texture,
+        xf: Option<gltf::texture::TextureTransform>,
+    ) -> Result<TextureSlot> {
+        let sampler = tex.sampler();
+        let wrap = |w: gltf::texture::WrappingMode| match w {
+            gltf::texture::WrappingMode::ClampToEdge => Wrap::Clamp,
+            gltf::texture::WrappingMode::MirroredRepeat => Wrap::Mirror,
+            gltf::texture::WrappingMode::Repeat => Wrap::Repeat,
+        };
+        let mut transform = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        if let Some(t) = xf {
+            let [ox, oy] = t.offset();
+            let [sx, sy] = t.scale();
+            let (s, c) = t.rotation().sin_cos();
+            // KHR_texture_transform: T * R * S with R = [[c, -s], [s, c]] (GLSL column order
+            // cos, sin / -sin, cos).
+            transform = [[c * sx, -s * sy, ox], [s * sx, c * sy, oy]];
+        }
+        Ok(TextureSlot {
+            image: self.image(tex.source())?,
+            wrap_s: wrap(sampler.wrap_s()),
+            wrap_t: wrap(sampler.wrap_t()),
+            nearest: matches!(
+                sampler.mag_filter(),
+                Some(gltf::texture::MagFilter::Nearest)
+            ),
+            transform,
+        })
+    }
+
+    fn load_materials(&mut self) -> Result<()> {
+        let doc = self.doc;
+        for m in doc.materials() {
+            let pbr = m.pbr_metallic_roughness();
+            let name = m
+                .name()
+                .map(str::to_string)
+                .unwrap_or_else(|| format!("material {}", m.index().unwrap_or(0)));
+            let base_color_texture = match pbr.base_color_texture() {
+                Some(info) => Some(self.slot(info.texture(), info.texture_transform())?),
+                None => None,
+            };
+            let metallic_roughness_texture = match pbr.metallic_roughness_texture() {
+                Some(info) => Some(self.slot(info.texture(), info.texture_transform())?),
+                None => None,
+            };
+            let emissive_texture = match m.emissive_texture() {
+                Some(info) => Some(self.slot(info.texture(), info.texture_transform())?),
+                None => None,
+            };
+            let strength = m.emissive_strength().unwrap_or(1.0);
+            let mat = Material {
+                name,
+                base_color: Vec4::from(pbr.base_color_factor()),
+                base_color_texture,
+                metallic: pbr.metallic_factor(),
+                roughness: pbr.roughness_factor(),
+                metallic_roughness_texture,
+                emissive: Vec3::from(m.emissive_factor()) * strength,
+                emissive_texture,
+                double_sided: m.double_sided(),
+            };
+            let finite = mat.base_color.is_finite()
+                && mat.emissive.is_finite()
+                && mat.metallic.is_finite()
+                && mat.roughness.is_finite();
+            if !finite || mat.emissive.min_element() < 0.0 {
+                return Err(self.err(format!(
+                    "material `{}` has non-finite or negative factors",
+                    mat.name
+                )));
+            }
+            self.scene.materials.push(mat);
+        }
+        Ok(())
+    }
+
+    fn material_index(&mut self, m: Option<usize>) -> u32 {
+        if let Some(i) = m {
+            return i as u32;
+        }
+        *self.default_material.get_or_insert_with(|| {
+            self.scene.materials.push(Material::default());
+            (self.scene.materials.len() - 1) as u32
+        })
+    }
+
+    fn load_nodes(&mut self) -> Result<()> {
+        let doc = self.doc;
+        let roots: Vec<gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next()) {
+            Some(s) => s.nodes().collect(),
+            None => {
+                // No scene: every node that is nobody's child is a root.
+                let mut is_child = vec![false; doc.nodes().len()];
+                for n in doc.nodes() {
+                    for c in n.children() {
+                        is_child[c.index()] = true;
+                    }
+                }
+                doc.nodes().filter(|n| !is_child[n.index()]).collect()
+            }
+        };
+        // Iterative walk; glTF validation rejects cycles, the depth bound guards the rest.
+        let mut stack: Vec<(gltf::Node, Mat4, usize)> = roots
+            .into_iter()
+            .rev()
+            .map(|n| (n, Mat4::IDENTITY, 0))
+            .collect();
+        let mut visits = 0usize;
+        while let Some((node, parent, depth)) = stack.pop() {
+            visits += 1;
+            if depth > 256 || visits > 1 << 22 {
+                return Err(self.err("node hierarchy too deep or cyclic"));
+            }
+            let local = Mat4::from_cols_array_2d(&node.transform().matrix());
+            let world = parent * local;
+            if !world.is_finite() {
+                return Err(self.err(format!("node {} has a non-finite transform", node.index())));
+            }
+            if let Some(mesh) = node.mesh() {
+                self.load_mesh(&mesh, world)?;
+            }
+            if let Some(cam) = node.camera() {
+                self.load_camera(&cam, &node, world);
+            }
+            if let Some(light) = node.light() {
+                self.load_light(&light, world)?;
+            }
+            // Reversed, so that nodes are visited in document order.
+            let children: Vec<gltf::Node> = node.children().collect();
+            for c in children.into_iter().rev() {
+                stack.push((c, world, depth + 1));
+            }
+        }
+        Ok(())
+    }
+
+    fn load_mesh(&mut self, mesh: &gltf::Mesh, world: Mat4) -> Result<()> {
+        let mesh_name = mesh
+            .name()
+            .map(|n| format!("mesh `{n}`"))
+            .unwrap_or_else(|| format!("mesh {}", mesh.index()));
+        let normal_m = Mat3::from_mat4(world).inverse().transpose();
+        let flip = Mat3::from_mat4(world).determinant() < 0.0;
+        for prim in mesh.primitives() {
+            let what = format!("{mesh_name} primitive {}", prim.index());
+            if prim.mode() != gltf::mesh::Mode::Triangles {
+                self.scene.warnings.push(format!(
+                    "{what}: mode {:?} is not a triangle list, skipped",
+                    prim.mode()
+                ));
+                continue;
+            }
+            let buffers = &self.buffers;
+            let reader = prim.reader(|b| buffers.get(b.index()).map(|v| v.as_slice()));
+            let Some(positions) = reader.read_positions() else {
+                self.scene
+                    .warnings
+                    .push(format!("{what}: no POSITION attribute, skipped"));
+                continue;
+            };
+            let positions: Vec<Vec3> = positions.map(Vec3::from).collect();
+            let normals: Option<Vec<Vec3>> =
+                reader.read_normals().map(|n| n.map(Vec3::from).collect());
+            let uvs: Option<Vec<Vec2>> = reader
+                .read_tex_coords(0)
+                .map(|t| t.into_f32().map(Vec2::from).collect());
+            let indices: Vec<u32> = match reader.read_indices() {
+                Some(i) => i.into_u32().collect(),
+                None => (0..positions.len() as u32).collect(),
+            };
+            let nv = positions.len();
+            if let Some(bad) = indices.iter().find(|&&i| i as usize >= nv) {
+                return Err(self.err(format!("{what}: index {bad} out of range ({nv} vertices)")));
+            }
+            if normals.as_ref().is_some_and(|n| n.len() != nv)
+                || uvs.as_ref().is_some_and(|u| u.len() != nv)
+            {
+                return Err(self.err(format!("{what}: attribute counts differ")));
+            }
+            let material = self.material_index(prim.material().index());
+            let mut skipped = 0;
+            for f in indices.chunks_exact(3) {
+                if self.scene.triangles.len() >= MAX_TRIANGLES {
+                    return Err(self.err(format!("more than {MAX_TRIANGLES} triangles")));
+                }
+                let mut idx = [f[0] as usize, f[1] as usize, f[2] as usize];
+                if flip {
+                    idx.swap(1, 2);
+                }
+                let p = idx.map(|i| world.transform_point3(positions[i]));
+                if p.iter().any(|v| !v.is_finite()) {
+                    skipped += 1;
+                    continue;
+                }
+                let face = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+                let n = idx.map(|i| match &normals {
+                    Some(ns) => {
+                        let v = (normal_m * ns[i]).normalize_or_zero();
+                        if v.is_finite() && v != Vec3::ZERO {
+                            v
+                        } else {
+                            face
+                        }
+                    }
+                    None => face,
+                });
+                let uv = idx.map(|i| match &uvs {
+                    Some(u) if u[i].is_finite() => u[i],
+                    _ => Vec2::ZERO,
+                });
+                self.scene.triangles.push(Triangle { p, n, uv, material });
+            }
+            if skipped > 0 {
+                self.scene.warnings.push(format!(
+                    "{what}: {skipped} triangles with non-finite positions skipped"
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn load_camera(&mut self, cam: &gltf::Camera, node: &gltf::Node, world: Mat4) {
+        let name = cam
+            .name()
+            .or(node.name())
+            .map(str::to_string)
+            .unwrap_or_else(|| format!("camera {}", self.scene.cameras.len()));
+        match cam.projection() {
+            gltf::camera::Projection::Perspective(p) => self.scene.cameras.push(Camera {
+                name,
+                world,
+                yfov: p.yfov(),
+                aspect: p.aspect_ratio(),
+            }),
+            gltf::camera::Projection::Orthographic(_) => self.scene.warnings.push(format!(
+                "camera `{name}` is orthographic, skipped (perspective only)"
+            )),
+        }
+    }
+
+    fn load_light(&mut self, light: &gltf::khr_lights_punctual::Light, world: Mat4) -> Result<()> {
+        use gltf::khr_lights_punctual::Kind;
+        let name = light
+            .name()
+            .map(str::to_string)
+            .unwrap_or_else(|| format!("light {}", light.index()));
+        let kind = match light.kind() {
+            Kind::Point => PunctualKind::Point,
+            Kind::Directional => PunctualKind::Directional,
+            Kind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => PunctualKind::Spot {
+                inner_cone: inner_cone_angle,
+                outer_cone: outer_cone_angle,
+            },
+        };
+        let intensity = Vec3::from(light.color()) * light.intensity();
+        if !intensity.is_finite() || intensity.min_element() < 0.0 {
+            return Err(self.err(format!(
+                "light `{name}` has a negative or non-finite intensity"
+            )));
+        }
+        self.scene.lights.push(PunctualLight {
+            name,
+            kind,
+            position: world.transform_point3(Vec3::ZERO),
+            direction: world
+                .transform_vector3(Vec3::NEG_Z)
+                .normalize_or(Vec3::NEG_Z),
+            intensity,
+            range: light.range().unwrap_or(0.0).max(0.0),
+        });
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::percent_decode;
+
+    #[test]
+    fn percent_decoding() {
+        assert_eq!(percent_decode("my%20tex.png"), "my tex.png");
+        assert_eq!(percent_decode("a%2"), "a%2");
+        assert_eq!(percent_decode("%2e%2e/x"), "../x");
+    }
+}

@@ -1,0 +1,219 @@
+//! Scenes: what the renderer sees after loading a glTF file (world-space triangles, materials,
+//! textures, cameras, lights, an optional environment map), and the BVH over the triangles.
+
+pub mod authoring;
+pub mod bundled;
+pub mod bvh;
+pub mod env;
+pub mod images;
+mod load;
+
+use glam::{Mat4, Vec2, Vec3, Vec4};
+use std::path::PathBuf;
+
+pub use env::EnvMap;
+pub use images::Image8;
+pub use load::load;
+
+/// One world-space triangle with its shading attributes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Triangle {
+    /// Vertex positions.
+    pub p: [Vec3; 3],
+    /// Vertex normals (unit length).
+    pub n: [Vec3; 3],
+    /// Vertex UV0 (zero when the mesh has none).
+    pub uv: [Vec2; 3],
+    /// Index into [`Scene::materials`].
+    pub material: u32,
+}
+
+impl Triangle {
+    /// Twice the area, as the length of the cross product of two edges.
+    pub fn area(&self) -> f32 {
+        0.5 * (self.p[1] - self.p[0])
+            .cross(self.p[2] - self.p[0])
+            .length()
+    }
+}
+
+/// Texture wrap mode (glTF sampler wrapS / wrapT).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Wrap {
+    /// REPEAT (glTF default).
+    #[default]
+    Repeat,
+    /// CLAMP_TO_EDGE.
+    Clamp,
+    /// MIRRORED_REPEAT.
+    Mirror,
+}
+
+/// A texture as used by one material slot.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TextureSlot {
+    /// Index into [`Scene::images`].
+    pub image: usize,
+    /// Horizontal wrap.
+    pub wrap_s: Wrap,
+    /// Vertical wrap.
+    pub wrap_t: Wrap,
+    /// Nearest lookups (glTF magFilter NEAREST) instead of bilinear.
+    pub nearest: bool,
+    /// KHR_texture_transform as a 2x3 matrix (rows), identity when absent.
+    pub transform: [[f32; 3]; 2],
+}
+
+/// A metallic-roughness material (linear values).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    /// Name from the file, or `material N`.
+    pub name: String,
+    /// baseColorFactor (linear RGBA).
+    pub base_color: Vec4,
+    /// baseColorTexture (sRGB).
+    pub base_color_texture: Option<TextureSlot>,
+    /// metallicFactor.
+    pub metallic: f32,
+    /// roughnessFactor (perceptual; alpha = roughness^2).
+    pub roughness: f32,
+    /// metallicRoughnessTexture (linear; G roughness, B metallic).
+    pub metallic_roughness_texture: Option<TextureSlot>,
+    /// emissiveFactor times KHR_materials_emissive_strength.
+    pub emissive: Vec3,
+    /// emissiveTexture (sRGB).
+    pub emissive_texture: Option<TextureSlot>,
+    /// doubleSided.
+    pub double_sided: bool,
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Material {
+            name: "default".into(),
+            base_color: Vec4::ONE,
+            base_color_texture: None,
+            metallic: 1.0,
+            roughness: 1.0,
+            metallic_roughness_texture: None,
+            emissive: Vec3::ZERO,
+            emissive_texture: None,
+            double_sided: false,
+        }
+    }
+}
+
+/// A perspective camera.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Camera {
+    /// Name of the camera (or of its node), or `camera N`.
+    pub name: String,
+    /// Camera-to-world transform (the camera looks down -Z, +Y up).
+    pub world: Mat4,
+    /// Vertical field of view in radians.
+    pub yfov: f32,
+    /// Width / height, when the file gives one.
+    pub aspect: Option<f32>,
+}
+
+/// Kind of a KHR_lights_punctual light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PunctualKind {
+    /// Point light; intensity in candela.
+    Point,
+    /// Spot light; intensity in candela, cone angles in radians.
+    Spot {
+        /// Angle where the fall-off starts.
+        inner_cone: f32,
+        /// Angle where the light ends.
+        outer_cone: f32,
+    },
+    /// Directional light; intensity in lux.
+    Directional,
+}
+
+/// A KHR_lights_punctual light in world space.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PunctualLight {
+    /// Light name or `light N`.
+    pub name: String,
+    /// Point, spot or directional.
+    pub kind: PunctualKind,
+    /// World position (point, spot).
+    pub position: Vec3,
+    /// World direction the light points to (spot, directional): the node's -Z.
+    pub direction: Vec3,
+    /// color x intensity.
+    pub intensity: Vec3,
+    /// Range (0 = infinite).
+    pub range: f32,
+}
+
+/// Everything the renderer needs, in world space.
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    /// The file the scene came from (empty for scenes built in code).
+    pub source: PathBuf,
+    /// Triangles of every mesh instance.
+    pub triangles: Vec<Triangle>,
+    /// Materials; index 0.. as in the file, plus a default one at the end when needed.
+    pub materials: Vec<Material>,
+    /// Decoded images (RGBA8).
+    pub images: Vec<Image8>,
+    /// Perspective cameras.
+    pub cameras: Vec<Camera>,
+    /// Punctual lights.
+    pub lights: Vec<PunctualLight>,
+    /// Optional environment light.
+    pub env: Option<EnvMap>,
+    /// Things skipped while loading, each naming what and why.
+    pub warnings: Vec<String>,
+}
+
+impl Scene {
+    /// Find a camera by name or by index.
+    pub fn camera(&self, which: Option<&str>) -> crate::Result<usize> {
+        if self.cameras.is_empty() {
+            return Err(crate::Error::file(
+                &self.source,
+                "the scene has no perspective camera",
+            ));
+        }
+        let Some(which) = which else { return Ok(0) };
+        if let Some(i) = self.cameras.iter().position(|c| c.name == which) {
+            return Ok(i);
+        }
+        if let Ok(i) = which.parse::<usize>() {
+            if i < self.cameras.len() {
+                return Ok(i);
+            }
+        }
+        let names: Vec<String> = self
+            .cameras
+            .iter()
+            .enumerate()
+            .map(|(i, c)| format!("{i}: {}", c.name))
+            .collect();
+        Err(crate::Error::file(
+            &self.source,
+            format!("no camera `{which}`; the scene has {}", names.join(", ")),
+        ))
+    }
+
+    /// Centre and radius of a sphere around every triangle.
+    pub fn bounding_sphere(&self) -> (Vec3, f32) {
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for t in &self.triangles {
+            for p in t.p {
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+        }
+        if self.triangles.is_empty() {
+            return (Vec3::ZERO, 1.0);
+        }
+        let c = 0.5 * (lo + hi);
+        (c, (0.5 * (hi - lo).length()).max(1e-3))
+    }
+}
