@@ -61,12 +61,14 @@ pub fn decode_texture(bytes: &[u8], path: &Path, name: &str) -> Result<Image8> {
         .map_err(|e| Error::file(path, format!("image `{name}`: {e}")))?;
     match reader.format() {
         Some(image::ImageFormat::Png) | Some(image::ImageFormat::Jpeg) => {}
-        Some(f) => return Err(Error::file(
-            path,
-            format!(
+        Some(f) => {
+            return Err(Error::file(
+                path,
+                format!(
                 "image `{name}` is {f:?}: unsupported texture format (psrestir reads PNG and JPEG)"
             ),
-        )),
+            ))
+        }
         None => {
             return Err(Error::file(
                 path,

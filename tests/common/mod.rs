@@ -1,0 +1,201 @@
+//! Shared test harness: a device (skip with a reason when none exists outside CI, fail in CI),
+//! scenes built in code, a CPU reference of the glTF BRDF, and noise-aware image comparisons.
+#![allow(dead_code)]
+
+use glam::{Mat4, Vec2, Vec3, Vec4};
+use psrestir::gpu::Gpu;
+use psrestir::scene::{Camera, Material, Scene, Triangle};
+use std::f32::consts::PI;
+
+/// A device on the machine's Vulkan driver. Outside CI, a machine without one skips the test
+/// with a message; in CI (CI=true) a missing driver fails the test.
+pub fn gpu() -> Option<Gpu> {
+    match Gpu::new() {
+        Ok(g) => Some(g),
+        Err(e) if std::env::var_os("CI").is_none() => {
+            eprintln!("skipped: no GPU adapter ({e})");
+            None
+        }
+        Err(e) => panic!("CI must have a GPU adapter (lavapipe): {e}"),
+    }
+}
+
+pub fn material(base: [f32; 3], metallic: f32, roughness: f32) -> Material {
+    Material {
+        name: "test".into(),
+        base_color: Vec4::new(base[0], base[1], base[2], 1.0),
+        metallic,
+        roughness,
+        ..Default::default()
+    }
+}
+
+/// Two triangles of a quad with corner `c` and edges `u`, `v` (front face along u x v).
+pub fn quad(c: Vec3, u: Vec3, v: Vec3, material: u32) -> Vec<Triangle> {
+    let n = u.cross(v).normalize();
+    let p = [c, c + u, c + u + v, c + v];
+    let uv = [
+        Vec2::new(0.0, 0.0),
+        Vec2::new(1.0, 0.0),
+        Vec2::new(1.0, 1.0),
+        Vec2::new(0.0, 1.0),
+    ];
+    vec![
+        Triangle {
+            p: [p[0], p[1], p[2]],
+            n: [n; 3],
+            uv: [uv[0], uv[1], uv[2]],
+            material,
+        },
+        Triangle {
+            p: [p[0], p[2], p[3]],
+            n: [n; 3],
+            uv: [uv[0], uv[2], uv[3]],
+            material,
+        },
+    ]
+}
+
+pub fn look_at(eye: Vec3, target: Vec3, up: Vec3, yfov: f32) -> Camera {
+    let f = (target - eye).normalize();
+    let r = f.cross(up).normalize();
+    let u = r.cross(f);
+    Camera {
+        name: "test".into(),
+        world: Mat4::from_cols(
+            r.extend(0.0),
+            u.extend(0.0),
+            (-f).extend(0.0),
+            eye.extend(1.0),
+        ),
+        yfov,
+        aspect: Some(1.0),
+    }
+}
+
+/// A large horizontal plane (y = 0, facing +y) of the given material, seen from above.
+pub fn plane_scene(mat: Material, half: f32) -> Scene {
+    Scene {
+        triangles: quad(
+            Vec3::new(-half, 0.0, half),
+            Vec3::new(2.0 * half, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, -2.0 * half),
+            0,
+        ),
+        materials: vec![mat],
+        cameras: vec![look_at(Vec3::new(0.0, 2.0, 2.0), Vec3::ZERO, Vec3::Y, 0.8)],
+        ..Default::default()
+    }
+}
+
+// ---- CPU reference of shaders/shared/brdf.wgsl (glTF metallic-roughness BRDF).
+
+pub fn brdf_eval_cos(
+    base: Vec3,
+    metallic: f32,
+    roughness: f32,
+    n: Vec3,
+    wo: Vec3,
+    wi: Vec3,
+) -> Vec3 {
+    let (nv, nl) = (n.dot(wo), n.dot(wi));
+    if nv <= 0.0 || nl <= 0.0 {
+        return Vec3::ZERO;
+    }
+    let h = (wo + wi).normalize();
+    let a = (roughness * roughness).max(4e-4);
+    let a2 = a * a;
+    let nh = n.dot(h);
+    let d = {
+        let t = nh * nh * (a2 - 1.0) + 1.0;
+        a2 / (PI * t * t)
+    };
+    let vis =
+        0.5 / (nl * (nv * nv * (1.0 - a2) + a2).sqrt() + nv * (nl * nl * (1.0 - a2) + a2).sqrt());
+    let f0 = Vec3::splat(0.04).lerp(base, metallic);
+    let f = f0 + (Vec3::ONE - f0) * (1.0 - wo.dot(h)).clamp(0.0, 1.0).powi(5);
+    let diffuse = (Vec3::ONE - f) * (1.0 - metallic) * base / PI;
+    (diffuse + f * d * vis) * nl
+}
+
+/// Directional albedo: integral of f cos over the hemisphere, by a midpoint rule.
+pub fn directional_albedo(base: Vec3, metallic: f32, roughness: f32, wo: Vec3) -> Vec3 {
+    let n = Vec3::Y;
+    let (nt, np) = (512, 256);
+    let mut sum = Vec3::ZERO;
+    for i in 0..nt {
+        let theta = (i as f32 + 0.5) / nt as f32 * 0.5 * PI;
+        for j in 0..np {
+            let phi = (j as f32 + 0.5) / np as f32 * 2.0 * PI;
+            let wi = Vec3::new(
+                theta.sin() * phi.cos(),
+                theta.cos(),
+                theta.sin() * phi.sin(),
+            );
+            sum += brdf_eval_cos(base, metallic, roughness, n, wo, wi) * theta.sin();
+        }
+    }
+    sum * (0.5 * PI / nt as f32) * (2.0 * PI / np as f32)
+}
+
+/// Continuous pixel position -> camera ray direction, as shaders/shared/camera.wgsl.
+pub fn camera_dir(cam: &Camera, w: u32, h: u32, px: Vec2) -> (Vec3, Vec3) {
+    let info = psrestir::render::camera_info(cam, w, h);
+    let sx = (2.0 * px.x / w as f32 - 1.0) * info.tan_half_fov_y * info.aspect;
+    let sy = (1.0 - 2.0 * px.y / h as f32) * info.tan_half_fov_y;
+    let d = (Vec3::from(info.forward) + sx * Vec3::from(info.right) + sy * Vec3::from(info.up))
+        .normalize();
+    (Vec3::from(info.origin), d)
+}
+
+pub fn lum(c: [f32; 3]) -> f64 {
+    0.2126 * c[0] as f64 + 0.7152 * c[1] as f64 + 0.0722 * c[2] as f64
+}
+
+/// Mean and standard deviation.
+pub fn mean_sd(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    let var = v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / (n - 1.0).max(1.0);
+    (m, var.sqrt())
+}
+
+/// z-scores of the difference of two estimators over square blocks of pixels. Each estimator
+/// comes as two renders with independent seeds: their half-difference estimates the per-pixel
+/// variance, summed over the block's pixels (many degrees of freedom per block).
+pub fn block_z_scores(
+    a: [&[[f32; 3]]; 2],
+    b: [&[[f32; 3]]; 2],
+    width: usize,
+    block: usize,
+) -> Vec<f64> {
+    let height = a[0].len() / width;
+    let mut out = Vec::new();
+    for by in (0..height).step_by(block) {
+        for bx in (0..width).step_by(block) {
+            let (mut da, mut db, mut va, mut vb, mut k) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for y in by..(by + block).min(height) {
+                for x in bx..(bx + block).min(width) {
+                    let i = y * width + x;
+                    let (a1, a2) = (lum(a[0][i]), lum(a[1][i]));
+                    let (b1, b2) = (lum(b[0][i]), lum(b[1][i]));
+                    da += 0.5 * (a1 + a2);
+                    db += 0.5 * (b1 + b2);
+                    va += 0.25 * (a1 - a2) * (a1 - a2);
+                    vb += 0.25 * (b1 - b2) * (b1 - b2);
+                    k += 1.0;
+                }
+            }
+            let var = (va + vb) / (k * k);
+            let diff = (da - db) / k;
+            out.push(if var > 0.0 {
+                diff / var.sqrt()
+            } else if diff.abs() < 1e-9 {
+                0.0
+            } else {
+                f64::INFINITY
+            });
+        }
+    }
+    out
+}
