@@ -21,28 +21,21 @@ pub struct Image8 {
     pub rgba: Vec<[u8; 4]>,
 }
 
-/// Refuse an image whose declared size would exhaust memory.
-pub fn check_dimensions(path: &Path, w: u64, h: u64, bytes_per_pixel: u64) -> Result<()> {
+/// Why an image of the declared size is refused (it would exhaust memory), if it is.
+pub fn size_problem(w: u64, h: u64, bytes_per_pixel: u64) -> Option<String> {
     if w == 0 || h == 0 {
-        return Err(Error::file(
-            path,
-            format!("image has an empty size {w}x{h}"),
-        ));
+        return Some(format!("image has an empty size {w}x{h}"));
     }
-    if w > MAX_IMAGE_DIM as u64
+    let too_big = w > MAX_IMAGE_DIM as u64
         || h > MAX_IMAGE_DIM as u64
-        || w * h * bytes_per_pixel > MAX_IMAGE_BYTES
-    {
-        return Err(Error::file(
-            path,
-            format!(
-                "image declares {w}x{h} pixels, over the limit of {MAX_IMAGE_DIM}x{MAX_IMAGE_DIM} \
-                 and {} MiB decoded; refused before decoding",
-                MAX_IMAGE_BYTES >> 20
-            ),
-        ));
-    }
-    Ok(())
+        || w * h * bytes_per_pixel > MAX_IMAGE_BYTES;
+    too_big.then(|| {
+        format!(
+            "image declares {w}x{h} pixels, over the limit of {MAX_IMAGE_DIM}x{MAX_IMAGE_DIM} \
+             and {} MiB decoded; refused before decoding",
+            MAX_IMAGE_BYTES >> 20
+        )
+    })
 }
 
 fn limits() -> image::Limits {
@@ -53,12 +46,12 @@ fn limits() -> image::Limits {
     l
 }
 
-/// Decode a PNG or JPEG texture. `path` names the source in errors (the file, or the scene
-/// file plus the image's name for embedded images).
-pub fn decode_texture(bytes: &[u8], path: &Path, name: &str) -> Result<Image8> {
+/// Decode a PNG or JPEG texture. Errors name `path` (the scene file) and `what` (the image,
+/// with its own file when it has one); `name` is kept in the result.
+pub fn decode_texture(bytes: &[u8], path: &Path, what: &str, name: &str) -> Result<Image8> {
     let reader = image::ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()
-        .map_err(|e| Error::file(path, format!("image `{name}`: {e}")))?;
+        .map_err(|e| Error::file(path, format!("{what}: {e}")))?;
     match reader.format() {
         Some(image::ImageFormat::Png) | Some(image::ImageFormat::Jpeg) => {}
         Some(f) => {
@@ -72,7 +65,7 @@ pub fn decode_texture(bytes: &[u8], path: &Path, name: &str) -> Result<Image8> {
         None => {
             return Err(Error::file(
                 path,
-                format!("image `{name}` is not PNG or JPEG: unsupported texture format"),
+                format!("{what} is not PNG or JPEG: unsupported texture format"),
             ))
         }
     }
@@ -81,13 +74,15 @@ pub fn decode_texture(bytes: &[u8], path: &Path, name: &str) -> Result<Image8> {
         reader.format().unwrap_or(image::ImageFormat::Png),
     )
     .into_dimensions()
-    .map_err(|e| Error::file(path, format!("image `{name}`: {e}")))?;
-    check_dimensions(path, w as u64, h as u64, 4)?;
+    .map_err(|e| Error::file(path, format!("{what}: {e}")))?;
+    if let Some(problem) = size_problem(w as u64, h as u64, 4) {
+        return Err(Error::file(path, format!("{what}: {problem}")));
+    }
     let mut reader = reader;
     reader.limits(limits());
     let img = reader
         .decode()
-        .map_err(|e| Error::file(path, format!("image `{name}`: {e}")))?;
+        .map_err(|e| Error::file(path, format!("{what}: {e}")))?;
     let rgba = img.to_rgba8();
     Ok(Image8 {
         name: name.to_string(),
@@ -103,7 +98,9 @@ pub fn decode_hdr(bytes: &[u8], path: &Path) -> Result<(u32, u32, Vec<[f32; 3]>)
     let (w, h) = image::ImageReader::with_format(Cursor::new(bytes), image::ImageFormat::Hdr)
         .into_dimensions()
         .map_err(|e| Error::file(path, format!("not a Radiance HDR image: {e}")))?;
-    check_dimensions(path, w as u64, h as u64, 12)?;
+    if let Some(problem) = size_problem(w as u64, h as u64, 12) {
+        return Err(Error::file(path, problem));
+    }
     let mut reader = reader;
     reader.limits(limits());
     let img = reader
@@ -123,7 +120,9 @@ pub fn decode_exr(path: &Path) -> Result<(u32, u32, Vec<[f32; 3]>)> {
         .first()
         .ok_or_else(|| Error::file(path, "OpenEXR file has no layer"))?;
     let size = header.layer_size;
-    check_dimensions(path, size.0 as u64, size.1 as u64, 16)?;
+    if let Some(problem) = size_problem(size.0 as u64, size.1 as u64, 16) {
+        return Err(Error::file(path, problem));
+    }
     let image = read_first_rgba_layer_from_file(
         path,
         |res, _| {

@@ -192,26 +192,28 @@ impl<'a> Loader<'a> {
             .name()
             .map(str::to_string)
             .unwrap_or_else(|| format!("image {}", img.index()));
-        let (bytes, at) = match img.source() {
+        let (bytes, what) = match img.source() {
             gltf::image::Source::View { view, .. } => {
                 let buf = &self.buffers[view.buffer().index()];
                 let end = view.offset() + view.length();
                 if end > buf.len() {
                     return Err(self.err(format!("image `{name}`: buffer view out of range")));
                 }
-                (buf[view.offset()..end].to_vec(), self.path.to_path_buf())
+                (buf[view.offset()..end].to_vec(), format!("image `{name}`"))
             }
             gltf::image::Source::Uri { uri, .. } => {
-                let bytes = self.read_uri(uri, &format!("image `{name}`"))?;
-                let at = if uri.starts_with("data:") {
-                    self.path.to_path_buf()
+                let what = if uri.starts_with("data:") {
+                    format!("image `{name}`")
                 } else {
-                    self.base.join(percent_decode(uri))
+                    format!(
+                        "image `{name}` ({})",
+                        self.base.join(percent_decode(uri)).display()
+                    )
                 };
-                (bytes, at)
+                (self.read_uri(uri, &format!("image `{name}`"))?, what)
             }
         };
-        let decoded = images::decode_texture(&bytes, &at, &name)?;
+        let decoded = images::decode_texture(&bytes, self.path, &what, &name)?;
         self.scene.images.push(decoded);
         let i = self.scene.images.len() - 1;
         self.image_map.insert(img.index(), i);

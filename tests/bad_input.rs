@@ -1,0 +1,340 @@
+//! Broken and hostile scene files: each gets a clear error naming the file and the problem,
+//! from the library and from the command line (non-zero exit, no panic).
+use psrestir::scene::authoring::{png_bytes, GltfBuilder};
+use psrestir::scene::load;
+use serde_json::json;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = 0xffff_ffffu32;
+    for &b in bytes {
+        c ^= b as u32;
+        for _ in 0..8 {
+            c = if c & 1 != 0 {
+                0xedb8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
+}
+
+/// A PNG whose header declares width x height (and no pixel data).
+fn png_header_only(width: u32, height: u32) -> Vec<u8> {
+    let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut ihdr = b"IHDR".to_vec();
+    ihdr.extend_from_slice(&width.to_be_bytes());
+    ihdr.extend_from_slice(&height.to_be_bytes());
+    ihdr.extend_from_slice(&[8, 6, 0, 0, 0]);
+    out.extend_from_slice(&13u32.to_be_bytes());
+    out.extend_from_slice(&ihdr);
+    out.extend_from_slice(&crc32(&ihdr).to_be_bytes());
+    // A token IDAT chunk: decoders read the header up to the first one.
+    out.extend_from_slice(&2u32.to_be_bytes());
+    out.extend_from_slice(b"IDAT\x78\x9c");
+    out.extend_from_slice(&crc32(b"IDAT\x78\x9c").to_be_bytes());
+    out.extend_from_slice(&0u32.to_be_bytes());
+    out.extend_from_slice(b"IEND");
+    out.extend_from_slice(&crc32(b"IEND").to_be_bytes());
+    out
+}
+
+/// A one-triangle scene whose base color texture is `uri`.
+fn textured(dir: &Path, uri: &str) -> PathBuf {
+    let mut b = GltfBuilder::new();
+    let img = b.add_image_uri("tex", uri);
+    let tex = b.add_texture(img, None);
+    let mat = b.add_material(json!({"pbrMetallicRoughness": {"baseColorTexture": {"index": tex}}}));
+    let mesh = b.add_mesh(
+        "m",
+        &[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        None,
+        None,
+        None,
+        Some(mat),
+    );
+    let node = b.add_node(json!({"mesh": mesh}));
+    b.set_scene(&[node]);
+    let path = dir.join("scene.gltf");
+    b.write_gltf(&path, false).unwrap();
+    path
+}
+
+/// Run the loader and the CLI on `path`; both must fail with every fragment in the message.
+fn refused(path: &Path, fragments: &[&str]) {
+    let err = load(path).expect_err("loading must fail").to_string();
+    let name = path.file_name().unwrap().to_string_lossy().to_string();
+    assert!(
+        err.contains(&name),
+        "error does not name the file {name}: {err}"
+    );
+    for f in fragments {
+        assert!(err.contains(f), "error lacks `{f}`: {err}");
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_psrestir"))
+        .args(["info"])
+        .arg(path)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "CLI exited 0 for {}", path.display());
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "CLI did not exit cleanly: {stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "CLI panicked: {stderr}");
+    assert!(
+        stderr.contains(&name) && fragments.iter().all(|f| stderr.contains(f)),
+        "CLI message: {stderr}"
+    );
+}
+
+#[test]
+fn malformed_json() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("broken.gltf");
+    std::fs::write(&p, br#"{"asset": {"version": "2.0"}, "nodes": [ "#).unwrap();
+    refused(&p, &["malformed glTF JSON"]);
+}
+
+#[test]
+fn malformed_glb() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("broken.glb");
+    let mut bytes = b"glTF".to_vec();
+    bytes.extend_from_slice(&2u32.to_le_bytes());
+    bytes.extend_from_slice(&9999u32.to_le_bytes());
+    bytes.extend_from_slice(b"garbage");
+    std::fs::write(&p, bytes).unwrap();
+    refused(&p, &["malformed GLB"]);
+}
+
+#[test]
+fn invalid_gltf_reference() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("dangling.gltf");
+    std::fs::write(
+        &p,
+        br#"{"asset": {"version": "2.0"}, "scenes": [{"nodes": [3]}]}"#,
+    )
+    .unwrap();
+    refused(&p, &["invalid glTF", "nodes"]);
+}
+
+#[test]
+fn missing_buffer_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("scene.gltf");
+    std::fs::write(
+        &p,
+        br#"{"asset": {"version": "2.0"}, "buffers": [{"uri": "gone.bin", "byteLength": 12}]}"#,
+    )
+    .unwrap();
+    refused(&p, &["buffer 0", "gone.bin"]);
+}
+
+#[test]
+fn buffer_shorter_than_declared() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("short.bin"), [0u8; 4]).unwrap();
+    let p = dir.path().join("scene.gltf");
+    std::fs::write(
+        &p,
+        br#"{"asset": {"version": "2.0"}, "buffers": [{"uri": "short.bin", "byteLength": 64}]}"#,
+    )
+    .unwrap();
+    refused(&p, &["declares 64 bytes but holds 4"]);
+}
+
+#[test]
+fn missing_image_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = textured(dir.path(), "nothere.png");
+    refused(&p, &["image `tex`", "nothere.png"]);
+}
+
+#[test]
+fn unsupported_texture_format() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("tex.gif"),
+        b"GIF89a\x01\x00\x01\x00\x00\x00\x00;",
+    )
+    .unwrap();
+    let p = textured(dir.path(), "tex.gif");
+    refused(&p, &["unsupported texture format", "Gif"]);
+    std::fs::write(dir.path().join("tex.png"), b"this is not an image at all").unwrap();
+    let p = textured(dir.path(), "tex.png");
+    refused(&p, &["unsupported texture format"]);
+}
+
+#[test]
+fn uris_leaving_the_folder_or_pointing_at_the_network_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let inner = dir.path().join("inner");
+    std::fs::create_dir(&inner).unwrap();
+    // The file exists, so only the policy can refuse it.
+    std::fs::write(
+        dir.path().join("secret.png"),
+        png_bytes(1, 1, &[[1, 2, 3, 255]]).unwrap(),
+    )
+    .unwrap();
+    for uri in ["../secret.png", "%2e%2e/secret.png", "sub/../../secret.png"] {
+        refused(&textured(&inner, uri), &["leaves the scene's folder"]);
+    }
+    let abs = dir.path().join("secret.png").to_string_lossy().to_string();
+    refused(&textured(&inner, &abs), &["refused"]);
+    for uri in [
+        "http://example.com/tex.png",
+        "https://example.com/tex.png",
+        "file:///etc/passwd",
+        "ftp://x/y.png",
+    ] {
+        refused(&textured(&inner, uri), &["refused", "data URIs"]);
+    }
+    // Buffers follow the same policy.
+    let p = inner.join("buf.gltf");
+    std::fs::write(
+        &p,
+        br#"{"asset": {"version": "2.0"}, "buffers": [{"uri": "../x.bin", "byteLength": 4}]}"#,
+    )
+    .unwrap();
+    refused(&p, &["buffer 0", "leaves the scene's folder"]);
+}
+
+#[cfg(unix)]
+#[test]
+fn symlinks_out_of_the_folder_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let inner = dir.path().join("inner");
+    std::fs::create_dir(&inner).unwrap();
+    std::fs::write(
+        dir.path().join("secret.png"),
+        png_bytes(1, 1, &[[1, 2, 3, 255]]).unwrap(),
+    )
+    .unwrap();
+    std::os::unix::fs::symlink(dir.path().join("secret.png"), inner.join("link.png")).unwrap();
+    refused(
+        &textured(&inner, "link.png"),
+        &["resolves outside the scene's folder"],
+    );
+}
+
+#[test]
+fn an_image_declaring_a_huge_size_is_refused_before_decoding() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("huge.png"),
+        png_header_only(100_000, 100_000),
+    )
+    .unwrap();
+    let p = textured(dir.path(), "huge.png");
+    refused(&p, &["100000x100000", "refused before decoding"]);
+}
+
+#[test]
+fn non_triangle_primitives_are_skipped_with_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut b = GltfBuilder::new();
+    let mesh = b.add_mesh(
+        "wire",
+        &[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        None,
+        None,
+        None,
+        None,
+    );
+    b.json["meshes"][mesh]["primitives"][0]["mode"] = json!(1);
+    let tri = b.add_mesh(
+        "solid",
+        &[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        None,
+        None,
+        None,
+        None,
+    );
+    let n1 = b.add_node(json!({"mesh": mesh}));
+    let n2 = b.add_node(json!({"mesh": tri}));
+    b.set_scene(&[n1, n2]);
+    let p = dir.path().join("lines.gltf");
+    b.write_gltf(&p, false).unwrap();
+    let s = load(&p).unwrap();
+    assert_eq!(s.triangles.len(), 1);
+    assert_eq!(s.warnings.len(), 1);
+    assert!(
+        s.warnings[0].contains("mesh `wire` primitive 0") && s.warnings[0].contains("Lines"),
+        "{:?}",
+        s.warnings
+    );
+    let out = Command::new(env!("CARGO_BIN_EXE_psrestir"))
+        .arg("info")
+        .arg(&p)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let all =
+        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    assert!(
+        all.contains("mesh `wire` primitive 0") && all.contains("skipped"),
+        "{all}"
+    );
+}
+
+#[test]
+fn out_of_range_indices_are_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut b = GltfBuilder::new();
+    let mesh = b.add_mesh(
+        "m",
+        &[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        None,
+        None,
+        Some(&[0, 1, 7]),
+        None,
+    );
+    let n = b.add_node(json!({"mesh": mesh}));
+    b.set_scene(&[n]);
+    let p = dir.path().join("idx.gltf");
+    b.write_gltf(&p, false).unwrap();
+    refused(&p, &["index 7 out of range"]);
+}
+
+#[test]
+fn render_cli_rejects_bad_arguments_clearly() {
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/default/scene.gltf");
+    let run = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_psrestir"))
+            .args(args)
+            .output()
+            .unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).to_string(),
+        )
+    };
+    let (code, err) = run(&["render", scene, "-o", "/tmp/x.jpg"]);
+    assert_eq!(code, Some(1));
+    assert!(err.contains("output must end in .exr"), "{err}");
+    let (code, err) = run(&["render", scene, "--camera", "nope", "-o", "/tmp/x.png"]);
+    assert_eq!(code, Some(1));
+    assert!(
+        err.contains("no camera `nope`") && err.contains("main"),
+        "{err}"
+    );
+    let (code, err) = run(&["render", scene, "--size", "0x5", "-o", "/tmp/x.png"]);
+    assert_ne!(code, Some(0));
+    assert!(err.contains("out of range"), "{err}");
+    let (code, err) = run(&[
+        "render",
+        scene,
+        "--env",
+        "/nonexistent/sky.exr",
+        "-o",
+        "/tmp/x.png",
+    ]);
+    assert_eq!(code, Some(1));
+    assert!(err.contains("sky.exr"), "{err}");
+}
