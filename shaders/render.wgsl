@@ -26,12 +26,20 @@ struct RenderParams {
 fn main(@builtin(global_invocation_id) id: vec3u) {
     let width = params.camera.width;
     let n_pixels = width * params.camera.height;
-    let pixel = id.x + id.y * params.stride;
-    if pixel >= n_pixels {
+    // Invocations walk the image in 8x8 tiles, so that neighbouring lanes trace neighbouring
+    // pixels (coherent BVH traversal).
+    let linear = id.x + id.y * params.stride;
+    let tiles_x = (width + 7u) / 8u;
+    let tile = linear / 64u;
+    let in_tile = linear % 64u;
+    let px = (tile % tiles_x) * 8u + in_tile % 8u;
+    let py = (tile / tiles_x) * 8u + in_tile / 8u;
+    if px >= width || py >= params.camera.height {
         return;
     }
+    let pixel = py * width + px;
     techniques = params.techniques;
-    let xy = vec2f(f32(pixel % width), f32(pixel / width));
+    let xy = vec2f(f32(px), f32(py));
     var sum = vec3f(0.0);
     var dropped = 0u;
     for (var s = 0u; s < params.spp; s++) {

@@ -462,7 +462,8 @@ impl Renderer {
             .device
             .limits()
             .max_compute_workgroups_per_dimension;
-        let grid = grid_2d(n_pixels, WORKGROUP, max_dim);
+        // One workgroup per 8x8 tile (see render.wgsl).
+        let grid = grid_2d(w.div_ceil(8) * h.div_ceil(8) * 64, WORKGROUP, max_dim);
         let mut params = GpuRenderParams {
             camera: camera_info(cam, w, h),
             seed: settings.seed,

@@ -5,7 +5,7 @@ use glam::Vec3;
 /// Deepest level the builder creates; the WGSL traversal stack holds 64 entries.
 pub const MAX_DEPTH: usize = 60;
 const BINS: usize = 16;
-const MAX_LEAF: usize = 4;
+const MAX_LEAF: usize = 1;
 
 /// A node. Keep in sync with `BvhNode` in shaders/shared/types.wgsl.
 #[repr(C)]
