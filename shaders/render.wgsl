@@ -17,44 +17,44 @@ struct RenderParams {
     _pad2: u32,
 }
 
-@group(1) @binding(0) var<uniform> params: RenderParams;
+@group(1) @binding(0) var<uniform> rp: RenderParams;
 @group(1) @binding(1) var<storage, read_write> accum: array<vec4f>;
 // [0] camera rays, [1] shadow rays, [2] BSDF rays, [3] dropped non-finite samples.
 @group(1) @binding(2) var<storage, read_write> stats: array<atomic<u32>, 4>;
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {
-    let width = params.camera.width;
-    let n_pixels = width * params.camera.height;
+    let width = rp.camera.width;
+    let n_pixels = width * rp.camera.height;
     // Invocations walk the image in 8x8 tiles, so that neighbouring lanes trace neighbouring
     // pixels (coherent BVH traversal).
-    let linear = id.x + id.y * params.stride;
+    let linear = id.x + id.y * rp.stride;
     let tiles_x = (width + 7u) / 8u;
     let tile = linear / 64u;
     let in_tile = linear % 64u;
     let px = (tile % tiles_x) * 8u + in_tile % 8u;
     let py = (tile / tiles_x) * 8u + in_tile / 8u;
-    if px >= width || py >= params.camera.height {
+    if px >= width || py >= rp.camera.height {
         return;
     }
     let pixel = py * width + px;
-    techniques = params.techniques;
+    techniques = rp.techniques;
     let xy = vec2f(f32(px), f32(py));
     var sum = vec3f(0.0);
     var dropped = 0u;
-    for (var s = 0u; s < params.spp; s++) {
+    for (var s = 0u; s < rp.spp; s++) {
         // The camera-sample index identifies this sample for replay.
-        rng_init(params.seed, (params.sample_offset + s) * n_pixels + pixel, 0u);
-        let d = camera_direction(params.camera, xy + rand2());
-        let l = direct_radiance(params.camera.origin, d);
+        rng_init(rp.seed, (rp.sample_offset + s) * n_pixels + pixel, 0u);
+        let d = camera_direction(rp.camera, xy + rand2());
+        let l = direct_radiance(rp.camera.origin, d);
         if all(l == l) && all(abs(l) < vec3f(3.0e38)) {
             sum += l;
         } else {
             dropped += 1u;
         }
     }
-    accum[pixel] += vec4f(sum, f32(params.spp));
-    atomicAdd(&stats[0], params.spp);
+    accum[pixel] += vec4f(sum, f32(rp.spp));
+    atomicAdd(&stats[0], rp.spp);
     atomicAdd(&stats[1], shadow_rays);
     atomicAdd(&stats[2], bsdf_rays);
     if dropped > 0u {

@@ -1,7 +1,7 @@
 // Trace a list of rays, through the BVH or against every triangle (the reference for tests).
 #import shared/bvh
 
-// Keep in sync with TraceParams in src/render/mod.rs.
+// Keep in sync with GpuTraceParams in src/render/layout.rs.
 struct TraceParams {
     n_rays: u32,
     brute_force: u32,
@@ -9,7 +9,7 @@ struct TraceParams {
     _pad: u32,
 }
 
-@group(1) @binding(0) var<uniform> params: TraceParams;
+@group(1) @binding(0) var<uniform> tp: TraceParams;
 // Two vec4 per ray: origin + tmax, direction + 0.
 @group(1) @binding(1) var<storage, read> rays: array<vec4f>;
 // One vec4 per ray: t, triangle index (bits), b1, b2.
@@ -17,14 +17,14 @@ struct TraceParams {
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {
-    let i = id.x + id.y * params.stride;
-    if i >= params.n_rays {
+    let i = id.x + id.y * tp.stride;
+    if i >= tp.n_rays {
         return;
     }
     let o = rays[2u * i];
     let d = rays[2u * i + 1u].xyz;
     var hit: Hit;
-    if params.brute_force != 0u {
+    if tp.brute_force != 0u {
         hit = trace_brute_force(o.xyz, d, o.w);
     } else {
         hit = trace_closest(o.xyz, d, o.w);

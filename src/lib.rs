@@ -7,7 +7,9 @@
 pub mod error;
 pub mod gpu;
 pub mod image_io;
+pub mod optim;
 pub mod render;
 pub mod scene;
+pub mod task;
 
 pub use error::{Error, Result};

@@ -19,12 +19,6 @@ fn ggx_d(nh: f32, a2: f32) -> f32 {
     return a2 / (PI * d * d);
 }
 
-fn smith_visibility(nl: f32, nv: f32, a2: f32) -> f32 {
-    let gv = nl * sqrt(nv * nv * (1.0 - a2) + a2);
-    let gl = nv * sqrt(nl * nl * (1.0 - a2) + a2);
-    return 0.5 / max(gv + gl, 1e-20);
-}
-
 fn smith_g1(nv: f32, a2: f32) -> f32 {
     return 2.0 * nv / (nv + sqrt(a2 + (1.0 - a2) * nv * nv));
 }
@@ -34,19 +28,61 @@ fn schlick(f0: vec3f, vh: f32) -> vec3f {
     return f0 + (vec3f(1.0) - f0) * k;
 }
 
-// f(wo, wi) * cos(theta_i).
-fn brdf_eval_cos(m: SurfaceMaterial, wo: vec3f, wi: vec3f) -> vec3f {
+// f(wo, wi) cos(theta_i) and its derivatives with respect to the material inputs: d_base is
+// per channel (channel c of the value depends only on channel c of the base color).
+struct BrdfGrad {
+    value: vec3f,
+    d_base: vec3f,
+    d_metallic: vec3f,
+    d_roughness: vec3f,
+}
+
+// Value and analytic derivatives in one code path; passes that need only the value call
+// brdf_eval_cos and the compiler drops the derivative terms.
+fn brdf_eval_cos_grad(m: SurfaceMaterial, wo: vec3f, wi: vec3f) -> BrdfGrad {
+    var out = BrdfGrad(vec3f(0.0), vec3f(0.0), vec3f(0.0), vec3f(0.0));
     if wo.z <= 0.0 || wi.z <= 0.0 {
-        return vec3f(0.0);
+        return out;
     }
     let h = normalize(wo + wi);
+    let r = m.roughness;
     let a = material_alpha(m);
     let a2 = a * a;
-    let f0 = mix(vec3f(0.04), m.base_color, m.metallic);
-    let fresnel = schlick(f0, dot(wo, h));
-    let diffuse = (vec3f(1.0) - fresnel) * (1.0 - m.metallic) * m.base_color * INV_PI;
-    let specular = fresnel * ggx_d(h.z, a2) * smith_visibility(wi.z, wo.z, a2);
-    return (diffuse + specular) * wi.z;
+    // d(a2)/dr: a2 = r^4 above the floor.
+    let da2 = select(0.0, 4.0 * r * r * r, r * r > ALPHA_MIN);
+    let b = m.base_color;
+    let met = m.metallic;
+    let f0 = mix(vec3f(0.04), b, met);
+    let k = pow(clamp(1.0 - dot(wo, h), 0.0, 1.0), 5.0);
+    let fresnel = f0 + (vec3f(1.0) - f0) * k;
+    // dF/dbase = (1 - k) met, dF/dmet = (1 - k) (base - 0.04).
+    let dfb = (1.0 - k) * met;
+    let dfm = (1.0 - k) * (b - vec3f(0.04));
+    // D and V with their derivatives with respect to a2.
+    let nh = h.z;
+    let t = nh * nh * (a2 - 1.0) + 1.0;
+    let d = a2 / (PI * t * t);
+    let dd = (t - 2.0 * a2 * nh * nh) / (PI * t * t * t);
+    let nl = wi.z;
+    let nv = wo.z;
+    let sv = sqrt(nv * nv * (1.0 - a2) + a2);
+    let sl = sqrt(nl * nl * (1.0 - a2) + a2);
+    let g = max(nl * sv + nv * sl, 1e-20);
+    let vis = 0.5 / g;
+    let dg = nl * (1.0 - nv * nv) / (2.0 * sv) + nv * (1.0 - nl * nl) / (2.0 * sl);
+    let dvis = -0.5 * dg / (g * g);
+    let kd = (1.0 - met) * INV_PI;
+    let diffuse = (vec3f(1.0) - fresnel) * kd * b;
+    let dv = d * vis;
+    out.value = (diffuse + fresnel * dv) * nl;
+    out.d_base = ((vec3f(1.0) - fresnel) * kd - dfb * kd * b + dfb * dv) * nl;
+    out.d_metallic = (-dfm * kd * b - (vec3f(1.0) - fresnel) * INV_PI * b + dfm * dv) * nl;
+    out.d_roughness = fresnel * (dd * vis + d * dvis) * da2 * nl;
+    return out;
+}
+
+fn brdf_eval_cos(m: SurfaceMaterial, wo: vec3f, wi: vec3f) -> vec3f {
+    return brdf_eval_cos_grad(m, wo, wi).value;
 }
 
 // Probability of sampling the specular lobe.

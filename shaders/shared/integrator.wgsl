@@ -5,6 +5,7 @@
 #import shared/bvh
 #import shared/lights
 #import shared/brdf
+#import shared/params
 
 const TECH_NEE: u32 = 1u;
 const TECH_BSDF: u32 = 2u;
@@ -96,7 +97,21 @@ fn surface_material(sf: Surface) -> SurfaceMaterial {
     let m = materials[sf.material];
     let bc = sample_texture(m.base_color_tex, transform_uv(m, 0u, sf.uv));
     let mr = sample_texture(m.mr_tex, transform_uv(m, 1u, sf.uv));
-    return SurfaceMaterial(m.base_color.rgb * bc.rgb, clamp(m.metallic * mr.b, 0.0, 1.0), clamp(m.roughness * mr.g, 0.0, 1.0));
+    var out = SurfaceMaterial(m.base_color.rgb * bc.rgb, clamp(m.metallic * mr.b, 0.0, 1.0), clamp(m.roughness * mr.g, 0.0, 1.0));
+    // Optimized textures replace the material's inputs (UV0, repeat wrap).
+    if m.param_base_color != NONE {
+        let p = param_textures[m.param_base_color];
+        out.base_color = param_value(p, param_footprint(p, sf.uv));
+    }
+    if m.param_metallic != NONE {
+        let p = param_textures[m.param_metallic];
+        out.metallic = param_value(p, param_footprint(p, sf.uv)).x;
+    }
+    if m.param_roughness != NONE {
+        let p = param_textures[m.param_roughness];
+        out.roughness = param_value(p, param_footprint(p, sf.uv)).x;
+    }
+    return out;
 }
 
 // Origin pushed off the surface along the geometric normal, on the side of direction d.
@@ -167,8 +182,24 @@ fn bsdf_direct_sample(sf: Surface, mat: SurfaceMaterial, u: vec3f) -> DirectSamp
     return out;
 }
 
+// The two direct-lighting samples at a surface: light sampling, then BSDF sampling. Uses 6
+// random numbers in a fixed order, so the primal and gradient passes draw the same samples
+// from the same camera-sample index.
+struct DirectSamples {
+    nee: DirectSample,
+    bsdf: DirectSample,
+}
+
+fn sample_direct(sf: Surface, mat: SurfaceMaterial) -> DirectSamples {
+    let u_pick = rand();
+    let u_light = rand2();
+    let nee = nee_sample(sf, mat, u_pick, u_light);
+    let u_bsdf = vec3f(rand(), rand2());
+    let bsdf = bsdf_direct_sample(sf, mat, u_bsdf);
+    return DirectSamples(nee, bsdf);
+}
+
 // Radiance along a camera ray (origin o, unit direction d) with direct illumination only.
-// Uses 5 random numbers after the camera's.
 fn direct_radiance(o: vec3f, d: vec3f) -> vec3f {
     let hit = trace_closest(o, d, 3.0e38);
     if hit.tri == NONE {
@@ -181,12 +212,8 @@ fn direct_radiance(o: vec3f, d: vec3f) -> vec3f {
     var l = emitted(hit.tri, hit.b1, hit.b2, sf.front);
     let mat = surface_material(sf);
     let wo = to_local(sf.frame, sf.wo);
-    let u_pick = rand();
-    let u_light = rand2();
-    let ns = nee_sample(sf, mat, u_pick, u_light);
-    l += brdf_eval_cos(mat, wo, to_local(sf.frame, ns.wi)) * ns.weight;
-    let u_bsdf = vec3f(rand(), rand2());
-    let bs = bsdf_direct_sample(sf, mat, u_bsdf);
-    l += brdf_eval_cos(mat, wo, to_local(sf.frame, bs.wi)) * bs.weight;
+    let s = sample_direct(sf, mat);
+    l += brdf_eval_cos(mat, wo, to_local(sf.frame, s.nee.wi)) * s.nee.weight;
+    l += brdf_eval_cos(mat, wo, to_local(sf.frame, s.bsdf.wi)) * s.bsdf.weight;
     return l;
 }

@@ -10,3 +10,5 @@
 @group(0) @binding(5) var<storage, read> lights: array<Light>;
 @group(0) @binding(6) var<storage, read> env: array<f32>;
 @group(0) @binding(7) var<uniform> scene: SceneInfo;
+@group(0) @binding(8) var<storage, read> param_textures: array<ParamTex>;
+@group(0) @binding(9) var<storage, read> params: array<f32>;

@@ -39,8 +39,14 @@ struct Material {
     metallic: f32,
     roughness: f32,
     double_sided: u32,
+    // Optimized textures replacing base color, metallic, roughness: indices into
+    // param_textures[], NONE when the slot is not optimized.
+    param_base_color: u32,
+    param_metallic: u32,
+    param_roughness: u32,
     _pad0: u32,
     _pad1: u32,
+    _pad2: u32,
     base_color_tex: TexRef,
     mr_tex: TexRef,
     emissive_tex: TexRef,
@@ -85,6 +91,20 @@ struct SceneInfo {
     env_total: f32,
     scene_radius: f32,
     _pad: u32,
+}
+
+// An optimized texture: linear values, `channels` floats per texel from params[offset], row 0
+// at v = 0, repeat wrap. filtering: 0 nearest, 1 bilinear. Keep in sync with GpuParamTex in
+// src/render/layout.rs.
+struct ParamTex {
+    offset: u32,
+    width: u32,
+    height: u32,
+    channels: u32,
+    filtering: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 struct Hit {

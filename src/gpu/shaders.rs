@@ -23,9 +23,13 @@ pub const SOURCES: &[(&str, &str)] = sources!(
     "shared/brdf",
     "shared/lights",
     "shared/camera",
+    "shared/params",
     "shared/integrator",
     "render",
     "trace_rays",
+    "gradient",
+    "loss",
+    "adam",
 );
 
 /// The passes (top-level WGSL files with an entry point `main`).

@@ -44,8 +44,10 @@ pub struct GpuMaterial {
     pub metallic: f32,
     pub roughness: f32,
     pub double_sided: u32,
-    pub _pad0: u32,
-    pub _pad1: u32,
+    pub param_base_color: u32,
+    pub param_metallic: u32,
+    pub param_roughness: u32,
+    pub _pad: [u32; 3],
     pub base_color_tex: GpuTexRef,
     pub mr_tex: GpuTexRef,
     pub emissive_tex: GpuTexRef,
@@ -124,6 +126,59 @@ pub struct GpuRenderParams {
     pub _pad: [u32; 3],
 }
 
+/// `ParamTex` in types.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuParamTex {
+    pub offset: u32,
+    pub width: u32,
+    pub height: u32,
+    pub channels: u32,
+    pub filtering: u32,
+    pub _pad: [u32; 3],
+}
+
+/// `GradientParams` in gradient.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuGradientParams {
+    pub camera: GpuCameraInfo,
+    pub seed: u32,
+    pub sample_offset: u32,
+    pub spp: u32,
+    pub techniques: u32,
+    pub stride: u32,
+    pub inv_spp: f32,
+    pub _pad: [u32; 2],
+}
+
+/// `LossParams` in loss.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuLossParams {
+    pub n_pixels: u32,
+    pub kind: u32,
+    pub norm: f32,
+    pub partial_offset: u32,
+}
+
+/// `AdamParams` in adam.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuAdamParams {
+    pub offset: u32,
+    pub count: u32,
+    pub lr: f32,
+    pub beta1: f32,
+    pub beta2: f32,
+    pub eps: f32,
+    pub bias1: f32,
+    pub bias2: f32,
+    pub lo: f32,
+    pub hi: f32,
+    pub _pad: [u32; 2],
+}
+
 /// `TraceParams` in trace_rays.wgsl.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
@@ -140,29 +195,37 @@ mod tests {
     use std::mem::size_of;
 
     // Sizes as naga computes them for the WGSL structs.
-    #[test]
-    fn sizes_match_wgsl() {
-        let module = crate::gpu::shaders::validate("render").unwrap();
+    fn wgsl_size(pass: &str, name: &str) -> usize {
+        let module = crate::gpu::shaders::validate(pass).unwrap();
         let mut layouter = naga::proc::Layouter::default();
         layouter.update(module.to_ctx()).unwrap();
-        let size_of_wgsl = |name: &str| {
-            let (h, _) = module
-                .types
-                .iter()
-                .find(|(_, t)| t.name.as_deref() == Some(name))
-                .unwrap_or_else(|| panic!("no WGSL struct {name}"));
-            layouter[h].size as usize
-        };
-        assert_eq!(size_of::<GpuTriShading>(), size_of_wgsl("TriShading"));
-        assert_eq!(size_of::<GpuTexRef>(), size_of_wgsl("TexRef"));
-        assert_eq!(size_of::<GpuMaterial>(), size_of_wgsl("Material"));
-        assert_eq!(size_of::<GpuLight>(), size_of_wgsl("Light"));
-        assert_eq!(size_of::<GpuSceneInfo>(), size_of_wgsl("SceneInfo"));
-        assert_eq!(size_of::<GpuCameraInfo>(), size_of_wgsl("CameraInfo"));
-        assert_eq!(size_of::<GpuRenderParams>(), size_of_wgsl("RenderParams"));
-        assert_eq!(
-            size_of::<crate::scene::bvh::BvhNode>(),
-            size_of_wgsl("BvhNode")
-        );
+        let (h, _) = module
+            .types
+            .iter()
+            .find(|(_, t)| t.name.as_deref() == Some(name))
+            .unwrap_or_else(|| panic!("no WGSL struct {name} in {pass}"));
+        layouter[h].size as usize
+    }
+
+    // Sizes as naga lays out the WGSL structs.
+    #[test]
+    fn sizes_match_wgsl() {
+        for (pass, name, size) in [
+            ("render", "TriShading", size_of::<GpuTriShading>()),
+            ("render", "TexRef", size_of::<GpuTexRef>()),
+            ("render", "Material", size_of::<GpuMaterial>()),
+            ("render", "Light", size_of::<GpuLight>()),
+            ("render", "SceneInfo", size_of::<GpuSceneInfo>()),
+            ("render", "CameraInfo", size_of::<GpuCameraInfo>()),
+            ("render", "RenderParams", size_of::<GpuRenderParams>()),
+            ("render", "ParamTex", size_of::<GpuParamTex>()),
+            ("render", "BvhNode", size_of::<crate::scene::bvh::BvhNode>()),
+            ("trace_rays", "TraceParams", size_of::<GpuTraceParams>()),
+            ("gradient", "GradientParams", size_of::<GpuGradientParams>()),
+            ("loss", "LossParams", size_of::<GpuLossParams>()),
+            ("adam", "AdamParams", size_of::<GpuAdamParams>()),
+        ] {
+            assert_eq!(size, wgsl_size(pass, name), "{name}");
+        }
     }
 }

@@ -1,6 +1,7 @@
 //! The direct-lighting renderer: scene upload, the `render` pass and the `trace_rays` pass.
 
 pub mod layout;
+pub mod params;
 
 use crate::gpu::{grid_2d, Binding, Gpu};
 use crate::image_io::Image;
@@ -8,9 +9,11 @@ use crate::scene::{bvh, PunctualKind, Scene, TextureSlot, Wrap};
 use crate::{Error, Result};
 use glam::Vec3;
 use layout::*;
+use params::ParamSet;
 use std::time::Instant;
 
-const WORKGROUP: u32 = 64;
+/// Invocations per workgroup of every pass.
+pub const WORKGROUP: u32 = 64;
 
 /// Scene data on the GPU: bind group 0 of every pass that traces rays.
 pub struct GpuScene {
@@ -26,6 +29,10 @@ pub struct GpuScene {
     pub gpu_index: Vec<u32>,
     /// Bytes uploaded, for reports.
     pub bytes: u64,
+    /// Values of the optimized textures (binding 9; Adam writes it).
+    pub params: wgpu::Buffer,
+    /// Number of floats in `params`.
+    pub param_count: u32,
 }
 
 fn wrap_bits(w: Wrap) -> u32 {
@@ -41,8 +48,9 @@ fn luminance(c: Vec3) -> f32 {
 }
 
 impl GpuScene {
-    /// Upload a scene: BVH, triangles, materials, textures, lights, environment.
-    pub fn new(gpu: &Gpu, scene: &Scene) -> Result<GpuScene> {
+    /// Upload a scene: BVH, triangles, materials, textures, lights, environment, and the
+    /// optimized textures that replace material inputs.
+    pub fn new(gpu: &Gpu, scene: &Scene, param_set: &ParamSet) -> Result<GpuScene> {
         let limits = gpu.device.limits();
         let max_binding = limits.max_storage_buffer_binding_size as u64;
         let check = |label: &str, bytes: usize| -> Result<()> {
@@ -111,8 +119,10 @@ impl GpuScene {
                     metallic: m.metallic,
                     roughness: m.roughness,
                     double_sided: m.double_sided as u32,
-                    _pad0: 0,
-                    _pad1: 0,
+                    param_base_color: u32::MAX,
+                    param_metallic: u32::MAX,
+                    param_roughness: u32::MAX,
+                    _pad: [0; 3],
                     base_color_tex: tex_ref(&m.base_color_texture, true),
                     mr_tex: tex_ref(&m.metallic_roughness_texture, false),
                     emissive_tex: tex_ref(&m.emissive_texture, true),
@@ -120,6 +130,36 @@ impl GpuScene {
                 }
             })
             .collect();
+
+        let mut materials = materials;
+        let mut param_textures = Vec::new();
+        for (i, t) in param_set.textures.iter().enumerate() {
+            let m = materials.get_mut(t.material as usize).ok_or_else(|| {
+                Error::Invalid(format!(
+                    "optimized texture {i} refers to material {} of {}",
+                    t.material,
+                    scene.materials.len()
+                ))
+            })?;
+            let slot = match t.slot {
+                crate::task::Slot::BaseColor => &mut m.param_base_color,
+                crate::task::Slot::Metallic => &mut m.param_metallic,
+                crate::task::Slot::Roughness => &mut m.param_roughness,
+            };
+            *slot = i as u32;
+            param_textures.push(GpuParamTex {
+                offset: t.offset,
+                width: t.width,
+                height: t.height,
+                channels: t.channels(),
+                filtering: match t.filter {
+                    crate::task::Filter::Nearest => 0,
+                    crate::task::Filter::Bilinear => 1,
+                },
+                _pad: [0; 3],
+            });
+        }
+        check("the optimized textures", param_set.values.len() * 4)?;
 
         // Lights, with selection probability proportional to a power estimate.
         let (_, radius) = scene.bounding_sphere();
@@ -254,12 +294,23 @@ impl GpuScene {
             gpu.storage("scene lights", bytemuck::cast_slice(&lights), none),
             gpu.storage("scene env", bytemuck::cast_slice(&env_table), none),
             gpu.uniform("scene info", bytemuck::bytes_of(&info)),
+            gpu.storage(
+                "scene param_textures",
+                bytemuck::cast_slice(&param_textures),
+                none,
+            ),
+            gpu.storage(
+                "scene params",
+                bytemuck::cast_slice(&param_set.values),
+                wgpu::BufferUsages::COPY_SRC,
+            ),
         ];
         let bytes = buffers.iter().map(|b| b.size()).sum();
         let layout = Self::bind_group_layout(gpu);
         let refs: Vec<&wgpu::Buffer> = buffers.iter().collect();
         let bind_group = gpu.bind_group("scene", &layout, &refs);
         gpu.check("scene upload")?;
+        let [_, _, _, _, _, _, _, _, _, params] = buffers;
         Ok(GpuScene {
             layout,
             bind_group,
@@ -267,6 +318,8 @@ impl GpuScene {
             cameras: scene.cameras.clone(),
             gpu_index,
             bytes,
+            params,
+            param_count: param_set.values.len() as u32,
         })
     }
 
@@ -276,7 +329,8 @@ impl GpuScene {
         gpu.layout(
             "scene",
             &[
-                Storage, Storage, Storage, Storage, Storage, Storage, Storage, Uniform,
+                Storage, Storage, Storage, Storage, Storage, Storage, Storage, Uniform, Storage,
+                Storage,
             ],
         )
     }
@@ -296,7 +350,8 @@ pub enum Techniques {
 }
 
 impl Techniques {
-    fn bits(self) -> u32 {
+    /// The value of `techniques` in the shaders.
+    pub fn bits(self) -> u32 {
         match self {
             Techniques::NeeOnly => 1,
             Techniques::BsdfOnly => 2,
@@ -368,6 +423,25 @@ pub struct RayHit {
     pub b: [f32; 2],
 }
 
+/// Record one compute pass: `groups[k]` is bound at group k.
+pub fn encode_pass(
+    enc: &mut wgpu::CommandEncoder,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    groups: &[&wgpu::BindGroup],
+    grid: (u32, u32),
+) {
+    let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+        label: Some(label),
+        timestamp_writes: None,
+    });
+    pass.set_pipeline(pipeline);
+    for (k, g) in groups.iter().enumerate() {
+        pass.set_bind_group(k as u32, *g, &[]);
+    }
+    pass.dispatch_workgroups(grid.0, grid.1, 1);
+}
+
 /// Camera constants for a pinhole camera at the given image size.
 pub fn camera_info(cam: &crate::scene::Camera, width: u32, height: u32) -> GpuCameraInfo {
     let m = cam.world;
@@ -391,8 +465,8 @@ pub struct Renderer {
     gpu: Gpu,
     /// The uploaded scene.
     pub scene: GpuScene,
-    render_pipeline: wgpu::ComputePipeline,
-    render_layout: wgpu::BindGroupLayout,
+    pub(crate) render_pipeline: wgpu::ComputePipeline,
+    pub(crate) render_layout: wgpu::BindGroupLayout,
     trace_pipeline: wgpu::ComputePipeline,
     trace_layout: wgpu::BindGroupLayout,
 }
@@ -400,7 +474,12 @@ pub struct Renderer {
 impl Renderer {
     /// Upload `scene` and compile the passes.
     pub fn new(gpu: &Gpu, scene: &Scene) -> Result<Renderer> {
-        let gscene = GpuScene::new(gpu, scene)?;
+        Self::with_params(gpu, scene, &ParamSet::default())
+    }
+
+    /// Upload `scene` with optimized textures replacing material inputs.
+    pub fn with_params(gpu: &Gpu, scene: &Scene, param_set: &ParamSet) -> Result<Renderer> {
+        let gscene = GpuScene::new(gpu, scene, param_set)?;
         use Binding::*;
         let render_layout = gpu.layout("render", &[Uniform, StorageRw, StorageRw]);
         let render_pipeline = gpu.compute_pipeline("render", &[&gscene.layout, &render_layout])?;
@@ -428,17 +507,24 @@ impl Renderer {
             .gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(label),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, &self.scene.bind_group, &[]);
-            pass.set_bind_group(1, group1, &[]);
-            pass.dispatch_workgroups(grid.0, grid.1, 1);
-        }
+        encode_pass(
+            &mut enc,
+            label,
+            pipeline,
+            &[&self.scene.bind_group, group1],
+            grid,
+        );
         self.gpu.queue.submit([enc.finish()]);
+    }
+
+    /// Workgroup grid for an image of `w` x `h` pixels in 8x8 tiles (see render.wgsl).
+    pub(crate) fn tile_grid(&self, w: u32, h: u32) -> (u32, u32) {
+        let max_dim = self
+            .gpu
+            .device
+            .limits()
+            .max_compute_workgroups_per_dimension;
+        grid_2d(w.div_ceil(8) * h.div_ceil(8) * 64, WORKGROUP, max_dim)
     }
 
     /// Render an image; `progress` is called with the samples per pixel done so far.
@@ -457,13 +543,7 @@ impl Renderer {
             Error::Invalid(format!("camera index {} out of range", settings.camera))
         })?;
         let n_pixels = w * h;
-        let max_dim = self
-            .gpu
-            .device
-            .limits()
-            .max_compute_workgroups_per_dimension;
-        // One workgroup per 8x8 tile (see render.wgsl).
-        let grid = grid_2d(w.div_ceil(8) * h.div_ceil(8) * 64, WORKGROUP, max_dim);
+        let grid = self.tile_grid(w, h);
         let mut params = GpuRenderParams {
             camera: camera_info(cam, w, h),
             seed: settings.seed,

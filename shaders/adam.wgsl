@@ -1,0 +1,45 @@
+// Adam step for one optimized texture, then clamping to the valid range. Non-finite
+// gradients leave their parameter unchanged and are counted.
+
+// Keep in sync with GpuAdamParams in src/render/layout.rs.
+struct AdamParams {
+    offset: u32,
+    count: u32,
+    lr: f32,
+    beta1: f32,
+    beta2: f32,
+    eps: f32,
+    // 1 - beta1^t and 1 - beta2^t for the step t (from 1).
+    bias1: f32,
+    bias2: f32,
+    lo: f32,
+    hi: f32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+@group(0) @binding(0) var<uniform> ap: AdamParams;
+@group(0) @binding(1) var<storage, read> grad: array<f32>;
+@group(0) @binding(2) var<storage, read_write> params: array<f32>;
+@group(0) @binding(3) var<storage, read_write> moment1: array<f32>;
+@group(0) @binding(4) var<storage, read_write> moment2: array<f32>;
+@group(0) @binding(5) var<storage, read_write> adam_stats: array<atomic<u32>, 4>;
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3u) {
+    if gid.x >= ap.count {
+        return;
+    }
+    let i = ap.offset + gid.x;
+    let g = grad[i];
+    if !(abs(g) < 3.0e38) {
+        atomicAdd(&adam_stats[0], 1u);
+        return;
+    }
+    let m = ap.beta1 * moment1[i] + (1.0 - ap.beta1) * g;
+    let v = ap.beta2 * moment2[i] + (1.0 - ap.beta2) * g * g;
+    moment1[i] = m;
+    moment2[i] = v;
+    let step = ap.lr * (m / ap.bias1) / (sqrt(v / ap.bias2) + ap.eps);
+    params[i] = clamp(params[i] - step, ap.lo, ap.hi);
+}

@@ -1,0 +1,148 @@
+// Baseline gradient pass: every camera sample differentiates its light-sampled and
+// BSDF-sampled contributions with respect to the material inputs at its hit point, weights
+// them by the adjoint of its pixel, and adds the result into the texels that the filter
+// touches (the parameter-space estimator of DESIGN.md section 2). Float additions use a
+// bounded compare-and-swap loop on 32-bit atomics; an update that exhausts the bound is
+// counted in stats[1], never silently lost.
+#import shared/rng
+#import shared/camera
+#import shared/integrator
+
+// Keep in sync with GpuGradientParams in src/render/layout.rs.
+struct GradientParams {
+    camera: CameraInfo,
+    seed: u32,
+    sample_offset: u32,
+    spp: u32,
+    techniques: u32,
+    stride: u32,
+    // 1 / (gradient samples per pixel of the whole estimate).
+    inv_spp: f32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+@group(1) @binding(0) var<uniform> gp: GradientParams;
+// dL/dI per pixel (rgb).
+@group(1) @binding(1) var<storage, read> adjoint: array<vec4f>;
+// Gradient per parameter scalar (f32 bits), laid out like params[].
+@group(1) @binding(2) var<storage, read_write> grad: array<atomic<u32>>;
+// [0] samples, [1] lost updates (CAS bound exhausted), [2] dropped non-finite values.
+@group(1) @binding(3) var<storage, read_write> gstats: array<atomic<u32>, 4>;
+
+const CAS_BOUND: u32 = 256u;
+
+var<private> lost_updates: u32 = 0u;
+var<private> dropped_values: u32 = 0u;
+
+fn atomic_add_f32(i: u32, v: f32) {
+    if v == 0.0 {
+        return;
+    }
+    if !(abs(v) < 3.0e38) {
+        dropped_values += 1u;
+        return;
+    }
+    var old = atomicLoad(&grad[i]);
+    for (var k = 0u; k < CAS_BOUND; k++) {
+        let r = atomicCompareExchangeWeak(&grad[i], old, bitcast<u32>(bitcast<f32>(old) + v));
+        if r.exchanged {
+            return;
+        }
+        old = r.old_value;
+    }
+    lost_updates += 1u;
+}
+
+// Scatter the derivative of one contribution c = f cos x weight into the optimized textures
+// of the material.
+fn scatter(m: Material, uv: vec2f, bg: BrdfGrad, weight: vec3f, adj: vec3f) {
+    if all(weight == vec3f(0.0)) {
+        return;
+    }
+    if m.param_base_color != NONE {
+        let p = param_textures[m.param_base_color];
+        let fp = param_footprint(p, uv);
+        let g = adj * bg.d_base * weight;
+        for (var k = 0u; k < 4u; k++) {
+            if fp.weight[k] != 0.0 {
+                let base = p.offset + fp.texel[k] * 3u;
+                atomic_add_f32(base, fp.weight[k] * g.x);
+                atomic_add_f32(base + 1u, fp.weight[k] * g.y);
+                atomic_add_f32(base + 2u, fp.weight[k] * g.z);
+            }
+        }
+    }
+    if m.param_metallic != NONE {
+        let p = param_textures[m.param_metallic];
+        let fp = param_footprint(p, uv);
+        let g = dot(adj, bg.d_metallic * weight);
+        for (var k = 0u; k < 4u; k++) {
+            if fp.weight[k] != 0.0 {
+                atomic_add_f32(p.offset + fp.texel[k], fp.weight[k] * g);
+            }
+        }
+    }
+    if m.param_roughness != NONE {
+        let p = param_textures[m.param_roughness];
+        let fp = param_footprint(p, uv);
+        let g = dot(adj, bg.d_roughness * weight);
+        for (var k = 0u; k < 4u; k++) {
+            if fp.weight[k] != 0.0 {
+                atomic_add_f32(p.offset + fp.texel[k], fp.weight[k] * g);
+            }
+        }
+    }
+}
+
+fn gradient_sample(o: vec3f, d: vec3f, adj: vec3f) {
+    let hit = trace_closest(o, d, 3.0e38);
+    if hit.tri == NONE {
+        return;
+    }
+    let sf = surface_at(o, d, hit);
+    let m = materials[sf.material];
+    if !sf.valid || (m.param_base_color == NONE && m.param_metallic == NONE && m.param_roughness == NONE) {
+        return;
+    }
+    let mat = surface_material(sf);
+    let wo = to_local(sf.frame, sf.wo);
+    let s = sample_direct(sf, mat);
+    scatter(m, sf.uv, brdf_eval_cos_grad(mat, wo, to_local(sf.frame, s.nee.wi)), s.nee.weight, adj);
+    scatter(m, sf.uv, brdf_eval_cos_grad(mat, wo, to_local(sf.frame, s.bsdf.wi)), s.bsdf.weight, adj);
+}
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) id: vec3u) {
+    let width = gp.camera.width;
+    let n_pixels = width * gp.camera.height;
+    // 8x8 tiles, as in render.wgsl.
+    let linear = id.x + id.y * gp.stride;
+    let tiles_x = (width + 7u) / 8u;
+    let tile = linear / 64u;
+    let in_tile = linear % 64u;
+    let px = (tile % tiles_x) * 8u + in_tile % 8u;
+    let py = (tile / tiles_x) * 8u + in_tile / 8u;
+    if px >= width || py >= gp.camera.height {
+        return;
+    }
+    let pixel = py * width + px;
+    let adj = adjoint[pixel].xyz * gp.inv_spp;
+    if all(adj == vec3f(0.0)) {
+        return;
+    }
+    techniques = gp.techniques;
+    let xy = vec2f(f32(px), f32(py));
+    for (var s = 0u; s < gp.spp; s++) {
+        rng_init(gp.seed, (gp.sample_offset + s) * n_pixels + pixel, 0u);
+        let d = camera_direction(gp.camera, xy + rand2());
+        gradient_sample(gp.camera.origin, d, adj);
+    }
+    atomicAdd(&gstats[0], gp.spp);
+    if lost_updates > 0u {
+        atomicAdd(&gstats[1], lost_updates);
+    }
+    if dropped_values > 0u {
+        atomicAdd(&gstats[2], dropped_values);
+    }
+}

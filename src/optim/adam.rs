@@ -1,0 +1,34 @@
+//! Adam: the constants, and a CPU reference of shaders/adam.wgsl.
+
+/// First-moment decay.
+pub const BETA1: f32 = 0.9;
+/// Second-moment decay.
+pub const BETA2: f32 = 0.999;
+/// Denominator epsilon.
+pub const EPS: f32 = 1e-8;
+
+/// One Adam step at step number `t` (from 1) with clamping to `[lo, hi]`, on the CPU.
+#[allow(clippy::too_many_arguments)]
+pub fn step(
+    params: &mut [f32],
+    m: &mut [f32],
+    v: &mut [f32],
+    grad: &[f32],
+    lr: f32,
+    t: u32,
+    lo: f32,
+    hi: f32,
+) {
+    let bias1 = 1.0 - BETA1.powi(t as i32);
+    let bias2 = 1.0 - BETA2.powi(t as i32);
+    for i in 0..params.len() {
+        let g = grad[i];
+        if !g.is_finite() {
+            continue;
+        }
+        m[i] = BETA1 * m[i] + (1.0 - BETA1) * g;
+        v[i] = BETA2 * v[i] + (1.0 - BETA2) * g * g;
+        let s = lr * (m[i] / bias1) / ((v[i] / bias2).sqrt() + EPS);
+        params[i] = (params[i] - s).clamp(lo, hi);
+    }
+}

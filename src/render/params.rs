@@ -1,0 +1,175 @@
+//! Optimized textures ("parameter textures"): the values the optimizer changes, laid out as on
+//! the GPU (all textures in one float array, `channels` floats per texel, row-major).
+use crate::scene::{Material, Scene};
+use crate::task::{Filter, Slot, TextureSpec};
+use crate::{Error, Result};
+
+/// One optimized texture.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamTexture {
+    /// Material index in the scene.
+    pub material: u32,
+    /// Material name.
+    pub material_name: String,
+    /// Which input it replaces.
+    pub slot: Slot,
+    /// Width in texels.
+    pub width: u32,
+    /// Height in texels.
+    pub height: u32,
+    /// Lookup filter.
+    pub filter: Filter,
+    /// First float in [`ParamSet::values`].
+    pub offset: u32,
+    /// Adam learning rate.
+    pub learning_rate: f32,
+}
+
+impl ParamTexture {
+    /// Floats per texel.
+    pub fn channels(&self) -> u32 {
+        self.slot.channels()
+    }
+    /// Number of floats.
+    pub fn len(&self) -> usize {
+        (self.width * self.height * self.channels()) as usize
+    }
+    /// Whether the texture has no texels (never, for a checked task).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// `material_slot`, for file names.
+    pub fn name(&self) -> String {
+        let clean: String = self
+            .material_name
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '-' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        format!("{clean}_{}", self.slot.name())
+    }
+}
+
+/// All optimized textures and their current values.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ParamSet {
+    /// The textures.
+    pub textures: Vec<ParamTexture>,
+    /// Their values, concatenated.
+    pub values: Vec<f32>,
+}
+
+impl ParamSet {
+    /// Textures as the task asks, at their initial values. Materials are found by name in
+    /// `scene`; `task_path` names the task in errors.
+    pub fn from_specs(
+        scene: &Scene,
+        specs: &[TextureSpec],
+        filter: Filter,
+        task_path: &std::path::Path,
+    ) -> Result<ParamSet> {
+        let mut set = ParamSet::default();
+        for (i, spec) in specs.iter().enumerate() {
+            let material = scene
+                .materials
+                .iter()
+                .position(|m: &Material| m.name == spec.material)
+                .ok_or_else(|| {
+                    let names: Vec<&str> =
+                        scene.materials.iter().map(|m| m.name.as_str()).collect();
+                    Error::file(
+                        task_path,
+                        format!(
+                            "`textures[{i}].material`: no material `{}` in {}; it has {}",
+                            spec.material,
+                            scene.source.display(),
+                            names.join(", ")
+                        ),
+                    )
+                })?;
+            let tex = ParamTexture {
+                material: material as u32,
+                material_name: spec.material.clone(),
+                slot: spec.slot,
+                width: spec.resolution[0],
+                height: spec.resolution[1],
+                filter,
+                offset: set.values.len() as u32,
+                learning_rate: spec.learning_rate,
+            };
+            let init = spec.init_values();
+            for _ in 0..tex.width * tex.height {
+                set.values.extend_from_slice(&init);
+            }
+            set.textures.push(tex);
+        }
+        Ok(set)
+    }
+
+    /// The values of texture `i`.
+    pub fn values_of(&self, i: usize) -> &[f32] {
+        let t = &self.textures[i];
+        &self.values[t.offset as usize..t.offset as usize + t.len()]
+    }
+
+    /// The optimized texture replacing `slot` of `material`, if any.
+    pub fn find(&self, material: u32, slot: Slot) -> Option<usize> {
+        self.textures
+            .iter()
+            .position(|t| t.material == material && t.slot == slot)
+    }
+
+    /// What the slot holds in a reference scene (e.g. the ground truth), sampled at the
+    /// centres of texture `i`'s texels with the same UV convention (UV0, no transform).
+    pub fn reference_values(&self, i: usize, reference: &Scene) -> Option<Vec<f32>> {
+        let t = &self.textures[i];
+        let m = reference
+            .materials
+            .iter()
+            .find(|m| m.name == t.material_name)?;
+        let mut out = Vec::with_capacity(t.len());
+        for y in 0..t.height {
+            for x in 0..t.width {
+                let uv = [
+                    (x as f32 + 0.5) / t.width as f32,
+                    (y as f32 + 0.5) / t.height as f32,
+                ];
+                let sample = |slot: &Option<crate::scene::TextureSlot>, srgb: bool| -> [f32; 4] {
+                    match slot {
+                        None => [1.0; 4],
+                        Some(s) => crate::scene::images::sample_bilinear(
+                            &reference.images[s.image],
+                            s,
+                            uv,
+                            srgb,
+                        ),
+                    }
+                };
+                match t.slot {
+                    Slot::BaseColor => {
+                        let c = sample(&m.base_color_texture, true);
+                        out.extend_from_slice(&[
+                            m.base_color.x * c[0],
+                            m.base_color.y * c[1],
+                            m.base_color.z * c[2],
+                        ]);
+                    }
+                    Slot::Roughness => out.push(
+                        (m.roughness * sample(&m.metallic_roughness_texture, false)[1])
+                            .clamp(0.0, 1.0),
+                    ),
+                    Slot::Metallic => out.push(
+                        (m.metallic * sample(&m.metallic_roughness_texture, false)[2])
+                            .clamp(0.0, 1.0),
+                    ),
+                }
+            }
+        }
+        Some(out)
+    }
+}

@@ -1,0 +1,426 @@
+//! Task files: what an optimization solves (TOML).
+//!
+//! ```toml
+//! scene = "scene.gltf"            # the scene with known geometry and lights
+//! cameras = ["main"]              # all of them are rendered every iteration (default: all)
+//! width = 128                     # image size of every camera
+//! height = 128
+//! seed = 1
+//! output = "out/default"          # relative to the working directory
+//!
+//! [target]                        # either a ground-truth scene rendered at `spp` ...
+//! scene = "scene.gltf"
+//! spp = 256
+//! # images = { main = "main.exr" } # ... or one image per camera (EXR or PNG)
+//!
+//! [optimizer]
+//! iterations = 300                # and/or time_budget_s
+//! primal_spp = 2
+//! gradient_spp = 2
+//! loss = "l2"                     # or "relmse"
+//! filter = "bilinear"             # or "nearest"
+//! checkpoint_every = 25
+//!
+//! [[textures]]
+//! material = "sphere"
+//! slot = "base_color"             # or "roughness", "metallic"
+//! resolution = [64, 32]
+//! init = [0.5, 0.5, 0.5]          # one value for roughness and metallic
+//! learning_rate = 0.02
+//! ```
+use crate::{Error, Result};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// Which material input a texture replaces.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Slot {
+    /// Linear RGB base color (replaces baseColorFactor x baseColorTexture).
+    BaseColor,
+    /// Perceptual roughness (replaces roughnessFactor x metallicRoughness.G).
+    Roughness,
+    /// Metalness (replaces metallicFactor x metallicRoughness.B).
+    Metallic,
+}
+
+impl Slot {
+    /// Floats per texel.
+    pub fn channels(self) -> u32 {
+        match self {
+            Slot::BaseColor => 3,
+            _ => 1,
+        }
+    }
+    /// The valid range that the optimizer clamps to.
+    pub fn range(self) -> (f32, f32) {
+        match self {
+            Slot::Roughness => (ROUGHNESS_FLOOR, 1.0),
+            _ => (0.0, 1.0),
+        }
+    }
+    /// Name as in task files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Slot::BaseColor => "base_color",
+            Slot::Roughness => "roughness",
+            Slot::Metallic => "metallic",
+        }
+    }
+}
+
+/// Smallest roughness the optimizer allows (alpha = 4e-4, the renderer's floor).
+pub const ROUGHNESS_FLOOR: f32 = 0.02;
+
+/// Texture filter for optimized textures.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Filter {
+    /// One texel, weight 1.
+    Nearest,
+    /// Four texels with bilinear weights.
+    #[default]
+    Bilinear,
+}
+
+/// Image loss.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Loss {
+    /// Mean of (I - G)^2.
+    #[default]
+    L2,
+    /// Mean of (I - G)^2 / (G^2 + 0.01).
+    Relmse,
+}
+
+/// Initial value: RGB for base color, one number for scalar textures.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(untagged)]
+pub enum Init {
+    /// One value.
+    Scalar(f32),
+    /// Several values (RGB).
+    Vector(Vec<f32>),
+}
+
+/// One texture to optimize.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TextureSpec {
+    /// Material name in the scene.
+    pub material: String,
+    /// Which input.
+    pub slot: Slot,
+    /// Width and height in texels.
+    pub resolution: [u32; 2],
+    /// Constant initial value.
+    pub init: Init,
+    /// Adam learning rate.
+    pub learning_rate: f32,
+}
+
+impl TextureSpec {
+    /// The initial value as one float per channel.
+    pub fn init_values(&self) -> Vec<f32> {
+        match &self.init {
+            Init::Scalar(v) => vec![*v; self.slot.channels() as usize],
+            Init::Vector(v) => v.clone(),
+        }
+    }
+}
+
+/// Where the target images come from.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TargetSpec {
+    /// A ground-truth version of the scene (same geometry, other textures).
+    pub scene: Option<PathBuf>,
+    /// Samples per pixel for rendering the ground-truth scene.
+    #[serde(default = "default_target_spp")]
+    pub spp: u32,
+    /// Target image per camera name.
+    pub images: Option<BTreeMap<String, PathBuf>>,
+}
+
+fn default_target_spp() -> u32 {
+    256
+}
+
+/// Optimizer settings.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OptimizerSpec {
+    /// Iterations to run (at most).
+    pub iterations: Option<u32>,
+    /// Wall-clock budget in seconds (at most).
+    pub time_budget_s: Option<f64>,
+    /// Samples per pixel of the primal render (independent of the gradient samples).
+    #[serde(default = "default_primal_spp")]
+    pub primal_spp: u32,
+    /// Samples per pixel of the gradient pass.
+    #[serde(default = "one")]
+    pub gradient_spp: u32,
+    /// Image loss.
+    #[serde(default)]
+    pub loss: Loss,
+    /// Texture filter of the optimized textures.
+    #[serde(default)]
+    pub filter: Filter,
+    /// Iterations between checkpoints (0: none).
+    #[serde(default = "default_checkpoint")]
+    pub checkpoint_every: u32,
+}
+
+fn default_primal_spp() -> u32 {
+    4
+}
+fn one() -> u32 {
+    1
+}
+fn default_checkpoint() -> u32 {
+    25
+}
+
+/// A whole task file.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Task {
+    /// The scene, relative to the task file.
+    pub scene: PathBuf,
+    /// Optional environment map (relative to the task file) and its scale.
+    pub env: Option<PathBuf>,
+    /// Multiplier of the environment map.
+    #[serde(default = "unit")]
+    pub env_scale: f32,
+    /// Cameras rendered every iteration (names or indices); all when absent.
+    pub cameras: Option<Vec<String>>,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Random seed.
+    #[serde(default = "one")]
+    pub seed: u32,
+    /// Output folder (relative to the working directory).
+    pub output: Option<PathBuf>,
+    /// Where the targets come from.
+    pub target: TargetSpec,
+    /// Optimizer settings.
+    pub optimizer: OptimizerSpec,
+    /// Textures to optimize.
+    pub textures: Vec<TextureSpec>,
+    /// Folder of the task file; paths in the task are relative to it.
+    #[serde(skip)]
+    pub base: PathBuf,
+    /// The task file itself.
+    #[serde(skip)]
+    pub path: PathBuf,
+}
+
+fn unit() -> f32 {
+    1.0
+}
+
+impl Task {
+    /// Read and check a task file.
+    pub fn load(path: &Path) -> Result<Task> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e.to_string()))?;
+        Task::parse(&text, path)
+    }
+
+    /// Parse and check task text; `path` names it in errors and anchors relative paths.
+    pub fn parse(text: &str, path: &Path) -> Result<Task> {
+        let mut task: Task = toml::from_str(text)
+            .map_err(|e| Error::file(path, format!("{}", e.to_string().trim_end())))?;
+        task.path = path.to_path_buf();
+        task.base = path
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_else(|| PathBuf::from("."));
+        task.check()?;
+        Ok(task)
+    }
+
+    fn bad(&self, key: &str, msg: impl std::fmt::Display) -> Error {
+        Error::file(&self.path, format!("`{key}`: {msg}"))
+    }
+
+    fn check(&self) -> Result<()> {
+        let size_ok = |v: u32| (1..=8192).contains(&v);
+        if !size_ok(self.width) {
+            return Err(self.bad("width", "must be between 1 and 8192"));
+        }
+        if !size_ok(self.height) {
+            return Err(self.bad("height", "must be between 1 and 8192"));
+        }
+        if !(self.env_scale.is_finite() && self.env_scale >= 0.0) {
+            return Err(self.bad("env_scale", "must be a finite number >= 0"));
+        }
+        let t = &self.target;
+        match (&t.scene, &t.images) {
+            (None, None) => return Err(self.bad("target", "give `scene` or `images`")),
+            (Some(_), Some(_)) => {
+                return Err(self.bad("target", "give `scene` or `images`, not both"))
+            }
+            _ => {}
+        }
+        if t.spp == 0 || t.spp > 1 << 16 {
+            return Err(self.bad("target.spp", "must be between 1 and 65536"));
+        }
+        let o = &self.optimizer;
+        if o.iterations.is_none() && o.time_budget_s.is_none() {
+            return Err(self.bad("optimizer", "give `iterations`, `time_budget_s` or both"));
+        }
+        if let Some(b) = o.time_budget_s {
+            if !(b.is_finite() && b > 0.0) {
+                return Err(self.bad(
+                    "optimizer.time_budget_s",
+                    "must be a positive number of seconds",
+                ));
+            }
+        }
+        if o.primal_spp == 0 || o.primal_spp > 4096 {
+            return Err(self.bad("optimizer.primal_spp", "must be between 1 and 4096"));
+        }
+        if o.gradient_spp == 0 || o.gradient_spp > 4096 {
+            return Err(self.bad("optimizer.gradient_spp", "must be between 1 and 4096"));
+        }
+        if self.textures.is_empty() {
+            return Err(self.bad("textures", "name at least one texture to optimize"));
+        }
+        for (i, tex) in self.textures.iter().enumerate() {
+            let key = |k: &str| format!("textures[{i}].{k}");
+            let [w, h] = tex.resolution;
+            if !(1..=4096).contains(&w) || !(1..=4096).contains(&h) {
+                return Err(self.bad(&key("resolution"), "each side must be between 1 and 4096"));
+            }
+            let init = tex.init_values();
+            if init.len() != tex.slot.channels() as usize {
+                return Err(self.bad(
+                    &key("init"),
+                    format!(
+                        "{} takes {} value(s), got {}",
+                        tex.slot.name(),
+                        tex.slot.channels(),
+                        init.len()
+                    ),
+                ));
+            }
+            let (lo, hi) = tex.slot.range();
+            if init
+                .iter()
+                .any(|v| !(v.is_finite() && *v >= lo && *v <= hi))
+            {
+                return Err(self.bad(&key("init"), format!("values must lie in [{lo}, {hi}]")));
+            }
+            if !(tex.learning_rate.is_finite() && tex.learning_rate >= 0.0) {
+                return Err(self.bad(&key("learning_rate"), "must be a finite number >= 0"));
+            }
+            if self.textures[..i]
+                .iter()
+                .any(|o| o.material == tex.material && o.slot == tex.slot)
+            {
+                return Err(self.bad(
+                    &key("slot"),
+                    format!("{} of `{}` is listed twice", tex.slot.name(), tex.material),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// A path from the task, resolved against the task file's folder.
+    pub fn resolve(&self, p: &Path) -> PathBuf {
+        if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            self.base.join(p)
+        }
+    }
+
+    /// The output folder: `output`, or `out/<task file stem>`.
+    pub fn output_dir(&self) -> PathBuf {
+        self.output.clone().unwrap_or_else(|| {
+            PathBuf::from("out").join(
+                self.path
+                    .file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_else(|| "task".into()),
+            )
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"
+scene = "scene.gltf"
+width = 32
+height = 16
+[target]
+scene = "gt.gltf"
+[optimizer]
+iterations = 10
+[[textures]]
+material = "m"
+slot = "roughness"
+resolution = [8, 8]
+init = 0.5
+learning_rate = 0.01
+"#;
+
+    fn err(text: &str) -> String {
+        Task::parse(text, Path::new("t.toml"))
+            .unwrap_err()
+            .to_string()
+    }
+
+    #[test]
+    fn a_good_task_parses_with_defaults() {
+        let t = Task::parse(GOOD, Path::new("dir/t.toml")).unwrap();
+        assert_eq!(t.optimizer.loss, Loss::L2);
+        assert_eq!(t.optimizer.filter, Filter::Bilinear);
+        assert_eq!(t.target.spp, 256);
+        assert_eq!(t.textures[0].init_values(), vec![0.5]);
+        assert_eq!(
+            t.resolve(Path::new("scene.gltf")),
+            PathBuf::from("dir/scene.gltf")
+        );
+        assert_eq!(t.output_dir(), PathBuf::from("out/t"));
+    }
+
+    #[test]
+    fn unknown_keys_and_bad_values_name_the_key() {
+        let e = err(&GOOD
+            .replace("seed", "x")
+            .replace("width = 32", "width = 32\nwidht = 3"));
+        assert!(e.contains("t.toml") && e.contains("widht"), "{e}");
+        let e = err(&GOOD.replace("init = 0.5", "init = 0.5\nlearning_rat = 1"));
+        assert!(e.contains("learning_rat"), "{e}");
+        let e = err(&GOOD.replace("learning_rate = 0.01", "learning_rate = -1"));
+        assert!(e.contains("textures[0].learning_rate"), "{e}");
+        let e = err(&GOOD.replace("init = 0.5", "init = [0.5, 0.5, 0.5]"));
+        assert!(
+            e.contains("textures[0].init") && e.contains("1 value"),
+            "{e}"
+        );
+        let e = err(&GOOD.replace("init = 0.5", "init = 0.0"));
+        assert!(e.contains("textures[0].init") && e.contains("0.02"), "{e}");
+        let e = err(&GOOD.replace("slot = \"roughness\"", "slot = \"shininess\""));
+        assert!(e.contains("shininess"), "{e}");
+        let e = err(&GOOD.replace("iterations = 10", ""));
+        assert!(e.contains("`optimizer`"), "{e}");
+        let e = err(&GOOD.replace("width = 32", "width = 0"));
+        assert!(e.contains("`width`"), "{e}");
+        let e = err(&GOOD.replace("resolution = [8, 8]", "resolution = [8, 0]"));
+        assert!(e.contains("textures[0].resolution"), "{e}");
+        let e = err(&GOOD.replace("[target]\nscene = \"gt.gltf\"", "[target]"));
+        assert!(e.contains("`target`"), "{e}");
+        let e = err(&GOOD.replace("iterations = 10", "iterations = 10\nprimal_spp = 0"));
+        assert!(e.contains("optimizer.primal_spp"), "{e}");
+    }
+}

@@ -1,0 +1,239 @@
+//! The baseline gradient is unbiased: its mean over many independent estimates equals the
+//! central finite difference of the loss, per texel, for base color, roughness and metallic,
+//! with nearest and bilinear filters, on a small scene with hard and soft shadows.
+mod common;
+
+use common::*;
+use glam::Vec3;
+use psrestir::image_io::Image;
+use psrestir::optim::{loss, Optimizer, Settings};
+use psrestir::render::params::ParamSet;
+use psrestir::scene::{Material, PunctualKind, PunctualLight, Scene};
+use psrestir::task::{Filter, Init, Loss, Slot, TextureSpec};
+
+const W: u32 = 16;
+
+/// A 2x2-unit plane (UV 0..1) under a point light and an emissive quad, with a floating
+/// blocker that casts a hard shadow (point light) and a soft one (area light).
+fn shadow_scene() -> Scene {
+    let mut s = Scene::default();
+    s.materials.push(Material {
+        name: "plane".into(),
+        ..material([0.5, 0.4, 0.3], 0.2, 0.5)
+    });
+    s.materials.push(Material {
+        name: "blocker".into(),
+        ..material([0.3, 0.3, 0.3], 0.0, 0.8)
+    });
+    s.materials.push(Material {
+        name: "lamp".into(),
+        emissive: Vec3::splat(8.0),
+        ..material([0.0; 3], 0.0, 1.0)
+    });
+    s.triangles.extend(quad(
+        Vec3::new(-1.0, 0.0, 1.0),
+        Vec3::new(2.0, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, -2.0),
+        0,
+    ));
+    s.triangles.extend(quad(
+        Vec3::new(-0.3, 0.5, 0.3),
+        Vec3::new(0.5, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, -0.5),
+        1,
+    ));
+    // The lamp faces down (u x v = -y).
+    s.triangles.extend(quad(
+        Vec3::new(0.2, 1.5, -0.8),
+        Vec3::new(0.6, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, 0.6),
+        2,
+    ));
+    s.lights.push(PunctualLight {
+        name: "p".into(),
+        kind: PunctualKind::Point,
+        position: Vec3::new(-0.4, 1.6, 0.5),
+        direction: Vec3::NEG_Y,
+        intensity: Vec3::splat(2.0),
+        range: 0.0,
+    });
+    s.cameras
+        .push(look_at(Vec3::new(0.0, 2.2, 1.2), Vec3::ZERO, Vec3::Y, 0.9));
+    s
+}
+
+fn spec(slot: Slot, init: Init) -> TextureSpec {
+    TextureSpec {
+        material: "plane".into(),
+        slot,
+        resolution: [2, 2],
+        init,
+        learning_rate: 0.0,
+    }
+}
+
+fn check_gradient(slot: Slot, filter: Filter, values: &[f32], target_values: &[f32]) {
+    let Some(gpu) = gpu() else { return };
+    let scene = shadow_scene();
+    let init = Init::Vector(vec![0.5; slot.channels() as usize]);
+    let set = ParamSet::from_specs(
+        &scene,
+        &[spec(slot, init)],
+        filter,
+        std::path::Path::new("test"),
+    )
+    .unwrap();
+    let settings = Settings {
+        width: W,
+        height: W,
+        cameras: vec![0],
+        primal_spp: 16,
+        gradient_spp: 16,
+        loss: Loss::L2,
+        seed: 7,
+    };
+    // Target: the scene with other texel values, rendered with many samples.
+    let blank = Image::new(W, W);
+    let mut opt = Optimizer::new(&gpu, &scene, set.clone(), settings.clone(), &[blank]).unwrap();
+    opt.write_params(target_values).unwrap();
+    let target = opt.render(0, 4096, 99).unwrap();
+    let mut opt = Optimizer::new(&gpu, &scene, set, settings, &[target.clone()]).unwrap();
+    opt.write_params(values).unwrap();
+
+    // Mean and spread of K independent baseline estimates.
+    let k = 48;
+    let n = values.len();
+    let mut sum = vec![0f64; n];
+    let mut sum2 = vec![0f64; n];
+    for it in 0..k {
+        let (g, _) = opt.estimate_gradient(1000 + it).unwrap();
+        for i in 0..n {
+            sum[i] += g[i] as f64;
+            sum2[i] += (g[i] as f64).powi(2);
+        }
+    }
+    let mean: Vec<f64> = sum.iter().map(|s| s / k as f64).collect();
+    let var_mean: Vec<f64> = (0..n)
+        .map(|i| {
+            ((sum2[i] / k as f64 - mean[i] * mean[i]).max(0.0)) * k as f64
+                / (k as f64 - 1.0)
+                / k as f64
+        })
+        .collect();
+
+    // Central differences of an unbiased loss estimate: the product of two independent
+    // renders' residuals has expectation (I - G)^2 exactly. Common random numbers on both
+    // sides; two independent repetitions estimate the difference's own noise.
+    let h = 0.02f32;
+    let spp = 512;
+    let lossf = |vals: &[f32], seed: u32| -> f64 {
+        opt.write_params(vals).unwrap();
+        let a = opt.render(0, spp, seed).unwrap();
+        let b = opt.render(0, spp, seed + 1).unwrap();
+        let mut s = 0.0;
+        for p in 0..a.rgb.len() {
+            for c in 0..3 {
+                s += (a.rgb[p][c] - target.rgb[p][c]) as f64
+                    * (b.rgb[p][c] - target.rgb[p][c]) as f64;
+            }
+        }
+        s / (a.rgb.len() * 3) as f64
+    };
+    let mut fd = vec![0f64; n];
+    let mut fd_var = 0.0;
+    for i in 0..n {
+        let mut reps = [0f64; 2];
+        for (r, rep) in reps.iter_mut().enumerate() {
+            let seed = 5000 + 10 * r as u32;
+            let mut plus = values.to_vec();
+            let mut minus = values.to_vec();
+            plus[i] += h;
+            minus[i] -= h;
+            *rep = (lossf(&plus, seed) - lossf(&minus, seed)) / (2.0 * h as f64);
+        }
+        fd[i] = 0.5 * (reps[0] + reps[1]);
+        eprintln!("fd reps {i}: {:.5e} {:.5e}", reps[0], reps[1]);
+        fd_var += 0.25 * (reps[0] - reps[1]).powi(2) / n as f64;
+    }
+    // Sanity of the CPU loss used by the renders: the same as the optimizer's.
+    let l_cpu = loss::loss(Loss::L2, &opt.render(0, 64, 1).unwrap().rgb, &target.rgb);
+    assert!(l_cpu.is_finite());
+
+    let scale = fd.iter().fold(0f64, |m, v| m.max(v.abs()));
+    assert!(
+        scale > 0.0,
+        "all finite differences are zero: the test sees nothing"
+    );
+    for i in 0..n {
+        // 4 standard errors of the difference (estimator mean, and FD noise pooled over the
+        // texture), plus 5% of the derivative for the O(h^2) truncation of the difference
+        // quotient, plus 0.1% of the largest derivative for float rounding.
+        let tol = 4.0 * (var_mean[i] + fd_var).sqrt() + 0.05 * fd[i].abs() + 1e-3 * scale;
+        eprintln!(
+            "{slot:?} {filter:?} param {i}: gradient {:.5e} +- {:.1e}, finite difference {:.5e}",
+            mean[i],
+            var_mean[i].sqrt(),
+            fd[i]
+        );
+        assert!(
+            (mean[i] - fd[i]).abs() <= tol,
+            "{slot:?}/{filter:?} parameter {i}: gradient {} vs finite difference {} (tolerance {tol})",
+            mean[i],
+            fd[i]
+        );
+    }
+}
+
+#[test]
+fn base_color_gradient_matches_finite_differences_nearest() {
+    let v = [0.5, 0.4, 0.3, 0.6, 0.5, 0.2, 0.3, 0.3, 0.3, 0.7, 0.6, 0.5];
+    let t = [0.8, 0.2, 0.1, 0.3, 0.6, 0.4, 0.5, 0.5, 0.5, 0.2, 0.3, 0.9];
+    check_gradient(Slot::BaseColor, Filter::Nearest, &v, &t);
+}
+
+#[test]
+fn base_color_gradient_matches_finite_differences_bilinear() {
+    let v = [0.5, 0.4, 0.3, 0.6, 0.5, 0.2, 0.3, 0.3, 0.3, 0.7, 0.6, 0.5];
+    let t = [0.8, 0.2, 0.1, 0.3, 0.6, 0.4, 0.5, 0.5, 0.5, 0.2, 0.3, 0.9];
+    check_gradient(Slot::BaseColor, Filter::Bilinear, &v, &t);
+}
+
+#[test]
+fn roughness_gradient_matches_finite_differences_nearest() {
+    check_gradient(
+        Slot::Roughness,
+        Filter::Nearest,
+        &[0.3, 0.5, 0.7, 0.4],
+        &[0.8, 0.2, 0.4, 0.9],
+    );
+}
+
+#[test]
+fn roughness_gradient_matches_finite_differences_bilinear() {
+    check_gradient(
+        Slot::Roughness,
+        Filter::Bilinear,
+        &[0.3, 0.5, 0.7, 0.4],
+        &[0.8, 0.2, 0.4, 0.9],
+    );
+}
+
+#[test]
+fn metallic_gradient_matches_finite_differences_nearest() {
+    check_gradient(
+        Slot::Metallic,
+        Filter::Nearest,
+        &[0.2, 0.5, 0.7, 0.4],
+        &[0.9, 0.1, 0.3, 0.6],
+    );
+}
+
+#[test]
+fn metallic_gradient_matches_finite_differences_bilinear() {
+    check_gradient(
+        Slot::Metallic,
+        Filter::Bilinear,
+        &[0.2, 0.5, 0.7, 0.4],
+        &[0.9, 0.1, 0.3, 0.6],
+    );
+}
