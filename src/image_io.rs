@@ -139,3 +139,55 @@ impl Image {
         })
     }
 }
+
+/// Load an image as linear RGB: OpenEXR and Radiance HDR as they are, PNG and JPEG decoded
+/// from sRGB.
+pub fn load_linear(path: &Path) -> Result<Image> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    let (width, height, rgb) = match ext.as_str() {
+        "exr" => crate::scene::images::decode_exr(path)?,
+        "hdr" => {
+            let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
+            crate::scene::images::decode_hdr(&bytes, path)?
+        }
+        "png" | "jpg" | "jpeg" => {
+            let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
+            let name = path
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            let img = crate::scene::images::decode_texture(&bytes, path, "image", &name)?;
+            let rgb = img
+                .rgba
+                .iter()
+                .map(|p| [0, 1, 2].map(|c| srgb_to_linear(p[c] as f32 / 255.0)))
+                .collect();
+            (img.width, img.height, rgb)
+        }
+        _ => return Err(Error::file(path, "images must be .exr, .hdr, .png or .jpg")),
+    };
+    if rgb.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(Error::file(path, "image has non-finite pixels"));
+    }
+    Ok(Image { width, height, rgb })
+}
+
+/// Two images side by side (left, right), same height.
+pub fn side_by_side(a: &Image, b: &Image) -> Image {
+    let h = a.height.max(b.height);
+    let mut out = Image::new(a.width + b.width, h);
+    for y in 0..h {
+        for x in 0..out.width {
+            let p = if x < a.width {
+                (y < a.height).then(|| a.at(x, y))
+            } else {
+                (y < b.height).then(|| b.at(x - a.width, y))
+            };
+            out.rgb[(y * out.width + x) as usize] = p.unwrap_or([0.0; 3]);
+        }
+    }
+    out
+}

@@ -3,8 +3,10 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use psrestir::gpu::Gpu;
+use psrestir::optim::{self, run::RunOptions};
 use psrestir::render::{RenderSettings, Renderer, Techniques};
 use psrestir::scene::{self, EnvMap};
+use psrestir::task::Task;
 use std::path::PathBuf;
 
 #[derive(Parser)]
@@ -27,6 +29,15 @@ enum TechniqueArg {
     /// BSDF sampling only (delta lights still use light sampling).
     Bsdf,
 }
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum MethodArg {
+    /// Plain Monte Carlo: every sample adds its derivative to the texels it touches.
+    Baseline,
+}
+
+/// The bundled default task.
+const DEFAULT_TASK: &str = "scenes/default/task.toml";
 
 #[derive(Subcommand)]
 enum Command {
@@ -56,6 +67,37 @@ enum Command {
         #[arg(long, value_enum, default_value = "mis")]
         technique: TechniqueArg,
         /// Output image: .exr (linear) or .png (sRGB).
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+    /// Recover textures from target images by gradient descent.
+    Optimize {
+        /// The task file (TOML); the bundled default task when absent.
+        task: Option<PathBuf>,
+        /// Gradient estimator.
+        #[arg(long, value_enum, default_value = "baseline")]
+        method: MethodArg,
+        /// Iterations (overrides the task).
+        #[arg(long)]
+        iterations: Option<u32>,
+        /// Wall-clock budget in seconds (overrides the task).
+        #[arg(long)]
+        time_budget: Option<f64>,
+        /// Output folder (overrides the task).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Continue from the checkpoint in the output folder.
+        #[arg(long)]
+        resume: bool,
+    },
+    /// Write one gradient estimate at the task's initial textures, as images in texel space.
+    Gradient {
+        /// The task file (TOML).
+        task: PathBuf,
+        /// Gradient estimator.
+        #[arg(long, value_enum, default_value = "baseline")]
+        method: MethodArg,
+        /// Output folder.
         #[arg(short, long)]
         output: PathBuf,
     },
@@ -185,6 +227,61 @@ fn run(cli: Cli) -> Result<()> {
                 out.bsdf_rays,
                 sc.triangles.len()
             );
+        }
+        Command::Optimize {
+            task,
+            method: MethodArg::Baseline,
+            iterations,
+            time_budget,
+            out,
+            resume,
+        } => {
+            let path = task.unwrap_or_else(|| PathBuf::from(DEFAULT_TASK));
+            let task = Task::load(&path)?;
+            if let Some(b) = time_budget {
+                if !(b.is_finite() && b > 0.0) {
+                    bail!("--time-budget must be a positive number of seconds");
+                }
+            }
+            let gpu = Gpu::new()?;
+            let summary = optim::run::run(
+                &gpu,
+                &task,
+                &RunOptions {
+                    iterations,
+                    time_budget_s: time_budget,
+                    out,
+                    resume,
+                    progress: true,
+                },
+            )
+            .with_context(|| format!("optimizing {}", path.display()))?;
+            println!(
+                "{} iterations in {:.1} s ({:.1} ms/iteration), final loss {:.4e}{}; outputs in {}",
+                summary.iterations,
+                summary.elapsed_s,
+                summary.ms_per_iteration,
+                summary.final_loss,
+                match (summary.initial_rmse, summary.final_rmse) {
+                    (Some(a), Some(b)) => format!(", texture RMSE {a:.4} -> {b:.4}"),
+                    _ => String::new(),
+                },
+                summary.out.display()
+            );
+        }
+        Command::Gradient {
+            task,
+            method: MethodArg::Baseline,
+            output,
+        } => {
+            let task_path = task;
+            let task = Task::load(&task_path)?;
+            let gpu = Gpu::new()?;
+            let written = optim::run::write_gradient(&gpu, &task, &output)
+                .with_context(|| format!("estimating the gradient of {}", task_path.display()))?;
+            for p in written {
+                println!("wrote {}", p.display());
+            }
         }
         Command::Info { scene: path } => {
             let sc = scene::load(&path)?;

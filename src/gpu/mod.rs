@@ -140,11 +140,12 @@ impl Gpu {
         Ok(())
     }
 
-    /// A storage buffer initialised with `data` (at least 16 bytes, so that empty arrays bind).
+    /// A storage buffer initialised with `data`, padded to at least 256 bytes so that an empty
+    /// array still binds (the largest GPU struct is smaller).
     pub fn storage(&self, label: &str, data: &[u8], extra: wgpu::BufferUsages) -> wgpu::Buffer {
         let mut bytes = data.to_vec();
-        if bytes.len() < 16 {
-            bytes.resize(16, 0);
+        if bytes.len() < 256 {
+            bytes.resize(256, 0);
         }
         while bytes.len() % 4 != 0 {
             bytes.push(0);

@@ -2,7 +2,11 @@
 //! pass, and Adam, as one submission per iteration.
 
 pub mod adam;
+pub mod checkpoint;
+pub mod export;
 pub mod loss;
+pub mod plot;
+pub mod run;
 
 use crate::gpu::{grid_2d, Binding, Gpu};
 use crate::image_io::Image;

@@ -132,44 +132,45 @@ impl ParamSet {
             .materials
             .iter()
             .find(|m| m.name == t.material_name)?;
-        let mut out = Vec::with_capacity(t.len());
-        for y in 0..t.height {
-            for x in 0..t.width {
-                let uv = [
-                    (x as f32 + 0.5) / t.width as f32,
-                    (y as f32 + 0.5) / t.height as f32,
-                ];
-                let sample = |slot: &Option<crate::scene::TextureSlot>, srgb: bool| -> [f32; 4] {
-                    match slot {
-                        None => [1.0; 4],
-                        Some(s) => crate::scene::images::sample_bilinear(
-                            &reference.images[s.image],
-                            s,
-                            uv,
-                            srgb,
-                        ),
+        Some(slot_values(reference, m, t.slot, t.width, t.height))
+    }
+}
+
+/// What `slot` of material `m` holds (factor x texture, linear), sampled at the centres of a
+/// `width` x `height` grid over UV0.
+pub fn slot_values(scene: &Scene, m: &Material, slot: Slot, width: u32, height: u32) -> Vec<f32> {
+    let mut out = Vec::with_capacity((width * height * slot.channels()) as usize);
+    for y in 0..height {
+        for x in 0..width {
+            let uv = [
+                (x as f32 + 0.5) / width as f32,
+                (y as f32 + 0.5) / height as f32,
+            ];
+            let sample = |tex: &Option<crate::scene::TextureSlot>, srgb: bool| -> [f32; 4] {
+                match tex {
+                    None => [1.0; 4],
+                    Some(s) => {
+                        crate::scene::images::sample_bilinear(&scene.images[s.image], s, uv, srgb)
                     }
-                };
-                match t.slot {
-                    Slot::BaseColor => {
-                        let c = sample(&m.base_color_texture, true);
-                        out.extend_from_slice(&[
-                            m.base_color.x * c[0],
-                            m.base_color.y * c[1],
-                            m.base_color.z * c[2],
-                        ]);
-                    }
-                    Slot::Roughness => out.push(
-                        (m.roughness * sample(&m.metallic_roughness_texture, false)[1])
-                            .clamp(0.0, 1.0),
-                    ),
-                    Slot::Metallic => out.push(
-                        (m.metallic * sample(&m.metallic_roughness_texture, false)[2])
-                            .clamp(0.0, 1.0),
-                    ),
                 }
+            };
+            match slot {
+                Slot::BaseColor => {
+                    let c = sample(&m.base_color_texture, true);
+                    out.extend_from_slice(&[
+                        m.base_color.x * c[0],
+                        m.base_color.y * c[1],
+                        m.base_color.z * c[2],
+                    ]);
+                }
+                Slot::Roughness => out.push(
+                    (m.roughness * sample(&m.metallic_roughness_texture, false)[1]).clamp(0.0, 1.0),
+                ),
+                Slot::Metallic => out.push(
+                    (m.metallic * sample(&m.metallic_roughness_texture, false)[2]).clamp(0.0, 1.0),
+                ),
             }
         }
-        Some(out)
     }
+    out
 }

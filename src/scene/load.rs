@@ -77,6 +77,99 @@ fn gltf_error(path: &Path, e: gltf::Error) -> Error {
     Error::file(path, msg)
 }
 
+/// Bytes behind a URI of the scene at `path` (folder `base`): a base64 data URI or a file
+/// inside the scene's folder; `what` names the referring object in errors.
+pub fn read_uri(path: &Path, base: &Path, uri: &str, what: &str) -> Result<Vec<u8>> {
+    if let Some(rest) = uri.strip_prefix("data:") {
+        let (header, payload) = rest
+            .split_once(',')
+            .ok_or_else(|| Error::file(path, format!("{what}: malformed data URI")))?;
+        if !header.ends_with(";base64") {
+            return Err(Error::file(path, format!("{what}: data URI is not base64")));
+        }
+        return base64::engine::general_purpose::STANDARD
+            .decode(payload.trim())
+            .map_err(|e| Error::file(path, format!("{what}: bad base64 in data URI: {e}")));
+    }
+    let first_sep = uri.find('/').unwrap_or(uri.len());
+    if uri[..first_sep].contains(':') {
+        return Err(Error::file(
+            path,
+            format!(
+            "{what}: URI `{uri}` refused: psrestir reads only files beside the scene and data URIs"
+        ),
+        ));
+    }
+    let rel = PathBuf::from(percent_decode(uri));
+    if rel.is_absolute()
+        || uri.starts_with('/')
+        || uri.starts_with('\\')
+        || rel
+            .components()
+            .any(|c| !matches!(c, Component::Normal(_) | Component::CurDir))
+    {
+        return Err(Error::file(
+            path,
+            format!("{what}: URI `{uri}` refused: it leaves the scene's folder"),
+        ));
+    }
+    let full = base.join(&rel);
+    // Symbolic links must not lead out of the folder either.
+    if let (Ok(cb), Ok(cf)) = (base.canonicalize(), full.canonicalize()) {
+        if !cf.starts_with(&cb) {
+            return Err(Error::file(
+                path,
+                format!("{what}: URI `{uri}` refused: it resolves outside the scene's folder"),
+            ));
+        }
+    }
+    read_file(&full).map_err(|e| match e {
+        Error::File { msg, .. } => Error::file(path, format!("{what} `{}`: {msg}", full.display())),
+        other => other,
+    })
+}
+
+/// The parts of a glTF file as stored: its JSON, every buffer's bytes, and the bytes of every
+/// image stored by URI (None for images in buffer views). Used to write the scene back out.
+#[allow(clippy::type_complexity)]
+pub fn load_source(path: &Path) -> Result<(serde_json::Value, Vec<Vec<u8>>, Vec<Option<Vec<u8>>>)> {
+    let bytes = read_file(path)?;
+    let (json, blob): (serde_json::Value, Option<Vec<u8>>) = if bytes.starts_with(b"glTF") {
+        let glb = gltf::binary::Glb::from_slice(&bytes).map_err(|e| gltf_error(path, e))?;
+        let json = serde_json::from_slice(&glb.json)
+            .map_err(|e| Error::file(path, format!("malformed glTF JSON: {e}")))?;
+        (json, glb.bin.map(|b| b.into_owned()))
+    } else {
+        (
+            serde_json::from_slice(&bytes)
+                .map_err(|e| Error::file(path, format!("malformed glTF JSON: {e}")))?,
+            None,
+        )
+    };
+    let base = path
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."));
+    let mut buffers = Vec::new();
+    for (i, b) in json["buffers"].as_array().into_iter().flatten().enumerate() {
+        let what = format!("buffer {i}");
+        buffers.push(match b["uri"].as_str() {
+            Some(uri) => read_uri(path, &base, uri, &what)?,
+            None => blob
+                .clone()
+                .ok_or_else(|| Error::file(path, format!("{what}: GLB binary chunk missing")))?,
+        });
+    }
+    let mut images = Vec::new();
+    for (i, img) in json["images"].as_array().into_iter().flatten().enumerate() {
+        images.push(match img["uri"].as_str() {
+            Some(uri) => Some(read_uri(path, &base, uri, &format!("image {i}"))?),
+            None => None,
+        });
+    }
+    Ok((json, buffers, images))
+}
+
 struct Loader<'a> {
     path: &'a Path,
     base: &'a Path,
@@ -112,50 +205,8 @@ impl<'a> Loader<'a> {
         Error::file(self.path, msg)
     }
 
-    /// Bytes behind a URI: a base64 data URI or a file inside the scene's folder.
     fn read_uri(&self, uri: &str, what: &str) -> Result<Vec<u8>> {
-        if let Some(rest) = uri.strip_prefix("data:") {
-            let (header, payload) = rest
-                .split_once(',')
-                .ok_or_else(|| self.err(format!("{what}: malformed data URI")))?;
-            if !header.ends_with(";base64") {
-                return Err(self.err(format!("{what}: data URI is not base64")));
-            }
-            return base64::engine::general_purpose::STANDARD
-                .decode(payload.trim())
-                .map_err(|e| self.err(format!("{what}: bad base64 in data URI: {e}")));
-        }
-        let first_sep = uri.find('/').unwrap_or(uri.len());
-        if uri[..first_sep].contains(':') {
-            return Err(self.err(format!(
-                "{what}: URI `{uri}` refused: psrestir reads only files beside the scene and data URIs"
-            )));
-        }
-        let rel = PathBuf::from(percent_decode(uri));
-        if rel.is_absolute()
-            || uri.starts_with('/')
-            || uri.starts_with('\\')
-            || rel
-                .components()
-                .any(|c| !matches!(c, Component::Normal(_) | Component::CurDir))
-        {
-            return Err(self.err(format!(
-                "{what}: URI `{uri}` refused: it leaves the scene's folder"
-            )));
-        }
-        let full = self.base.join(&rel);
-        // Symbolic links must not lead out of the folder either.
-        if let (Ok(cb), Ok(cf)) = (self.base.canonicalize(), full.canonicalize()) {
-            if !cf.starts_with(&cb) {
-                return Err(self.err(format!(
-                    "{what}: URI `{uri}` refused: it resolves outside the scene's folder"
-                )));
-            }
-        }
-        read_file(&full).map_err(|e| match e {
-            Error::File { msg, .. } => self.err(format!("{what} `{}`: {msg}", full.display())),
-            other => other,
-        })
+        read_uri(self.path, self.base, uri, what)
     }
 
     fn load_buffers(&mut self) -> Result<()> {

@@ -13,7 +13,7 @@ use std::path::PathBuf;
 
 pub use env::EnvMap;
 pub use images::Image8;
-pub use load::load;
+pub use load::{load, load_source};
 
 /// One world-space triangle with its shading attributes.
 #[derive(Clone, Debug, PartialEq)]

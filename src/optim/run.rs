@@ -1,0 +1,552 @@
+//! A whole optimization run from a task file: targets, the iteration loop with progress,
+//! metrics and checkpoints, and the outputs.
+use super::checkpoint::{Checkpoint, Header, MetricRow};
+use super::{FaultCounts, Optimizer, Settings};
+use crate::gpu::Gpu;
+use crate::image_io::{self, Image};
+use crate::render::params::ParamSet;
+use crate::render::Renderer;
+use crate::scene::{self, EnvMap, Scene};
+use crate::task::{Slot, Task};
+use crate::{Error, Result};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Overrides from the command line.
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Iterations (overrides the task).
+    pub iterations: Option<u32>,
+    /// Time budget in seconds (overrides the task).
+    pub time_budget_s: Option<f64>,
+    /// Output folder (overrides the task).
+    pub out: Option<PathBuf>,
+    /// Continue from the output folder's checkpoint.
+    pub resume: bool,
+    /// Show a progress bar.
+    pub progress: bool,
+}
+
+/// What a run did.
+#[derive(Clone, Debug)]
+pub struct RunSummary {
+    /// Iterations done in total (including before a resume).
+    pub iterations: u32,
+    /// Optimization seconds in total.
+    pub elapsed_s: f64,
+    /// Loss of the last iteration.
+    pub final_loss: f64,
+    /// Texture RMSE of the initial textures, when the ground truth is known.
+    pub initial_rmse: Option<f64>,
+    /// Texture RMSE at the end.
+    pub final_rmse: Option<f64>,
+    /// Milliseconds per iteration in this session.
+    pub ms_per_iteration: f64,
+    /// The output folder.
+    pub out: PathBuf,
+    /// Dropped or lost values, all zero in a healthy run.
+    pub faults: FaultCounts,
+}
+
+/// Scenes, targets and textures of a task, ready to optimize.
+pub struct Prepared {
+    /// The scene to optimize.
+    pub scene: Scene,
+    /// Ground-truth scene, when the task has one.
+    pub truth: Option<Scene>,
+    /// Camera indices.
+    pub cameras: Vec<usize>,
+    /// One target per camera.
+    pub targets: Vec<Image>,
+    /// Optimized textures at their initial values.
+    pub set: ParamSet,
+    /// Ground-truth values laid out like `set.values`, when known.
+    pub reference: Option<Vec<f32>>,
+}
+
+fn load_scene(task: &Task, path: &Path) -> Result<Scene> {
+    let mut s = scene::load(&task.resolve(path))?;
+    if let Some(env) = &task.env {
+        let mut e = EnvMap::load(&task.resolve(env))?;
+        e.scale = task.env_scale;
+        s.env = Some(e);
+    }
+    Ok(s)
+}
+
+fn camera_file_name(scene: &Scene, cam: usize) -> String {
+    let n: String = scene.cameras[cam]
+        .name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    format!("{cam}_{n}")
+}
+
+/// Load the scenes, find the cameras, render or load the targets (reusing `target_*.exr` in
+/// `out` when `reuse` and present), and lay out the textures.
+pub fn prepare(gpu: &Gpu, task: &Task, out: &Path, reuse: bool) -> Result<Prepared> {
+    let scene = load_scene(task, &task.scene)?;
+    let cameras: Vec<usize> = match &task.cameras {
+        Some(names) => names
+            .iter()
+            .map(|n| scene.camera(Some(n)))
+            .collect::<Result<_>>()?,
+        None => {
+            scene.camera(None)?;
+            (0..scene.cameras.len()).collect()
+        }
+    };
+    let set = ParamSet::from_specs(&scene, &task.textures, task.optimizer.filter, &task.path)?;
+    let (w, h) = (task.width, task.height);
+    let truth = match &task.target.scene {
+        Some(p) => Some(load_scene(task, p)?),
+        None => None,
+    };
+    let mut targets = Vec::new();
+    for (k, &cam) in cameras.iter().enumerate() {
+        let cached = out.join(format!("target_{}.exr", camera_file_name(&scene, cam)));
+        let img = if reuse && cached.exists() {
+            image_io::load_linear(&cached)?
+        } else if let Some(truth) = &truth {
+            if truth.cameras.len() != scene.cameras.len() {
+                return Err(Error::file(
+                    &task.path,
+                    "the target scene's cameras differ from the scene's",
+                ));
+            }
+            let r = Renderer::new(gpu, truth)?;
+            let img = r
+                .render(
+                    &crate::render::RenderSettings {
+                        width: w,
+                        height: h,
+                        spp: task.target.spp,
+                        seed: super::pass_seed(task.seed, u32::MAX, k as u32, 2),
+                        camera: cam,
+                        techniques: crate::render::Techniques::Mis,
+                    },
+                    |_| {},
+                )?
+                .image;
+            img.save(&cached)?;
+            img
+        } else {
+            let images = task
+                .target
+                .images
+                .as_ref()
+                .ok_or_else(|| Error::file(&task.path, "`target`: no images"))?;
+            let name = &scene.cameras[cam].name;
+            let p = images
+                .get(name)
+                .or_else(|| images.get(&cam.to_string()))
+                .ok_or_else(|| {
+                    Error::file(
+                        &task.path,
+                        format!("`target.images`: no image for camera `{name}`"),
+                    )
+                })?;
+            let img = image_io::load_linear(&task.resolve(p))?;
+            if (img.width, img.height) != (w, h) {
+                return Err(Error::file(
+                    task.resolve(p),
+                    format!(
+                        "target is {}x{}, the task renders {w}x{h}",
+                        img.width, img.height
+                    ),
+                ));
+            }
+            img
+        };
+        targets.push(img);
+    }
+    let reference = match &truth {
+        Some(t) => {
+            let mut all = Vec::with_capacity(set.values.len());
+            for i in 0..set.textures.len() {
+                all.extend(set.reference_values(i, t).ok_or_else(|| {
+                    Error::file(
+                        &task.path,
+                        format!(
+                            "the target scene has no material `{}`",
+                            set.textures[i].material_name
+                        ),
+                    )
+                })?);
+            }
+            Some(all)
+        }
+        None => None,
+    };
+    Ok(Prepared {
+        scene,
+        truth,
+        cameras,
+        targets,
+        set,
+        reference,
+    })
+}
+
+/// Root-mean-square difference.
+pub fn rmse(a: &[f32], b: &[f32]) -> f64 {
+    let s: f64 = a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum();
+    (s / a.len().max(1) as f64).sqrt()
+}
+
+fn layout_string(set: &ParamSet) -> String {
+    set.textures
+        .iter()
+        .map(|t| format!("{}:{}x{}", t.name(), t.width, t.height))
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+/// Write metrics.csv atomically.
+pub fn write_metrics(path: &Path, rows: &[MetricRow]) -> Result<()> {
+    let mut s = String::from("iteration,elapsed_s,loss,texture_rmse\n");
+    for r in rows {
+        s.push_str(&format!(
+            "{},{:.4},{:.6e},{}\n",
+            r.iteration,
+            r.elapsed_s,
+            r.loss,
+            r.texture_rmse
+                .map(|v| format!("{v:.6e}"))
+                .unwrap_or_default()
+        ));
+    }
+    image_io::write_atomic(path, s.as_bytes())
+}
+
+/// Texture `i` of `values` as an image: RGB for base color, gray for scalars.
+pub fn texture_image(set: &ParamSet, values: &[f32], i: usize) -> Image {
+    let t = &set.textures[i];
+    let v = &values[t.offset as usize..t.offset as usize + t.len()];
+    let rgb = match t.slot {
+        Slot::BaseColor => v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        _ => v.iter().map(|&x| [x; 3]).collect(),
+    };
+    Image {
+        width: t.width,
+        height: t.height,
+        rgb,
+    }
+}
+
+/// Save each texture as EXR (linear) and PNG (sRGB for base color, linear gray for scalars).
+pub fn save_textures(dir: &Path, set: &ParamSet, values: &[f32]) -> Result<()> {
+    for i in 0..set.textures.len() {
+        let t = &set.textures[i];
+        let img = texture_image(set, values, i);
+        img.save(&dir.join(format!("{}.exr", t.name())))?;
+        let bytes: Vec<u8> = match t.slot {
+            Slot::BaseColor => img.to_srgb8(),
+            _ => img
+                .rgb
+                .iter()
+                .flat_map(|p| p.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8))
+                .collect(),
+        };
+        let png = image::RgbImage::from_raw(img.width, img.height, bytes)
+            .ok_or_else(|| Error::Invalid("texture size mismatch".into()))?;
+        let path = dir.join(format!("{}.png", t.name()));
+        image_io::write_atomic_with(&path, |tmp| {
+            png.save_with_format(tmp, image::ImageFormat::Png)
+                .map_err(std::io::Error::other)
+        })?;
+    }
+    Ok(())
+}
+
+/// Run (or continue) the optimization of `task`.
+pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
+    let out = opts.out.clone().unwrap_or_else(|| task.output_dir());
+    std::fs::create_dir_all(&out).map_err(|e| Error::file(&out, e.to_string()))?;
+    let ckpt_path = out.join("checkpoint.bin");
+    let checkpoint = if opts.resume {
+        if !ckpt_path.exists() {
+            return Err(Error::file(
+                &ckpt_path,
+                "--resume: no checkpoint in the output folder",
+            ));
+        }
+        Some(Checkpoint::load(&ckpt_path)?)
+    } else {
+        None
+    };
+    let prep = prepare(gpu, task, &out, opts.resume)?;
+    let settings = Settings {
+        width: task.width,
+        height: task.height,
+        cameras: prep.cameras.clone(),
+        primal_spp: task.optimizer.primal_spp,
+        gradient_spp: task.optimizer.gradient_spp,
+        loss: task.optimizer.loss,
+        seed: task.seed,
+    };
+    let initial_rmse = prep.reference.as_ref().map(|r| rmse(&prep.set.values, r));
+    let mut opt = Optimizer::new(gpu, &prep.scene, prep.set.clone(), settings, &prep.targets)?;
+    let layout = layout_string(&prep.set);
+    let mut rows: Vec<MetricRow> = Vec::new();
+    let mut elapsed_before = 0.0;
+    if let Some(c) = checkpoint {
+        if c.header.layout != layout || c.header.n_params != prep.set.values.len() {
+            return Err(Error::file(
+                &ckpt_path,
+                format!(
+                    "checkpoint holds textures {} but the task has {layout}",
+                    c.header.layout
+                ),
+            ));
+        }
+        opt.write_params(&c.params)?;
+        opt.write_moments(&[c.m1, c.m2])?;
+        opt.iteration = c.header.iteration;
+        elapsed_before = c.header.elapsed_s;
+        rows = c.header.metrics;
+        rows.retain(|r| r.iteration <= opt.iteration);
+        log::info!(
+            "resuming at iteration {} ({:.1} s done)",
+            opt.iteration,
+            elapsed_before
+        );
+    }
+    let max_iter = opts.iterations.or(task.optimizer.iterations);
+    let budget = opts.time_budget_s.or(task.optimizer.time_budget_s);
+    let save_checkpoint = |opt: &Optimizer, rows: &[MetricRow], elapsed: f64| -> Result<()> {
+        let [m1, m2] = opt.read_moments()?;
+        Checkpoint {
+            header: Header {
+                iteration: opt.iteration,
+                elapsed_s: elapsed,
+                layout: layout.clone(),
+                n_params: m1.len(),
+                metrics: rows.to_vec(),
+            },
+            params: opt.read_params()?,
+            m1,
+            m2,
+        }
+        .save(&ckpt_path)?;
+        write_metrics(&out.join("metrics.csv"), rows)
+    };
+
+    let bar = if opts.progress {
+        let b = match max_iter {
+            Some(n) => indicatif::ProgressBar::new(n as u64),
+            None => indicatif::ProgressBar::new(budget.map(|b| b.ceil() as u64).unwrap_or(0)),
+        };
+        b.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{prefix} [{bar:30}] {pos}/{len} {msg} ETA {eta}",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        b.set_prefix(if max_iter.is_some() {
+            "iteration"
+        } else {
+            "seconds"
+        });
+        b.set_position(if max_iter.is_some() {
+            opt.iteration as u64
+        } else {
+            elapsed_before as u64
+        });
+        Some(b)
+    } else {
+        None
+    };
+    let rmse_every = (prep.set.values.len() / (1 << 20)).max(1) as u32;
+    let session_start = Instant::now();
+    let start_iter = opt.iteration;
+    let mut last_loss = rows.last().map(|r| r.loss).unwrap_or(f64::NAN);
+    let ckpt_every = task.optimizer.checkpoint_every;
+    loop {
+        let elapsed = elapsed_before + session_start.elapsed().as_secs_f64();
+        if max_iter.is_some_and(|n| opt.iteration >= n) || budget.is_some_and(|b| elapsed >= b) {
+            break;
+        }
+        let stats = opt.step()?;
+        last_loss = stats.loss;
+        let elapsed = elapsed_before + session_start.elapsed().as_secs_f64();
+        let texture_rmse = match &prep.reference {
+            Some(r) if opt.iteration % rmse_every == 0 => Some(rmse(&opt.read_params()?, r)),
+            _ => None,
+        };
+        rows.push(MetricRow {
+            iteration: opt.iteration,
+            elapsed_s: elapsed,
+            loss: stats.loss,
+            texture_rmse,
+        });
+        if let Some(b) = &bar {
+            b.set_position(if max_iter.is_some() {
+                opt.iteration as u64
+            } else {
+                elapsed as u64
+            });
+            b.set_message(match texture_rmse {
+                Some(r) => format!("loss {:.3e} texture RMSE {r:.4}", stats.loss),
+                None => format!("loss {:.3e}", stats.loss),
+            });
+        }
+        if ckpt_every > 0 && opt.iteration % ckpt_every == 0 {
+            save_checkpoint(&opt, &rows, elapsed)?;
+        }
+    }
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    let session_s = session_start.elapsed().as_secs_f64();
+    let elapsed = elapsed_before + session_s;
+    let done = opt.iteration - start_iter;
+    save_checkpoint(&opt, &rows, elapsed)?;
+    let values = opt.read_params()?;
+    let final_rmse = prep.reference.as_ref().map(|r| rmse(&values, r));
+    write_outputs(&out, task, &prep, &opt, &values, &rows)?;
+    let faults = opt.faults()?;
+    if faults != FaultCounts::default() {
+        log::warn!("dropped or lost values during the run: {faults:?}");
+    }
+    Ok(RunSummary {
+        iterations: opt.iteration,
+        elapsed_s: elapsed,
+        final_loss: last_loss,
+        initial_rmse,
+        final_rmse,
+        ms_per_iteration: if done > 0 {
+            1000.0 * session_s / done as f64
+        } else {
+            f64::NAN
+        },
+        out,
+        faults,
+    })
+}
+
+fn write_outputs(
+    out: &Path,
+    task: &Task,
+    prep: &Prepared,
+    opt: &Optimizer,
+    values: &[f32],
+    rows: &[MetricRow],
+) -> Result<()> {
+    save_textures(out, &prep.set, values)?;
+    write_metrics(&out.join("metrics.csv"), rows)?;
+    let series = |f: &dyn Fn(&MetricRow) -> Option<f64>| -> Vec<(f64, f64)> {
+        rows.iter()
+            .filter_map(|r| f(r).map(|y| (r.elapsed_s, y)))
+            .collect()
+    };
+    let mut panels = vec![super::plot::Panel {
+        title: format!("loss ({:?})", task.optimizer.loss).to_lowercase(),
+        series: vec![super::plot::Series {
+            name: "loss".into(),
+            color: [30, 90, 200],
+            points: series(&|r| Some(r.loss)),
+        }],
+    }];
+    if prep.reference.is_some() {
+        panels.push(super::plot::Panel {
+            title: "texture RMSE vs ground truth".into(),
+            series: vec![super::plot::Series {
+                name: "RMSE".into(),
+                color: [200, 50, 40],
+                points: series(&|r| r.texture_rmse),
+            }],
+        });
+    }
+    super::plot::plot(&out.join("plot.png"), "seconds", &panels)?;
+    for (k, &cam) in prep.cameras.iter().enumerate() {
+        let img = opt.render(
+            k,
+            task.target.spp.min(64),
+            super::pass_seed(task.seed, u32::MAX - 1, k as u32, 3),
+        )?;
+        img.save(&out.join(format!("final_{}.exr", camera_file_name(&prep.scene, cam))))?;
+        image_io::side_by_side(&img, &prep.targets[k]).save(&out.join(format!(
+            "final_vs_target_{}.png",
+            camera_file_name(&prep.scene, cam)
+        )))?;
+    }
+    super::export::write_glb(
+        &task.resolve(&task.scene),
+        &out.join("optimized.glb"),
+        &prep.scene,
+        &prep.set,
+        values,
+    )
+}
+
+/// One gradient estimate at the task's initial textures, written to `dir` per texture as
+/// `<texture>_gradient.exr` (linear, signed) and `<texture>_gradient.png` (signed false color:
+/// red positive, blue negative, scaled by the largest magnitude). Returns the files written.
+pub fn write_gradient(gpu: &Gpu, task: &Task, dir: &Path) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
+    let prep = prepare(gpu, task, dir, false)?;
+    let settings = Settings {
+        width: task.width,
+        height: task.height,
+        cameras: prep.cameras.clone(),
+        primal_spp: task.optimizer.primal_spp,
+        gradient_spp: task.optimizer.gradient_spp,
+        loss: task.optimizer.loss,
+        seed: task.seed,
+    };
+    let mut opt = Optimizer::new(gpu, &prep.scene, prep.set.clone(), settings, &prep.targets)?;
+    let (grad, _) = opt.estimate_gradient(0)?;
+    let mut written = Vec::new();
+    for i in 0..prep.set.textures.len() {
+        let t = &prep.set.textures[i];
+        let img = texture_image(&prep.set, &grad, i);
+        let exr = dir.join(format!("{}_gradient.exr", t.name()));
+        img.save(&exr)?;
+        let scale = img
+            .rgb
+            .iter()
+            .flatten()
+            .fold(0f32, |m, v| m.max(v.abs()))
+            .max(1e-30);
+        let bytes: Vec<u8> = img
+            .rgb
+            .iter()
+            .flat_map(|p| {
+                let v = match t.slot {
+                    Slot::BaseColor => (p[0] * 0.2126 + p[1] * 0.7152 + p[2] * 0.0722) / scale,
+                    _ => p[0] / scale,
+                };
+                false_color(v)
+            })
+            .collect();
+        let png = dir.join(format!("{}_gradient.png", t.name()));
+        let im = image::RgbImage::from_raw(img.width, img.height, bytes)
+            .ok_or_else(|| Error::Invalid("size".into()))?;
+        image_io::write_atomic_with(&png, |tmp| {
+            im.save_with_format(tmp, image::ImageFormat::Png)
+                .map_err(std::io::Error::other)
+        })?;
+        written.push(exr);
+        written.push(png);
+    }
+    Ok(written)
+}
+
+/// Signed value in [-1, 1] to a diverging color: blue (negative), white (0), red (positive).
+pub fn false_color(v: f32) -> [u8; 3] {
+    let a = v.clamp(-1.0, 1.0).abs().sqrt();
+    let fade = ((1.0 - a) * 255.0) as u8;
+    if v >= 0.0 {
+        [255, fade, fade]
+    } else {
+        [fade, fade, 255]
+    }
+}
