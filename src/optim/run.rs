@@ -266,10 +266,23 @@ pub fn save_textures(dir: &Path, set: &ParamSet, values: &[f32]) -> Result<()> {
     Ok(())
 }
 
+/// Remove temporary files that a killed run left in `dir` (see `image_io::write_atomic`).
+fn remove_stale_temporaries(dir: &Path) {
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for e in entries.flatten() {
+            let name = e.file_name().to_string_lossy().to_string();
+            if name.starts_with('.') && name.ends_with(".tmp") {
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+    }
+}
+
 /// Run (or continue) the optimization of `task`.
 pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     let out = opts.out.clone().unwrap_or_else(|| task.output_dir());
     std::fs::create_dir_all(&out).map_err(|e| Error::file(&out, e.to_string()))?;
+    remove_stale_temporaries(&out);
     let ckpt_path = out.join("checkpoint.bin");
     let checkpoint = if opts.resume {
         if !ckpt_path.exists() {
