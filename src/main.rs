@@ -106,6 +106,8 @@ enum Command {
         /// The scene (.gltf or .glb).
         scene: PathBuf,
     },
+    /// Print the GPU adapter psrestir would use, its features and limits.
+    Adapter,
     /// Regenerate the bundled scenes (scenes/default).
     #[command(hide = true)]
     MakeScenes {
@@ -268,6 +270,12 @@ fn run(cli: Cli) -> Result<()> {
                 },
                 summary.out.display()
             );
+            if let Some(t) = summary.pass_times {
+                println!(
+                    "GPU time per iteration: primal {:.1} ms, loss {:.2} ms, gradient {:.1} ms, Adam {:.2} ms",
+                    t.primal_ms, t.loss_ms, t.gradient_ms, t.adam_ms
+                );
+            }
         }
         Command::Gradient {
             task,
@@ -329,6 +337,19 @@ fn run(cli: Cli) -> Result<()> {
             for w in &sc.warnings {
                 println!("  warning: {w}");
             }
+        }
+        Command::Adapter => {
+            let gpu = Gpu::new()?;
+            println!("{}", gpu.describe());
+            println!("device type: {:?}", gpu.info.device_type);
+            println!("timestamp queries: {}", gpu.timestamps);
+            let l = gpu.device.limits();
+            println!(
+                "max storage buffer binding: {} MiB, storage buffers per stage: {}, workgroups per dimension: {}",
+                l.max_storage_buffer_binding_size >> 20,
+                l.max_storage_buffers_per_shader_stage,
+                l.max_compute_workgroups_per_dimension
+            );
         }
         Command::MakeScenes { dir } => {
             scene::bundled::write_default_scene(&dir.join("default"))?;

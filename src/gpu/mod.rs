@@ -25,6 +25,9 @@ pub struct Gpu {
     pub queue: wgpu::Queue,
     /// Adapter name, backend and driver.
     pub info: wgpu::AdapterInfo,
+    /// Whether timestamp queries are enabled (used for per-pass timings when the adapter
+    /// has them; nothing depends on them).
+    pub timestamps: bool,
     /// Uncaptured errors, recorded instead of panicking; checked after each submission.
     errors: Arc<Mutex<Vec<String>>>,
 }
@@ -67,10 +70,12 @@ impl Gpu {
             .map_err(|e| Error::NoAdapter(format!("no GPU adapter found ({e}). {INSTALL_HINT}")))?;
         let info = adapter.get_info();
         let limits = Self::required_limits(&adapter.limits())?;
+        // Timestamp queries are optional: requested when present, for per-pass timings.
+        let features = adapter.features() & wgpu::Features::TIMESTAMP_QUERY;
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("psrestir"),
-                required_features: wgpu::Features::empty(),
+                required_features: features,
                 required_limits: limits,
                 ..Default::default()
             })
@@ -108,10 +113,12 @@ impl Gpu {
                 v.push(e.to_string());
             }
         }));
+        let timestamps = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         Gpu {
             device,
             queue,
             info,
+            timestamps,
             errors,
         }
     }

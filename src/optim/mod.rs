@@ -12,7 +12,7 @@ use crate::gpu::{grid_2d, Binding, Gpu};
 use crate::image_io::Image;
 use crate::render::layout::*;
 use crate::render::params::ParamSet;
-use crate::render::{camera_info, encode_pass, Renderer, Techniques, WORKGROUP};
+use crate::render::{camera_info, encode_timed_pass, Renderer, Techniques, WORKGROUP};
 use crate::scene::Scene;
 use crate::task::Loss;
 use crate::{Error, Result};
@@ -64,6 +64,27 @@ pub struct StepStats {
     pub loss: f64,
 }
 
+/// GPU milliseconds of each kind of pass in the last iteration (from timestamp queries).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PassTimes {
+    /// Primal renders of all cameras.
+    pub primal_ms: f64,
+    /// Loss and adjoint.
+    pub loss_ms: f64,
+    /// Gradient passes.
+    pub gradient_ms: f64,
+    /// Adam updates.
+    pub adam_ms: f64,
+}
+
+/// Timestamp queries: one begin/end pair per pass of an iteration.
+struct Timing {
+    queries: wgpu::QuerySet,
+    resolve: wgpu::Buffer,
+    /// Kind of pass k: 0 primal, 1 loss, 2 gradient, 3 adam.
+    kinds: Vec<u8>,
+}
+
 /// Counters of dropped or lost values since the optimizer was created.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct FaultCounts {
@@ -95,6 +116,7 @@ pub struct Optimizer {
     adam_pipeline: wgpu::ComputePipeline,
     adam: Vec<(wgpu::Buffer, wgpu::BindGroup, GpuAdamParams)>,
     accum: wgpu::Buffer,
+    timing: Option<Timing>,
     /// Iterations done (Adam steps taken).
     pub iteration: u32,
 }
@@ -264,6 +286,28 @@ impl Optimizer {
             );
             adam.push((u, g, p));
         }
+        let timing = gpu.timestamps.then(|| {
+            let mut kinds = Vec::new();
+            for _ in 0..cams.len() {
+                kinds.extend_from_slice(&[0, 1, 2]);
+            }
+            kinds.extend(std::iter::repeat_n(3, adam.len()));
+            let n = 2 * kinds.len() as u32;
+            Timing {
+                queries: gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+                    label: Some("pass timestamps"),
+                    ty: wgpu::QueryType::Timestamp,
+                    count: n,
+                }),
+                resolve: gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("pass timestamps resolve"),
+                    size: 8 * n as u64,
+                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                }),
+                kinds,
+            }
+        });
         gpu.check("optimizer setup")?;
         Ok(Optimizer {
             gpu: gpu.clone(),
@@ -281,6 +325,7 @@ impl Optimizer {
             adam_pipeline,
             adam,
             accum,
+            timing,
             iteration: 0,
         })
     }
@@ -307,6 +352,7 @@ impl Optimizer {
                 .limits()
                 .max_compute_workgroups_per_dimension,
         );
+        let q = self.timing.as_ref().map(|t| &t.queries);
         for (k, cam) in self.cams.iter_mut().enumerate() {
             cam.render_params.seed = pass_seed(self.settings.seed, iteration, k as u32, 0);
             cam.gradient_params.seed = pass_seed(self.settings.seed, iteration, k as u32, 1);
@@ -321,26 +367,22 @@ impl Optimizer {
                 bytemuck::bytes_of(&cam.gradient_params),
             );
             enc.clear_buffer(&self.accum, 0, None);
-            encode_pass(
-                enc,
-                "primal",
-                &self.renderer.render_pipeline,
-                &[scene_group, &cam.render_group],
-                self.grid,
-            );
-            encode_pass(
-                enc,
-                "loss",
-                &self.loss_pipeline,
-                &[&cam.loss_group],
-                loss_grid,
-            );
-            encode_pass(
+            let t = 3 * k as u32;
+            let groups = [scene_group, &cam.render_group];
+            let pipe = &self.renderer.render_pipeline;
+            encode_timed_pass(enc, "primal", pipe, &groups, self.grid, q.map(|q| (q, t)));
+            let groups = [&cam.loss_group];
+            let pipe = &self.loss_pipeline;
+            encode_timed_pass(enc, "loss", pipe, &groups, loss_grid, q.map(|q| (q, t + 1)));
+            let groups = [scene_group, &cam.gradient_group];
+            let pipe = &self.gradient_pipeline;
+            encode_timed_pass(
                 enc,
                 "gradient",
-                &self.gradient_pipeline,
-                &[scene_group, &cam.gradient_group],
+                pipe,
+                &groups,
                 self.grid,
+                q.map(|q| (q, t + 2)),
             );
         }
     }
@@ -365,22 +407,46 @@ impl Optimizer {
             .device
             .limits()
             .max_compute_workgroups_per_dimension;
-        for (u, g, p) in &mut self.adam {
+        let first = 3 * self.cams.len() as u32;
+        for (k, (u, g, p)) in self.adam.iter_mut().enumerate() {
             p.bias1 = 1.0 - adam::BETA1.powi(t as i32);
             p.bias2 = 1.0 - adam::BETA2.powi(t as i32);
             self.gpu.queue.write_buffer(u, 0, bytemuck::bytes_of(p));
-            encode_pass(
-                &mut enc,
-                "adam",
-                &self.adam_pipeline,
-                &[g],
-                grid_2d(p.count, WORKGROUP, max_dim),
-            );
+            let timing = self
+                .timing
+                .as_ref()
+                .map(|tm| (&tm.queries, first + k as u32));
+            let grid = grid_2d(p.count, WORKGROUP, max_dim);
+            encode_timed_pass(&mut enc, "adam", &self.adam_pipeline, &[g], grid, timing);
+        }
+        if let Some(tm) = &self.timing {
+            enc.resolve_query_set(&tm.queries, 0..2 * tm.kinds.len() as u32, &tm.resolve, 0);
         }
         self.gpu.queue.submit([enc.finish()]);
         self.iteration = t;
         let loss = self.read_loss()?;
         Ok(StepStats { loss })
+    }
+
+    /// GPU time per kind of pass in the last [`Optimizer::step`], when the adapter has
+    /// timestamp queries.
+    pub fn pass_times(&self) -> Result<Option<PassTimes>> {
+        let Some(tm) = &self.timing else {
+            return Ok(None);
+        };
+        let ticks: Vec<u64> = self.gpu.read_pod(&tm.resolve)?;
+        let period = self.gpu.queue.get_timestamp_period() as f64 * 1e-6;
+        let mut t = PassTimes::default();
+        for (k, kind) in tm.kinds.iter().enumerate() {
+            let ms = ticks[2 * k + 1].saturating_sub(ticks[2 * k]) as f64 * period;
+            match kind {
+                0 => t.primal_ms += ms,
+                1 => t.loss_ms += ms,
+                2 => t.gradient_ms += ms,
+                _ => t.adam_ms += ms,
+            }
+        }
+        Ok(Some(t))
     }
 
     /// One gradient estimate at the current textures, as iteration `iteration` would draw it,

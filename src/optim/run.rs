@@ -1,7 +1,7 @@
 //! A whole optimization run from a task file: targets, the iteration loop with progress,
 //! metrics and checkpoints, and the outputs.
 use super::checkpoint::{Checkpoint, Header, MetricRow};
-use super::{FaultCounts, Optimizer, Settings};
+use super::{FaultCounts, Optimizer, PassTimes, Settings};
 use crate::gpu::Gpu;
 use crate::image_io::{self, Image};
 use crate::render::params::ParamSet;
@@ -46,6 +46,8 @@ pub struct RunSummary {
     pub out: PathBuf,
     /// Dropped or lost values, all zero in a healthy run.
     pub faults: FaultCounts,
+    /// Mean GPU time per iteration of each kind of pass in this session (timestamp queries).
+    pub pass_times: Option<PassTimes>,
 }
 
 /// Scenes, targets and textures of a task, ready to optimize.
@@ -382,6 +384,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     let start_iter = opt.iteration;
     let mut last_loss = rows.last().map(|r| r.loss).unwrap_or(f64::NAN);
     let ckpt_every = task.optimizer.checkpoint_every;
+    let mut pass_sum: Option<PassTimes> = None;
     loop {
         let elapsed = elapsed_before + session_start.elapsed().as_secs_f64();
         if max_iter.is_some_and(|n| opt.iteration >= n) || budget.is_some_and(|b| elapsed >= b) {
@@ -389,6 +392,13 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         }
         let stats = opt.step()?;
         last_loss = stats.loss;
+        if let Some(t) = opt.pass_times()? {
+            let s = pass_sum.get_or_insert_with(PassTimes::default);
+            s.primal_ms += t.primal_ms;
+            s.loss_ms += t.loss_ms;
+            s.gradient_ms += t.gradient_ms;
+            s.adam_ms += t.adam_ms;
+        }
         let elapsed = elapsed_before + session_start.elapsed().as_secs_f64();
         let texture_rmse = match &prep.reference {
             Some(r) if opt.iteration % rmse_every == 0 => Some(rmse(&opt.read_params()?, r)),
@@ -442,6 +452,15 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         },
         out,
         faults,
+        pass_times: pass_sum.filter(|_| done > 0).map(|s| {
+            let n = done as f64;
+            PassTimes {
+                primal_ms: s.primal_ms / n,
+                loss_ms: s.loss_ms / n,
+                gradient_ms: s.gradient_ms / n,
+                adam_ms: s.adam_ms / n,
+            }
+        }),
     })
 }
 

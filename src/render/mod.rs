@@ -431,9 +431,26 @@ pub fn encode_pass(
     groups: &[&wgpu::BindGroup],
     grid: (u32, u32),
 ) {
+    encode_timed_pass(enc, label, pipeline, groups, grid, None)
+}
+
+/// [`encode_pass`], writing timestamps `2k` and `2k + 1` of the query set at the pass's start
+/// and end when given `(query set, k)`.
+pub fn encode_timed_pass(
+    enc: &mut wgpu::CommandEncoder,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    groups: &[&wgpu::BindGroup],
+    grid: (u32, u32),
+    timing: Option<(&wgpu::QuerySet, u32)>,
+) {
     let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
         label: Some(label),
-        timestamp_writes: None,
+        timestamp_writes: timing.map(|(q, k)| wgpu::ComputePassTimestampWrites {
+            query_set: q,
+            beginning_of_pass_write_index: Some(2 * k),
+            end_of_pass_write_index: Some(2 * k + 1),
+        }),
     });
     pass.set_pipeline(pipeline);
     for (k, g) in groups.iter().enumerate() {
