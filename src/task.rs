@@ -233,7 +233,7 @@ impl Task {
     /// Parse and check task text; `path` names it in errors and anchors relative paths.
     pub fn parse(text: &str, path: &Path) -> Result<Task> {
         let mut task: Task = toml::from_str(text)
-            .map_err(|e| Error::file(path, format!("{}", e.to_string().trim_end())))?;
+            .map_err(|e| Error::file(path, e.to_string().trim_end().to_string()))?;
         task.path = path.to_path_buf();
         task.base = path
             .parent()

@@ -94,7 +94,7 @@ fn check_gradient(slot: Slot, filter: Filter, values: &[f32], target_values: &[f
     };
     // Target: the scene with other texel values, rendered with many samples.
     let blank = Image::new(W, W);
-    let mut opt = Optimizer::new(&gpu, &scene, set.clone(), settings.clone(), &[blank]).unwrap();
+    let opt = Optimizer::new(&gpu, &scene, set.clone(), settings.clone(), &[blank]).unwrap();
     opt.write_params(target_values).unwrap();
     let target = opt.render(0, 4096, 99).unwrap();
     let mut opt = Optimizer::new(&gpu, &scene, set, settings, &[target.clone()]).unwrap();

@@ -73,7 +73,7 @@ fn setup(
         seed: 3,
     };
     let init = set.values.clone();
-    let mut opt = Optimizer::new(
+    let opt = Optimizer::new(
         gpu,
         &scene,
         set.clone(),

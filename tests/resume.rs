@@ -37,7 +37,7 @@ fn write_scene(path: &Path, textured: bool) {
     let n = vec![
         b.add_node(json!({"mesh": mesh})),
         // Looking straight down (-90 degrees about X).
-        b.add_node(json!({"camera": cam, "translation": [0.0, 2.6, 0.0], "rotation": [-0.7071068, 0.0, 0.0, 0.7071068]})),
+        b.add_node(json!({"camera": cam, "translation": [0.0, 2.6, 0.0], "rotation": [-std::f32::consts::FRAC_1_SQRT_2, 0.0, 0.0, std::f32::consts::FRAC_1_SQRT_2]})),
         b.add_node(json!({"translation": [0.3, 2.0, 0.4], "extensions": {"KHR_lights_punctual": {"light": light}}})),
     ];
     b.set_scene(&n);
@@ -62,18 +62,20 @@ fn no_temporaries(dir: &Path) {
     }
 }
 
-#[test]
-fn killed_run_resumes_from_its_checkpoint() {
-    if std::env::var_os("CI").is_none() && psrestir::gpu::Gpu::new().is_err() {
+fn no_gpu() -> bool {
+    let none = std::env::var_os("CI").is_none() && psrestir::gpu::Gpu::new().is_err();
+    if none {
         eprintln!("skipped: no GPU adapter");
-        return;
     }
-    let dir = tempfile::tempdir().unwrap();
-    write_scene(&dir.path().join("scene.glb"), false);
-    write_scene(&dir.path().join("truth.glb"), true);
-    let iterations = 300;
+    none
+}
+
+/// A plane task in `dir`: scene.glb (gray), truth.glb (textured), task.toml.
+fn write_task(dir: &Path, iterations: usize) -> std::path::PathBuf {
+    write_scene(&dir.join("scene.glb"), false);
+    write_scene(&dir.join("truth.glb"), true);
     std::fs::write(
-        dir.path().join("task.toml"),
+        dir.join("task.toml"),
         format!(
             r#"
 scene = "scene.glb"
@@ -98,7 +100,45 @@ learning_rate = 0.03
         ),
     )
     .unwrap();
-    let task = dir.path().join("task.toml");
+    dir.join("task.toml")
+}
+
+#[test]
+fn gradient_command_writes_signed_texel_images() {
+    if no_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let task = write_task(dir.path(), 10);
+    let out = dir.path().join("g");
+    let st = Command::new(env!("CARGO_BIN_EXE_psrestir"))
+        .arg("gradient")
+        .arg(&task)
+        .arg("-o")
+        .arg(&out)
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let g = psrestir::image_io::load_linear(&out.join("plane_base_color_gradient.exr")).unwrap();
+    assert_eq!((g.width, g.height), (4, 4));
+    // The plane starts gray; the truth is brighter in some texels and darker in others, so
+    // the gradient has both signs.
+    let flat: Vec<f32> = g.rgb.iter().flatten().copied().collect();
+    assert!(
+        flat.iter().any(|v| *v > 0.0) && flat.iter().any(|v| *v < 0.0),
+        "{flat:?}"
+    );
+    assert!(out.join("plane_base_color_gradient.png").exists());
+}
+
+#[test]
+fn killed_run_resumes_from_its_checkpoint() {
+    if no_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let iterations = 300;
+    let task = write_task(dir.path(), iterations);
     let bin = env!("CARGO_BIN_EXE_psrestir");
     let (a, b) = (dir.path().join("a"), dir.path().join("b"));
 

@@ -52,7 +52,7 @@ impl GpuScene {
     /// optimized textures that replace material inputs.
     pub fn new(gpu: &Gpu, scene: &Scene, param_set: &ParamSet) -> Result<GpuScene> {
         let limits = gpu.device.limits();
-        let max_binding = limits.max_storage_buffer_binding_size as u64;
+        let max_binding = limits.max_storage_buffer_binding_size;
         let check = |label: &str, bytes: usize| -> Result<()> {
             if bytes as u64 > max_binding {
                 return Err(Error::Unsuitable(format!(
