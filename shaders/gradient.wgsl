@@ -18,12 +18,13 @@ struct GradientParams {
     stride: u32,
     // 1 / (gradient samples per pixel of the whole estimate).
     inv_spp: f32,
-    _pad0: u32,
+    // Where this camera's pixels start in adjoint[].
+    adjoint_offset: u32,
     _pad1: u32,
 }
 
 @group(1) @binding(0) var<uniform> gp: GradientParams;
-// dL/dI per pixel (rgb).
+// dL/dI per pixel (rgb), all cameras.
 @group(1) @binding(1) var<storage, read> adjoint: array<vec4f>;
 // Gradient per parameter scalar (f32 bits), laid out like params[].
 @group(1) @binding(2) var<storage, read_write> grad: array<atomic<u32>>;
@@ -60,36 +61,20 @@ fn scatter(m: Material, uv: vec2f, bg: BrdfGrad, weight: vec3f, adj: vec3f) {
     if all(weight == vec3f(0.0)) {
         return;
     }
-    if m.param_base_color != NONE {
-        let p = param_textures[m.param_base_color];
-        let fp = param_footprint(p, uv);
-        let g = adj * bg.d_base * weight;
-        for (var k = 0u; k < 4u; k++) {
-            if fp.weight[k] != 0.0 {
-                let base = p.offset + fp.texel[k] * 3u;
-                atomic_add_f32(base, fp.weight[k] * g.x);
-                atomic_add_f32(base + 1u, fp.weight[k] * g.y);
-                atomic_add_f32(base + 2u, fp.weight[k] * g.z);
-            }
+    for (var slot = 0u; slot < 3u; slot++) {
+        let pi = material_param(m, slot);
+        if pi == NONE {
+            continue;
         }
-    }
-    if m.param_metallic != NONE {
-        let p = param_textures[m.param_metallic];
+        let p = param_textures[pi];
         let fp = param_footprint(p, uv);
-        let g = dot(adj, bg.d_metallic * weight);
+        let g = slot_derivative(slot, bg, weight, adj);
         for (var k = 0u; k < 4u; k++) {
             if fp.weight[k] != 0.0 {
-                atomic_add_f32(p.offset + fp.texel[k], fp.weight[k] * g);
-            }
-        }
-    }
-    if m.param_roughness != NONE {
-        let p = param_textures[m.param_roughness];
-        let fp = param_footprint(p, uv);
-        let g = dot(adj, bg.d_roughness * weight);
-        for (var k = 0u; k < 4u; k++) {
-            if fp.weight[k] != 0.0 {
-                atomic_add_f32(p.offset + fp.texel[k], fp.weight[k] * g);
+                let base = p.offset + fp.texel[k] * p.channels;
+                for (var c = 0u; c < p.channels; c++) {
+                    atomic_add_f32(base + c, fp.weight[k] * g[c]);
+                }
             }
         }
     }
@@ -127,7 +112,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         return;
     }
     let pixel = py * width + px;
-    let adj = adjoint[pixel].xyz * gp.inv_spp;
+    let adj = adjoint[gp.adjoint_offset + pixel].xyz * gp.inv_spp;
     if all(adj == vec3f(0.0)) {
         return;
     }

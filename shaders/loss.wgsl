@@ -11,6 +11,11 @@ struct LossParams {
     // 1 / (pixels x channels x cameras).
     norm: f32,
     partial_offset: u32,
+    // Where this camera's pixels start in adjoint[].
+    adjoint_offset: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 const REL_EPS: f32 = 0.01;
@@ -42,7 +47,7 @@ fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(local_invocation_ind
             adj = vec3f(0.0);
             term = 0.0;
         }
-        adjoint[i] = vec4f(adj, 0.0);
+        adjoint[lp.adjoint_offset + i] = vec4f(adj, 0.0);
         l = term;
     }
     partial[li] = l;

@@ -32,8 +32,45 @@ enum TechniqueArg {
 
 #[derive(Clone, Copy, clap::ValueEnum)]
 enum MethodArg {
+    /// Parameter-space ReSTIR: per-texel reservoirs reused across iterations.
+    Restir,
     /// Plain Monte Carlo: every sample adds its derivative to the texels it touches.
     Baseline,
+}
+
+/// Choice of gradient estimator, shared by the commands that estimate gradients.
+#[derive(clap::Args)]
+struct EstimatorArgs {
+    /// Gradient estimator.
+    #[arg(long, value_enum, default_value = "restir")]
+    method: MethodArg,
+    /// ReSTIR: cap on the confidence of the kept sample.
+    #[arg(long, default_value_t = 16.0)]
+    m_cap: f32,
+    /// ReSTIR ablation: resample within each iteration only.
+    #[arg(long)]
+    no_temporal: bool,
+    /// ReSTIR ablation: one reservoir per texel over |target| instead of two.
+    #[arg(long)]
+    no_positivization: bool,
+}
+
+impl EstimatorArgs {
+    fn resolve(&self) -> Result<(optim::Method, optim::RestirOptions)> {
+        if !(self.m_cap.is_finite() && self.m_cap > 0.0) {
+            bail!("--m-cap must be a positive number");
+        }
+        let method = match self.method {
+            MethodArg::Restir => optim::Method::Restir,
+            MethodArg::Baseline => optim::Method::Baseline,
+        };
+        let restir = optim::RestirOptions {
+            m_cap: self.m_cap,
+            temporal: !self.no_temporal,
+            positivization: !self.no_positivization,
+        };
+        Ok((method, restir))
+    }
 }
 
 /// The bundled default task.
@@ -74,9 +111,8 @@ enum Command {
     Optimize {
         /// The task file (TOML); the bundled default task when absent.
         task: Option<PathBuf>,
-        /// Gradient estimator.
-        #[arg(long, value_enum, default_value = "baseline")]
-        method: MethodArg,
+        #[command(flatten)]
+        estimator: EstimatorArgs,
         /// Iterations (overrides the task).
         #[arg(long)]
         iterations: Option<u32>,
@@ -94,9 +130,8 @@ enum Command {
     Gradient {
         /// The task file (TOML).
         task: PathBuf,
-        /// Gradient estimator.
-        #[arg(long, value_enum, default_value = "baseline")]
-        method: MethodArg,
+        #[command(flatten)]
+        estimator: EstimatorArgs,
         /// Output folder.
         #[arg(short, long)]
         output: PathBuf,
@@ -232,7 +267,7 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Optimize {
             task,
-            method: MethodArg::Baseline,
+            estimator,
             iterations,
             time_budget,
             out,
@@ -245,11 +280,14 @@ fn run(cli: Cli) -> Result<()> {
                     bail!("--time-budget must be a positive number of seconds");
                 }
             }
+            let (method, restir) = estimator.resolve()?;
             let gpu = Gpu::new()?;
             let summary = optim::run::run(
                 &gpu,
                 &task,
                 &RunOptions {
+                    method,
+                    restir,
                     iterations,
                     time_budget_s: time_budget,
                     out,
@@ -272,20 +310,21 @@ fn run(cli: Cli) -> Result<()> {
             );
             if let Some(t) = summary.pass_times {
                 println!(
-                    "GPU time per iteration: primal {:.1} ms, loss {:.2} ms, gradient {:.1} ms, Adam {:.2} ms",
-                    t.primal_ms, t.loss_ms, t.gradient_ms, t.adam_ms
+                    "GPU time per iteration: primal {:.1} ms, loss {:.2} ms, gradient {:.1} ms, merge {:.1} ms, Adam {:.2} ms",
+                    t.primal_ms, t.loss_ms, t.gradient_ms, t.merge_ms, t.adam_ms
                 );
             }
         }
         Command::Gradient {
             task,
-            method: MethodArg::Baseline,
+            estimator,
             output,
         } => {
+            let (method, restir) = estimator.resolve()?;
             let task_path = task;
             let task = Task::load(&task_path)?;
             let gpu = Gpu::new()?;
-            let written = optim::run::write_gradient(&gpu, &task, &output)
+            let written = optim::run::write_gradient(&gpu, &task, &output, method, restir)
                 .with_context(|| format!("estimating the gradient of {}", task_path.display()))?;
             for p in written {
                 println!("wrote {}", p.display());

@@ -4,63 +4,12 @@
 mod common;
 
 use common::*;
-use glam::Vec3;
 use psrestir::image_io::Image;
 use psrestir::optim::{loss, Optimizer, Settings};
 use psrestir::render::params::ParamSet;
-use psrestir::scene::{Material, PunctualKind, PunctualLight, Scene};
 use psrestir::task::{Filter, Init, Loss, Slot, TextureSpec};
 
 const W: u32 = 16;
-
-/// A 2x2-unit plane (UV 0..1) under a point light and an emissive quad, with a floating
-/// blocker that casts a hard shadow (point light) and a soft one (area light).
-fn shadow_scene() -> Scene {
-    let mut s = Scene::default();
-    s.materials.push(Material {
-        name: "plane".into(),
-        ..material([0.5, 0.4, 0.3], 0.2, 0.5)
-    });
-    s.materials.push(Material {
-        name: "blocker".into(),
-        ..material([0.3, 0.3, 0.3], 0.0, 0.8)
-    });
-    s.materials.push(Material {
-        name: "lamp".into(),
-        emissive: Vec3::splat(8.0),
-        ..material([0.0; 3], 0.0, 1.0)
-    });
-    s.triangles.extend(quad(
-        Vec3::new(-1.0, 0.0, 1.0),
-        Vec3::new(2.0, 0.0, 0.0),
-        Vec3::new(0.0, 0.0, -2.0),
-        0,
-    ));
-    s.triangles.extend(quad(
-        Vec3::new(-0.3, 0.5, 0.3),
-        Vec3::new(0.5, 0.0, 0.0),
-        Vec3::new(0.0, 0.0, -0.5),
-        1,
-    ));
-    // The lamp faces down (u x v = -y).
-    s.triangles.extend(quad(
-        Vec3::new(0.2, 1.5, -0.8),
-        Vec3::new(0.6, 0.0, 0.0),
-        Vec3::new(0.0, 0.0, 0.6),
-        2,
-    ));
-    s.lights.push(PunctualLight {
-        name: "p".into(),
-        kind: PunctualKind::Point,
-        position: Vec3::new(-0.4, 1.6, 0.5),
-        direction: Vec3::NEG_Y,
-        intensity: Vec3::splat(2.0),
-        range: 0.0,
-    });
-    s.cameras
-        .push(look_at(Vec3::new(0.0, 2.2, 1.2), Vec3::ZERO, Vec3::Y, 0.9));
-    s
-}
 
 fn spec(slot: Slot, init: Init) -> TextureSpec {
     TextureSpec {
@@ -91,6 +40,8 @@ fn check_gradient(slot: Slot, filter: Filter, values: &[f32], target_values: &[f
         gradient_spp: 16,
         loss: Loss::L2,
         seed: 7,
+        method: psrestir::optim::Method::Baseline,
+        restir: Default::default(),
     };
     // Target: the scene with other texel values, rendered with many samples.
     let blank = Image::new(W, W);

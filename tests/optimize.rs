@@ -71,6 +71,8 @@ fn setup(
         gradient_spp: 4,
         loss: Loss::L2,
         seed: 3,
+        method: psrestir::optim::Method::Baseline,
+        restir: Default::default(),
     };
     let init = set.values.clone();
     let opt = Optimizer::new(

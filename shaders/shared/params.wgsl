@@ -1,5 +1,6 @@
 // Optimized textures: lookups and the texel footprint that gradients are scattered to.
 #import shared/texture
+#import shared/brdf
 
 // Up to four texels (indices within the texture) and their filter weights.
 struct Footprint {
@@ -30,14 +31,70 @@ fn param_footprint(p: ParamTex, uv: vec2f) -> Footprint {
     );
 }
 
+// Read the previous iteration's textures instead of the current ones (ReSTIR replays).
+var<private> use_prev_params: bool = false;
+
+fn param_at(i: u32) -> f32 {
+    if use_prev_params {
+        return params_prev[i];
+    }
+    return params[i];
+}
+
+// The footprint with repeated texels (textures 1 texel wide or high wrap onto themselves)
+// merged into their first occurrence, so that a sample touches each texel once.
+fn footprint_merged(fp: Footprint) -> Footprint {
+    var out = fp;
+    for (var k = 1u; k < 4u; k++) {
+        for (var j = 0u; j < k; j++) {
+            if out.weight[k] != 0.0 && out.weight[j] != 0.0 && out.texel[j] == out.texel[k] {
+                out.weight[j] += out.weight[k];
+                out.weight[k] = 0.0;
+            }
+        }
+    }
+    return out;
+}
+
+// Index of the optimized texture replacing slot (0 base color, 1 metallic, 2 roughness) of m.
+fn material_param(m: Material, slot: u32) -> u32 {
+    switch slot {
+        case 0u: {
+            return m.param_base_color;
+        }
+        case 1u: {
+            return m.param_metallic;
+        }
+        default: {
+            return m.param_roughness;
+        }
+    }
+}
+
+// Derivative of adjoint . contribution with respect to one input of the slot, where the
+// contribution is brdf x weight: per channel for base color (xyz), a scalar (x) otherwise.
+fn slot_derivative(slot: u32, bg: BrdfGrad, weight: vec3f, adj: vec3f) -> vec3f {
+    switch slot {
+        case 0u: {
+            return adj * bg.d_base * weight;
+        }
+        case 1u: {
+            return vec3f(dot(adj, bg.d_metallic * weight), 0.0, 0.0);
+        }
+        default: {
+            return vec3f(dot(adj, bg.d_roughness * weight), 0.0, 0.0);
+        }
+    }
+}
+
 // Filtered value (up to 3 channels; unused channels are 0).
 fn param_value(p: ParamTex, fp: Footprint) -> vec3f {
     var v = vec3f(0.0);
     for (var k = 0u; k < 4u; k++) {
         let base = p.offset + fp.texel[k] * p.channels;
-        var texel = vec3f(params[base], 0.0, 0.0);
+        var texel = vec3f(param_at(base), 0.0, 0.0);
         if p.channels == 3u {
-            texel = vec3f(params[base], params[base + 1u], params[base + 2u]);
+            texel = vec3f(param_at(base), param_at(base + 1u), param_at(base + 2u));
         }
         v += fp.weight[k] * texel;
     }

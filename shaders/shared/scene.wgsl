@@ -12,3 +12,5 @@
 @group(0) @binding(7) var<uniform> scene: SceneInfo;
 @group(0) @binding(8) var<storage, read> param_textures: array<ParamTex>;
 @group(0) @binding(9) var<storage, read> params: array<f32>;
+// The optimized textures of the previous iteration (ReSTIR evaluates kept samples under both).
+@group(0) @binding(10) var<storage, read> params_prev: array<f32>;

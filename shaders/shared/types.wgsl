@@ -96,16 +96,22 @@ struct SceneInfo {
 // An optimized texture: linear values, `channels` floats per texel from params[offset], row 0
 // at v = 0, repeat wrap. filtering: 0 nearest, 1 bilinear. Keep in sync with GpuParamTex in
 // src/render/layout.rs.
+// texel_offset: index of the texture's first texel among the texels of all optimized textures
+// (reservoirs are per texel).
 struct ParamTex {
     offset: u32,
     width: u32,
     height: u32,
     channels: u32,
     filtering: u32,
-    _pad0: u32,
+    texel_offset: u32,
     _pad1: u32,
     _pad2: u32,
 }
+
+// Words per ReSTIR reservoir (see shared/reservoir.wgsl). Keep in sync with RESERVOIR_WORDS
+// in src/optim/restir.rs.
+const RESERVOIR_WORDS: u32 = 8u;
 
 struct Hit {
     t: f32,

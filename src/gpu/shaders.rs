@@ -25,11 +25,15 @@ pub const SOURCES: &[(&str, &str)] = sources!(
     "shared/camera",
     "shared/params",
     "shared/integrator",
+    "shared/reservoir",
     "render",
     "trace_rays",
     "gradient",
     "loss",
     "adam",
+    "reservoir_test",
+    "restir_candidates",
+    "restir_merge",
 );
 
 /// The passes (top-level WGSL files with an entry point `main`).

@@ -1,11 +1,13 @@
-//! Texture optimization on the GPU: primal render, loss and adjoint, the baseline gradient
-//! pass, and Adam, as one submission per iteration.
+//! Texture optimization on the GPU: primal render, loss and adjoint, a gradient estimator
+//! (the baseline pass, or ReSTIR's candidate and merge passes), and Adam, as one submission
+//! per iteration.
 
 pub mod adam;
 pub mod checkpoint;
 pub mod export;
 pub mod loss;
 pub mod plot;
+pub mod restir;
 pub mod run;
 
 use crate::gpu::{grid_2d, Binding, Gpu};
@@ -16,6 +18,7 @@ use crate::render::{camera_info, encode_timed_pass, Renderer, Techniques, WORKGR
 use crate::scene::Scene;
 use crate::task::Loss;
 use crate::{Error, Result};
+pub use restir::{Method, RestirOptions};
 
 /// How each iteration samples.
 #[derive(Clone, Debug)]
@@ -34,27 +37,41 @@ pub struct Settings {
     pub loss: Loss,
     /// Seed of the whole run; every pass derives its own from it.
     pub seed: u32,
+    /// Gradient estimator.
+    pub method: Method,
+    /// ReSTIR options (used when `method` is ReSTIR).
+    pub restir: RestirOptions,
 }
 
-/// Seed of pass `kind` (0 primal, 1 gradient) of camera `camera` at iteration `iteration`:
-/// independent streams, so the adjoint never shares random numbers with the gradient samples.
-pub fn pass_seed(seed: u32, iteration: u32, camera: u32, kind: u32) -> u32 {
-    let mut x = (seed as u64) << 32 ^ (iteration as u64) << 8 ^ (camera as u64) << 2 ^ kind as u64;
+fn mix64(mut x: u64) -> u64 {
     // splitmix64 finalizer
     x = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
     x = (x ^ (x >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     x = (x ^ (x >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    (x ^ (x >> 31)) as u32
+    x ^ (x >> 31)
+}
+
+/// Seed of pass `kind` (0 primal, 1 gradient, 2 target, 3 final render, 4 merge) of camera
+/// `camera` at iteration `iteration`: independent streams, so the adjoint never shares random
+/// numbers with the gradient samples.
+pub fn pass_seed(seed: u32, iteration: u32, camera: u32, kind: u32) -> u32 {
+    let x =
+        mix64(mix64(mix64(seed as u64) ^ iteration as u64) ^ ((camera as u64) << 8 | kind as u64));
+    x as u32
 }
 
 struct CameraState {
     render_uniform: wgpu::Buffer,
     gradient_uniform: wgpu::Buffer,
+    candidate_uniform: wgpu::Buffer,
     render_group: wgpu::BindGroup,
-    loss_group: wgpu::BindGroup,
-    gradient_group: wgpu::BindGroup,
+    /// Per parity of the iteration (the adjoint and reservoir buffers alternate).
+    loss_groups: [wgpu::BindGroup; 2],
+    gradient_groups: [wgpu::BindGroup; 2],
+    candidate_groups: Option<[wgpu::BindGroup; 2]>,
     render_params: GpuRenderParams,
     gradient_params: GpuGradientParams,
+    candidate_params: GpuCandidateParams,
 }
 
 /// What one iteration reports.
@@ -71,8 +88,10 @@ pub struct PassTimes {
     pub primal_ms: f64,
     /// Loss and adjoint.
     pub loss_ms: f64,
-    /// Gradient passes.
+    /// Gradient passes (baseline), or ReSTIR's candidate passes.
     pub gradient_ms: f64,
+    /// ReSTIR's merge pass.
+    pub merge_ms: f64,
     /// Adam updates.
     pub adam_ms: f64,
 }
@@ -81,7 +100,7 @@ pub struct PassTimes {
 struct Timing {
     queries: wgpu::QuerySet,
     resolve: wgpu::Buffer,
-    /// Kind of pass k: 0 primal, 1 loss, 2 gradient, 3 adam.
+    /// Kind of pass k: 0 primal, 1 loss, 2 gradient or candidates, 3 adam, 4 merge.
     kinds: Vec<u8>,
 }
 
@@ -90,12 +109,33 @@ struct Timing {
 pub struct FaultCounts {
     /// Gradient additions that exhausted the compare-and-swap bound.
     pub lost_updates: u32,
-    /// Non-finite values dropped by the gradient pass.
+    /// Non-finite values dropped by the gradient or candidate pass.
     pub dropped_gradient: u32,
     /// Non-finite gradients skipped by Adam.
     pub skipped_adam: u32,
     /// Non-finite primal samples dropped.
     pub dropped_primal: u32,
+    /// ReSTIR candidates whose reservoir lock was not taken within the bound.
+    pub lost_offers: u32,
+    /// Non-finite ReSTIR replays dropped.
+    pub dropped_replays: u32,
+}
+
+/// GPU state of the ReSTIR estimator.
+struct RestirState {
+    candidate_pipeline: wgpu::ComputePipeline,
+    merge_pipeline: wgpu::ComputePipeline,
+    /// Reservoirs: fresh then merged at iteration t in buffer t % 2, kept in the other.
+    reservoirs: [wgpu::Buffer; 2],
+    locks: wgpu::Buffer,
+    merge_uniform: wgpu::Buffer,
+    merge_params: GpuMergeParams,
+    merge_groups: [wgpu::BindGroup; 2],
+    merge_grid: (u32, u32),
+    /// [candidate stats, merge stats]
+    stats: [wgpu::Buffer; 2],
+    /// Whether the kept reservoirs hold the previous iteration's samples.
+    have_prev: bool,
 }
 
 /// The optimizer: a scene on the GPU with its optimized textures, targets, and the passes.
@@ -117,6 +157,7 @@ pub struct Optimizer {
     adam: Vec<(wgpu::Buffer, wgpu::BindGroup, GpuAdamParams)>,
     accum: wgpu::Buffer,
     timing: Option<Timing>,
+    restir: Option<RestirState>,
     /// Iterations done (Adam steps taken).
     pub iteration: u32,
 }
@@ -136,6 +177,12 @@ impl Optimizer {
                 "{} targets for {} cameras",
                 targets.len(),
                 settings.cameras.len()
+            )));
+        }
+        if settings.method == Method::Restir && targets.len() > MAX_CAMERAS {
+            return Err(Error::Invalid(format!(
+                "ReSTIR handles at most {MAX_CAMERAS} cameras, the task has {}",
+                targets.len()
             )));
         }
         for t in targets {
@@ -160,9 +207,14 @@ impl Optimizer {
         let adam_pipeline = gpu.compute_pipeline("adam", &[&adam_layout])?;
 
         let n_pixels = w * h;
+        let n_cams = targets.len() as u32;
         let n_params = set.values.len() as u64;
         let accum = gpu.storage_zeroed("primal accum", n_pixels as u64 * 16);
-        let adjoint = gpu.storage_zeroed("adjoint", n_pixels as u64 * 16);
+        let adjoint_size = (n_pixels * n_cams) as u64 * 16;
+        let adjoint = [
+            gpu.storage_zeroed("adjoint even", adjoint_size),
+            gpu.storage_zeroed("adjoint odd", adjoint_size),
+        ];
         let grad = gpu.storage_zeroed("gradient", n_params * 4);
         let moments = [
             gpu.storage_zeroed("adam moment1", n_params * 4),
@@ -174,12 +226,94 @@ impl Optimizer {
             gpu.storage_zeroed("adam stats", 16),
         ];
         let n_loss_groups = n_pixels.div_ceil(WORKGROUP);
-        let loss_partial = gpu.storage_zeroed(
-            "loss partial sums",
-            (n_loss_groups * targets.len() as u32) as u64 * 4,
-        );
+        let loss_partial =
+            gpu.storage_zeroed("loss partial sums", (n_loss_groups * n_cams) as u64 * 4);
         let grid = renderer.tile_grid(w, h);
-        let norm = 1.0 / (n_pixels as f32 * 3.0 * targets.len() as f32);
+        let norm = 1.0 / (n_pixels as f32 * 3.0 * n_cams as f32);
+        let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
+
+        // ReSTIR buffers and pipelines.
+        let n_texels = renderer.scene.n_texels as u64;
+        let restir_parts = if settings.method == Method::Restir {
+            let candidate_layout = gpu.layout(
+                "restir_candidates",
+                &[Uniform, Storage, StorageRw, StorageRw, StorageRw],
+            );
+            let merge_layout = gpu.layout(
+                "restir_merge",
+                &[
+                    Uniform, Storage, Storage, Storage, StorageRw, StorageRw, StorageRw,
+                ],
+            );
+            let candidate_pipeline = gpu.compute_pipeline(
+                "restir_candidates",
+                &[&renderer.scene.layout, &candidate_layout],
+            )?;
+            let merge_pipeline =
+                gpu.compute_pipeline("restir_merge", &[&renderer.scene.layout, &merge_layout])?;
+            let res_size = n_texels * 2 * restir::RESERVOIR_WORDS * 4;
+            let reservoirs = [
+                gpu.storage_zeroed("reservoirs even", res_size),
+                gpu.storage_zeroed("reservoirs odd", res_size),
+            ];
+            let locks = gpu.storage_zeroed("reservoir locks", n_texels * 2 * 4);
+            let rstats = [
+                gpu.storage_zeroed("candidate stats", 16),
+                gpu.storage_zeroed("merge stats", 16),
+            ];
+            let merge_grid = grid_2d(n_texels as u32, WORKGROUP, max_dim);
+            let mut cameras = [GpuCameraInfo::default(); MAX_CAMERAS];
+            for (k, &cam) in settings.cameras.iter().enumerate() {
+                cameras[k] = camera_info(&scene.cameras[cam], w, h);
+            }
+            let merge_params = GpuMergeParams {
+                cameras,
+                n_texels: n_texels as u32,
+                n_pixels,
+                seed: 0,
+                flags: 0,
+                m_fresh: (2 * settings.gradient_spp * n_cams) as f32,
+                m_cap: settings.restir.m_cap,
+                inv_spp: 1.0 / settings.gradient_spp as f32,
+                n_textures: set.textures.len() as u32,
+                stride: merge_grid.0 * WORKGROUP,
+                _pad: [0; 3],
+            };
+            let merge_uniform = gpu.uniform("merge params", bytemuck::bytes_of(&merge_params));
+            let merge_groups = [0usize, 1].map(|p| {
+                gpu.bind_group(
+                    "restir_merge",
+                    &merge_layout,
+                    &[
+                        &merge_uniform,
+                        &adjoint[p],
+                        &adjoint[1 - p],
+                        &reservoirs[1 - p],
+                        &reservoirs[p],
+                        &grad,
+                        &rstats[1],
+                    ],
+                )
+            });
+            Some((
+                candidate_layout,
+                RestirState {
+                    candidate_pipeline,
+                    merge_pipeline,
+                    reservoirs,
+                    locks,
+                    merge_uniform,
+                    merge_params,
+                    merge_groups,
+                    merge_grid,
+                    stats: rstats,
+                    have_prev: false,
+                },
+            ))
+        } else {
+            None
+        };
+
         let mut cams = Vec::new();
         for (k, (&cam, target)) in settings.cameras.iter().zip(targets).enumerate() {
             let camera = camera_info(
@@ -203,7 +337,19 @@ impl Optimizer {
                 techniques: Techniques::Mis.bits(),
                 stride: grid.0 * WORKGROUP,
                 inv_spp: 1.0 / settings.gradient_spp as f32,
+                adjoint_offset: k as u32 * n_pixels,
                 ..Default::default()
+            };
+            let candidate_params = GpuCandidateParams {
+                camera,
+                seed: 0,
+                spp: settings.gradient_spp,
+                stride: grid.0 * WORKGROUP,
+                inv_spp: 1.0 / settings.gradient_spp as f32,
+                camera_index: k as u32,
+                adjoint_offset: k as u32 * n_pixels,
+                positivize: settings.restir.positivization as u32,
+                _pad: 0,
             };
             let loss_params = GpuLossParams {
                 n_pixels,
@@ -213,6 +359,8 @@ impl Optimizer {
                 },
                 norm,
                 partial_offset: k as u32 * n_loss_groups,
+                adjoint_offset: k as u32 * n_pixels,
+                _pad: [0; 3],
             };
             let target_data: Vec<[f32; 4]> =
                 target.rgb.iter().map(|p| [p[0], p[1], p[2], 0.0]).collect();
@@ -229,30 +377,62 @@ impl Optimizer {
                 &format!("gradient params {k}"),
                 bytemuck::bytes_of(&gradient_params),
             );
+            let candidate_uniform = gpu.uniform(
+                &format!("candidate params {k}"),
+                bytemuck::bytes_of(&candidate_params),
+            );
             let loss_uniform = gpu.uniform(
                 &format!("loss params {k}"),
                 bytemuck::bytes_of(&loss_params),
             );
+            let candidate_groups = restir_parts.as_ref().map(|(layout, st)| {
+                [0usize, 1].map(|p| {
+                    gpu.bind_group(
+                        "restir_candidates",
+                        layout,
+                        &[
+                            &candidate_uniform,
+                            &adjoint[p],
+                            &st.reservoirs[p],
+                            &st.locks,
+                            &st.stats[0],
+                        ],
+                    )
+                })
+            });
             cams.push(CameraState {
                 render_group: gpu.bind_group(
                     "primal",
                     &renderer.render_layout,
                     &[&render_uniform, &accum, &stats[0]],
                 ),
-                loss_group: gpu.bind_group(
-                    "loss",
-                    &loss_layout,
-                    &[&loss_uniform, &accum, &target_buf, &adjoint, &loss_partial],
-                ),
-                gradient_group: gpu.bind_group(
-                    "gradient",
-                    &gradient_layout,
-                    &[&gradient_uniform, &adjoint, &grad, &stats[1]],
-                ),
+                loss_groups: [0usize, 1].map(|p| {
+                    gpu.bind_group(
+                        "loss",
+                        &loss_layout,
+                        &[
+                            &loss_uniform,
+                            &accum,
+                            &target_buf,
+                            &adjoint[p],
+                            &loss_partial,
+                        ],
+                    )
+                }),
+                gradient_groups: [0usize, 1].map(|p| {
+                    gpu.bind_group(
+                        "gradient",
+                        &gradient_layout,
+                        &[&gradient_uniform, &adjoint[p], &grad, &stats[1]],
+                    )
+                }),
+                candidate_groups,
                 render_uniform,
                 gradient_uniform,
+                candidate_uniform,
                 render_params,
                 gradient_params,
+                candidate_params,
             });
         }
         let mut adam = Vec::new();
@@ -286,10 +466,15 @@ impl Optimizer {
             );
             adam.push((u, g, p));
         }
+        // Timestamps: per camera primal, loss, gradient (or candidates); then the merge; then
+        // one Adam pass per texture.
         let timing = gpu.timestamps.then(|| {
             let mut kinds = Vec::new();
             for _ in 0..cams.len() {
                 kinds.extend_from_slice(&[0, 1, 2]);
+            }
+            if restir_parts.is_some() {
+                kinds.push(4);
             }
             kinds.extend(std::iter::repeat_n(3, adam.len()));
             let n = 2 * kinds.len() as u32;
@@ -326,6 +511,7 @@ impl Optimizer {
             adam,
             accum,
             timing,
+            restir: restir_parts.map(|(_, st)| st),
             iteration: 0,
         })
     }
@@ -340,22 +526,35 @@ impl Optimizer {
         &self.settings
     }
 
-    /// Record primal, loss and gradient passes of every camera for iteration `iteration`.
+    /// Record primal, loss and gradient passes of every camera for iteration `iteration`
+    /// (for ReSTIR: candidates per camera, then the merge, then the copy of the textures that
+    /// the next merge will call previous). The gradient ends in `grad`.
     fn encode_gradient(&mut self, enc: &mut wgpu::CommandEncoder, iteration: u32) {
-        enc.clear_buffer(&self.grad, 0, None);
+        let parity = (iteration % 2) as usize;
         let scene_group = &self.renderer.scene.bind_group;
+        let max_dim = self
+            .gpu
+            .device
+            .limits()
+            .max_compute_workgroups_per_dimension;
         let loss_grid = grid_2d(
             self.settings.width * self.settings.height,
             WORKGROUP,
-            self.gpu
-                .device
-                .limits()
-                .max_compute_workgroups_per_dimension,
+            max_dim,
         );
         let q = self.timing.as_ref().map(|t| &t.queries);
+        match &self.restir {
+            None => enc.clear_buffer(&self.grad, 0, None),
+            Some(st) => {
+                enc.clear_buffer(&st.reservoirs[parity], 0, None);
+                enc.clear_buffer(&st.locks, 0, None);
+            }
+        }
         for (k, cam) in self.cams.iter_mut().enumerate() {
             cam.render_params.seed = pass_seed(self.settings.seed, iteration, k as u32, 0);
-            cam.gradient_params.seed = pass_seed(self.settings.seed, iteration, k as u32, 1);
+            let gseed = pass_seed(self.settings.seed, iteration, k as u32, 1);
+            cam.gradient_params.seed = gseed;
+            cam.candidate_params.seed = gseed;
             self.gpu.queue.write_buffer(
                 &cam.render_uniform,
                 0,
@@ -366,24 +565,74 @@ impl Optimizer {
                 0,
                 bytemuck::bytes_of(&cam.gradient_params),
             );
+            self.gpu.queue.write_buffer(
+                &cam.candidate_uniform,
+                0,
+                bytemuck::bytes_of(&cam.candidate_params),
+            );
             enc.clear_buffer(&self.accum, 0, None);
             let t = 3 * k as u32;
             let groups = [scene_group, &cam.render_group];
             let pipe = &self.renderer.render_pipeline;
             encode_timed_pass(enc, "primal", pipe, &groups, self.grid, q.map(|q| (q, t)));
-            let groups = [&cam.loss_group];
+            let groups = [&cam.loss_groups[parity]];
             let pipe = &self.loss_pipeline;
             encode_timed_pass(enc, "loss", pipe, &groups, loss_grid, q.map(|q| (q, t + 1)));
-            let groups = [scene_group, &cam.gradient_group];
-            let pipe = &self.gradient_pipeline;
+            match (&self.restir, &cam.candidate_groups) {
+                (Some(st), Some(cg)) => {
+                    let groups = [scene_group, &cg[parity]];
+                    let pipe = &st.candidate_pipeline;
+                    encode_timed_pass(
+                        enc,
+                        "restir_candidates",
+                        pipe,
+                        &groups,
+                        self.grid,
+                        q.map(|q| (q, t + 2)),
+                    );
+                }
+                _ => {
+                    let groups = [scene_group, &cam.gradient_groups[parity]];
+                    let pipe = &self.gradient_pipeline;
+                    encode_timed_pass(
+                        enc,
+                        "gradient",
+                        pipe,
+                        &groups,
+                        self.grid,
+                        q.map(|q| (q, t + 2)),
+                    );
+                }
+            }
+        }
+        let merge_slot = 3 * self.cams.len() as u32;
+        if let Some(st) = &mut self.restir {
+            let o = &self.settings.restir;
+            st.merge_params.seed = pass_seed(self.settings.seed, iteration, 0, 4);
+            st.merge_params.flags =
+                (o.temporal as u32) | (o.positivization as u32) << 1 | (st.have_prev as u32) << 2;
+            self.gpu
+                .queue
+                .write_buffer(&st.merge_uniform, 0, bytemuck::bytes_of(&st.merge_params));
+            let groups = [scene_group, &st.merge_groups[parity]];
             encode_timed_pass(
                 enc,
-                "gradient",
-                pipe,
+                "restir_merge",
+                &st.merge_pipeline,
                 &groups,
-                self.grid,
-                q.map(|q| (q, t + 2)),
+                st.merge_grid,
+                q.map(|q| (q, merge_slot)),
             );
+            // The textures of this iteration become the previous ones of the next merge.
+            let params = &self.renderer.scene.params;
+            enc.copy_buffer_to_buffer(
+                params,
+                0,
+                &self.renderer.scene.params_prev,
+                0,
+                params.size(),
+            );
+            st.have_prev = o.temporal;
         }
     }
 
@@ -407,7 +656,7 @@ impl Optimizer {
             .device
             .limits()
             .max_compute_workgroups_per_dimension;
-        let first = 3 * self.cams.len() as u32;
+        let first = 3 * self.cams.len() as u32 + self.restir.is_some() as u32;
         for (k, (u, g, p)) in self.adam.iter_mut().enumerate() {
             p.bias1 = 1.0 - adam::BETA1.powi(t as i32);
             p.bias2 = 1.0 - adam::BETA2.powi(t as i32);
@@ -443,6 +692,7 @@ impl Optimizer {
                 0 => t.primal_ms += ms,
                 1 => t.loss_ms += ms,
                 2 => t.gradient_ms += ms,
+                4 => t.merge_ms += ms,
                 _ => t.adam_ms += ms,
             }
         }
@@ -450,7 +700,8 @@ impl Optimizer {
     }
 
     /// One gradient estimate at the current textures, as iteration `iteration` would draw it,
-    /// without changing anything. Returns (gradient laid out like the parameters, loss).
+    /// without changing the textures. For ReSTIR this advances the reservoirs like an
+    /// iteration does. Returns (gradient laid out like the parameters, loss).
     pub fn estimate_gradient(&mut self, iteration: u32) -> Result<(Vec<f32>, f64)> {
         let mut enc = self
             .gpu
@@ -464,6 +715,13 @@ impl Optimizer {
         let mut g: Vec<f32> = self.gpu.read_pod(&self.grad)?;
         g.truncate(self.set.values.len());
         Ok((g, loss))
+    }
+
+    /// The gradient of the last iteration or estimate, laid out like the parameters.
+    pub fn read_gradient(&self) -> Result<Vec<f32>> {
+        let mut g: Vec<f32> = self.gpu.read_pod(&self.grad)?;
+        g.truncate(self.set.values.len());
+        Ok(g)
     }
 
     /// Current texture values.
@@ -516,12 +774,21 @@ impl Optimizer {
         let p: Vec<u32> = self.gpu.read_pod(&self.stats[0])?;
         let g: Vec<u32> = self.gpu.read_pod(&self.stats[1])?;
         let a: Vec<u32> = self.gpu.read_pod(&self.stats[2])?;
-        Ok(FaultCounts {
+        let mut f = FaultCounts {
             lost_updates: g[1],
             dropped_gradient: g[2],
             skipped_adam: a[0],
             dropped_primal: p[3],
-        })
+            ..Default::default()
+        };
+        if let Some(st) = &self.restir {
+            let c: Vec<u32> = self.gpu.read_pod(&st.stats[0])?;
+            let m: Vec<u32> = self.gpu.read_pod(&st.stats[1])?;
+            f.lost_offers = c[1];
+            f.dropped_gradient += c[2];
+            f.dropped_replays = m[1];
+        }
+        Ok(f)
     }
 
     /// Render camera `k` of the task (index into `settings.cameras`) at the current textures.

@@ -25,6 +25,10 @@ pub struct RunOptions {
     pub resume: bool,
     /// Show a progress bar.
     pub progress: bool,
+    /// Gradient estimator.
+    pub method: super::Method,
+    /// ReSTIR options.
+    pub restir: super::RestirOptions,
 }
 
 /// What a run did.
@@ -306,6 +310,8 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         gradient_spp: task.optimizer.gradient_spp,
         loss: task.optimizer.loss,
         seed: task.seed,
+        method: opts.method,
+        restir: opts.restir,
     };
     let initial_rmse = prep.reference.as_ref().map(|r| rmse(&prep.set.values, r));
     let mut opt = Optimizer::new(gpu, &prep.scene, prep.set.clone(), settings, &prep.targets)?;
@@ -397,6 +403,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
             s.primal_ms += t.primal_ms;
             s.loss_ms += t.loss_ms;
             s.gradient_ms += t.gradient_ms;
+            s.merge_ms += t.merge_ms;
             s.adam_ms += t.adam_ms;
         }
         let elapsed = elapsed_before + session_start.elapsed().as_secs_f64();
@@ -458,6 +465,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
                 primal_ms: s.primal_ms / n,
                 loss_ms: s.loss_ms / n,
                 gradient_ms: s.gradient_ms / n,
+                merge_ms: s.merge_ms / n,
                 adam_ms: s.adam_ms / n,
             }
         }),
@@ -522,7 +530,13 @@ fn write_outputs(
 /// One gradient estimate at the task's initial textures, written to `dir` per texture as
 /// `<texture>_gradient.exr` (linear, signed) and `<texture>_gradient.png` (signed false color:
 /// red positive, blue negative, scaled by the largest magnitude). Returns the files written.
-pub fn write_gradient(gpu: &Gpu, task: &Task, dir: &Path) -> Result<Vec<PathBuf>> {
+pub fn write_gradient(
+    gpu: &Gpu,
+    task: &Task,
+    dir: &Path,
+    method: super::Method,
+    restir: super::RestirOptions,
+) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
     let prep = prepare(gpu, task, dir, false)?;
     let settings = Settings {
@@ -533,6 +547,8 @@ pub fn write_gradient(gpu: &Gpu, task: &Task, dir: &Path) -> Result<Vec<PathBuf>
         gradient_spp: task.optimizer.gradient_spp,
         loss: task.optimizer.loss,
         seed: task.seed,
+        method,
+        restir,
     };
     let mut opt = Optimizer::new(gpu, &prep.scene, prep.set.clone(), settings, &prep.targets)?;
     let (grad, _) = opt.estimate_gradient(0)?;

@@ -135,7 +135,8 @@ pub struct GpuParamTex {
     pub height: u32,
     pub channels: u32,
     pub filtering: u32,
-    pub _pad: [u32; 3],
+    pub texel_offset: u32,
+    pub _pad: [u32; 2],
 }
 
 /// `GradientParams` in gradient.wgsl.
@@ -149,7 +150,8 @@ pub struct GpuGradientParams {
     pub techniques: u32,
     pub stride: u32,
     pub inv_spp: f32,
-    pub _pad: [u32; 2],
+    pub adjoint_offset: u32,
+    pub _pad: u32,
 }
 
 /// `LossParams` in loss.wgsl.
@@ -160,6 +162,43 @@ pub struct GpuLossParams {
     pub kind: u32,
     pub norm: f32,
     pub partial_offset: u32,
+    pub adjoint_offset: u32,
+    pub _pad: [u32; 3],
+}
+
+/// `CandidateParams` in restir_candidates.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuCandidateParams {
+    pub camera: GpuCameraInfo,
+    pub seed: u32,
+    pub spp: u32,
+    pub stride: u32,
+    pub inv_spp: f32,
+    pub camera_index: u32,
+    pub adjoint_offset: u32,
+    pub positivize: u32,
+    pub _pad: u32,
+}
+
+/// Cameras a ReSTIR merge can replay from (`MAX_CAMERAS` in restir_merge.wgsl).
+pub const MAX_CAMERAS: usize = 8;
+
+/// `MergeParams` in restir_merge.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuMergeParams {
+    pub cameras: [GpuCameraInfo; MAX_CAMERAS],
+    pub n_texels: u32,
+    pub n_pixels: u32,
+    pub seed: u32,
+    pub flags: u32,
+    pub m_fresh: f32,
+    pub m_cap: f32,
+    pub inv_spp: f32,
+    pub n_textures: u32,
+    pub stride: u32,
+    pub _pad: [u32; 3],
 }
 
 /// `AdamParams` in adam.wgsl.
@@ -224,6 +263,12 @@ mod tests {
             ("gradient", "GradientParams", size_of::<GpuGradientParams>()),
             ("loss", "LossParams", size_of::<GpuLossParams>()),
             ("adam", "AdamParams", size_of::<GpuAdamParams>()),
+            (
+                "restir_candidates",
+                "CandidateParams",
+                size_of::<GpuCandidateParams>(),
+            ),
+            ("restir_merge", "MergeParams", size_of::<GpuMergeParams>()),
         ] {
             assert_eq!(size, wgsl_size(pass, name), "{name}");
         }

@@ -31,8 +31,12 @@ pub struct GpuScene {
     pub bytes: u64,
     /// Values of the optimized textures (binding 9; Adam writes it).
     pub params: wgpu::Buffer,
+    /// The optimized textures of the previous iteration (binding 10; ReSTIR's merge reads it).
+    pub params_prev: wgpu::Buffer,
     /// Number of floats in `params`.
     pub param_count: u32,
+    /// Number of texels of all optimized textures.
+    pub n_texels: u32,
 }
 
 fn wrap_bits(w: Wrap) -> u32 {
@@ -133,6 +137,7 @@ impl GpuScene {
 
         let mut materials = materials;
         let mut param_textures = Vec::new();
+        let mut texel_offset = 0u32;
         for (i, t) in param_set.textures.iter().enumerate() {
             let m = materials.get_mut(t.material as usize).ok_or_else(|| {
                 Error::Invalid(format!(
@@ -156,8 +161,10 @@ impl GpuScene {
                     crate::task::Filter::Nearest => 0,
                     crate::task::Filter::Bilinear => 1,
                 },
-                _pad: [0; 3],
+                texel_offset,
+                _pad: [0; 2],
             });
+            texel_offset += t.width * t.height;
         }
         check("the optimized textures", param_set.values.len() * 4)?;
 
@@ -304,13 +311,18 @@ impl GpuScene {
                 bytemuck::cast_slice(&param_set.values),
                 wgpu::BufferUsages::COPY_SRC,
             ),
+            gpu.storage(
+                "scene params_prev",
+                bytemuck::cast_slice(&param_set.values),
+                wgpu::BufferUsages::COPY_SRC,
+            ),
         ];
         let bytes = buffers.iter().map(|b| b.size()).sum();
         let layout = Self::bind_group_layout(gpu);
         let refs: Vec<&wgpu::Buffer> = buffers.iter().collect();
         let bind_group = gpu.bind_group("scene", &layout, &refs);
         gpu.check("scene upload")?;
-        let [_, _, _, _, _, _, _, _, _, params] = buffers;
+        let [_, _, _, _, _, _, _, _, _, params, params_prev] = buffers;
         Ok(GpuScene {
             layout,
             bind_group,
@@ -319,7 +331,9 @@ impl GpuScene {
             gpu_index,
             bytes,
             params,
+            params_prev,
             param_count: param_set.values.len() as u32,
+            n_texels: texel_offset,
         })
     }
 
@@ -330,7 +344,7 @@ impl GpuScene {
             "scene",
             &[
                 Storage, Storage, Storage, Storage, Storage, Storage, Storage, Uniform, Storage,
-                Storage,
+                Storage, Storage,
             ],
         )
     }

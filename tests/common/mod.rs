@@ -4,7 +4,7 @@
 
 use glam::{Mat4, Vec2, Vec3, Vec4};
 use psrestir::gpu::Gpu;
-use psrestir::scene::{Camera, Material, Scene, Triangle};
+use psrestir::scene::{Camera, Material, PunctualKind, PunctualLight, Scene, Triangle};
 use std::f32::consts::PI;
 
 /// A device on the machine's Vulkan driver. Outside CI, a machine without one skips the test
@@ -198,4 +198,53 @@ pub fn block_z_scores(
         }
     }
     out
+}
+
+/// A 2x2-unit plane (UV 0..1) under a point light and an emissive quad, with a floating
+/// blocker that casts a hard shadow (point light) and a soft one (area light).
+pub fn shadow_scene() -> Scene {
+    let mut s = Scene::default();
+    s.materials.push(Material {
+        name: "plane".into(),
+        ..material([0.5, 0.4, 0.3], 0.2, 0.5)
+    });
+    s.materials.push(Material {
+        name: "blocker".into(),
+        ..material([0.3, 0.3, 0.3], 0.0, 0.8)
+    });
+    s.materials.push(Material {
+        name: "lamp".into(),
+        emissive: Vec3::splat(8.0),
+        ..material([0.0; 3], 0.0, 1.0)
+    });
+    s.triangles.extend(quad(
+        Vec3::new(-1.0, 0.0, 1.0),
+        Vec3::new(2.0, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, -2.0),
+        0,
+    ));
+    s.triangles.extend(quad(
+        Vec3::new(-0.3, 0.5, 0.3),
+        Vec3::new(0.5, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, -0.5),
+        1,
+    ));
+    // The lamp faces down (u x v = -y).
+    s.triangles.extend(quad(
+        Vec3::new(0.2, 1.5, -0.8),
+        Vec3::new(0.6, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, 0.6),
+        2,
+    ));
+    s.lights.push(PunctualLight {
+        name: "p".into(),
+        kind: PunctualKind::Point,
+        position: Vec3::new(-0.4, 1.6, 0.5),
+        direction: Vec3::NEG_Y,
+        intensity: Vec3::splat(2.0),
+        range: 0.0,
+    });
+    s.cameras
+        .push(look_at(Vec3::new(0.0, 2.2, 1.2), Vec3::ZERO, Vec3::Y, 0.9));
+    s
 }

@@ -1,0 +1,36 @@
+// Test pass for the reservoir update: invocation i offers candidate i % n_candidates, with
+// weight weights[i % n_candidates], to reservoir i / (n_candidates * copies), so that many
+// invocations hit each reservoir at once. The test checks the selection frequencies.
+#import shared/rng
+#import shared/reservoir
+
+struct ReservoirTestParams {
+    n_candidates: u32,
+    copies: u32,
+    n_invocations: u32,
+    seed: u32,
+}
+
+@group(0) @binding(0) var<uniform> tp: ReservoirTestParams;
+@group(0) @binding(1) var<storage, read> weights: array<f32>;
+@group(0) @binding(2) var<storage, read_write> fresh: array<atomic<u32>>;
+@group(0) @binding(3) var<storage, read_write> locks: array<atomic<u32>>;
+@group(0) @binding(4) var<storage, read_write> failures: array<atomic<u32>>;
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) id: vec3u) {
+    let i = id.x;
+    if i >= tp.n_invocations {
+        return;
+    }
+    let c = i % tp.n_candidates;
+    let r = i / (tp.n_candidates * tp.copies);
+    let w = weights[c];
+    if w <= 0.0 {
+        return;
+    }
+    rng_init(tp.seed, i, 0u);
+    if !reservoir_offer(r, w, rand(), c, 0u, 0u, vec3f(w, 0.0, 0.0)) {
+        atomicAdd(&failures[0], 1u);
+    }
+}

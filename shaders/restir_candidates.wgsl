@@ -1,0 +1,127 @@
+// ReSTIR candidate pass: every camera sample's light-sampled and BSDF-sampled contributions
+// are candidates for every texel that their hit point touches. A candidate's value v for a
+// texel is the adjoint-weighted derivative (as the baseline would add it), its target
+// q = luminance(v) (v for scalar textures), and it is offered to the texel's positive
+// reservoir with weight q when q > 0, to the negative one with weight -q when q < 0 (or to one
+// reservoir with weight |q| without positivization). Because v already carries 1/density,
+// the weight is q itself.
+#import shared/rng
+#import shared/camera
+#import shared/integrator
+#import shared/reservoir
+
+// Keep in sync with GpuCandidateParams in src/render/layout.rs.
+struct CandidateParams {
+    camera: CameraInfo,
+    seed: u32,
+    spp: u32,
+    stride: u32,
+    inv_spp: f32,
+    // Index of this camera (stored in the reservoirs for replay) and where its adjoint starts.
+    camera_index: u32,
+    adjoint_offset: u32,
+    positivize: u32,
+    _pad0: u32,
+}
+
+@group(1) @binding(0) var<uniform> cp: CandidateParams;
+@group(1) @binding(1) var<storage, read> adjoint: array<vec4f>;
+@group(1) @binding(2) var<storage, read_write> fresh: array<atomic<u32>>;
+@group(1) @binding(3) var<storage, read_write> locks: array<atomic<u32>>;
+// [0] candidates offered, [1] lost offers (lock bound exhausted), [2] dropped non-finite.
+@group(1) @binding(4) var<storage, read_write> cstats: array<atomic<u32>, 4>;
+
+var<private> offered: u32 = 0u;
+var<private> lost: u32 = 0u;
+var<private> dropped: u32 = 0u;
+
+fn offer_contribution(m: Material, uv: vec2f, bg: BrdfGrad, weight: vec3f, adj: vec3f, sample: u32, info: u32) {
+    if all(weight == vec3f(0.0)) {
+        return;
+    }
+    for (var slot = 0u; slot < 3u; slot++) {
+        let pi = material_param(m, slot);
+        if pi == NONE {
+            continue;
+        }
+        let p = param_textures[pi];
+        let fp = footprint_merged(param_footprint(p, uv));
+        let g = slot_derivative(slot, bg, weight, adj);
+        for (var k = 0u; k < 4u; k++) {
+            if fp.weight[k] == 0.0 {
+                continue;
+            }
+            let v = fp.weight[k] * g;
+            var q = v.x;
+            if p.channels == 3u {
+                q = luminance(v);
+            }
+            if q == 0.0 {
+                continue;
+            }
+            if !(abs(q) < 3.0e38) || !all(abs(v) < vec3f(3.0e38)) {
+                dropped += 1u;
+                continue;
+            }
+            let texel = p.texel_offset + fp.texel[k];
+            var r = 2u * texel;
+            if cp.positivize != 0u && q < 0.0 {
+                r += 1u;
+            }
+            offered += 1u;
+            if !reservoir_offer(r, abs(q), rand(), sample, cp.seed, info, v) {
+                lost += 1u;
+            }
+        }
+    }
+}
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) id: vec3u) {
+    let width = cp.camera.width;
+    let n_pixels = width * cp.camera.height;
+    // 8x8 tiles, as in render.wgsl.
+    let linear = id.x + id.y * cp.stride;
+    let tiles_x = (width + 7u) / 8u;
+    let tile = linear / 64u;
+    let in_tile = linear % 64u;
+    let px = (tile % tiles_x) * 8u + in_tile % 8u;
+    let py = (tile / tiles_x) * 8u + in_tile / 8u;
+    if px >= width || py >= cp.camera.height {
+        return;
+    }
+    let pixel = py * width + px;
+    let adj = adjoint[cp.adjoint_offset + pixel].xyz * cp.inv_spp;
+    if all(adj == vec3f(0.0)) {
+        return;
+    }
+    techniques = TECH_MIS;
+    let xy = vec2f(f32(px), f32(py));
+    for (var s = 0u; s < cp.spp; s++) {
+        let sample = s * n_pixels + pixel;
+        rng_init(cp.seed, sample, 0u);
+        let d = camera_direction(cp.camera, xy + rand2());
+        let hit = trace_closest(cp.camera.origin, d, 3.0e38);
+        if hit.tri == NONE {
+            continue;
+        }
+        let sf = surface_at(cp.camera.origin, d, hit);
+        let m = materials[sf.material];
+        if !sf.valid || (m.param_base_color == NONE && m.param_metallic == NONE && m.param_roughness == NONE) {
+            continue;
+        }
+        let mat = surface_material(sf);
+        let wo = to_local(sf.frame, sf.wo);
+        let ds = sample_direct(sf, mat);
+        let cam_bits = cp.camera_index << 1u;
+        offer_contribution(m, sf.uv, brdf_eval_cos_grad(mat, wo, to_local(sf.frame, ds.nee.wi)), ds.nee.weight, adj, sample, cam_bits);
+        offer_contribution(m, sf.uv, brdf_eval_cos_grad(mat, wo, to_local(sf.frame, ds.bsdf.wi)), ds.bsdf.weight, adj, sample, cam_bits | 1u);
+    }
+    atomicAdd(&cstats[0], offered);
+    if lost > 0u {
+        atomicAdd(&cstats[1], lost);
+    }
+    if dropped > 0u {
+        atomicAdd(&cstats[2], dropped);
+    }
+}

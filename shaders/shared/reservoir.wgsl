@@ -1,0 +1,40 @@
+#import shared/types
+
+// Streaming reservoir updates for parameter-space ReSTIR. Layout of a reservoir
+// (RESERVOIR_WORDS = 8 words, 32 bytes, in types.wgsl):
+//   [0] camera-sample index   [1] seed of the gradient pass that drew it
+//   [2] info: bit 0 technique (0 light sampling, 1 BSDF sampling), bits 1-7 camera; NONE = empty
+//   [3] weight sum (fresh reservoirs) or unbiased contribution weight W (merged)
+//   [4] confidence M          [5-7] the sample's value v (RGB; scalars use x)
+// Texel t owns reservoirs 2t (positive part of the target) and 2t + 1 (negative part).
+// Passes that offer candidates declare `fresh` (the reservoirs, as atomics) and `locks`.
+
+const LOCK_BOUND: u32 = 1024u;
+
+// Streaming update from many invocations at once. Design: a per-reservoir lock taken with
+// atomicCompareExchangeWeak, the critical section and the release inside the loop iteration
+// that took it (a lock that spins first and works after the loop deadlocks within a SIMD group
+// on lavapipe). Every word is accessed atomically so that the next holder sees it. The
+// candidate replaces the sample with probability w / (Wsum_before + w), which makes the
+// selection exactly proportional to weight. Returns false if the bounded loop never got the
+// lock (the caller counts it).
+fn reservoir_offer(r: u32, w: f32, u: f32, sample: u32, seed: u32, info: u32, v: vec3f) -> bool {
+    for (var k = 0u; k < LOCK_BOUND; k++) {
+        if atomicCompareExchangeWeak(&locks[r], 0u, 1u).exchanged {
+            let base = r * RESERVOIR_WORDS;
+            let wsum = bitcast<f32>(atomicLoad(&fresh[base + 3u])) + w;
+            atomicStore(&fresh[base + 3u], bitcast<u32>(wsum));
+            if u * wsum < w {
+                atomicStore(&fresh[base], sample);
+                atomicStore(&fresh[base + 1u], seed);
+                atomicStore(&fresh[base + 2u], info);
+                atomicStore(&fresh[base + 5u], bitcast<u32>(v.x));
+                atomicStore(&fresh[base + 6u], bitcast<u32>(v.y));
+                atomicStore(&fresh[base + 7u], bitcast<u32>(v.z));
+            }
+            atomicStore(&locks[r], 0u);
+            return true;
+        }
+    }
+    return false;
+}

@@ -1,0 +1,323 @@
+//! The ReSTIR estimator: reservoir selection is exactly proportional to weight; without
+//! temporal reuse it equals the baseline's sum of the same candidates for a scalar texture;
+//! with reuse (parameters held fixed) its mean matches a high-sample baseline reference; and a
+//! texel whose gradient changes sign gets gradients of the new sign.
+mod common;
+
+use common::*;
+use psrestir::image_io::Image;
+use psrestir::optim::{restir::selection_trial, Method, Optimizer, RestirOptions, Settings};
+use psrestir::render::params::ParamSet;
+use psrestir::task::{Filter, Init, Loss, Slot, TextureSpec};
+
+const W: u32 = 16;
+
+#[test]
+fn reservoir_selection_is_proportional_to_weight() {
+    let Some(gpu) = gpu() else { return };
+    let weights = [0.0f32, 1.0, 2.0, 0.0, 3.0, 5.0, 0.5, 8.0];
+    let total: f64 = weights.iter().map(|&w| w as f64).sum();
+    let mut counts = [0u64; 8];
+    let mut n = 0u64;
+    for seed in 0..4 {
+        // 4096 reservoirs, each offered every candidate 4 times by adjacent invocations.
+        let (sel, failures) = selection_trial(&gpu, &weights, 4, 4096, seed).unwrap();
+        assert_eq!(failures, 0, "offers lost: the lock bound was exhausted");
+        for s in sel {
+            assert!((s as usize) < weights.len(), "a reservoir selected nothing");
+            counts[s as usize] += 1;
+            n += 1;
+        }
+    }
+    let mut chi2 = 0.0;
+    for (k, &w) in weights.iter().enumerate() {
+        if w == 0.0 {
+            assert_eq!(counts[k], 0, "zero-weight candidate {k} was selected");
+            continue;
+        }
+        let e = n as f64 * w as f64 / total;
+        chi2 += (counts[k] as f64 - e).powi(2) / e;
+    }
+    // 6 non-zero weights: 5 degrees of freedom; P(chi2 > 30) < 2e-5 for a correct sampler.
+    // The rule of the reference code (accept when u * Wsum_before < w) fails this badly.
+    eprintln!("counts {counts:?}, chi2 {chi2:.2}");
+    assert!(
+        chi2 < 30.0,
+        "selection frequencies {counts:?} do not match the weights (chi2 {chi2})"
+    );
+}
+
+fn optimizer(
+    gpu: &psrestir::gpu::Gpu,
+    slot: Slot,
+    filter: Filter,
+    method: Method,
+    restir: RestirOptions,
+    values: &[f32],
+    target_values: &[f32],
+) -> Optimizer {
+    let scene = shadow_scene();
+    let spec = TextureSpec {
+        material: "plane".into(),
+        slot,
+        resolution: [2, 2],
+        init: Init::Vector(vec![0.5; slot.channels() as usize]),
+        learning_rate: 0.0,
+    };
+    let set = ParamSet::from_specs(&scene, &[spec], filter, std::path::Path::new("test")).unwrap();
+    let settings = Settings {
+        width: W,
+        height: W,
+        cameras: vec![0],
+        primal_spp: 8,
+        gradient_spp: 2,
+        loss: Loss::L2,
+        seed: 11,
+        method,
+        restir,
+    };
+    let base = Settings {
+        method: Method::Baseline,
+        ..settings.clone()
+    };
+    let opt = Optimizer::new(gpu, &scene, set.clone(), base, &[Image::new(W, W)]).unwrap();
+    opt.write_params(target_values).unwrap();
+    let target = opt.render(0, 2048, 99).unwrap();
+    let opt = Optimizer::new(gpu, &scene, set, settings, &[target]).unwrap();
+    opt.write_params(values).unwrap();
+    opt
+}
+
+#[test]
+fn without_reuse_restir_equals_the_baseline_for_a_scalar_texture() {
+    let Some(gpu) = gpu() else { return };
+    let (v, t) = ([0.3, 0.5, 0.7, 0.4], [0.8, 0.2, 0.4, 0.9]);
+    for filter in [Filter::Nearest, Filter::Bilinear] {
+        let opts = RestirOptions {
+            temporal: false,
+            ..Default::default()
+        };
+        let mut base = optimizer(
+            &gpu,
+            Slot::Roughness,
+            filter,
+            Method::Baseline,
+            opts,
+            &v,
+            &t,
+        );
+        let mut re = optimizer(&gpu, Slot::Roughness, filter, Method::Restir, opts, &v, &t);
+        for it in 0..3 {
+            let (gb, _) = base.estimate_gradient(it).unwrap();
+            let (gr, _) = re.estimate_gradient(it).unwrap();
+            let scale = gb.iter().fold(0f32, |m, x| m.max(x.abs()));
+            assert!(scale > 0.0);
+            for i in 0..gb.len() {
+                // The same candidates summed in another order: float rounding only.
+                assert!(
+                    (gb[i] - gr[i]).abs() <= 1e-4 * gb[i].abs() + 1e-6 * scale,
+                    "{filter:?} iteration {it} texel {i}: baseline {} vs ReSTIR {}",
+                    gb[i],
+                    gr[i]
+                );
+            }
+        }
+        assert_eq!(re.faults().unwrap(), Default::default());
+    }
+}
+
+/// Mean and its standard error from batch means (ReSTIR's estimates are correlated across
+/// iterations; batches much longer than the correlation time are nearly independent).
+fn batch_mean(samples: &[Vec<f32>], batches: usize) -> (Vec<f64>, Vec<f64>) {
+    let n = samples[0].len();
+    let per = samples.len() / batches;
+    let mut means = vec![vec![0f64; n]; batches];
+    for (b, m) in means.iter_mut().enumerate() {
+        for s in &samples[b * per..(b + 1) * per] {
+            for i in 0..n {
+                m[i] += s[i] as f64 / per as f64;
+            }
+        }
+    }
+    let mean: Vec<f64> = (0..n)
+        .map(|i| means.iter().map(|m| m[i]).sum::<f64>() / batches as f64)
+        .collect();
+    let se: Vec<f64> = (0..n)
+        .map(|i| {
+            (means.iter().map(|m| (m[i] - mean[i]).powi(2)).sum::<f64>()
+                / (batches as f64 - 1.0)
+                / batches as f64)
+                .sqrt()
+        })
+        .collect();
+    (mean, se)
+}
+
+fn check_unbiased_with_reuse(slot: Slot, filter: Filter, v: &[f32], t: &[f32]) {
+    let Some(gpu) = gpu() else { return };
+    let opts = RestirOptions::default();
+    // Reference: many independent baseline estimates.
+    let mut base = optimizer(&gpu, slot, filter, Method::Baseline, opts, v, t);
+    let reference: Vec<Vec<f32>> = (0..160)
+        .map(|it| base.estimate_gradient(10_000 + it).unwrap().0)
+        .collect();
+    let (ref_mean, ref_se) = batch_mean(&reference, 16);
+    // ReSTIR with temporal reuse, learning rate 0: the state evolves, the textures do not.
+    let mut re = optimizer(&gpu, slot, filter, Method::Restir, opts, v, t);
+    let mut samples = Vec::new();
+    for _ in 0..320 {
+        re.step().unwrap();
+        samples.push(re.read_gradient().unwrap());
+    }
+    assert_eq!(
+        re.read_params().unwrap(),
+        v,
+        "learning rate 0 changed the textures"
+    );
+    // Drop the first 20 iterations (the reservoirs start empty), batches of 25.
+    let (mean, se) = batch_mean(&samples[20..], 12);
+    let scale = ref_mean.iter().fold(0f64, |m, x| m.max(x.abs()));
+    for i in 0..mean.len() {
+        // 4.5 standard errors of the difference, plus 0.1% of the largest entry for rounding.
+        let tol = 4.5 * (se[i].powi(2) + ref_se[i].powi(2)).sqrt() + 1e-3 * scale;
+        eprintln!(
+            "{slot:?} {filter:?} {i}: ReSTIR {:.4e} +- {:.1e}, baseline {:.4e} +- {:.1e}",
+            mean[i], se[i], ref_mean[i], ref_se[i]
+        );
+        assert!(
+            (mean[i] - ref_mean[i]).abs() <= tol,
+            "{slot:?}/{filter:?} parameter {i}: ReSTIR mean {} vs reference {} (tolerance {tol})",
+            mean[i],
+            ref_mean[i]
+        );
+    }
+    assert_eq!(re.faults().unwrap(), Default::default());
+}
+
+#[test]
+fn restir_with_reuse_is_unbiased_for_base_color_nearest() {
+    let v = [0.5, 0.4, 0.3, 0.6, 0.5, 0.2, 0.3, 0.3, 0.3, 0.7, 0.6, 0.5];
+    let t = [0.8, 0.2, 0.1, 0.3, 0.6, 0.4, 0.5, 0.5, 0.5, 0.2, 0.3, 0.9];
+    check_unbiased_with_reuse(Slot::BaseColor, Filter::Nearest, &v, &t);
+}
+
+#[test]
+fn restir_with_reuse_is_unbiased_for_base_color_bilinear() {
+    let v = [0.5, 0.4, 0.3, 0.6, 0.5, 0.2, 0.3, 0.3, 0.3, 0.7, 0.6, 0.5];
+    let t = [0.8, 0.2, 0.1, 0.3, 0.6, 0.4, 0.5, 0.5, 0.5, 0.2, 0.3, 0.9];
+    check_unbiased_with_reuse(Slot::BaseColor, Filter::Bilinear, &v, &t);
+}
+
+#[test]
+fn restir_with_reuse_is_unbiased_for_roughness_nearest() {
+    check_unbiased_with_reuse(
+        Slot::Roughness,
+        Filter::Nearest,
+        &[0.3, 0.5, 0.7, 0.4],
+        &[0.8, 0.2, 0.4, 0.9],
+    );
+}
+
+#[test]
+fn restir_with_reuse_is_unbiased_for_roughness_bilinear() {
+    check_unbiased_with_reuse(
+        Slot::Roughness,
+        Filter::Bilinear,
+        &[0.3, 0.5, 0.7, 0.4],
+        &[0.8, 0.2, 0.4, 0.9],
+    );
+}
+
+#[test]
+fn gradients_follow_a_sign_change() {
+    let Some(gpu) = gpu() else { return };
+    // One roughness texel; the target was rendered at 0.5. At 0.3 and at 0.7 the true
+    // gradients have opposite signs.
+    let one = |filter, method, v: f32| {
+        let scene = shadow_scene();
+        let spec = TextureSpec {
+            material: "plane".into(),
+            slot: Slot::Roughness,
+            resolution: [1, 1],
+            init: Init::Scalar(0.5),
+            learning_rate: 0.0,
+        };
+        let set =
+            ParamSet::from_specs(&scene, &[spec], filter, std::path::Path::new("test")).unwrap();
+        let settings = Settings {
+            width: W,
+            height: W,
+            cameras: vec![0],
+            primal_spp: 8,
+            gradient_spp: 2,
+            loss: Loss::L2,
+            seed: 5,
+            method,
+            restir: RestirOptions::default(),
+        };
+        let opt = Optimizer::new(
+            &gpu,
+            &scene,
+            set.clone(),
+            Settings {
+                method: Method::Baseline,
+                ..settings.clone()
+            },
+            &[Image::new(W, W)],
+        )
+        .unwrap();
+        opt.write_params(&[0.5]).unwrap();
+        let target = opt.render(0, 2048, 3).unwrap();
+        let opt = Optimizer::new(&gpu, &scene, set, settings, &[target]).unwrap();
+        opt.write_params(&[v]).unwrap();
+        opt
+    };
+    for filter in [Filter::Nearest, Filter::Bilinear] {
+        let mut reference = Vec::new();
+        for v in [0.3f32, 0.7] {
+            let mut b = one(filter, Method::Baseline, v);
+            let mean = (0..64)
+                .map(|it| b.estimate_gradient(500 + it).unwrap().0[0] as f64)
+                .sum::<f64>()
+                / 64.0;
+            reference.push(mean);
+        }
+        assert!(
+            reference[0] * reference[1] < 0.0,
+            "the scene does not flip the gradient: {reference:?}"
+        );
+        let mut re = one(filter, Method::Restir, 0.3);
+        let mut phase = [Vec::new(), Vec::new()];
+        for it in 0..80 {
+            if it == 40 {
+                re.write_params(&[0.7]).unwrap();
+            }
+            re.step().unwrap();
+            let g = re.read_gradient().unwrap()[0] as f64;
+            // Skip the first 10 iterations of each phase (empty reservoirs, then the change).
+            if it % 40 >= 10 {
+                phase[it / 40].push(g);
+            }
+        }
+        for (k, p) in phase.iter().enumerate() {
+            let mean = p.iter().sum::<f64>() / p.len() as f64;
+            eprintln!(
+                "{filter:?} phase {k}: ReSTIR mean {mean:.4e}, baseline {:.4e}",
+                reference[k]
+            );
+            assert!(
+                mean * reference[k] > 0.0,
+                "{filter:?} phase {k}: ReSTIR mean {mean} has the wrong sign (baseline {})",
+                reference[k]
+            );
+            // Every single estimate after the change has the new sign or is zero: kept samples
+            // of the old sign are routed to the other reservoir, not kept alive.
+            let wrong = p.iter().filter(|g| **g * reference[k] < 0.0).count();
+            assert!(
+                wrong * 4 <= p.len(),
+                "{filter:?} phase {k}: {wrong} of {} estimates have the old sign",
+                p.len()
+            );
+        }
+    }
+}
