@@ -141,6 +141,24 @@ enum Command {
         /// The scene (.gltf or .glb).
         scene: PathBuf,
     },
+    /// Measure gradient error: ReSTIR after some iterations against the baseline at equal
+    /// iterations and equal time, relMSE against a high-sample reference.
+    #[command(hide = true)]
+    GradientError {
+        /// The task file (TOML).
+        task: PathBuf,
+        #[command(flatten)]
+        estimator: EstimatorArgs,
+        /// ReSTIR iterations before measuring.
+        #[arg(long, default_value_t = 20)]
+        warmup: u32,
+        /// Baseline estimates averaged for the reference.
+        #[arg(long, default_value_t = 64)]
+        reference: u32,
+        /// Seeds averaged.
+        #[arg(long, default_value_t = 3)]
+        repeats: u32,
+    },
     /// Print the GPU adapter psrestir would use, its features and limits.
     Adapter,
     /// Regenerate the bundled scenes (scenes/default).
@@ -376,6 +394,30 @@ fn run(cli: Cli) -> Result<()> {
             for w in &sc.warnings {
                 println!("  warning: {w}");
             }
+        }
+        Command::GradientError {
+            task,
+            estimator,
+            warmup,
+            reference,
+            repeats,
+        } => {
+            let (_, restir) = estimator.resolve()?;
+            let task = Task::load(&task)?;
+            let gpu = Gpu::new()?;
+            let e =
+                optim::measure::gradient_error(&gpu, &task, restir, warmup, reference, repeats)?;
+            println!(
+                "ms/iteration: ReSTIR {:.1}, baseline {:.1}\ngradient relMSE after {warmup} iterations: ReSTIR {:.4e}, baseline (equal iterations) {:.4e} (ratio {:.3}), baseline at {} spp (equal time) {:.4e} (ratio {:.3})",
+                e.ms_restir,
+                e.ms_baseline,
+                e.relmse_restir,
+                e.relmse_baseline,
+                e.relmse_restir / e.relmse_baseline,
+                e.baseline_spp_equal_time,
+                e.relmse_baseline_equal_time,
+                e.relmse_restir / e.relmse_baseline_equal_time
+            );
         }
         Command::Adapter => {
             let gpu = Gpu::new()?;

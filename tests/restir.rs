@@ -321,3 +321,55 @@ fn gradients_follow_a_sign_change() {
         }
     }
 }
+
+#[test]
+fn restir_beats_the_baseline_on_the_default_task() {
+    let Some(gpu) = gpu() else { return };
+    // The bundled default task at a quarter of its pixels and 40% of its iterations (to keep
+    // the suite short): same scene, cameras, texture and learning rate.
+    let path = std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/scenes/default/task.toml"
+    ));
+    let mut task = psrestir::task::Task::load(path).unwrap();
+    task.width = 64;
+    task.height = 64;
+    task.target.spp = 128;
+    let iterations = 60;
+    let dir = tempfile::tempdir().unwrap();
+    let prep = psrestir::optim::run::prepare(&gpu, &task, dir.path(), false).unwrap();
+    let truth = prep.reference.clone().unwrap();
+    let mut final_rmse = [0f64; 2];
+    let seeds = [1u32, 2, 3];
+    for (m, method) in [Method::Restir, Method::Baseline].into_iter().enumerate() {
+        for &seed in &seeds {
+            let settings = Settings {
+                width: task.width,
+                height: task.height,
+                cameras: prep.cameras.clone(),
+                primal_spp: task.optimizer.primal_spp,
+                gradient_spp: task.optimizer.gradient_spp,
+                loss: task.optimizer.loss,
+                seed,
+                method,
+                restir: RestirOptions::default(),
+            };
+            let mut opt =
+                Optimizer::new(&gpu, &prep.scene, prep.set.clone(), settings, &prep.targets)
+                    .unwrap();
+            for _ in 0..iterations {
+                opt.step().unwrap();
+            }
+            final_rmse[m] += psrestir::optim::run::rmse(&opt.read_params().unwrap(), &truth)
+                / seeds.len() as f64;
+        }
+    }
+    let initial = psrestir::optim::run::rmse(&prep.set.values, &truth);
+    eprintln!("texture RMSE after {iterations} iterations: initial {initial:.4}, ReSTIR {:.4}, baseline {:.4}", final_rmse[0], final_rmse[1]);
+    assert!(
+        final_rmse[0] < final_rmse[1],
+        "ReSTIR {} is not below the baseline {}",
+        final_rmse[0],
+        final_rmse[1]
+    );
+}

@@ -6,6 +6,7 @@ pub mod adam;
 pub mod checkpoint;
 pub mod export;
 pub mod loss;
+pub mod measure;
 pub mod plot;
 pub mod restir;
 pub mod run;
