@@ -89,34 +89,87 @@ fn optimizer(
 }
 
 #[test]
-fn without_reuse_restir_equals_the_baseline_for_a_scalar_texture() {
+fn without_reuse_restir_equals_the_baseline_for_scalar_textures() {
     let Some(gpu) = gpu() else { return };
-    let (v, t) = ([0.3, 0.5, 0.7, 0.4], [0.8, 0.2, 0.4, 0.9]);
+    // Two scalar textures at once (roughness 2x2, metallic 3x1) on the same material.
+    let scene = shadow_scene();
+    let specs = [
+        TextureSpec {
+            material: "plane".into(),
+            slot: Slot::Roughness,
+            resolution: [2, 2],
+            init: Init::Scalar(0.5),
+            learning_rate: 0.0,
+        },
+        TextureSpec {
+            material: "plane".into(),
+            slot: Slot::Metallic,
+            resolution: [3, 1],
+            init: Init::Scalar(0.5),
+            learning_rate: 0.0,
+        },
+    ];
+    let values = [0.3, 0.5, 0.7, 0.4, 0.2, 0.6, 0.9];
+    let truth = [0.8, 0.2, 0.4, 0.9, 0.7, 0.1, 0.3];
     for filter in [Filter::Nearest, Filter::Bilinear] {
+        let set =
+            ParamSet::from_specs(&scene, &specs, filter, std::path::Path::new("test")).unwrap();
         let opts = RestirOptions {
             temporal: false,
             ..Default::default()
         };
-        let mut base = optimizer(
+        let settings = Settings {
+            width: W,
+            height: W,
+            cameras: vec![0],
+            primal_spp: 8,
+            gradient_spp: 2,
+            loss: Loss::L2,
+            seed: 11,
+            method: Method::Baseline,
+            restir: opts,
+        };
+        let opt = Optimizer::new(
             &gpu,
-            Slot::Roughness,
-            filter,
-            Method::Baseline,
-            opts,
-            &v,
-            &t,
-        );
-        let mut re = optimizer(&gpu, Slot::Roughness, filter, Method::Restir, opts, &v, &t);
+            &scene,
+            set.clone(),
+            settings.clone(),
+            &[Image::new(W, W)],
+        )
+        .unwrap();
+        opt.write_params(&truth).unwrap();
+        let target = opt.render(0, 1024, 99).unwrap();
+        let mut base = Optimizer::new(
+            &gpu,
+            &scene,
+            set.clone(),
+            settings.clone(),
+            &[target.clone()],
+        )
+        .unwrap();
+        let mut re = Optimizer::new(
+            &gpu,
+            &scene,
+            set,
+            Settings {
+                method: Method::Restir,
+                ..settings
+            },
+            &[target],
+        )
+        .unwrap();
+        base.write_params(&values).unwrap();
+        re.write_params(&values).unwrap();
         for it in 0..3 {
             let (gb, _) = base.estimate_gradient(it).unwrap();
             let (gr, _) = re.estimate_gradient(it).unwrap();
             let scale = gb.iter().fold(0f32, |m, x| m.max(x.abs()));
-            assert!(scale > 0.0);
+            assert!(gb[..4].iter().any(|g| *g != 0.0) && gb[4..].iter().any(|g| *g != 0.0));
             for i in 0..gb.len() {
                 // The same candidates summed in another order: float rounding only.
                 assert!(
                     (gb[i] - gr[i]).abs() <= 1e-4 * gb[i].abs() + 1e-6 * scale,
-                    "{filter:?} iteration {it} texel {i}: baseline {} vs ReSTIR {}",
+                    "{filter:?} iteration {it} parameter {i}: baseline {} vs ReSTIR {}",
                     gb[i],
                     gr[i]
                 );

@@ -14,7 +14,10 @@ const LOCK_BOUND: u32 = 1024u;
 // Streaming update from many invocations at once. Design: a per-reservoir lock taken with
 // atomicCompareExchangeWeak, the critical section and the release inside the loop iteration
 // that took it (a lock that spins first and works after the loop deadlocks within a SIMD group
-// on lavapipe). Every word is accessed atomically so that the next holder sees it. The
+// on lavapipe). Chosen over order-independent selection (atomicMin on -ln(u)/w keys), which
+// is deterministic but needs a second pass in which every candidate is traced again to write
+// its payload: the candidate pass is the expensive part, and doubling it would cost more than
+// determinism is worth here. Every word is accessed atomically so that the next holder sees it. The
 // candidate replaces the sample with probability w / (Wsum_before + w), which makes the
 // selection exactly proportional to weight. Returns false if the bounded loop never got the
 // lock (the caller counts it).
