@@ -80,37 +80,16 @@ fn scatter(m: Material, uv: vec2f, bg: BrdfGrad, weight: vec3f, adj: vec3f) {
     }
 }
 
-fn gradient_sample(o: vec3f, d: vec3f, adj: vec3f) {
-    let hit = trace_closest(o, d, 3.0e38);
-    if hit.tri == NONE {
-        return;
-    }
-    let sf = surface_at(o, d, hit);
-    let m = materials[sf.material];
-    if !sf.valid || (m.param_base_color == NONE && m.param_metallic == NONE && m.param_roughness == NONE) {
-        return;
-    }
-    let mat = surface_material(sf);
-    let wo = to_local(sf.frame, sf.wo);
-    let s = sample_direct(sf, mat);
-    scatter(m, sf.uv, brdf_eval_cos_grad(mat, wo, to_local(sf.frame, s.nee.wi)), s.nee.weight, adj);
-    scatter(m, sf.uv, brdf_eval_cos_grad(mat, wo, to_local(sf.frame, s.bsdf.wi)), s.bsdf.weight, adj);
-}
-
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {
     let width = gp.camera.width;
     let n_pixels = width * gp.camera.height;
-    // 8x8 tiles, as in render.wgsl.
-    let linear = id.x + id.y * gp.stride;
-    let tiles_x = (width + 7u) / 8u;
-    let tile = linear / 64u;
-    let in_tile = linear % 64u;
-    let px = (tile % tiles_x) * 8u + in_tile % 8u;
-    let py = (tile / tiles_x) * 8u + in_tile / 8u;
-    if px >= width || py >= gp.camera.height {
+    let xy_px = tile_pixel(id.x + id.y * gp.stride, width, gp.camera.height);
+    if xy_px.x == NONE {
         return;
     }
+    let px = xy_px.x;
+    let py = xy_px.y;
     let pixel = py * width + px;
     let adj = adjoint[gp.adjoint_offset + pixel].xyz * gp.inv_spp;
     if all(adj == vec3f(0.0)) {
@@ -121,7 +100,11 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     for (var s = 0u; s < gp.spp; s++) {
         rng_init(gp.seed, (gp.sample_offset + s) * n_pixels + pixel, 0u);
         let d = camera_direction(gp.camera, xy + rand2());
-        gradient_sample(gp.camera.origin, d, adj);
+        let g = gradient_sample(gp.camera.origin, d);
+        if g.valid {
+            scatter(g.m, g.sf.uv, g.nee_grad, g.nee.weight, adj);
+            scatter(g.m, g.sf.uv, g.bsdf_grad, g.bsdf.weight, adj);
+        }
     }
     atomicAdd(&gstats[0], gp.spp);
     if lost_updates > 0u {

@@ -26,17 +26,12 @@ struct RenderParams {
 fn main(@builtin(global_invocation_id) id: vec3u) {
     let width = rp.camera.width;
     let n_pixels = width * rp.camera.height;
-    // Invocations walk the image in 8x8 tiles, so that neighbouring lanes trace neighbouring
-    // pixels (coherent BVH traversal).
-    let linear = id.x + id.y * rp.stride;
-    let tiles_x = (width + 7u) / 8u;
-    let tile = linear / 64u;
-    let in_tile = linear % 64u;
-    let px = (tile % tiles_x) * 8u + in_tile % 8u;
-    let py = (tile / tiles_x) * 8u + in_tile / 8u;
-    if px >= width || py >= rp.camera.height {
+    let xy_px = tile_pixel(id.x + id.y * rp.stride, width, rp.camera.height);
+    if xy_px.x == NONE {
         return;
     }
+    let px = xy_px.x;
+    let py = xy_px.y;
     let pixel = py * width + px;
     techniques = rp.techniques;
     let xy = vec2f(f32(px), f32(py));

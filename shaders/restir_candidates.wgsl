@@ -80,16 +80,12 @@ fn offer_contribution(m: Material, uv: vec2f, bg: BrdfGrad, weight: vec3f, adj: 
 fn main(@builtin(global_invocation_id) id: vec3u) {
     let width = cp.camera.width;
     let n_pixels = width * cp.camera.height;
-    // 8x8 tiles, as in render.wgsl.
-    let linear = id.x + id.y * cp.stride;
-    let tiles_x = (width + 7u) / 8u;
-    let tile = linear / 64u;
-    let in_tile = linear % 64u;
-    let px = (tile % tiles_x) * 8u + in_tile % 8u;
-    let py = (tile / tiles_x) * 8u + in_tile / 8u;
-    if px >= width || py >= cp.camera.height {
+    let xy_px = tile_pixel(id.x + id.y * cp.stride, width, cp.camera.height);
+    if xy_px.x == NONE {
         return;
     }
+    let px = xy_px.x;
+    let py = xy_px.y;
     let pixel = py * width + px;
     let adj = adjoint[cp.adjoint_offset + pixel].xyz * cp.inv_spp;
     if all(adj == vec3f(0.0)) {
@@ -101,21 +97,13 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         let sample = s * n_pixels + pixel;
         rng_init(cp.seed, sample, 0u);
         let d = camera_direction(cp.camera, xy + rand2());
-        let hit = trace_closest(cp.camera.origin, d, 3.0e38);
-        if hit.tri == NONE {
+        let g = gradient_sample(cp.camera.origin, d);
+        if !g.valid {
             continue;
         }
-        let sf = surface_at(cp.camera.origin, d, hit);
-        let m = materials[sf.material];
-        if !sf.valid || (m.param_base_color == NONE && m.param_metallic == NONE && m.param_roughness == NONE) {
-            continue;
-        }
-        let mat = surface_material(sf);
-        let wo = to_local(sf.frame, sf.wo);
-        let ds = sample_direct(sf, mat);
         let cam_bits = cp.camera_index << 1u;
-        offer_contribution(m, sf.uv, brdf_eval_cos_grad(mat, wo, to_local(sf.frame, ds.nee.wi)), ds.nee.weight, adj, sample, cam_bits);
-        offer_contribution(m, sf.uv, brdf_eval_cos_grad(mat, wo, to_local(sf.frame, ds.bsdf.wi)), ds.bsdf.weight, adj, sample, cam_bits | 1u);
+        offer_contribution(g.m, g.sf.uv, g.nee_grad, g.nee.weight, adj, sample, cam_bits);
+        offer_contribution(g.m, g.sf.uv, g.bsdf_grad, g.bsdf.weight, adj, sample, cam_bits | 1u);
     }
     atomicAdd(&cstats[0], offered);
     if lost > 0u {

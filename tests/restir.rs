@@ -397,15 +397,13 @@ fn restir_beats_the_baseline_on_the_default_task() {
     for (m, method) in [Method::Restir, Method::Baseline].into_iter().enumerate() {
         for &seed in &seeds {
             let settings = Settings {
-                width: task.width,
-                height: task.height,
-                cameras: prep.cameras.clone(),
-                primal_spp: task.optimizer.primal_spp,
-                gradient_spp: task.optimizer.gradient_spp,
-                loss: task.optimizer.loss,
                 seed,
-                method,
-                restir: RestirOptions::default(),
+                ..psrestir::optim::run::task_settings(
+                    &task,
+                    &prep.cameras,
+                    method,
+                    RestirOptions::default(),
+                )
             };
             let mut opt =
                 Optimizer::new(&gpu, &prep.scene, prep.set.clone(), settings, &prep.targets)

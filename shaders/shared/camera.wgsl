@@ -17,3 +17,18 @@ fn camera_direction(cam: CameraInfo, px: vec2f) -> vec3f {
     let sy = (1.0 - 2.0 * px.y / f32(cam.height)) * cam.tan_half_fov_y;
     return normalize(cam.forward + sx * cam.right + sy * cam.up);
 }
+
+// Passes over an image walk it in 8x8 tiles, so that neighbouring lanes trace neighbouring
+// pixels (coherent BVH traversal): the pixel (x, y) of invocation `linear`, or x = NONE past
+// the image. The host dispatches 64 invocations per tile.
+fn tile_pixel(linear: u32, width: u32, height: u32) -> vec2u {
+    let tiles_x = (width + 7u) / 8u;
+    let tile = linear / 64u;
+    let in_tile = linear % 64u;
+    let px = (tile % tiles_x) * 8u + in_tile % 8u;
+    let py = (tile / tiles_x) * 8u + in_tile / 8u;
+    if px >= width || py >= height {
+        return vec2u(0xffffffffu, 0u);
+    }
+    return vec2u(px, py);
+}

@@ -217,3 +217,40 @@ fn direct_radiance(o: vec3f, d: vec3f) -> vec3f {
     l += brdf_eval_cos(mat, wo, to_local(sf.frame, s.bsdf.wi)) * s.bsdf.weight;
     return l;
 }
+
+// A camera sample as the gradient passes see it: the surface it hits and its two direct
+// samples with their BRDF derivatives. valid is false when the ray misses, hits the back of a
+// single-sided surface, or hits a material without optimized textures.
+struct GradientSample {
+    valid: bool,
+    sf: Surface,
+    m: Material,
+    nee: DirectSample,
+    nee_grad: BrdfGrad,
+    bsdf: DirectSample,
+    bsdf_grad: BrdfGrad,
+}
+
+fn gradient_sample(o: vec3f, d: vec3f) -> GradientSample {
+    var out: GradientSample;
+    out.valid = false;
+    let hit = trace_closest(o, d, 3.0e38);
+    if hit.tri == NONE {
+        return out;
+    }
+    out.sf = surface_at(o, d, hit);
+    out.m = materials[out.sf.material];
+    let m = out.m;
+    if !out.sf.valid || (m.param_base_color == NONE && m.param_metallic == NONE && m.param_roughness == NONE) {
+        return out;
+    }
+    let mat = surface_material(out.sf);
+    let wo = to_local(out.sf.frame, out.sf.wo);
+    let s = sample_direct(out.sf, mat);
+    out.nee = s.nee;
+    out.bsdf = s.bsdf;
+    out.nee_grad = brdf_eval_cos_grad(mat, wo, to_local(out.sf.frame, s.nee.wi));
+    out.bsdf_grad = brdf_eval_cos_grad(mat, wo, to_local(out.sf.frame, s.bsdf.wi));
+    out.valid = true;
+    return out;
+}

@@ -45,15 +45,9 @@ fn settings(
     seed: u32,
 ) -> Settings {
     Settings {
-        width: task.width,
-        height: task.height,
-        cameras: cameras.to_vec(),
-        primal_spp: task.optimizer.primal_spp,
         gradient_spp: spp,
-        loss: task.optimizer.loss,
         seed,
-        method,
-        restir,
+        ..super::run::task_settings(task, cameras, method, restir)
     }
 }
 

@@ -201,6 +201,26 @@ pub fn prepare(gpu: &Gpu, task: &Task, out: &Path, reuse: bool) -> Result<Prepar
     })
 }
 
+/// The optimizer settings a task asks for, with the given estimator.
+pub fn task_settings(
+    task: &Task,
+    cameras: &[usize],
+    method: super::Method,
+    restir: super::RestirOptions,
+) -> Settings {
+    Settings {
+        width: task.width,
+        height: task.height,
+        cameras: cameras.to_vec(),
+        primal_spp: task.optimizer.primal_spp,
+        gradient_spp: task.optimizer.gradient_spp,
+        loss: task.optimizer.loss,
+        seed: task.seed,
+        method,
+        restir,
+    }
+}
+
 /// Root-mean-square difference.
 pub fn rmse(a: &[f32], b: &[f32]) -> f64 {
     let s: f64 = a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum();
@@ -302,17 +322,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         None
     };
     let prep = prepare(gpu, task, &out, opts.resume)?;
-    let settings = Settings {
-        width: task.width,
-        height: task.height,
-        cameras: prep.cameras.clone(),
-        primal_spp: task.optimizer.primal_spp,
-        gradient_spp: task.optimizer.gradient_spp,
-        loss: task.optimizer.loss,
-        seed: task.seed,
-        method: opts.method,
-        restir: opts.restir,
-    };
+    let settings = task_settings(task, &prep.cameras, opts.method, opts.restir);
     let initial_rmse = prep.reference.as_ref().map(|r| rmse(&prep.set.values, r));
     let mut opt = Optimizer::new(gpu, &prep.scene, prep.set.clone(), settings, &prep.targets)?;
     let layout = layout_string(&prep.set);
@@ -539,17 +549,7 @@ pub fn write_gradient(
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
     let prep = prepare(gpu, task, dir, false)?;
-    let settings = Settings {
-        width: task.width,
-        height: task.height,
-        cameras: prep.cameras.clone(),
-        primal_spp: task.optimizer.primal_spp,
-        gradient_spp: task.optimizer.gradient_spp,
-        loss: task.optimizer.loss,
-        seed: task.seed,
-        method,
-        restir,
-    };
+    let settings = task_settings(task, &prep.cameras, method, restir);
     let mut opt = Optimizer::new(gpu, &prep.scene, prep.set.clone(), settings, &prep.targets)?;
     let (grad, _) = opt.estimate_gradient(0)?;
     let mut written = Vec::new();
