@@ -338,3 +338,22 @@ fn render_cli_rejects_bad_arguments_clearly() {
     assert_eq!(code, Some(1));
     assert!(err.contains("sky.exr"), "{err}");
 }
+
+#[cfg(target_os = "linux")]
+#[test]
+fn a_missing_gpu_driver_says_how_to_install_one() {
+    // Asking for a backend that Linux builds do not have leaves no adapter, as on a machine
+    // without a Vulkan driver.
+    let out = Command::new(env!("CARGO_BIN_EXE_psrestir"))
+        .arg("adapter")
+        .env("WGPU_BACKEND", "metal")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("no GPU adapter") && err.contains("mesa-vulkan-drivers"),
+        "{err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+}
