@@ -166,9 +166,11 @@ fn without_reuse_restir_equals_the_baseline_for_scalar_textures() {
             let scale = gb.iter().fold(0f32, |m, x| m.max(x.abs()));
             assert!(gb[..4].iter().any(|g| *g != 0.0) && gb[4..].iter().any(|g| *g != 0.0));
             for i in 0..gb.len() {
-                // The same candidates summed in another order: float rounding only.
+                // The same candidates summed in another order: float rounding only (relative to
+                // the largest entry, since entries that are sums of many terms of both signs
+                // carry the rounding of their terms).
                 assert!(
-                    (gb[i] - gr[i]).abs() <= 1e-4 * gb[i].abs() + 1e-6 * scale,
+                    (gb[i] - gr[i]).abs() <= 1e-4 * gb[i].abs() + 1e-5 * scale,
                     "{filter:?} iteration {it} parameter {i}: baseline {} vs ReSTIR {}",
                     gb[i],
                     gr[i]
