@@ -33,6 +33,20 @@ pub fn srgb_to_linear(x: f32) -> f32 {
     }
 }
 
+/// `name` with every character other than ASCII letters, digits and '-' replaced by '_', for
+/// use in file names.
+pub fn file_safe(name: &str) -> String {
+    name.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
 fn temp_path(path: &Path) -> PathBuf {
     let name = path
         .file_name()

@@ -81,18 +81,7 @@ fn load_scene(task: &Task, path: &Path) -> Result<Scene> {
 }
 
 fn camera_file_name(scene: &Scene, cam: usize) -> String {
-    let n: String = scene.cameras[cam]
-        .name
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect();
-    format!("{cam}_{n}")
+    format!("{cam}_{}", image_io::file_safe(&scene.cameras[cam].name))
 }
 
 /// Load the scenes, find the cameras, render or load the targets (reusing `target_*.exr` in

@@ -40,18 +40,11 @@ impl ParamTexture {
     }
     /// `material_slot`, for file names.
     pub fn name(&self) -> String {
-        let clean: String = self
-            .material_name
-            .chars()
-            .map(|c| {
-                if c.is_ascii_alphanumeric() || c == '-' {
-                    c
-                } else {
-                    '_'
-                }
-            })
-            .collect();
-        format!("{clean}_{}", self.slot.name())
+        format!(
+            "{}_{}",
+            crate::image_io::file_safe(&self.material_name),
+            self.slot.name()
+        )
     }
 }
 
