@@ -4,6 +4,7 @@
 //! ([`gpu`]), glTF scene loading and the BVH ([`scene`]), and the direct-lighting renderer
 //! ([`render`]), all GPU work being WGSL compute shaders under `shaders/`.
 
+pub mod bench;
 pub mod error;
 pub mod gpu;
 pub mod image_io;

@@ -44,6 +44,12 @@ struct EstimatorArgs {
     /// Gradient estimator.
     #[arg(long, value_enum, default_value = "restir")]
     method: MethodArg,
+    #[command(flatten)]
+    restir: RestirArgs,
+}
+
+#[derive(clap::Args)]
+struct RestirArgs {
     /// ReSTIR: cap on the confidence of the kept sample.
     #[arg(long, default_value_t = 16.0)]
     m_cap: f32,
@@ -55,21 +61,26 @@ struct EstimatorArgs {
     no_positivization: bool,
 }
 
-impl EstimatorArgs {
-    fn resolve(&self) -> Result<(optim::Method, optim::RestirOptions)> {
+impl RestirArgs {
+    fn resolve(&self) -> Result<optim::RestirOptions> {
         if !(self.m_cap.is_finite() && self.m_cap > 0.0) {
             bail!("--m-cap must be a positive number");
         }
+        Ok(optim::RestirOptions {
+            m_cap: self.m_cap,
+            temporal: !self.no_temporal,
+            positivization: !self.no_positivization,
+        })
+    }
+}
+
+impl EstimatorArgs {
+    fn resolve(&self) -> Result<(optim::Method, optim::RestirOptions)> {
         let method = match self.method {
             MethodArg::Restir => optim::Method::Restir,
             MethodArg::Baseline => optim::Method::Baseline,
         };
-        let restir = optim::RestirOptions {
-            m_cap: self.m_cap,
-            temporal: !self.no_temporal,
-            positivization: !self.no_positivization,
-        };
-        Ok((method, restir))
+        Ok((method, self.restir.resolve()?))
     }
 }
 
@@ -141,27 +152,40 @@ enum Command {
         /// The scene (.gltf or .glb).
         scene: PathBuf,
     },
-    /// Measure gradient error: ReSTIR after some iterations against the baseline at equal
-    /// iterations and equal time, relMSE against a high-sample reference.
-    #[command(hide = true)]
-    GradientError {
-        /// The task file (TOML).
-        task: PathBuf,
-        #[command(flatten)]
-        estimator: EstimatorArgs,
-        /// ReSTIR iterations before measuring.
+    /// Benchmark baseline against ReSTIR (equal-time gradient error, equal-time optimization,
+    /// cost) on the bundled benchmark scenes or given tasks; writes bench.json, report.md and
+    /// plots.
+    Bench {
+        /// Scenes: names of bundled benchmark scenes (vase, lattice, dish, sphere), task
+        /// files, or folders holding task.toml (default: every bundled benchmark scene).
+        scenes: Vec<String>,
+        /// Seconds of optimization per estimator and scene.
+        #[arg(long, default_value_t = 60.0)]
+        budget_s: f64,
+        /// Output folder.
+        #[arg(long, default_value = "out/bench")]
+        out: PathBuf,
+        /// Multiply image and texture sizes (e.g. 4 for GPU-size runs, 0.5 for a quick look).
+        #[arg(long, default_value_t = 1.0)]
+        scale: f64,
+        /// ReSTIR iterations before the gradient error is measured.
         #[arg(long, default_value_t = 20)]
         warmup: u32,
-        /// Baseline estimates averaged for the reference.
-        #[arg(long, default_value_t = 64)]
-        reference: u32,
-        /// Seeds averaged.
+        /// Seeds the gradient error is averaged over.
         #[arg(long, default_value_t = 3)]
         repeats: u32,
+        /// Gradient samples per pixel of the reference gradient.
+        #[arg(long, default_value_t = 256)]
+        reference_spp: u32,
+        /// Samples per pixel of the renders that measure image error.
+        #[arg(long, default_value_t = 64)]
+        eval_spp: u32,
+        #[command(flatten)]
+        restir: RestirArgs,
     },
     /// Print the GPU adapter psrestir would use, its features and limits.
     Adapter,
-    /// Regenerate the bundled scenes (scenes/default).
+    /// Regenerate the bundled scenes (scenes/default and scenes/bench/*).
     #[command(hide = true)]
     MakeScenes {
         /// Output folder.
@@ -395,29 +419,45 @@ fn run(cli: Cli) -> Result<()> {
                 println!("  warning: {w}");
             }
         }
-        Command::GradientError {
-            task,
-            estimator,
+        Command::Bench {
+            scenes,
+            budget_s,
+            out,
+            scale,
             warmup,
-            reference,
             repeats,
+            reference_spp,
+            eval_spp,
+            restir,
         } => {
-            let (_, restir) = estimator.resolve()?;
-            let task = Task::load(&task)?;
+            let names: Vec<String> = if scenes.is_empty() {
+                scene::bench_scenes::BENCH_SCENES
+                    .iter()
+                    .map(|s| s.to_string())
+                    .collect()
+            } else {
+                scenes
+            };
+            let tasks = names
+                .iter()
+                .map(|n| psrestir::bench::resolve_scene(n))
+                .collect::<std::result::Result<Vec<_>, _>>()?;
+            let opts = psrestir::bench::BenchOptions {
+                budget_s,
+                scale,
+                warmup,
+                repeats,
+                reference_spp,
+                eval_spp,
+                restir: restir.resolve()?,
+                out: out.clone(),
+                progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
+                ..Default::default()
+            };
             let gpu = Gpu::new()?;
-            let e =
-                optim::measure::gradient_error(&gpu, &task, restir, warmup, reference, repeats)?;
-            println!(
-                "ms/iteration: ReSTIR {:.1}, baseline {:.1}\ngradient relMSE after {warmup} iterations: ReSTIR {:.4e}, baseline (equal iterations) {:.4e} (ratio {:.3}), baseline at {} spp (equal time) {:.4e} (ratio {:.3})",
-                e.ms_restir,
-                e.ms_baseline,
-                e.relmse_restir,
-                e.relmse_baseline,
-                e.relmse_restir / e.relmse_baseline,
-                e.baseline_spp_equal_time,
-                e.relmse_baseline_equal_time,
-                e.relmse_restir / e.relmse_baseline_equal_time
-            );
+            let report = psrestir::bench::bench(&gpu, &tasks, &opts)?;
+            println!("{}", psrestir::bench::report::table(&report));
+            println!("wrote {}", out.join("report.md").display());
         }
         Command::Adapter => {
             let gpu = Gpu::new()?;
@@ -435,6 +475,8 @@ fn run(cli: Cli) -> Result<()> {
         Command::MakeScenes { dir } => {
             scene::bundled::write_default_scene(&dir.join("default"))?;
             println!("wrote {}", dir.join("default").display());
+            scene::bench_scenes::write_bench_scenes(&dir.join("bench"))?;
+            println!("wrote {}", dir.join("bench").display());
         }
     }
     Ok(())

@@ -6,7 +6,6 @@ pub mod adam;
 pub mod checkpoint;
 pub mod export;
 pub mod loss;
-pub mod measure;
 pub mod plot;
 pub mod restir;
 pub mod run;
@@ -83,7 +82,7 @@ pub struct StepStats {
 }
 
 /// GPU milliseconds of each kind of pass in the last iteration (from timestamp queries).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct PassTimes {
     /// Primal renders of all cameras.
     pub primal_ms: f64,
@@ -768,6 +767,21 @@ impl Optimizer {
             self.gpu.queue.write_buffer(buf, 0, bytemuck::cast_slice(v));
         }
         self.gpu.check("write moments")
+    }
+
+    /// Bytes of GPU memory the optimizer keeps per optimized texel: the textures (current and
+    /// previous), gradient and Adam moments, plus the reservoirs and locks of ReSTIR. Buffers
+    /// that scale with the image (targets, adjoints) are not counted.
+    pub fn state_bytes_per_texel(&self) -> f64 {
+        let scene = &self.renderer.scene;
+        let mut bytes = scene.params.size()
+            + scene.params_prev.size()
+            + self.grad.size()
+            + self.moments.iter().map(|b| b.size()).sum::<u64>();
+        if let Some(r) = &self.restir {
+            bytes += r.reservoirs.iter().map(|b| b.size()).sum::<u64>() + r.locks.size();
+        }
+        bytes as f64 / scene.n_texels.max(1) as f64
     }
 
     /// Dropped and lost values so far.

@@ -31,7 +31,7 @@ const MR: u32 = 20;
 const MT: u32 = 24;
 const MB: u32 = 30;
 
-fn text(img: &mut RgbImage, x: i64, y: i64, s: &str, color: [u8; 3]) {
+pub(crate) fn text(img: &mut RgbImage, x: i64, y: i64, s: &str, color: [u8; 3]) {
     for (k, ch) in s.chars().enumerate() {
         let glyph = font8x8::legacy::BASIC_LEGACY[(ch as usize).min(127)];
         for (row, bits) in glyph.iter().enumerate() {

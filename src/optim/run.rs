@@ -556,23 +556,9 @@ pub fn write_gradient(
         let img = texture_image(&prep.set, &grad, i);
         let exr = dir.join(format!("{}_gradient.exr", t.name()));
         img.save(&exr)?;
-        let scale = img
-            .rgb
-            .iter()
-            .flatten()
-            .fold(0f32, |m, v| m.max(v.abs()))
-            .max(1e-30);
-        let bytes: Vec<u8> = img
-            .rgb
-            .iter()
-            .flat_map(|p| {
-                let v = match t.slot {
-                    Slot::BaseColor => (p[0] * 0.2126 + p[1] * 0.7152 + p[2] * 0.0722) / scale,
-                    _ => p[0] / scale,
-                };
-                false_color(v)
-            })
-            .collect();
+        let v = gradient_scalars(&prep.set, &grad, i);
+        let scale = v.iter().fold(0f32, |m, v| m.max(v.abs())).max(1e-30);
+        let bytes: Vec<u8> = v.iter().flat_map(|&x| false_color(x / scale)).collect();
         let png = dir.join(format!("{}_gradient.png", t.name()));
         let im = image::RgbImage::from_raw(img.width, img.height, bytes)
             .ok_or_else(|| Error::Invalid("size".into()))?;
@@ -584,6 +570,20 @@ pub fn write_gradient(
         written.push(png);
     }
     Ok(written)
+}
+
+/// One signed number per texel of texture `i` of a gradient: the luminance-weighted sum of
+/// the channels for base color, the value for scalar textures.
+pub fn gradient_scalars(set: &ParamSet, g: &[f32], i: usize) -> Vec<f32> {
+    let img = texture_image(set, g, i);
+    let slot = set.textures[i].slot;
+    img.rgb
+        .iter()
+        .map(|p| match slot {
+            Slot::BaseColor => p[0] * 0.2126 + p[1] * 0.7152 + p[2] * 0.0722,
+            _ => p[0],
+        })
+        .collect()
 }
 
 /// Signed value in [-1, 1] to a diverging color: blue (negative), white (0), red (positive).

@@ -318,3 +318,112 @@ pub fn uv_sphere(
     }
     (p, n, t, idx)
 }
+
+/// Triangles of a surface of revolution about +Y: `profile` is a list of (radius, height)
+/// points, swept through `segments` steps. Normals point to the left of the direction of
+/// travel along the profile in the (radius, height) plane (outward for a profile that goes
+/// up on the outside), U runs around the axis and V along the profile by arc length.
+/// Returns (positions, normals, uvs, indices), triangles wound counter-clockwise about the
+/// normals.
+#[allow(clippy::type_complexity)]
+pub fn lathe(
+    profile: &[[f32; 2]],
+    segments: u32,
+) -> (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<[f32; 2]>, Vec<u32>) {
+    let (mut p, mut n, mut t, mut idx) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let m = profile.len();
+    let mut arc = vec![0f32; m];
+    for i in 1..m {
+        let d = [
+            profile[i][0] - profile[i - 1][0],
+            profile[i][1] - profile[i - 1][1],
+        ];
+        arc[i] = arc[i - 1] + (d[0] * d[0] + d[1] * d[1]).sqrt();
+    }
+    let total = arc[m - 1].max(1e-12);
+    for (i, &[r, y]) in profile.iter().enumerate() {
+        let a = profile[i.saturating_sub(1)];
+        let b = profile[(i + 1).min(m - 1)];
+        let (dr, dy) = (b[0] - a[0], b[1] - a[1]);
+        let len = (dr * dr + dy * dy).sqrt().max(1e-12);
+        let (nr, ny) = (dy / len, -dr / len);
+        for s in 0..=segments {
+            let u = s as f32 / segments as f32;
+            let phi = u * 2.0 * std::f32::consts::PI;
+            let (c, sn) = (phi.cos(), -phi.sin());
+            p.push([r * c, y, r * sn]);
+            n.push([nr * c, ny, nr * sn]);
+            t.push([u, arc[i] / total]);
+        }
+    }
+    let w = segments + 1;
+    for i in 0..m as u32 - 1 {
+        for s in 0..segments {
+            let a = i * w + s;
+            let b = a + w;
+            for tri in [[a, a + 1, b], [a + 1, b + 1, b]] {
+                // Wind counter-clockwise about the mean normal (skip degenerate triangles).
+                let [v0, v1, v2] = tri.map(|k| glam::Vec3::from(p[k as usize]));
+                let cross = (v1 - v0).cross(v2 - v0);
+                if cross.length_squared() < 1e-14 {
+                    continue;
+                }
+                let nm: glam::Vec3 = tri.iter().map(|&k| glam::Vec3::from(n[k as usize])).sum();
+                if cross.dot(nm) >= 0.0 {
+                    idx.extend_from_slice(&tri);
+                } else {
+                    idx.extend_from_slice(&[tri[0], tri[2], tri[1]]);
+                }
+            }
+        }
+    }
+    (p, n, t, idx)
+}
+
+/// A square of side `size` centred at `center`, facing `toward` (its front side, counter-
+/// clockwise, looks at that point): (positions, normals, indices).
+#[allow(clippy::type_complexity)]
+pub fn quad_facing(
+    center: [f32; 3],
+    toward: [f32; 3],
+    size: f32,
+) -> (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<u32>) {
+    let c = glam::Vec3::from(center);
+    let f = (glam::Vec3::from(toward) - c).normalize();
+    let helper = if f.y.abs() > 0.9 {
+        glam::Vec3::X
+    } else {
+        glam::Vec3::Y
+    };
+    let u = helper.cross(f).normalize() * 0.5 * size;
+    let v = f.cross(u);
+    let p = [c - u - v, c + u - v, c + u + v, c - u + v].map(|q| q.to_array());
+    (p.to_vec(), vec![f.to_array(); 4], vec![0, 1, 2, 0, 2, 3])
+}
+
+/// Triangles (non-indexed, no normals: flat normals come from the loader) of an axis-aligned
+/// box, wound counter-clockwise seen from outside.
+pub fn box_triangles(center: [f32; 3], half: [f32; 3]) -> Vec<[f32; 3]> {
+    let faces: [([f32; 3], [f32; 3], [f32; 3]); 6] = [
+        ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]),
+        ([-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]),
+        ([0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]),
+        ([0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]),
+        ([0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]),
+        ([0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]),
+    ];
+    let (c, h) = (glam::Vec3::from(center), glam::Vec3::from(half));
+    let mut out = Vec::with_capacity(36);
+    for (nrm, u, v) in faces {
+        let (nrm, u, v) = (
+            glam::Vec3::from(nrm),
+            glam::Vec3::from(u),
+            glam::Vec3::from(v),
+        );
+        let q = |a: f32, b: f32| (c + h * (nrm + a * u + b * v)).to_array();
+        // Counter-clockwise seen from outside: u x v = n.
+        out.extend_from_slice(&[q(-1.0, -1.0), q(1.0, -1.0), q(1.0, 1.0)]);
+        out.extend_from_slice(&[q(-1.0, -1.0), q(1.0, 1.0), q(-1.0, 1.0)]);
+    }
+    out
+}

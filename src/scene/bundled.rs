@@ -1,12 +1,12 @@
 //! Generator of the bundled scenes under `scenes/` (run `psrestir make-scenes`).
-use super::authoring::{png_bytes, uv_sphere, GltfBuilder};
+use super::authoring::{box_triangles, png_bytes, uv_sphere, GltfBuilder};
 use crate::image_io::write_atomic_with;
 use crate::Result;
 use glam::{Mat4, Vec3};
 use serde_json::json;
 use std::path::Path;
 
-fn look_at(eye: Vec3, target: Vec3, up: Vec3) -> Vec<f32> {
+pub(crate) fn look_at(eye: Vec3, target: Vec3, up: Vec3) -> Vec<f32> {
     // Camera-to-world: -Z looks at the target, +Y is as close to `up` as it can be.
     let f = (target - eye).normalize();
     let r = f.cross(up).normalize();
@@ -21,7 +21,7 @@ fn look_at(eye: Vec3, target: Vec3, up: Vec3) -> Vec<f32> {
     .to_vec()
 }
 
-fn srgb8(v: f32) -> u8 {
+pub(crate) fn srgb8(v: f32) -> u8 {
     (crate::image_io::linear_to_srgb(v) * 255.0 + 0.5) as u8
 }
 
@@ -122,22 +122,7 @@ pub fn write_default_scene(dir: &Path) -> Result<()> {
         "pbrMetallicRoughness": {"baseColorFactor": [0.2, 0.6, 0.25, 1.0],
             "metallicFactor": 0.0, "roughnessFactor": 0.4}
     }));
-    let mut cp = Vec::new();
-    let faces: [([f32; 3], [f32; 3], [f32; 3]); 6] = [
-        ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]),
-        ([-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]),
-        ([0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]),
-        ([0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]),
-        ([0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]),
-        ([0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]),
-    ];
-    for (nrm, u, v) in faces {
-        let (nrm, u, v) = (Vec3::from(nrm), Vec3::from(u), Vec3::from(v));
-        let c = |a: f32, b: f32| (0.5 * nrm + 0.5 * a * u + 0.5 * b * v).to_array();
-        // Counter-clockwise seen from outside: u x v = n.
-        cp.extend_from_slice(&[c(-1.0, -1.0), c(1.0, -1.0), c(1.0, 1.0)]);
-        cp.extend_from_slice(&[c(-1.0, -1.0), c(1.0, 1.0), c(-1.0, 1.0)]);
-    }
+    let cp = box_triangles([0.0; 3], [0.5; 3]);
     let cube = b.add_mesh("cube", &cp, None, None, None, Some(cube_mat));
 
     // Area light: a one-sided emissive quad facing down.
@@ -190,7 +175,11 @@ pub fn write_default_scene(dir: &Path) -> Result<()> {
     b.set_scene(&nodes);
     b.write_gltf(&dir.join("scene.gltf"), false)?;
 
-    // A small sky: bright zenith, horizon glow, dark ground.
+    write_sky(&dir.join("sky.exr"))
+}
+
+/// A small sky (64x32, equirectangular): bright zenith, horizon glow, dark ground.
+pub fn write_sky(path: &Path) -> Result<()> {
     let (ew, eh) = (64usize, 32usize);
     let mut sky = vec![(0f32, 0f32, 0f32); ew * eh];
     for j in 0..eh {
@@ -205,7 +194,7 @@ pub fn write_default_scene(dir: &Path) -> Result<()> {
             };
         }
     }
-    write_atomic_with(&dir.join("sky.exr"), |tmp| {
+    write_atomic_with(path, |tmp| {
         exr::prelude::write_rgb_file(tmp, ew, eh, |x, y| sky[y * ew + x])
             .map_err(std::io::Error::other)
     })

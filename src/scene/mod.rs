@@ -2,6 +2,7 @@
 //! textures, cameras, lights, an optional environment map), and the BVH over the triangles.
 
 pub mod authoring;
+pub mod bench_scenes;
 pub mod bundled;
 pub mod bvh;
 pub mod env;

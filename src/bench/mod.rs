@@ -1,0 +1,714 @@
+//! `psrestir bench`: the paper's measurements (DESIGN.md section 6) of the baseline and the
+//! ReSTIR estimator, one after the other on the same device, per scene:
+//!
+//! 1. equal-time gradient error: after `warmup` ReSTIR iterations, the relMSE of ReSTIR's
+//!    next gradient and of a baseline gradient given as many spp as fit in the time of one
+//!    ReSTIR iteration, both against a high-spp reference at that parameter state;
+//! 2. equal-time optimization: both estimators optimize from the same start for the same
+//!    wall-clock budget; image relMSE (a high-spp render against the target) and texture RMSE
+//!    against the ground truth, as curves over time and at the end;
+//! 3. cost: milliseconds per iteration, GPU time per pass, bytes of state per texel.
+//!
+//! The report (`bench.json`, `report.md`, plots and gradient images) is written by
+//! [`report`].
+pub mod report;
+
+use crate::gpu::Gpu;
+use crate::image_io::Image;
+use crate::optim::run::{prepare, rmse, task_settings, Prepared};
+use crate::optim::{pass_seed, Method, Optimizer, PassTimes, RestirOptions, Settings};
+use crate::task::Task;
+use crate::{Error, Result};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// What to measure and where to write it.
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
+    /// Wall-clock seconds each estimator optimizes each scene (step time only: evaluation
+    /// renders and readbacks are not counted).
+    pub budget_s: f64,
+    /// Multiplier of image and texture sizes.
+    pub scale: f64,
+    /// ReSTIR iterations before the gradient error is measured.
+    pub warmup: u32,
+    /// Seeds the gradient error is averaged over.
+    pub repeats: u32,
+    /// Gradient samples per pixel of the reference gradient.
+    pub reference_spp: u32,
+    /// Samples per pixel of the renders that measure image error.
+    pub eval_spp: u32,
+    /// Image-error evaluations along each optimization (start and end included).
+    pub curve_points: u32,
+    /// ReSTIR settings.
+    pub restir: RestirOptions,
+    /// Output folder.
+    pub out: PathBuf,
+    /// Show a progress bar.
+    pub progress: bool,
+}
+
+impl Default for BenchOptions {
+    fn default() -> Self {
+        BenchOptions {
+            budget_s: 60.0,
+            scale: 1.0,
+            warmup: 20,
+            repeats: 3,
+            reference_spp: 256,
+            eval_spp: 64,
+            curve_points: 5,
+            restir: RestirOptions::default(),
+            out: PathBuf::from("out/bench"),
+            progress: true,
+        }
+    }
+}
+
+/// One point of an optimization curve.
+#[derive(Clone, Debug, Serialize)]
+pub struct CurvePoint {
+    /// Iterations done.
+    pub iteration: u32,
+    /// Seconds of optimization (step time).
+    pub seconds: f64,
+    /// Loss of the iteration's primal render.
+    pub loss: f64,
+    /// Texture RMSE against the ground truth.
+    pub texture_rmse: f64,
+    /// Image relMSE of a high-spp render against the target, at evaluation points only.
+    pub image_relmse: Option<f64>,
+}
+
+/// The measurements of one scene.
+#[derive(Clone, Debug, Serialize)]
+pub struct SceneResult {
+    /// Scene name.
+    pub name: String,
+    /// Task file.
+    pub task: String,
+    /// Image size (per camera) and number of cameras.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Cameras rendered per iteration.
+    pub cameras: usize,
+    /// Optimized texels (all textures).
+    pub texels: u32,
+    /// Gradient spp the baseline gets in the time of one ReSTIR iteration.
+    pub baseline_spp_equal_time: u32,
+    /// Gradient relMSE of the baseline at `baseline_spp_equal_time` (mean over seeds).
+    pub gradient_relmse_baseline: f64,
+    /// Gradient relMSE of ReSTIR after `warmup` iterations (mean over seeds).
+    pub gradient_relmse_restir: f64,
+    /// restir / baseline, equal time.
+    pub gradient_relmse_ratio: f64,
+    /// Gradient relMSE of the baseline at the task's spp (equal iterations).
+    pub gradient_relmse_baseline_equal_iterations: f64,
+    /// Image relMSE at the initial textures.
+    pub image_relmse_initial: f64,
+    /// Image relMSE after the baseline's budget.
+    pub image_relmse_baseline: f64,
+    /// Image relMSE after ReSTIR's budget.
+    pub image_relmse_restir: f64,
+    /// restir / baseline.
+    pub image_relmse_ratio: f64,
+    /// Texture RMSE at the initial textures.
+    pub texture_rmse_initial: f64,
+    /// Texture RMSE after the baseline's budget.
+    pub texture_rmse_baseline: f64,
+    /// Texture RMSE after ReSTIR's budget.
+    pub texture_rmse_restir: f64,
+    /// Mean wall-clock milliseconds per baseline iteration (GPU work finished).
+    pub ms_per_iteration_baseline: f64,
+    /// Mean wall-clock milliseconds per ReSTIR iteration.
+    pub ms_per_iteration_restir: f64,
+    /// Iterations the baseline ran within the budget.
+    pub iterations_baseline: u32,
+    /// Iterations ReSTIR ran within the budget.
+    pub iterations_restir: u32,
+    /// Mean GPU time per pass of a baseline iteration (timestamp queries), when available.
+    pub passes_baseline: Option<PassTimes>,
+    /// Mean GPU time per pass of a ReSTIR iteration, when available.
+    pub passes_restir: Option<PassTimes>,
+    /// Bytes of GPU state per texel of the ReSTIR optimizer (textures, gradient, Adam,
+    /// reservoirs, locks).
+    pub state_bytes_per_texel: f64,
+    /// The same for the baseline optimizer.
+    pub state_bytes_per_texel_baseline: f64,
+    /// Optimization curve of the baseline.
+    pub curve_baseline: Vec<CurvePoint>,
+    /// Optimization curve of ReSTIR.
+    pub curve_restir: Vec<CurvePoint>,
+}
+
+/// The whole benchmark (`bench.json`).
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchReport {
+    /// psrestir version.
+    pub version: String,
+    /// The adapter, as `psrestir adapter` prints it.
+    pub adapter: String,
+    /// Seconds of optimization per estimator and scene.
+    pub budget_s: f64,
+    /// Size multiplier.
+    pub scale: f64,
+    /// ReSTIR iterations before the gradient error is measured.
+    pub warmup: u32,
+    /// Seeds the gradient error is averaged over.
+    pub repeats: u32,
+    /// Gradient spp of the reference gradient.
+    pub reference_spp: u32,
+    /// spp of the image-error renders.
+    pub eval_spp: u32,
+    /// ReSTIR's confidence cap.
+    pub m_cap: f32,
+    /// Per scene.
+    pub scenes: Vec<SceneResult>,
+}
+
+/// What the gradient images show (one gradient of each estimator at one state).
+pub struct GradientSnapshot {
+    /// The reference gradient.
+    pub reference: Vec<f32>,
+    /// The baseline's gradient at equal time.
+    pub baseline: Vec<f32>,
+    /// ReSTIR's gradient.
+    pub restir: Vec<f32>,
+}
+
+/// Final renders of the first camera: target, baseline and ReSTIR.
+pub struct FinalImages {
+    /// The target.
+    pub target: Image,
+    /// Baseline after its budget.
+    pub baseline: Image,
+    /// ReSTIR after its budget.
+    pub restir: Image,
+}
+
+/// Folder of the bundled scenes: `scenes/` in the working directory, else the one beside
+/// the crate's sources.
+pub fn scenes_root() -> PathBuf {
+    let here = PathBuf::from("scenes");
+    if here.join("bench").is_dir() {
+        here
+    } else {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes")
+    }
+}
+
+/// The task file of a scene argument: a bundled benchmark scene's name, a task file, or a
+/// folder holding `task.toml`.
+pub fn resolve_scene(arg: &str) -> Result<PathBuf> {
+    let p = PathBuf::from(arg);
+    if p.is_file() {
+        return Ok(p);
+    }
+    if p.join("task.toml").is_file() {
+        return Ok(p.join("task.toml"));
+    }
+    let bundled = scenes_root().join("bench").join(arg).join("task.toml");
+    if bundled.is_file() {
+        return Ok(bundled);
+    }
+    Err(Error::Invalid(format!(
+        "bench: `{arg}` is neither a benchmark scene ({}) nor a task file nor a folder with \
+         task.toml",
+        crate::scene::bench_scenes::BENCH_SCENES.join(", ")
+    )))
+}
+
+/// `task` with image and texture sizes multiplied by `scale` (at least 8 pixels, 4 texels).
+pub fn scaled(task: &Task, scale: f64) -> Task {
+    let mut t = task.clone();
+    let s = |v: u32, min: u32| ((v as f64 * scale).round() as u32).max(min);
+    t.width = s(task.width, 8);
+    t.height = s(task.height, 8);
+    for tex in &mut t.textures {
+        tex.resolution = [s(tex.resolution[0], 4), s(tex.resolution[1], 4)];
+    }
+    t
+}
+
+/// relMSE over entries with a non-zero reference: mean of (g - r)^2 / (r^2 + 1e-2).
+pub fn gradient_relmse(g: &[f32], reference: &[f64]) -> f64 {
+    let (mut s, mut n) = (0.0, 0usize);
+    for (a, r) in g.iter().zip(reference) {
+        if *r != 0.0 {
+            s += (*a as f64 - r).powi(2) / (r * r + 1e-2);
+            n += 1;
+        }
+    }
+    s / n.max(1) as f64
+}
+
+/// Image relMSE: mean over pixels and channels of (x - t)^2 / (t^2 + 1e-2).
+pub fn image_relmse(img: &Image, target: &Image) -> f64 {
+    let mut s = 0.0;
+    for (a, t) in img.rgb.iter().zip(&target.rgb) {
+        for c in 0..3 {
+            let (a, t) = (a[c] as f64, t[c] as f64);
+            s += (a - t).powi(2) / (t * t + 1e-2);
+        }
+    }
+    s / (3 * target.rgb.len()).max(1) as f64
+}
+
+/// Progress reporting: a bar over the phases of all scenes.
+struct Progress {
+    bar: Option<indicatif::ProgressBar>,
+}
+
+impl Progress {
+    fn new(enabled: bool, phases: u64) -> Progress {
+        let bar = enabled.then(|| {
+            let b = indicatif::ProgressBar::new(phases);
+            b.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "bench [{bar:30}] {pos}/{len} {msg} ({elapsed})",
+                )
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            );
+            b
+        });
+        Progress { bar }
+    }
+    fn message(&self, m: String) {
+        match &self.bar {
+            Some(b) => b.set_message(m),
+            None => log::info!("{m}"),
+        }
+    }
+    fn done(&self) {
+        if let Some(b) = &self.bar {
+            b.inc(1);
+        }
+    }
+    fn finish(&self) {
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
+    }
+}
+
+fn settings(prep: &Prepared, task: &Task, method: Method, o: &BenchOptions) -> Settings {
+    task_settings(task, &prep.cameras, method, o.restir)
+}
+
+/// Mean milliseconds of `n` steps after one untimed step.
+fn time_steps(opt: &mut Optimizer, n: u32) -> Result<f64> {
+    opt.step()?;
+    let t0 = Instant::now();
+    for _ in 0..n {
+        opt.step()?;
+    }
+    Ok(1000.0 * t0.elapsed().as_secs_f64() / n.max(1) as f64)
+}
+
+/// Gradient error at equal time (phase 1). Returns the scene's partial result fields
+/// (baseline spp, relMSEs) and the gradients of the first seed for the images.
+struct GradientPhase {
+    baseline_spp_equal_time: u32,
+    relmse_baseline: f64,
+    relmse_restir: f64,
+    relmse_baseline_equal_iterations: f64,
+    snapshot: GradientSnapshot,
+}
+
+fn gradient_phase(
+    gpu: &Gpu,
+    task: &Task,
+    prep: &Prepared,
+    o: &BenchOptions,
+    progress: &Progress,
+) -> Result<GradientPhase> {
+    let spp = task.optimizer.gradient_spp.max(1);
+    let new = |method: Method, gradient_spp: u32, seed: u32| -> Result<Optimizer> {
+        Optimizer::new(
+            gpu,
+            &prep.scene,
+            prep.set.clone(),
+            Settings {
+                gradient_spp,
+                seed,
+                ..settings(prep, task, method, o)
+            },
+            &prep.targets,
+        )
+    };
+    let mut out = GradientPhase {
+        baseline_spp_equal_time: spp,
+        relmse_baseline: 0.0,
+        relmse_restir: 0.0,
+        relmse_baseline_equal_iterations: 0.0,
+        snapshot: GradientSnapshot {
+            reference: Vec::new(),
+            baseline: Vec::new(),
+            restir: Vec::new(),
+        },
+    };
+    let repeats = o.repeats.max(1);
+    let mut eq_spp = None;
+    for rep in 0..repeats {
+        progress.message(format!("gradient error, seed {}/{repeats}", rep + 1));
+        let seed = task.seed.wrapping_add(1000 * (rep + 1));
+        // ReSTIR from the initial textures; the later warm-up steps time an iteration.
+        let mut re = new(Method::Restir, spp, seed)?;
+        let untimed = (o.warmup / 4).max(1).min(o.warmup);
+        for _ in 0..untimed {
+            re.step()?;
+        }
+        let t0 = Instant::now();
+        for _ in untimed..o.warmup {
+            re.step()?;
+        }
+        let timed = o.warmup - untimed;
+        let ms_restir = if timed > 0 {
+            Some(1000.0 * t0.elapsed().as_secs_f64() / timed as f64)
+        } else {
+            None
+        };
+        let state = re.read_params()?;
+        let (g_restir, _) = re.estimate_gradient(re.iteration)?;
+        drop(re);
+
+        // The baseline's cost per gradient spp, measured once: iterations at spp and 4 spp.
+        let k = match eq_spp {
+            Some(k) => k,
+            None => {
+                let ms_restir = match ms_restir {
+                    Some(ms) => ms,
+                    None => {
+                        let mut r = new(Method::Restir, spp, seed)?;
+                        time_steps(&mut r, 3)?
+                    }
+                };
+                let mut b1 = new(Method::Baseline, spp, seed ^ 0x71)?;
+                let t1 = time_steps(&mut b1, 3)?;
+                drop(b1);
+                let mut b4 = new(Method::Baseline, 4 * spp, seed ^ 0x72)?;
+                let t4 = time_steps(&mut b4, 3)?;
+                drop(b4);
+                let per_spp = ((t4 - t1) / (3 * spp) as f64).max(1e-3);
+                let k = spp as f64 + ((ms_restir - t1) / per_spp).floor();
+                let k = (k.max(1.0) as u32).min(1024);
+                log::info!(
+                    "{}: ReSTIR {ms_restir:.1} ms/it, baseline {t1:.1} ms/it at {spp} spp \
+                     (+{per_spp:.1} ms per spp): {k} spp at equal time",
+                    task.path.display()
+                );
+                eq_spp = Some(k);
+                k
+            }
+        };
+
+        // Reference: many baseline samples at the same state.
+        let ref_spp = o.reference_spp.clamp(1, 64);
+        let estimates = o.reference_spp.div_ceil(ref_spp).max(1);
+        let mut reference = vec![0f64; state.len()];
+        {
+            let mut r = new(Method::Baseline, ref_spp, seed ^ 0x5eed)?;
+            r.write_params(&state)?;
+            for it in 0..estimates {
+                let (g, _) = r.estimate_gradient(it)?;
+                for (acc, v) in reference.iter_mut().zip(&g) {
+                    *acc += *v as f64 / estimates as f64;
+                }
+            }
+        }
+        let mut b = new(Method::Baseline, k, seed ^ 0xe9)?;
+        b.write_params(&state)?;
+        let (g_eq, _) = b.estimate_gradient(0)?;
+        drop(b);
+        let mut b = new(Method::Baseline, spp, seed ^ 0xea)?;
+        b.write_params(&state)?;
+        let (g_it, _) = b.estimate_gradient(0)?;
+        drop(b);
+
+        let n = repeats as f64;
+        out.relmse_restir += gradient_relmse(&g_restir, &reference) / n;
+        out.relmse_baseline += gradient_relmse(&g_eq, &reference) / n;
+        out.relmse_baseline_equal_iterations += gradient_relmse(&g_it, &reference) / n;
+        out.baseline_spp_equal_time = k;
+        if rep == 0 {
+            out.snapshot = GradientSnapshot {
+                reference: reference.iter().map(|&v| v as f32).collect(),
+                baseline: g_eq,
+                restir: g_restir,
+            };
+        }
+        progress.done();
+    }
+    Ok(out)
+}
+
+/// Image relMSE of the current textures, mean over the task's cameras, and the render of
+/// the first camera.
+fn evaluate(opt: &Optimizer, prep: &Prepared, task: &Task, spp: u32) -> Result<(f64, Image)> {
+    let mut sum = 0.0;
+    let mut first = None;
+    for (k, target) in prep.targets.iter().enumerate() {
+        // The same seed for every evaluation: differences are the textures', not the noise's.
+        let img = opt.render(k, spp, pass_seed(task.seed, u32::MAX - 2, k as u32, 3))?;
+        sum += image_relmse(&img, target);
+        if k == 0 {
+            first = Some(img);
+        }
+    }
+    let first = first.ok_or_else(|| Error::Invalid("the task has no camera".into()))?;
+    Ok((sum / prep.targets.len() as f64, first))
+}
+
+/// One estimator's equal-time optimization (phase 2).
+struct OptimizationRun {
+    curve: Vec<CurvePoint>,
+    iterations: u32,
+    ms_per_iteration: f64,
+    passes: Option<PassTimes>,
+    state_bytes_per_texel: f64,
+    final_image: Image,
+}
+
+fn optimization_phase(
+    gpu: &Gpu,
+    task: &Task,
+    prep: &Prepared,
+    o: &BenchOptions,
+    method: Method,
+    progress: &Progress,
+) -> Result<OptimizationRun> {
+    let mut opt = Optimizer::new(
+        gpu,
+        &prep.scene,
+        prep.set.clone(),
+        settings(prep, task, method, o),
+        &prep.targets,
+    )?;
+    let truth = prep.reference.as_deref();
+    let texture_rmse = |v: &[f32]| truth.map(|r| rmse(v, r)).unwrap_or(f64::NAN);
+    let points = o.curve_points.max(2);
+    let mut next_eval = 1u32;
+    let mut curve = Vec::new();
+    let mut seconds = 0.0;
+    let mut passes: Option<(PassTimes, u32)> = None;
+    let mut last_image = None;
+    let name = match method {
+        Method::Baseline => "baseline",
+        Method::Restir => "ReSTIR",
+    };
+    loop {
+        let eval_due = seconds >= o.budget_s * next_eval as f64 / (points - 1) as f64;
+        if seconds >= o.budget_s || eval_due {
+            let (e, img) = evaluate(&opt, prep, task, o.eval_spp)?;
+            last_image = Some(img);
+            if let Some(p) = curve.last_mut() {
+                let p: &mut CurvePoint = p;
+                p.image_relmse = Some(e);
+            }
+            next_eval += 1;
+            progress.message(format!(
+                "{name}: {seconds:.0}/{:.0} s, image relMSE {e:.3e}",
+                o.budget_s
+            ));
+        }
+        if seconds >= o.budget_s {
+            break;
+        }
+        let t0 = Instant::now();
+        let stats = opt.step()?;
+        seconds += t0.elapsed().as_secs_f64();
+        if opt.iteration % 8 == 2 {
+            if let Some(t) = opt.pass_times()? {
+                let (s, n) = passes.get_or_insert((PassTimes::default(), 0));
+                s.primal_ms += t.primal_ms;
+                s.loss_ms += t.loss_ms;
+                s.gradient_ms += t.gradient_ms;
+                s.merge_ms += t.merge_ms;
+                s.adam_ms += t.adam_ms;
+                *n += 1;
+            }
+        }
+        curve.push(CurvePoint {
+            iteration: opt.iteration,
+            seconds,
+            loss: stats.loss,
+            texture_rmse: texture_rmse(&opt.read_params()?),
+            image_relmse: None,
+        });
+    }
+    // The loop ends with an evaluation at the end of the budget.
+    let final_image = match last_image {
+        Some(img) => img,
+        None => evaluate(&opt, prep, task, o.eval_spp)?.1,
+    };
+    let iterations = opt.iteration;
+    progress.done();
+    Ok(OptimizationRun {
+        ms_per_iteration: 1000.0 * seconds / iterations.max(1) as f64,
+        iterations,
+        passes: passes.map(|(s, n)| {
+            let n = n as f64;
+            PassTimes {
+                primal_ms: s.primal_ms / n,
+                loss_ms: s.loss_ms / n,
+                gradient_ms: s.gradient_ms / n,
+                merge_ms: s.merge_ms / n,
+                adam_ms: s.adam_ms / n,
+            }
+        }),
+        state_bytes_per_texel: opt.state_bytes_per_texel(),
+        curve,
+        final_image,
+    })
+}
+
+/// Run the benchmark on the given task files and write the report into `o.out`.
+pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchReport> {
+    if !(o.budget_s > 0.0 && o.budget_s.is_finite()) {
+        return Err(Error::Invalid(format!(
+            "bench: the budget must be a positive number of seconds, not {}",
+            o.budget_s
+        )));
+    }
+    if !(o.scale > 0.0 && o.scale <= 64.0) {
+        return Err(Error::Invalid(format!(
+            "bench: --scale must be in (0, 64], not {}",
+            o.scale
+        )));
+    }
+    // Load every task first, so that a bad one fails before hours of measuring.
+    let mut loaded = Vec::new();
+    for p in tasks {
+        loaded.push(scaled(&Task::load(p)?, o.scale));
+    }
+    std::fs::create_dir_all(&o.out).map_err(|e| Error::file(&o.out, e.to_string()))?;
+    let progress = Progress::new(
+        o.progress,
+        loaded.len() as u64 * (o.repeats.max(1) as u64 + 3),
+    );
+    let mut report = BenchReport {
+        version: env!("CARGO_PKG_VERSION").into(),
+        adapter: gpu.describe(),
+        budget_s: o.budget_s,
+        scale: o.scale,
+        warmup: o.warmup,
+        repeats: o.repeats.max(1),
+        reference_spp: o.reference_spp,
+        eval_spp: o.eval_spp,
+        m_cap: o.restir.m_cap,
+        scenes: Vec::new(),
+    };
+    for task in &loaded {
+        let name = scene_name(task);
+        let dir = o.out.join(crate::image_io::file_safe(&name));
+        std::fs::create_dir_all(&dir).map_err(|e| Error::file(&dir, e.to_string()))?;
+        if let Some(b) = &progress.bar {
+            b.set_prefix(name.clone());
+        }
+        progress.message(format!("{name}: rendering targets"));
+        let prep = prepare(gpu, task, &dir, false)?;
+        progress.done();
+        let g = gradient_phase(gpu, task, &prep, o, &progress)?;
+        let init = Optimizer::new(
+            gpu,
+            &prep.scene,
+            prep.set.clone(),
+            settings(&prep, task, Method::Baseline, o),
+            &prep.targets,
+        )?;
+        let (image_initial, _) = evaluate(&init, &prep, task, o.eval_spp)?;
+        drop(init);
+        let texture_initial = prep
+            .reference
+            .as_deref()
+            .map(|r| rmse(&prep.set.values, r))
+            .unwrap_or(f64::NAN);
+        let start = CurvePoint {
+            iteration: 0,
+            seconds: 0.0,
+            loss: f64::NAN,
+            texture_rmse: texture_initial,
+            image_relmse: Some(image_initial),
+        };
+        let base = optimization_phase(gpu, task, &prep, o, Method::Baseline, &progress)?;
+        let re = optimization_phase(gpu, task, &prep, o, Method::Restir, &progress)?;
+        let last = |r: &OptimizationRun| -> (f64, f64) {
+            let t = r
+                .curve
+                .last()
+                .map(|p| p.texture_rmse)
+                .unwrap_or(texture_initial);
+            let i = r
+                .curve
+                .iter()
+                .rev()
+                .find_map(|p| p.image_relmse)
+                .unwrap_or(image_initial);
+            (t, i)
+        };
+        let (tb, ib) = last(&base);
+        let (tr, ir) = last(&re);
+        let with_start = |c: &[CurvePoint]| {
+            let mut v = vec![start.clone()];
+            v.extend_from_slice(c);
+            v
+        };
+        let result = SceneResult {
+            name: name.clone(),
+            task: task.path.display().to_string(),
+            width: task.width,
+            height: task.height,
+            cameras: prep.cameras.len(),
+            texels: prep.set.textures.iter().map(|t| t.width * t.height).sum(),
+            baseline_spp_equal_time: g.baseline_spp_equal_time,
+            gradient_relmse_baseline: g.relmse_baseline,
+            gradient_relmse_restir: g.relmse_restir,
+            gradient_relmse_ratio: g.relmse_restir / g.relmse_baseline,
+            gradient_relmse_baseline_equal_iterations: g.relmse_baseline_equal_iterations,
+            image_relmse_initial: image_initial,
+            image_relmse_baseline: ib,
+            image_relmse_restir: ir,
+            image_relmse_ratio: ir / ib,
+            texture_rmse_initial: texture_initial,
+            texture_rmse_baseline: tb,
+            texture_rmse_restir: tr,
+            ms_per_iteration_baseline: base.ms_per_iteration,
+            ms_per_iteration_restir: re.ms_per_iteration,
+            iterations_baseline: base.iterations,
+            iterations_restir: re.iterations,
+            passes_baseline: base.passes,
+            passes_restir: re.passes,
+            state_bytes_per_texel: re.state_bytes_per_texel,
+            state_bytes_per_texel_baseline: base.state_bytes_per_texel,
+            curve_baseline: with_start(&base.curve),
+            curve_restir: with_start(&re.curve),
+        };
+        report::write_scene_files(
+            &dir,
+            &prep,
+            &result,
+            &g.snapshot,
+            &FinalImages {
+                target: prep.targets[0].clone(),
+                baseline: base.final_image,
+                restir: re.final_image,
+            },
+        )?;
+        report.scenes.push(result);
+        // Written after every scene, so that an interrupted run keeps what it measured.
+        report::write_report(&o.out, &report)?;
+    }
+    progress.finish();
+    Ok(report)
+}
+
+/// The scene's name: its folder's name (the bundled scenes' folders are their names).
+fn scene_name(task: &Task) -> String {
+    task.base
+        .file_name()
+        .map(|n| n.to_string_lossy().to_string())
+        .filter(|n| !n.is_empty())
+        .unwrap_or_else(|| task.path.display().to_string())
+}

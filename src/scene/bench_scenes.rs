@@ -1,0 +1,587 @@
+//! Generator of the benchmark scenes under `scenes/bench/` (run `psrestir make-scenes`): the
+//! paper's four experiments in miniature, each a glTF scene holding the ground-truth texture
+//! and a task file that starts the optimized texture from a constant.
+use super::authoring::{box_triangles, lathe, png_bytes, quad_facing, uv_sphere, GltfBuilder};
+use super::bundled::{look_at, srgb8, write_sky};
+use crate::image_io::write_atomic;
+use crate::{Error, Result};
+use glam::Vec3;
+use serde_json::json;
+use std::path::Path;
+
+/// Names of the benchmark scenes, in the order `psrestir bench` runs them.
+pub const BENCH_SCENES: [&str; 4] = ["vase", "lattice", "dish", "sphere"];
+
+/// Texture resolution of the ground truth and of the optimized textures.
+const TEX: u32 = 256;
+
+/// Write every benchmark scene into `dir/<name>/`.
+pub fn write_bench_scenes(dir: &Path) -> Result<()> {
+    write_vase(&dir.join("vase"))?;
+    write_lattice(&dir.join("lattice"))?;
+    write_dish(&dir.join("dish"))?;
+    write_sphere(&dir.join("sphere"))
+}
+
+fn create(dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))
+}
+
+/// A deterministic hash to [0, 1) for procedural patterns.
+fn hash(a: u32, b: u32) -> f32 {
+    let mut h = a.wrapping_mul(0x9E37_79B9) ^ b.wrapping_mul(0x85EB_CA6B);
+    h ^= h >> 15;
+    h = h.wrapping_mul(0x2C1B_3C6D);
+    h ^= h >> 12;
+    (h >> 8) as f32 / (1u32 << 24) as f32
+}
+
+/// A `TEX` x `TEX` RGBA8 image from a function of the texel centre's UV.
+fn texture(f: impl Fn(f32, f32) -> [u8; 4]) -> Vec<[u8; 4]> {
+    let mut out = Vec::with_capacity((TEX * TEX) as usize);
+    for y in 0..TEX {
+        for x in 0..TEX {
+            out.push(f(
+                (x as f32 + 0.5) / TEX as f32,
+                (y as f32 + 0.5) / TEX as f32,
+            ));
+        }
+    }
+    out
+}
+
+fn unit(v: f32) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
+}
+
+fn write_png(dir: &Path, name: &str, rgba: &[[u8; 4]]) -> Result<()> {
+    write_atomic(&dir.join(name), &png_bytes(TEX, TEX, rgba)?)
+}
+
+fn write_task(dir: &Path, text: &str) -> Result<()> {
+    write_atomic(&dir.join("task.toml"), text.as_bytes())
+}
+
+/// An emissive square of side `size` at `at`, facing `toward`, with `color` x `strength`.
+fn area_light(
+    b: &mut GltfBuilder,
+    name: &str,
+    at: [f32; 3],
+    toward: [f32; 3],
+    size: f32,
+    color: [f32; 3],
+    strength: f32,
+) -> usize {
+    let m = b.add_material(json!({
+        "name": name,
+        "emissiveFactor": color,
+        "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": strength}},
+        "pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0]}
+    }));
+    let (p, n, idx) = quad_facing(at, toward, size);
+    let mesh = b.add_mesh(name, &p, Some(&n), None, Some(&idx), Some(m));
+    b.add_node(json!({"name": name, "mesh": mesh}))
+}
+
+/// A diffuse floor square of half-size `s` at height 0.
+fn floor(b: &mut GltfBuilder, s: f32, color: f32) -> usize {
+    let m = b.add_material(json!({
+        "name": "floor",
+        "pbrMetallicRoughness": {"baseColorFactor": [color, color, color, 1.0],
+            "metallicFactor": 0.0, "roughnessFactor": 0.9}
+    }));
+    let mesh = b.add_mesh(
+        "floor",
+        &[[-s, 0.0, -s], [s, 0.0, -s], [s, 0.0, s], [-s, 0.0, s]],
+        Some(&[[0.0, 1.0, 0.0]; 4]),
+        None,
+        Some(&[0, 2, 1, 0, 3, 2]),
+        Some(m),
+    );
+    b.add_node(json!({"name": "floor", "mesh": mesh}))
+}
+
+fn camera(b: &mut GltfBuilder, name: &str, yfov: f32, eye: [f32; 3], target: [f32; 3]) -> usize {
+    let c = b.add_camera(name, yfov, Some(1.0));
+    b.add_node(json!({"name": name, "camera": c,
+        "matrix": look_at(Vec3::from(eye), Vec3::from(target), Vec3::Y)}))
+}
+
+/// The paper's tire and chalice: a roughness texture on a curved metallic vase lit by three
+/// colored area lights and an environment map.
+pub fn write_vase(dir: &Path) -> Result<()> {
+    create(dir)?;
+    let mut b = GltfBuilder::new();
+    b.use_extension("KHR_materials_emissive_strength");
+    // Roughness (green channel) in diagonal bands, a rough belt and a slow ramp; metallic 1.
+    let mr = texture(|u, v| {
+        let band = ((u * 12.0 + v * 6.0).floor() as i32).rem_euclid(2) == 0;
+        let mut r = if band { 0.12 } else { 0.5 } + 0.2 * v;
+        if (0.45..0.55).contains(&v) {
+            r = 0.85;
+        }
+        [0, unit(r), 255, 255]
+    });
+    write_png(dir, "vase_mr.png", &mr)?;
+    let img = b.add_image_uri("vase_mr", "vase_mr.png");
+    let tex = b.add_texture(img, None);
+    let mat = b.add_material(json!({
+        "name": "vase",
+        "pbrMetallicRoughness": {"baseColorFactor": [0.95, 0.8, 0.55, 1.0],
+            "metallicRoughnessTexture": {"index": tex},
+            "metallicFactor": 1.0, "roughnessFactor": 1.0}
+    }));
+    let mut profile = vec![[0.0, 0.0]];
+    let n = 80;
+    for i in 0..=n {
+        let t = i as f32 / n as f32;
+        let pi = std::f32::consts::PI;
+        profile.push([
+            0.28 + 0.32 * (pi * t).sin() + 0.08 * (3.0 * pi * t).sin(),
+            1.6 * t,
+        ]);
+    }
+    profile.push([0.0, 1.62]);
+    let (p, nrm, uv, idx) = lathe(&profile, 96);
+    let mesh = b.add_mesh("vase", &p, Some(&nrm), Some(&uv), Some(&idx), Some(mat));
+    let mut nodes = vec![b.add_node(json!({"name": "vase", "mesh": mesh}))];
+    let c = [0.0, 0.8, 0.0];
+    nodes.push(area_light(
+        &mut b,
+        "light_red",
+        [-2.0, 1.6, 1.2],
+        c,
+        0.7,
+        [1.0, 0.35, 0.2],
+        10.0,
+    ));
+    nodes.push(area_light(
+        &mut b,
+        "light_green",
+        [2.2, 0.6, 1.0],
+        c,
+        0.6,
+        [0.3, 1.0, 0.4],
+        10.0,
+    ));
+    nodes.push(area_light(
+        &mut b,
+        "light_blue",
+        [0.4, 3.0, 1.8],
+        c,
+        0.8,
+        [0.35, 0.5, 1.0],
+        8.0,
+    ));
+    nodes.push(camera(
+        &mut b,
+        "main",
+        0.62,
+        [0.0, 1.3, 3.2],
+        [0.0, 0.8, 0.0],
+    ));
+    b.set_scene(&nodes);
+    b.write_gltf(&dir.join("scene.gltf"), false)?;
+    write_sky(&dir.join("sky.exr"))?;
+    write_task(
+        dir,
+        r#"# Benchmark scene "vase" (the paper's tire and chalice): recover the roughness texture of a
+# curved metallic vase lit by three colored area lights and an environment map.
+# Written by `psrestir make-scenes`; paths are relative to this file.
+scene = "scene.gltf"
+env = "sky.exr"
+env_scale = 0.6
+cameras = ["main"]
+width = 128
+height = 128
+seed = 11
+output = "out/bench/vase"
+
+[target]
+scene = "scene.gltf"
+spp = 256
+
+[optimizer]
+time_budget_s = 60
+primal_spp = 2
+gradient_spp = 1
+loss = "l2"
+filter = "bilinear"
+checkpoint_every = 50
+
+[[textures]]
+material = "vase"
+slot = "roughness"
+resolution = [256, 256]
+init = 0.5
+learning_rate = 0.02
+"#,
+    )
+}
+
+/// The paper's Christmas tree: a base color texture on a wall seen through, and shadowed by,
+/// two layers of thin bars lit by a small area light and the sun, so that visibility makes
+/// the gradient sparse.
+pub fn write_lattice(dir: &Path) -> Result<()> {
+    create(dir)?;
+    let mut b = GltfBuilder::new();
+    b.use_extension("KHR_materials_emissive_strength");
+    b.use_extension("KHR_lights_punctual");
+    // Colored baubles on a green-to-teal background.
+    let color = texture(|u, v| {
+        let mut c = [0.08 + 0.1 * u, 0.35 - 0.15 * v, 0.12 + 0.2 * v];
+        let cells = 8.0;
+        let (cx, cy) = ((u * cells).floor(), (v * cells).floor());
+        let (i, j) = (cx as u32, cy as u32);
+        let (ox, oy) = (
+            cx + 0.3 + 0.4 * hash(i, j),
+            cy + 0.3 + 0.4 * hash(j + 17, i),
+        );
+        let d = ((u * cells - ox).powi(2) + (v * cells - oy).powi(2)).sqrt();
+        if d < 0.28 {
+            c = match (hash(i + 5, j + 9) * 3.0) as u32 {
+                0 => [0.85, 0.1, 0.08],
+                1 => [0.95, 0.75, 0.2],
+                _ => [0.15, 0.3, 0.9],
+            };
+        }
+        [srgb8(c[0]), srgb8(c[1]), srgb8(c[2]), 255]
+    });
+    write_png(dir, "wall_color.png", &color)?;
+    let img = b.add_image_uri("wall_color", "wall_color.png");
+    let tex = b.add_texture(img, None);
+    let wall_mat = b.add_material(json!({
+        "name": "wall",
+        "pbrMetallicRoughness": {"baseColorTexture": {"index": tex},
+            "metallicFactor": 0.0, "roughnessFactor": 0.7}
+    }));
+    let s = 1.5;
+    let wall = b.add_mesh(
+        "wall",
+        &[
+            [-s, 0.0, 0.0],
+            [s, 0.0, 0.0],
+            [s, 2.0 * s, 0.0],
+            [-s, 2.0 * s, 0.0],
+        ],
+        Some(&[[0.0, 0.0, 1.0]; 4]),
+        Some(&[[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]]),
+        Some(&[0, 1, 2, 0, 2, 3]),
+        Some(wall_mat),
+    );
+    // Bars: vertical ones close to the wall, horizontal ones further out.
+    let mut bars = Vec::new();
+    for i in 0..13 {
+        let x = -1.5 + 0.25 * i as f32;
+        bars.extend(box_triangles([x, 1.5, 0.6], [0.015, 1.6, 0.015]));
+    }
+    for j in 0..10 {
+        let y = 0.15 + 0.3 * j as f32;
+        bars.extend(box_triangles([0.0, y, 1.1], [1.7, 0.012, 0.012]));
+    }
+    let bar_mat = b.add_material(json!({
+        "name": "bars",
+        "pbrMetallicRoughness": {"baseColorFactor": [0.3, 0.2, 0.12, 1.0],
+            "metallicFactor": 0.0, "roughnessFactor": 0.6}
+    }));
+    let bar_mesh = b.add_mesh("bars", &bars, None, None, None, Some(bar_mat));
+    let sun = b.add_light(
+        json!({"name": "sun", "type": "directional", "color": [1.0, 0.95, 0.85], "intensity": 2.5}),
+    );
+    let mut nodes = vec![
+        b.add_node(json!({"name": "wall", "mesh": wall})),
+        b.add_node(json!({"name": "bars", "mesh": bar_mesh})),
+        b.add_node(json!({"name": "sun",
+            "matrix": look_at(Vec3::new(-3.0, 4.0, 4.0), Vec3::ZERO, Vec3::Y),
+            "extensions": {"KHR_lights_punctual": {"light": sun}}})),
+    ];
+    nodes.push(area_light(
+        &mut b,
+        "lamp",
+        [1.6, 3.2, 3.0],
+        [0.0, 1.5, 0.0],
+        0.15,
+        [1.0, 0.85, 0.6],
+        400.0,
+    ));
+    nodes.push(camera(
+        &mut b,
+        "main",
+        0.8,
+        [0.3, 1.5, 4.0],
+        [0.0, 1.5, 0.0],
+    ));
+    b.set_scene(&nodes);
+    b.write_gltf(&dir.join("scene.gltf"), false)?;
+    write_task(
+        dir,
+        r#"# Benchmark scene "lattice" (the paper's Christmas tree): recover the base color texture of
+# a wall seen through, and shadowed by, two layers of thin bars (sparse gradients).
+# Written by `psrestir make-scenes`; paths are relative to this file.
+scene = "scene.gltf"
+cameras = ["main"]
+width = 128
+height = 128
+seed = 12
+output = "out/bench/lattice"
+
+[target]
+scene = "scene.gltf"
+spp = 256
+
+[optimizer]
+time_budget_s = 60
+primal_spp = 2
+gradient_spp = 1
+loss = "l2"
+filter = "bilinear"
+checkpoint_every = 50
+
+[[textures]]
+material = "wall"
+slot = "base_color"
+resolution = [256, 256]
+init = [0.5, 0.5, 0.5]
+learning_rate = 0.03
+"#,
+    )
+}
+
+/// The paper's ashtray: a metallic texture on a glossy copper dish on a floor, under a few
+/// area lights.
+pub fn write_dish(dir: &Path) -> Result<()> {
+    create(dir)?;
+    let mut b = GltfBuilder::new();
+    b.use_extension("KHR_materials_emissive_strength");
+    // Metallic (blue channel): rings along the profile, spokes on the inner floor and a ramp
+    // around the rim; roughness (green) constant 0.3.
+    let mr = texture(|u, v| {
+        let m = if v > 0.72 {
+            ((u * 16.0).floor() as i32 % 2 == 0) as u8 as f32
+        } else if (0.42..0.5).contains(&v) {
+            u
+        } else {
+            ((v * 14.0).floor() as i32 % 2 == 0) as u8 as f32
+        };
+        [0, unit(0.3), unit(m), 255]
+    });
+    write_png(dir, "dish_mr.png", &mr)?;
+    let img = b.add_image_uri("dish_mr", "dish_mr.png");
+    let tex = b.add_texture(img, None);
+    let mat = b.add_material(json!({
+        "name": "dish",
+        "pbrMetallicRoughness": {"baseColorFactor": [0.95, 0.64, 0.54, 1.0],
+            "metallicRoughnessTexture": {"index": tex},
+            "metallicFactor": 1.0, "roughnessFactor": 1.0}
+    }));
+    // Outer bottom, outer wall, lip, inner wall and inner floor, as one profile.
+    let mut profile = vec![[0.0, 0.0], [0.8, 0.0]];
+    let n = 16;
+    for i in 1..=n {
+        let t = i as f32 / n as f32;
+        let a = t * std::f32::consts::FRAC_PI_2;
+        profile.push([0.8 + 0.2 * a.sin(), 0.25 * (1.0 - a.cos())]);
+    }
+    for i in 1..=n {
+        let a = i as f32 / n as f32 * std::f32::consts::PI;
+        profile.push([0.96 + 0.04 * a.cos(), 0.25 + 0.04 * a.sin()]);
+    }
+    for i in 1..=n {
+        let t = i as f32 / n as f32;
+        let a = t * std::f32::consts::FRAC_PI_2;
+        profile.push([0.92 - 0.2 * a.sin(), 0.25 - 0.15 * (1.0 - a.cos())]);
+    }
+    profile.push([0.4, 0.1]);
+    profile.push([0.0, 0.1]);
+    let (p, nrm, uv, idx) = lathe(&profile, 96);
+    let mesh = b.add_mesh("dish", &p, Some(&nrm), Some(&uv), Some(&idx), Some(mat));
+    let mut nodes = vec![
+        b.add_node(json!({"name": "dish", "mesh": mesh})),
+        floor(&mut b, 3.0, 0.5),
+    ];
+    let c = [0.0, 0.1, 0.0];
+    nodes.push(area_light(
+        &mut b,
+        "key",
+        [-1.2, 2.5, 0.8],
+        c,
+        0.8,
+        [1.0, 0.95, 0.85],
+        12.0,
+    ));
+    nodes.push(area_light(
+        &mut b,
+        "fill",
+        [1.5, 1.8, -0.6],
+        c,
+        0.6,
+        [0.75, 0.85, 1.0],
+        8.0,
+    ));
+    nodes.push(area_light(
+        &mut b,
+        "rim",
+        [0.3, 1.2, -2.0],
+        c,
+        0.5,
+        [1.0, 0.9, 0.8],
+        10.0,
+    ));
+    nodes.push(camera(
+        &mut b,
+        "main",
+        0.75,
+        [0.0, 2.0, 2.0],
+        [0.0, 0.05, 0.0],
+    ));
+    b.set_scene(&nodes);
+    b.write_gltf(&dir.join("scene.gltf"), false)?;
+    write_task(
+        dir,
+        r#"# Benchmark scene "dish" (the paper's ashtray): recover the metallic texture of a glossy
+# copper dish under three area lights.
+# Written by `psrestir make-scenes`; paths are relative to this file.
+scene = "scene.gltf"
+cameras = ["main"]
+width = 128
+height = 128
+seed = 13
+output = "out/bench/dish"
+
+[target]
+scene = "scene.gltf"
+spp = 256
+
+[optimizer]
+time_budget_s = 60
+primal_spp = 2
+gradient_spp = 1
+loss = "l2"
+filter = "bilinear"
+checkpoint_every = 50
+
+[[textures]]
+material = "dish"
+slot = "metallic"
+resolution = [256, 256]
+init = 0.5
+learning_rate = 0.03
+"#,
+    )
+}
+
+/// Two textures at once (base color and roughness) on a sphere, seen by two cameras.
+pub fn write_sphere(dir: &Path) -> Result<()> {
+    create(dir)?;
+    let mut b = GltfBuilder::new();
+    b.use_extension("KHR_materials_emissive_strength");
+    let color = texture(|u, v| {
+        let stripe = ((u * 10.0 + (v * 6.0).sin()).floor() as i32).rem_euclid(3);
+        let c = match stripe {
+            0 => [0.75, 0.3, 0.12],
+            1 => [0.2, 0.45, 0.7],
+            _ => [0.85, 0.85, 0.8],
+        };
+        let shade = 0.6 + 0.4 * (v * std::f32::consts::PI).sin();
+        [
+            srgb8(c[0] * shade),
+            srgb8(c[1] * shade),
+            srgb8(c[2] * shade),
+            255,
+        ]
+    });
+    write_png(dir, "sphere_color.png", &color)?;
+    let mr = texture(|u, v| {
+        let spots = ((u * 8.0).fract() - 0.5).powi(2) + ((v * 4.0).fract() - 0.5).powi(2) < 0.06;
+        let r = if spots { 0.1 } else { 0.3 + 0.5 * u };
+        [0, unit(r), 0, 255]
+    });
+    write_png(dir, "sphere_mr.png", &mr)?;
+    let ci = b.add_image_uri("sphere_color", "sphere_color.png");
+    let ct = b.add_texture(ci, None);
+    let mi = b.add_image_uri("sphere_mr", "sphere_mr.png");
+    let mt = b.add_texture(mi, None);
+    let mat = b.add_material(json!({
+        "name": "sphere",
+        "pbrMetallicRoughness": {"baseColorTexture": {"index": ct},
+            "metallicRoughnessTexture": {"index": mt},
+            "metallicFactor": 0.0, "roughnessFactor": 1.0}
+    }));
+    let (p, nrm, uv, idx) = uv_sphere([0.0, 1.0, 0.0], 1.0, 96, 48);
+    let mesh = b.add_mesh("sphere", &p, Some(&nrm), Some(&uv), Some(&idx), Some(mat));
+    let mut nodes = vec![
+        b.add_node(json!({"name": "sphere", "mesh": mesh})),
+        floor(&mut b, 4.0, 0.4),
+    ];
+    let c = [0.0, 1.0, 0.0];
+    nodes.push(area_light(
+        &mut b,
+        "key",
+        [-2.0, 3.0, 2.0],
+        c,
+        0.6,
+        [1.0, 0.95, 0.9],
+        30.0,
+    ));
+    nodes.push(area_light(
+        &mut b,
+        "side",
+        [2.5, 1.5, 1.0],
+        c,
+        0.5,
+        [0.8, 0.9, 1.0],
+        25.0,
+    ));
+    nodes.push(area_light(
+        &mut b,
+        "back",
+        [0.5, 2.5, -2.5],
+        c,
+        0.6,
+        [1.0, 0.9, 0.8],
+        20.0,
+    ));
+    nodes.push(camera(&mut b, "front", 0.7, [0.0, 1.6, 3.8], c));
+    nodes.push(camera(&mut b, "side", 0.7, [3.3, 2.2, -1.5], c));
+    b.set_scene(&nodes);
+    b.write_gltf(&dir.join("scene.gltf"), false)?;
+    write_task(
+        dir,
+        r#"# Benchmark scene "sphere": recover two textures at once (base color and roughness) of a
+# sphere seen by two cameras.
+# Written by `psrestir make-scenes`; paths are relative to this file.
+scene = "scene.gltf"
+cameras = ["front", "side"]
+width = 128
+height = 128
+seed = 14
+output = "out/bench/sphere"
+
+[target]
+scene = "scene.gltf"
+spp = 256
+
+[optimizer]
+time_budget_s = 60
+primal_spp = 2
+gradient_spp = 1
+loss = "l2"
+filter = "bilinear"
+checkpoint_every = 50
+
+[[textures]]
+material = "sphere"
+slot = "base_color"
+resolution = [256, 256]
+init = [0.5, 0.5, 0.5]
+learning_rate = 0.03
+
+[[textures]]
+material = "sphere"
+slot = "roughness"
+resolution = [256, 256]
+init = 0.5
+learning_rate = 0.02
+"#,
+    )
+}
