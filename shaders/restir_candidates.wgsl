@@ -35,7 +35,7 @@ var<private> offered: u32 = 0u;
 var<private> lost: u32 = 0u;
 var<private> dropped: u32 = 0u;
 
-fn offer_contribution(m: Material, uv: vec2f, bg: BrdfGrad, weight: vec3f, adj: vec3f, sample: u32, info: u32) {
+fn offer_contribution(m: Material, hit: Hit, uv: vec2f, bg: BrdfGrad, weight: vec3f, adj: vec3f, sample: u32, info: u32) {
     if all(weight == vec3f(0.0)) {
         return;
     }
@@ -69,7 +69,7 @@ fn offer_contribution(m: Material, uv: vec2f, bg: BrdfGrad, weight: vec3f, adj: 
                 r += 1u;
             }
             offered += 1u;
-            if !reservoir_offer(r, abs(q), rand(), sample, cp.seed, info, v) {
+            if !reservoir_offer(r, abs(q), rand(), sample, cp.seed, info, v, hit) {
                 lost += 1u;
             }
         }
@@ -102,8 +102,8 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
             continue;
         }
         let cam_bits = cp.camera_index << 1u;
-        offer_contribution(g.m, g.sf.uv, g.nee_grad, g.nee.weight, adj, sample, cam_bits);
-        offer_contribution(g.m, g.sf.uv, g.bsdf_grad, g.bsdf.weight, adj, sample, cam_bits | 1u);
+        offer_contribution(g.m, g.hit, g.sf.uv, g.nee_grad, g.nee.weight, adj, sample, cam_bits);
+        offer_contribution(g.m, g.hit, g.sf.uv, g.bsdf_grad, g.bsdf.weight, adj, sample, cam_bits | 1u);
     }
     atomicAdd(&cstats[0], offered);
     if lost > 0u {

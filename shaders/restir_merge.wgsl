@@ -7,6 +7,9 @@
 // Kept samples are replayed from their random numbers (camera-sample index, seed, technique:
 // the shift is the identity in primary sample space, Jacobian 1) under the current textures
 // and adjoint; the fresh sample is replayed under the previous ones, both double-buffered.
+// Geometry and cameras are fixed, so a replay starts from the stored camera-ray hit and, for
+// a light sample (unoccluded when drawn, or it would have no weight), skips the shadow ray:
+// only BSDF samples trace a ray, since their direction depends on the textures.
 // MIS: balance heuristic with confidences over the inputs' own targets.
 #import shared/rng
 #import shared/camera
@@ -54,16 +57,17 @@ struct Stored {
     w: f32,
     m: f32,
     v: vec3f,
+    hit: Hit,
 }
 
 fn load_kept(r: u32) -> Stored {
     let b = r * RESERVOIR_WORDS;
-    return Stored(kept[b], kept[b + 1u], kept[b + 2u], bitcast<f32>(kept[b + 3u]), bitcast<f32>(kept[b + 4u]), vec3f(bitcast<f32>(kept[b + 5u]), bitcast<f32>(kept[b + 6u]), bitcast<f32>(kept[b + 7u])));
+    return Stored(kept[b], kept[b + 1u], kept[b + 2u], bitcast<f32>(kept[b + 3u]), bitcast<f32>(kept[b + 4u]), vec3f(bitcast<f32>(kept[b + 5u]), bitcast<f32>(kept[b + 6u]), bitcast<f32>(kept[b + 7u])), Hit(bitcast<f32>(kept[b + 8u]), kept[b + 9u], bitcast<f32>(kept[b + 10u]), bitcast<f32>(kept[b + 11u])));
 }
 
 fn load_fresh(r: u32) -> Stored {
     let b = r * RESERVOIR_WORDS;
-    return Stored(merged[b], merged[b + 1u], merged[b + 2u], bitcast<f32>(merged[b + 3u]), bitcast<f32>(merged[b + 4u]), vec3f(bitcast<f32>(merged[b + 5u]), bitcast<f32>(merged[b + 6u]), bitcast<f32>(merged[b + 7u])));
+    return Stored(merged[b], merged[b + 1u], merged[b + 2u], bitcast<f32>(merged[b + 3u]), bitcast<f32>(merged[b + 4u]), vec3f(bitcast<f32>(merged[b + 5u]), bitcast<f32>(merged[b + 6u]), bitcast<f32>(merged[b + 7u])), Hit(bitcast<f32>(merged[b + 8u]), merged[b + 9u], bitcast<f32>(merged[b + 10u]), bitcast<f32>(merged[b + 11u])));
 }
 
 fn store_merged(r: u32, s: Stored) {
@@ -76,6 +80,10 @@ fn store_merged(r: u32, s: Stored) {
     merged[b + 5u] = bitcast<u32>(s.v.x);
     merged[b + 6u] = bitcast<u32>(s.v.y);
     merged[b + 7u] = bitcast<u32>(s.v.z);
+    merged[b + 8u] = bitcast<u32>(s.hit.t);
+    merged[b + 9u] = s.hit.tri;
+    merged[b + 10u] = bitcast<u32>(s.hit.b1);
+    merged[b + 11u] = bitcast<u32>(s.hit.b2);
 }
 
 // The target of a value: luminance for RGB textures, the value for scalar ones.
@@ -114,12 +122,13 @@ fn replay(st: Stored, ti: u32, local: u32, prev: bool) -> vec3f {
     use_prev_params = prev;
     rng_init(st.seed, st.sample, 0u);
     let xy = vec2f(f32(pixel % cam.width), f32(pixel / cam.width));
+    // The jittered direction (for the outgoing direction, and to keep the random numbers in
+    // step); the hit is the stored one.
     let d = camera_direction(cam, xy + rand2());
-    let hit = trace_closest(cam.origin, d, 3.0e38);
-    if hit.tri == NONE {
+    if st.hit.tri >= arrayLength(&tri_shading) {
         return vec3f(0.0);
     }
-    let sf = surface_at(cam.origin, d, hit);
+    let sf = surface_at(cam.origin, d, st.hit);
     if !sf.valid {
         return vec3f(0.0);
     }
@@ -151,7 +160,9 @@ fn replay(st: Stored, ti: u32, local: u32, prev: bool) -> vec3f {
     if (st.info & 1u) == 0u {
         let u_pick = rand();
         let u_light = rand2();
+        assume_visible = true;
         ds = nee_sample(sf, mat, u_pick, u_light);
+        assume_visible = false;
     } else {
         _ = rand();
         _ = rand2();
@@ -186,14 +197,23 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     let n_signs = select(1u, 2u, (mp.flags & FLAG_POSITIVIZE) != 0u);
     let reuse = (mp.flags & FLAG_TEMPORAL) != 0u && (mp.flags & FLAG_HAVE_PREV) != 0u;
 
-    // Kept samples: their previous values (stored) and current values (replayed).
+    // Kept samples (their previous values are stored) and fresh samples. Replays: each kept
+    // sample under the current textures and adjoint, each fresh sample under the previous
+    // ones (only needed when there is a kept sample to weigh it against). The replays are
+    // gathered into one list and run from one loop, so that the invocations of a SIMD group
+    // replay together whatever their mix of inputs.
     var k_st: array<Stored, 2>;
     var k_ok: array<bool, 2>;
     var k_cur: array<vec3f, 2>;
     var k_qprev: array<f32, 2>;
     var k_qcur: array<f32, 2>;
     var k_m: array<f32, 2>;
+    var f_st: array<Stored, 2>;
+    var f_ok: array<bool, 2>;
+    var c_qprev: array<f32, 2>;
     var any_kept = false;
+    var jobs: array<u32, 4>;
+    var n_jobs = 0u;
     for (var r = 0u; r < 2u; r++) {
         k_ok[r] = false;
         if reuse && r < n_signs {
@@ -204,26 +224,43 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
                 any_kept = true;
                 k_qprev[r] = target_of(st.v, ch);
                 k_m[r] = min(st.m, mp.m_cap);
-                k_cur[r] = replay(st, ti, local, false);
-                k_qcur[r] = target_of(k_cur[r], ch);
+                jobs[n_jobs] = r;
+                n_jobs += 1u;
             }
+        }
+    }
+    for (var s = 0u; s < 2u; s++) {
+        f_ok[s] = false;
+        c_qprev[s] = 0.0;
+        if s < n_signs {
+            f_st[s] = load_fresh(2u * t + s);
+            f_ok[s] = f_st[s].info != NONE && f_st[s].w > 0.0;
+            if f_ok[s] && any_kept {
+                jobs[n_jobs] = 2u + s;
+                n_jobs += 1u;
+            }
+        }
+    }
+    for (var j = 0u; j < n_jobs; j++) {
+        let job = jobs[j];
+        if job < 2u {
+            k_cur[job] = replay(k_st[job], ti, local, false);
+            k_qcur[job] = target_of(k_cur[job], ch);
+        } else {
+            c_qprev[job - 2u] = target_of(replay(f_st[job - 2u], ti, local, true), ch);
         }
     }
 
     var g = vec3f(0.0);
     for (var s = 0u; s < 2u; s++) {
-        let empty = Stored(0u, 0u, NONE, 0.0, 0.0, vec3f(0.0));
+        let empty = Stored(0u, 0u, NONE, 0.0, 0.0, vec3f(0.0), Hit(0.0, NONE, 0.0, 0.0));
         if s >= n_signs {
             store_merged(2u * t + s, empty);
             continue;
         }
-        let fresh = load_fresh(2u * t + s);
-        let c_ok = fresh.info != NONE && fresh.w > 0.0;
+        let fresh = f_st[s];
+        let c_ok = f_ok[s];
         let c_qcur = target_of(fresh.v, ch);
-        var c_qprev = 0.0;
-        if c_ok && any_kept {
-            c_qprev = target_of(replay(fresh, ti, local, true), ch);
-        }
         // Resampling weights m_r(y_r) * tau_s(q_cur(y_r)) * W_r.
         var w: array<f32, 3>;
         w[0] = 0.0;
@@ -232,7 +269,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
             var den = own;
             for (var r = 0u; r < 2u; r++) {
                 if k_ok[r] {
-                    den += k_m[r] * tau(c_qprev, r);
+                    den += k_m[r] * tau(c_qprev[s], r);
                 }
             }
             let big_w = fresh.w / tau(c_qcur, s);

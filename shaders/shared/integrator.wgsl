@@ -15,6 +15,9 @@ const TECH_MIS: u32 = 3u;
 var<private> techniques: u32 = TECH_MIS;
 var<private> shadow_rays: u32 = 0u;
 var<private> bsdf_rays: u32 = 0u;
+// Set by ReSTIR's replays of light samples that were unoccluded when drawn: geometry does not
+// change during texture optimization, so the shadow ray would find the same answer.
+var<private> assume_visible: bool = false;
 
 struct Surface {
     p: vec3f,
@@ -137,7 +140,7 @@ fn nee_sample(sf: Surface, mat: SurfaceMaterial, u_pick: f32, u: vec2f) -> Direc
     shadow_rays += 1u;
     let o = offset_origin(sf, ls.wi);
     let tmax = select(ls.dist * (1.0 - 1e-4), 3.0e38, ls.dist >= 3.0e38);
-    if occluded(o, ls.wi, tmax) {
+    if !assume_visible && occluded(o, ls.wi, tmax) {
         return out;
     }
     out.wi = ls.wi;
@@ -223,6 +226,8 @@ fn direct_radiance(o: vec3f, d: vec3f) -> vec3f {
 // single-sided surface, or hits a material without optimized textures.
 struct GradientSample {
     valid: bool,
+    // The camera ray's hit (stored by ReSTIR so that replays need not trace it again).
+    hit: Hit,
     sf: Surface,
     m: Material,
     nee: DirectSample,
@@ -238,6 +243,7 @@ fn gradient_sample(o: vec3f, d: vec3f) -> GradientSample {
     if hit.tri == NONE {
         return out;
     }
+    out.hit = hit;
     out.sf = surface_at(o, d, hit);
     out.m = materials[out.sf.material];
     let m = out.m;

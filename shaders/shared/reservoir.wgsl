@@ -1,11 +1,13 @@
 #import shared/types
 
 // Streaming reservoir updates for parameter-space ReSTIR. Layout of a reservoir
-// (RESERVOIR_WORDS = 8 words, 32 bytes, in types.wgsl):
+// (RESERVOIR_WORDS = 12 words, 48 bytes, in types.wgsl):
 //   [0] camera-sample index   [1] seed of the gradient pass that drew it
 //   [2] info: bit 0 technique (0 light sampling, 1 BSDF sampling), bits 1-7 camera; NONE = empty
 //   [3] weight sum (fresh reservoirs) or unbiased contribution weight W (merged)
 //   [4] confidence M          [5-7] the sample's value v (RGB; scalars use x)
+//   [8-11] the camera ray's hit (t, triangle, b1, b2): replays start from it instead of
+//   tracing the camera ray again (geometry and cameras do not change)
 // Texel t owns reservoirs 2t (positive part of the target) and 2t + 1 (negative part).
 // Passes that offer candidates declare `fresh` (the reservoirs, as atomics) and `locks`.
 
@@ -21,7 +23,7 @@ const LOCK_BOUND: u32 = 1024u;
 // candidate replaces the sample with probability w / (Wsum_before + w), which makes the
 // selection exactly proportional to weight. Returns false if the bounded loop never got the
 // lock (the caller counts it).
-fn reservoir_offer(r: u32, w: f32, u: f32, sample: u32, seed: u32, info: u32, v: vec3f) -> bool {
+fn reservoir_offer(r: u32, w: f32, u: f32, sample: u32, seed: u32, info: u32, v: vec3f, hit: Hit) -> bool {
     for (var k = 0u; k < LOCK_BOUND; k++) {
         if atomicCompareExchangeWeak(&locks[r], 0u, 1u).exchanged {
             let base = r * RESERVOIR_WORDS;
@@ -34,6 +36,10 @@ fn reservoir_offer(r: u32, w: f32, u: f32, sample: u32, seed: u32, info: u32, v:
                 atomicStore(&fresh[base + 5u], bitcast<u32>(v.x));
                 atomicStore(&fresh[base + 6u], bitcast<u32>(v.y));
                 atomicStore(&fresh[base + 7u], bitcast<u32>(v.z));
+                atomicStore(&fresh[base + 8u], bitcast<u32>(hit.t));
+                atomicStore(&fresh[base + 9u], hit.tri);
+                atomicStore(&fresh[base + 10u], bitcast<u32>(hit.b1));
+                atomicStore(&fresh[base + 11u], bitcast<u32>(hit.b2));
             }
             atomicStore(&locks[r], 0u);
             return true;

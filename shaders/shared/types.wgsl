@@ -111,7 +111,7 @@ struct ParamTex {
 
 // Words per ReSTIR reservoir (see shared/reservoir.wgsl). Keep in sync with RESERVOIR_WORDS
 // in src/optim/restir.rs.
-const RESERVOIR_WORDS: u32 = 8u;
+const RESERVOIR_WORDS: u32 = 12u;
 
 struct Hit {
     t: f32,

@@ -427,6 +427,14 @@ fn gradient_phase(
         let (g_it, _) = b.estimate_gradient(0)?;
         drop(b);
 
+        let l1 = |g: &[f32]| g.iter().map(|v| v.abs() as f64).sum::<f64>();
+        log::debug!(
+            "sum |g|: reference {:.4e}, ReSTIR {:.4e}, baseline {k} spp {:.4e}, baseline {spp} spp {:.4e}",
+            reference.iter().map(|v| v.abs()).sum::<f64>(),
+            l1(&g_restir),
+            l1(&g_eq),
+            l1(&g_it)
+        );
         let n = repeats as f64;
         out.relmse_restir += gradient_relmse(&g_restir, &reference) / n;
         out.relmse_baseline += gradient_relmse(&g_eq, &reference) / n;

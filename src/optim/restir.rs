@@ -2,7 +2,7 @@
 //! restir_merge.wgsl; the per-iteration driving is in [`super::Optimizer`]).
 
 /// Words per reservoir. Keep in sync with RESERVOIR_WORDS in shaders/shared/types.wgsl.
-pub const RESERVOIR_WORDS: u64 = 8;
+pub const RESERVOIR_WORDS: u64 = 12;
 
 /// Bytes of ReSTIR state per texel: two reservoirs (positive and negative) in each of two
 /// buffers (kept and fresh/merged), and a lock word per reservoir.

@@ -1,0 +1,166 @@
+//! `psrestir bench` on one benchmark scene shrunk to 32x32 images and 64x64 textures, with a
+//! one-second budget: every field of bench.json is there, finite and in range, and the
+//! report, plots and images are written. The benchmark is never a timing test: nothing here
+//! asserts that one estimator is faster or better.
+mod common;
+
+use psrestir::bench::{bench, resolve_scene, BenchOptions};
+use psrestir::optim::restir::STATE_BYTES_PER_TEXEL;
+use serde_json::Value;
+use std::path::Path;
+
+fn number(scene: &Value, key: &str) -> f64 {
+    let v = scene
+        .get(key)
+        .unwrap_or_else(|| panic!("bench.json: scene has no `{key}`"));
+    let x = v
+        .as_f64()
+        .unwrap_or_else(|| panic!("bench.json: `{key}` is not a number: {v}"));
+    assert!(x.is_finite(), "bench.json: `{key}` is not finite: {x}");
+    x
+}
+
+fn png(path: &Path) -> (u32, u32) {
+    let img = image::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    (img.width(), img.height())
+}
+
+#[test]
+fn bench_json_has_every_field_finite_and_in_range() {
+    let Some(gpu) = common::gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let task = resolve_scene("sphere").unwrap();
+    let opts = BenchOptions {
+        budget_s: 1.0,
+        scale: 0.25,
+        warmup: 4,
+        repeats: 1,
+        reference_spp: 16,
+        eval_spp: 4,
+        curve_points: 3,
+        out: dir.path().to_path_buf(),
+        progress: false,
+        ..Default::default()
+    };
+    bench(&gpu, &[task], &opts).unwrap();
+
+    let json: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("bench.json")).unwrap())
+            .unwrap();
+    assert!(!json["adapter"].as_str().unwrap().is_empty());
+    assert_eq!(json["budget_s"].as_f64(), Some(1.0));
+    let scenes = json["scenes"].as_array().unwrap();
+    assert_eq!(scenes.len(), 1);
+    let s = &scenes[0];
+    assert_eq!(s["name"].as_str(), Some("sphere"));
+    // Sizes scaled: 128 -> 32 pixels, 256 -> 64 texels, two textures.
+    assert_eq!((number(s, "width"), number(s, "height")), (32.0, 32.0));
+    assert_eq!(number(s, "texels"), 2.0 * 64.0 * 64.0);
+
+    let spp = number(s, "baseline_spp_equal_time");
+    assert!(spp >= 1.0 && spp.fract() == 0.0, "spp {spp}");
+    for m in ["gradient_relmse", "image_relmse"] {
+        let b = number(s, &format!("{m}_baseline"));
+        let r = number(s, &format!("{m}_restir"));
+        let ratio = number(s, &format!("{m}_ratio"));
+        assert!(b > 0.0 && r > 0.0, "{m}: {b} {r}");
+        assert!(
+            (ratio - r / b).abs() <= 1e-9 * ratio,
+            "{m}_ratio {ratio} vs {r}/{b}"
+        );
+    }
+    number(s, "gradient_relmse_baseline_equal_iterations");
+    for k in [
+        "texture_rmse_initial",
+        "texture_rmse_baseline",
+        "texture_rmse_restir",
+    ] {
+        let x = number(s, k);
+        assert!(x > 0.0 && x < 1.0, "{k} {x}");
+    }
+    // The image error of the start is the same for both and larger than after optimizing
+    // would be hard to promise in one second; only its range is checked.
+    assert!(number(s, "image_relmse_initial") > 0.0);
+    for k in ["ms_per_iteration_baseline", "ms_per_iteration_restir"] {
+        let x = number(s, k);
+        assert!(x > 0.0 && x < 60_000.0, "{k} {x}");
+    }
+    for k in ["iterations_baseline", "iterations_restir"] {
+        assert!(number(s, k) >= 1.0, "{k}");
+    }
+    // ReSTIR's extra state is exactly the reservoirs and locks.
+    let extra = number(s, "state_bytes_per_texel") - number(s, "state_bytes_per_texel_baseline");
+    assert_eq!(extra, STATE_BYTES_PER_TEXEL as f64);
+    // Curves start at the initial state and run to the budget.
+    for c in ["curve_baseline", "curve_restir"] {
+        let pts = s[c].as_array().unwrap();
+        assert!(pts.len() >= 2, "{c}");
+        assert_eq!(pts[0]["seconds"].as_f64(), Some(0.0));
+        let last = pts.last().unwrap();
+        assert!(last["seconds"].as_f64().unwrap() >= 1.0);
+        assert!(
+            last["image_relmse"].as_f64().is_some(),
+            "{c}: no final image error"
+        );
+    }
+
+    let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
+    assert!(md.contains("| sphere |"), "{md}");
+    let scene_dir = dir.path().join("sphere");
+    assert_eq!(png(&scene_dir.join("error_vs_time.png")).0, 640);
+    let (w, h) = png(&scene_dir.join("gradients.png"));
+    assert!(w >= 3 * 192 && h >= 2 * 192, "gradients.png {w}x{h}");
+    let (w, h) = png(&scene_dir.join("final.png"));
+    assert!(w >= 3 * 32 && h >= 32, "final.png {w}x{h}");
+}
+
+#[test]
+fn bench_rejects_unknown_scenes_and_bad_options_clearly() {
+    let e = resolve_scene("no_such_scene").unwrap_err().to_string();
+    assert!(
+        e.contains("no_such_scene") && e.contains("vase"),
+        "unclear error: {e}"
+    );
+    let Some(gpu) = common::gpu() else { return };
+    let task = resolve_scene("dish").unwrap();
+    for (budget_s, scale, what) in [(0.0, 1.0, "budget"), (1.0, -2.0, "--scale")] {
+        let opts = BenchOptions {
+            budget_s,
+            scale,
+            progress: false,
+            out: std::env::temp_dir().join("psrestir-bench-never-written"),
+            ..Default::default()
+        };
+        let e = bench(&gpu, std::slice::from_ref(&task), &opts)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(what), "unclear error: {e}");
+    }
+}
+
+#[test]
+fn committed_bench_scenes_are_what_the_generator_writes() {
+    let dir = tempfile::tempdir().unwrap();
+    psrestir::scene::bench_scenes::write_bench_scenes(dir.path()).unwrap();
+    let committed = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/bench");
+    for name in psrestir::scene::bench_scenes::BENCH_SCENES {
+        let fresh_dir = dir.path().join(name);
+        let mut files: Vec<_> = std::fs::read_dir(&fresh_dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        files.sort();
+        assert!(files.len() >= 3, "{name}: {files:?}");
+        for f in files {
+            let a = std::fs::read(fresh_dir.join(&f)).unwrap();
+            let b = std::fs::read(committed.join(name).join(&f))
+                .unwrap_or_else(|e| panic!("scenes/bench/{name}/{f:?}: {e}"));
+            assert!(
+                a == b,
+                "scenes/bench/{name}/{f:?} differs from the generator: run `psrestir make-scenes`"
+            );
+        }
+        // Every bundled scene loads as a task.
+        psrestir::task::Task::load(&committed.join(name).join("task.toml")).unwrap();
+    }
+}
