@@ -530,11 +530,7 @@ fn optimization_phase(
         if opt.iteration % 8 == 2 {
             if let Some(t) = opt.pass_times()? {
                 let (s, n) = passes.get_or_insert((PassTimes::default(), 0));
-                s.primal_ms += t.primal_ms;
-                s.loss_ms += t.loss_ms;
-                s.gradient_ms += t.gradient_ms;
-                s.merge_ms += t.merge_ms;
-                s.adam_ms += t.adam_ms;
+                s.add(&t);
                 *n += 1;
             }
         }
@@ -556,16 +552,7 @@ fn optimization_phase(
     Ok(OptimizationRun {
         ms_per_iteration: 1000.0 * seconds / iterations.max(1) as f64,
         iterations,
-        passes: passes.map(|(s, n)| {
-            let n = n as f64;
-            PassTimes {
-                primal_ms: s.primal_ms / n,
-                loss_ms: s.loss_ms / n,
-                gradient_ms: s.gradient_ms / n,
-                merge_ms: s.merge_ms / n,
-                adam_ms: s.adam_ms / n,
-            }
-        }),
+        passes: passes.map(|(s, n)| s.divided(n as f64)),
         state_bytes_per_texel: opt.state_bytes_per_texel(),
         curve,
         final_image,

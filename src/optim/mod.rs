@@ -96,6 +96,28 @@ pub struct PassTimes {
     pub adam_ms: f64,
 }
 
+impl PassTimes {
+    /// Add `other` pass by pass.
+    pub fn add(&mut self, other: &PassTimes) {
+        self.primal_ms += other.primal_ms;
+        self.loss_ms += other.loss_ms;
+        self.gradient_ms += other.gradient_ms;
+        self.merge_ms += other.merge_ms;
+        self.adam_ms += other.adam_ms;
+    }
+
+    /// Every pass divided by `n` (the mean of `n` added iterations).
+    pub fn divided(&self, n: f64) -> PassTimes {
+        PassTimes {
+            primal_ms: self.primal_ms / n,
+            loss_ms: self.loss_ms / n,
+            gradient_ms: self.gradient_ms / n,
+            merge_ms: self.merge_ms / n,
+            adam_ms: self.adam_ms / n,
+        }
+    }
+}
+
 /// Timestamp queries: one begin/end pair per pass of an iteration.
 struct Timing {
     queries: wgpu::QuerySet,

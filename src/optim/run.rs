@@ -407,12 +407,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
             None
         } {
             timed += 1;
-            let s = pass_sum.get_or_insert_with(PassTimes::default);
-            s.primal_ms += t.primal_ms;
-            s.loss_ms += t.loss_ms;
-            s.gradient_ms += t.gradient_ms;
-            s.merge_ms += t.merge_ms;
-            s.adam_ms += t.adam_ms;
+            pass_sum.get_or_insert_with(PassTimes::default).add(&t);
         }
         let elapsed = elapsed_before + session_start.elapsed().as_secs_f64();
         let texture_rmse = match &prep.reference {
@@ -467,16 +462,9 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         },
         out,
         faults,
-        pass_times: pass_sum.filter(|_| timed > 0).map(|s| {
-            let n = timed as f64;
-            PassTimes {
-                primal_ms: s.primal_ms / n,
-                loss_ms: s.loss_ms / n,
-                gradient_ms: s.gradient_ms / n,
-                merge_ms: s.merge_ms / n,
-                adam_ms: s.adam_ms / n,
-            }
-        }),
+        pass_times: pass_sum
+            .filter(|_| timed > 0)
+            .map(|s| s.divided(timed as f64)),
     })
 }
 

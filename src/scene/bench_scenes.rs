@@ -58,7 +58,24 @@ fn write_png(dir: &Path, name: &str, rgba: &[[u8; 4]]) -> Result<()> {
     write_atomic(&dir.join(name), &png_bytes(TEX, TEX, rgba)?)
 }
 
-fn write_task(dir: &Path, text: &str) -> Result<()> {
+/// Target and optimizer settings shared by every benchmark task.
+const TASK_COMMON: &str = r#"
+[target]
+scene = "scene.gltf"
+spp = 256
+
+[optimizer]
+time_budget_s = 60
+primal_spp = 2
+gradient_spp = 1
+loss = "l2"
+filter = "bilinear"
+checkpoint_every = 50
+"#;
+
+/// `task.toml`: the scene-specific head, the shared settings, then the textures.
+fn write_task(dir: &Path, head: &str, textures: &str) -> Result<()> {
+    let text = format!("{head}{TASK_COMMON}{textures}");
     write_atomic(&dir.join("task.toml"), text.as_bytes())
 }
 
@@ -196,19 +213,8 @@ width = 128
 height = 128
 seed = 11
 output = "out/bench/vase"
-
-[target]
-scene = "scene.gltf"
-spp = 256
-
-[optimizer]
-time_budget_s = 60
-primal_spp = 2
-gradient_spp = 1
-loss = "l2"
-filter = "bilinear"
-checkpoint_every = 50
-
+"#,
+        r#"
 [[textures]]
 material = "vase"
 slot = "roughness"
@@ -324,19 +330,8 @@ width = 128
 height = 128
 seed = 12
 output = "out/bench/lattice"
-
-[target]
-scene = "scene.gltf"
-spp = 256
-
-[optimizer]
-time_budget_s = 60
-primal_spp = 2
-gradient_spp = 1
-loss = "l2"
-filter = "bilinear"
-checkpoint_every = 50
-
+"#,
+        r#"
 [[textures]]
 material = "wall"
 slot = "base_color"
@@ -447,19 +442,8 @@ width = 128
 height = 128
 seed = 13
 output = "out/bench/dish"
-
-[target]
-scene = "scene.gltf"
-spp = 256
-
-[optimizer]
-time_budget_s = 60
-primal_spp = 2
-gradient_spp = 1
-loss = "l2"
-filter = "bilinear"
-checkpoint_every = 50
-
+"#,
+        r#"
 [[textures]]
 material = "dish"
 slot = "metallic"
@@ -556,19 +540,8 @@ width = 128
 height = 128
 seed = 14
 output = "out/bench/sphere"
-
-[target]
-scene = "scene.gltf"
-spp = 256
-
-[optimizer]
-time_budget_s = 60
-primal_spp = 2
-gradient_spp = 1
-loss = "l2"
-filter = "bilinear"
-checkpoint_every = 50
-
+"#,
+        r#"
 [[textures]]
 material = "sphere"
 slot = "base_color"
