@@ -573,6 +573,13 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
             o.scale
         )));
     }
+    if o.eval_spp == 0 || o.reference_spp == 0 || o.eval_spp > 1 << 16 {
+        return Err(Error::Invalid(format!(
+            "bench: --eval-spp ({}) and --reference-spp ({}) must be at least 1 (eval at most \
+             65536)",
+            o.eval_spp, o.reference_spp
+        )));
+    }
     // Load every task first, so that a bad one fails before hours of measuring.
     let mut loaded = Vec::new();
     for p in tasks {
