@@ -189,7 +189,8 @@ fn killed_run_resumes_from_its_checkpoint() {
         }
         child.wait().unwrap();
         // A kill during a write may leave a temporary file (the next run removes it), but
-        // the files under their real names are whole: the checkpoint loads, metrics parse.: the checkpoint loads and the metrics parse.
+        // the files under their real names are whole: the checkpoint loads and the metrics
+        // parse.
         psrestir::optim::checkpoint::Checkpoint::load(&ckpt).unwrap();
         metrics(&b);
     }
@@ -204,6 +205,18 @@ fn killed_run_resumes_from_its_checkpoint() {
         (1..=iterations as u32).collect::<Vec<_>>(),
         "metrics have a gap or a repeat"
     );
+    // Each resumed process starts from the textures of the last checkpoint: the RMSE never
+    // jumps between consecutive iterations (one Adam step moves it by at most 0.025 in these
+    // runs; starting again from the initial gray would jump by 0.09 or more after iteration 5).
+    for w in rows.windows(2) {
+        assert!(
+            (w[1].1 - w[0].1).abs() < 0.05,
+            "texture RMSE jumps from {} to {} at iteration {}",
+            w[0].1,
+            w[1].1,
+            w[1].0
+        );
+    }
     no_temporaries(&b);
     for f in [
         "optimized.glb",
@@ -215,14 +228,23 @@ fn killed_run_resumes_from_its_checkpoint() {
         assert!(b.join(f).exists(), "{f} missing");
     }
     psrestir::scene::load(&b.join("optimized.glb")).unwrap();
-    // Same quality as the uninterrupted run: both recover the texture well, and the final
-    // errors agree (float atomics make runs differ in the last bits, not in quality).
-    let (ra, rb) = (ref_rows.last().unwrap().1, rows.last().unwrap().1);
+    // Same quality as the uninterrupted run. The runs are not bit-identical (the order of
+    // float atomics and reservoir locks varies), and with a constant learning rate the RMSE of
+    // the 16 texels jitters between 0.004 and 0.04 over the last iterations, so the final value
+    // of one run says little. The median over the last 100 iterations is steady: 0.0070 to
+    // 0.0109 over five uninterrupted runs. Both must be far below the start and within a
+    // factor 2 of each other.
+    let median_tail = |rows: &[(u32, f64)]| {
+        let mut v: Vec<f64> = rows[rows.len() - 100..].iter().map(|r| r.1).collect();
+        v.sort_by(f64::total_cmp);
+        v[50]
+    };
+    let (ra, rb) = (median_tail(&ref_rows), median_tail(&rows));
     let r0 = ref_rows[0].1;
-    eprintln!("texture RMSE: first {r0:.4}, uninterrupted {ra:.4}, resumed {rb:.4}");
-    assert!(ra < r0 / 3.0 && rb < r0 / 3.0);
+    eprintln!("texture RMSE: first {r0:.4}, median of the last 100: uninterrupted {ra:.4}, resumed {rb:.4}");
+    assert!(ra < r0 / 10.0 && rb < r0 / 10.0, "{ra} {rb} vs {r0}");
     assert!(
-        (ra - rb).abs() <= 0.25 * ra + 0.005,
-        "resumed run ends at {rb}, uninterrupted at {ra}"
+        ra.max(rb) <= 2.0 * ra.min(rb),
+        "resumed run settles at {rb}, uninterrupted at {ra}"
     );
 }

@@ -1,11 +1,14 @@
 //! Checkpoints: everything needed to continue a run exactly where it stopped (iteration,
-//! elapsed time, textures, Adam moments, the metrics so far; the random numbers are a pure
-//! function of seed and iteration). Written atomically: a temporary file, then a rename.
+//! elapsed time, textures, Adam moments, the ReSTIR reservoirs with the textures they were
+//! drawn at, the metrics so far; the random numbers are a pure function of seed and
+//! iteration, so the iteration is the RNG state). Written atomically: a temporary file, then a
+//! rename.
+use super::{OptimizerState, RestirSnapshot};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-const MAGIC: &[u8; 8] = b"PSRCKPT1";
+const MAGIC: &[u8; 8] = b"PSRCKPT2";
 
 /// One row of metrics.csv.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -23,16 +26,27 @@ pub struct MetricRow {
 /// Small fields, stored as a JSON header.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Header {
-    /// Iterations done.
-    pub iteration: u32,
     /// Optimization time so far.
     pub elapsed_s: f64,
     /// What the textures are (names and sizes); a resume must match it.
     pub layout: String,
-    /// Number of floats in each array.
-    pub n_params: usize,
     /// Metrics so far.
     pub metrics: Vec<MetricRow>,
+}
+
+/// Sizes and flags of the binary part, stored in the file's header.
+#[derive(Serialize, Deserialize)]
+struct Stored {
+    #[serde(flatten)]
+    header: Header,
+    iteration: u32,
+    n_params: usize,
+    /// Words of ReSTIR reservoirs; absent for the baseline.
+    reservoir_words: Option<usize>,
+    /// Floats of the previous adjoint images (ReSTIR only).
+    #[serde(default)]
+    adjoint_floats: usize,
+    have_prev: bool,
 }
 
 /// A whole checkpoint.
@@ -40,25 +54,43 @@ pub struct Header {
 pub struct Checkpoint {
     /// Header.
     pub header: Header,
-    /// Texture values.
-    pub params: Vec<f32>,
-    /// Adam first moments.
-    pub m1: Vec<f32>,
-    /// Adam second moments.
-    pub m2: Vec<f32>,
+    /// The optimizer's state.
+    pub state: OptimizerState,
 }
 
 impl Checkpoint {
     /// Write atomically.
     pub fn save(&self, path: &Path) -> Result<()> {
-        let header =
-            serde_json::to_vec(&self.header).map_err(|e| Error::file(path, e.to_string()))?;
-        let mut out = Vec::with_capacity(16 + header.len() + 12 * self.params.len());
+        let st = &self.state;
+        let stored = Stored {
+            header: self.header.clone(),
+            iteration: st.iteration,
+            n_params: st.params.len(),
+            reservoir_words: st.restir.as_ref().map(|r| r.reservoirs.len()),
+            adjoint_floats: st.restir.as_ref().map_or(0, |r| r.adjoint_prev.len()),
+            have_prev: st.restir.as_ref().is_some_and(|r| r.have_prev),
+        };
+        if st.m1.len() != st.params.len()
+            || st.m2.len() != st.params.len()
+            || st
+                .restir
+                .as_ref()
+                .is_some_and(|r| r.params_prev.len() != st.params.len())
+        {
+            return Err(Error::file(path, "checkpoint arrays differ in length"));
+        }
+        let header = serde_json::to_vec(&stored).map_err(|e| Error::file(path, e.to_string()))?;
+        let mut out = Vec::with_capacity(16 + header.len() + 16 * st.params.len());
         out.extend_from_slice(MAGIC);
         out.extend_from_slice(&(header.len() as u64).to_le_bytes());
         out.extend_from_slice(&header);
-        for a in [&self.params, &self.m1, &self.m2] {
+        for a in [&st.params, &st.m1, &st.m2] {
             out.extend_from_slice(bytemuck::cast_slice(a));
+        }
+        if let Some(r) = &st.restir {
+            out.extend_from_slice(bytemuck::cast_slice(&r.params_prev));
+            out.extend_from_slice(bytemuck::cast_slice(&r.adjoint_prev));
+            out.extend_from_slice(bytemuck::cast_slice(&r.reservoirs));
         }
         crate::image_io::write_atomic(path, &out)
     }
@@ -68,27 +100,51 @@ impl Checkpoint {
         let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
         let bad = |m: &str| Error::file(path, format!("not a psrestir checkpoint: {m}"));
         if bytes.len() < 16 || &bytes[..8] != MAGIC {
-            return Err(bad("wrong magic"));
+            return Err(bad(
+                "wrong magic (a checkpoint of an older psrestir cannot be resumed)",
+            ));
         }
-        let hlen = u64::from_le_bytes(bytes[8..16].try_into().map_err(|_| bad("short"))?) as usize;
-        let hend = 16usize
-            .checked_add(hlen)
+        let hlen = u64::from_le_bytes(bytes[8..16].try_into().map_err(|_| bad("short"))?);
+        let hend = usize::try_from(hlen)
+            .ok()
+            .and_then(|h| h.checked_add(16))
             .filter(|&e| e <= bytes.len())
             .ok_or_else(|| bad("truncated header"))?;
-        let header: Header =
+        let stored: Stored =
             serde_json::from_slice(&bytes[16..hend]).map_err(|e| bad(&e.to_string()))?;
-        let n = header.n_params;
-        if bytes.len() != hend + 12 * n {
+        let n = stored.n_params;
+        let arrays = if stored.reservoir_words.is_some() {
+            4
+        } else {
+            3
+        };
+        let words = n
+            .checked_mul(arrays)
+            .and_then(|w| w.checked_add(stored.reservoir_words.unwrap_or(0)))
+            .and_then(|w| w.checked_add(stored.adjoint_floats));
+        if words.and_then(|w| w.checked_mul(4)) != Some(bytes.len() - hend) {
             return Err(bad("truncated data"));
         }
-        let arr = |k: usize| -> Vec<f32> {
-            bytemuck::pod_collect_to_vec(&bytes[hend + 4 * n * k..hend + 4 * n * (k + 1)])
+        let data = &bytes[hend..];
+        let floats = |k: usize| -> Vec<f32> {
+            bytemuck::pod_collect_to_vec(&data[4 * n * k..4 * n * (k + 1)])
         };
+        let adjoint_end = 16 * n + 4 * stored.adjoint_floats;
+        let restir = stored.reservoir_words.map(|_| RestirSnapshot {
+            params_prev: floats(3),
+            adjoint_prev: bytemuck::pod_collect_to_vec(&data[16 * n..adjoint_end]),
+            reservoirs: bytemuck::pod_collect_to_vec(&data[adjoint_end..]),
+            have_prev: stored.have_prev,
+        });
         Ok(Checkpoint {
-            params: arr(0),
-            m1: arr(1),
-            m2: arr(2),
-            header,
+            header: stored.header,
+            state: OptimizerState {
+                iteration: stored.iteration,
+                params: floats(0),
+                m1: floats(1),
+                m2: floats(2),
+                restir,
+            },
         })
     }
 }
@@ -103,10 +159,8 @@ mod tests {
         let p = dir.path().join("c.bin");
         let c = Checkpoint {
             header: Header {
-                iteration: 7,
                 elapsed_s: 1.5,
                 layout: "x".into(),
-                n_params: 3,
                 metrics: vec![MetricRow {
                     iteration: 1,
                     elapsed_s: 0.1,
@@ -114,10 +168,24 @@ mod tests {
                     texture_rmse: None,
                 }],
             },
-            params: vec![1.0, 2.0, 3.0],
-            m1: vec![0.1; 3],
-            m2: vec![0.2; 3],
+            state: OptimizerState {
+                iteration: 7,
+                params: vec![1.0, 2.0, 3.0],
+                m1: vec![0.1; 3],
+                m2: vec![0.2; 3],
+                restir: Some(RestirSnapshot {
+                    reservoirs: (0..24).collect(),
+                    params_prev: vec![0.9, 1.9, 2.9],
+                    adjoint_prev: vec![0.5; 8],
+                    have_prev: true,
+                }),
+            },
         };
+        // Without reservoirs (the baseline) as well.
+        let mut base = c.clone();
+        base.state.restir = None;
+        base.save(&p).unwrap();
+        assert_eq!(Checkpoint::load(&p).unwrap(), base);
         c.save(&p).unwrap();
         assert_eq!(Checkpoint::load(&p).unwrap(), c);
         let bytes = std::fs::read(&p).unwrap();

@@ -143,6 +143,35 @@ pub struct FaultCounts {
     pub dropped_replays: u32,
 }
 
+/// The state of an optimizer between iterations, on the CPU (see [`Optimizer::state`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct OptimizerState {
+    /// Iterations done.
+    pub iteration: u32,
+    /// Texture values, laid out like [`ParamSet::values`].
+    pub params: Vec<f32>,
+    /// Adam first moments.
+    pub m1: Vec<f32>,
+    /// Adam second moments.
+    pub m2: Vec<f32>,
+    /// The ReSTIR estimator's state; `None` for the baseline.
+    pub restir: Option<RestirSnapshot>,
+}
+
+/// The part of a ReSTIR optimizer's state that carries over to the next iteration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RestirSnapshot {
+    /// The reservoirs kept from the last iteration (two per texel, 12 words each).
+    pub reservoirs: Vec<u32>,
+    /// The textures at which the kept reservoirs were drawn.
+    pub params_prev: Vec<f32>,
+    /// The adjoint images (RGBA per pixel, cameras one after another) of the last iteration,
+    /// at which the kept samples' targets were evaluated.
+    pub adjoint_prev: Vec<f32>,
+    /// Whether the kept reservoirs are to be reused (false before the first iteration).
+    pub have_prev: bool,
+}
+
 /// GPU state of the ReSTIR estimator.
 struct RestirState {
     candidate_pipeline: wgpu::ComputePipeline,
@@ -156,6 +185,8 @@ struct RestirState {
     merge_grid: (u32, u32),
     /// [candidate stats, merge stats]
     stats: [wgpu::Buffer; 2],
+    /// The adjoint buffers (shared with the loss pass): the merge reads the previous one.
+    adjoint: [wgpu::Buffer; 2],
     /// Whether the kept reservoirs hold the previous iteration's samples.
     have_prev: bool,
 }
@@ -329,6 +360,7 @@ impl Optimizer {
                     merge_groups,
                     merge_grid,
                     stats: rstats,
+                    adjoint: adjoint.clone(),
                     have_prev: false,
                 },
             ))
@@ -789,6 +821,70 @@ impl Optimizer {
             self.gpu.queue.write_buffer(buf, 0, bytemuck::cast_slice(v));
         }
         self.gpu.check("write moments")
+    }
+
+    /// Everything a later run needs to continue exactly where this one stands: iteration,
+    /// textures, Adam moments and, for ReSTIR, the kept reservoirs with the textures they were
+    /// drawn at. Restore it with [`Optimizer::restore`].
+    pub fn state(&self) -> Result<OptimizerState> {
+        let [m1, m2] = self.read_moments()?;
+        let restir = match &self.restir {
+            None => None,
+            Some(st) => {
+                let last = (self.iteration as usize + 1) % 2;
+                let kept = &st.reservoirs[last];
+                let mut params_prev: Vec<f32> =
+                    self.gpu.read_pod(&self.renderer.scene.params_prev)?;
+                params_prev.truncate(self.set.values.len());
+                Some(RestirSnapshot {
+                    reservoirs: self.gpu.read_pod(kept)?,
+                    adjoint_prev: self.gpu.read_pod(&st.adjoint[last])?,
+                    params_prev,
+                    have_prev: st.have_prev,
+                })
+            }
+        };
+        Ok(OptimizerState {
+            iteration: self.iteration,
+            params: self.read_params()?,
+            m1,
+            m2,
+            restir,
+        })
+    }
+
+    /// Continue from a state taken with [`Optimizer::state`] of an optimizer made with the same
+    /// scene, textures and estimator. A state without reservoirs restores a ReSTIR optimizer
+    /// with empty ones (its next iteration starts afresh, as the first does).
+    pub fn restore(&mut self, state: &OptimizerState) -> Result<()> {
+        self.write_params(&state.params)?;
+        self.write_moments(&[state.m1.clone(), state.m2.clone()])?;
+        if let Some(st) = &mut self.restir {
+            let last = (state.iteration as usize + 1) % 2;
+            let kept = &st.reservoirs[last];
+            match &state.restir {
+                Some(r) => {
+                    if r.reservoirs.len() as u64 * 4 != kept.size()
+                        || r.adjoint_prev.len() as u64 * 4 != st.adjoint[last].size()
+                        || r.params_prev.len() != self.set.values.len()
+                    {
+                        return Err(Error::Invalid(
+                            "the saved ReSTIR state does not match this optimizer's textures and images".into(),
+                        ));
+                    }
+                    let q = &self.gpu.queue;
+                    q.write_buffer(kept, 0, bytemuck::cast_slice(&r.reservoirs));
+                    let adjoint = &st.adjoint[last];
+                    q.write_buffer(adjoint, 0, bytemuck::cast_slice(&r.adjoint_prev));
+                    let prev = &self.renderer.scene.params_prev;
+                    q.write_buffer(prev, 0, bytemuck::cast_slice(&r.params_prev));
+                    st.have_prev = r.have_prev && self.settings.restir.temporal;
+                }
+                None => st.have_prev = false,
+            }
+        }
+        self.iteration = state.iteration;
+        self.gpu.check("restore optimizer state")
     }
 
     /// Bytes of GPU memory the optimizer keeps per optimized texel: the textures (current and

@@ -318,7 +318,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     let mut rows: Vec<MetricRow> = Vec::new();
     let mut elapsed_before = 0.0;
     if let Some(c) = checkpoint {
-        if c.header.layout != layout || c.header.n_params != prep.set.values.len() {
+        if c.header.layout != layout || c.state.params.len() != prep.set.values.len() {
             return Err(Error::file(
                 &ckpt_path,
                 format!(
@@ -327,9 +327,13 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
                 ),
             ));
         }
-        opt.write_params(&c.params)?;
-        opt.write_moments(&[c.m1, c.m2])?;
-        opt.iteration = c.header.iteration;
+        if c.state.restir.is_some() != (opt.settings().method == super::Method::Restir) {
+            return Err(Error::file(
+                &ckpt_path,
+                "the checkpoint was written by the other gradient estimator (baseline vs ReSTIR); resume with the same --method",
+            ));
+        }
+        opt.restore(&c.state)?;
         elapsed_before = c.header.elapsed_s;
         rows = c.header.metrics;
         rows.retain(|r| r.iteration <= opt.iteration);
@@ -342,18 +346,13 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     let max_iter = opts.iterations.or(task.optimizer.iterations);
     let budget = opts.time_budget_s.or(task.optimizer.time_budget_s);
     let save_checkpoint = |opt: &Optimizer, rows: &[MetricRow], elapsed: f64| -> Result<()> {
-        let [m1, m2] = opt.read_moments()?;
         Checkpoint {
             header: Header {
-                iteration: opt.iteration,
                 elapsed_s: elapsed,
                 layout: layout.clone(),
-                n_params: m1.len(),
                 metrics: rows.to_vec(),
             },
-            params: opt.read_params()?,
-            m1,
-            m2,
+            state: opt.state()?,
         }
         .save(&ckpt_path)?;
         write_metrics(&out.join("metrics.csv"), rows)
