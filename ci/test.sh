@@ -9,3 +9,5 @@ else
     echo "ci/test.sh: rustfmt not installed, format check skipped"
 fi
 cargo test --all-targets
+# Doc examples (not part of --all-targets).
+cargo test --doc

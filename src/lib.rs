@@ -1,8 +1,66 @@
 //! psrestir: inverse texture optimization on wgpu with parameter-space ReSTIR gradients.
 //!
-//! This crate holds the engine behind the `psrestir` binary: headless device creation
-//! ([`gpu`]), glTF scene loading and the BVH ([`scene`]), and the direct-lighting renderer
-//! ([`render`]), all GPU work being WGSL compute shaders under `shaders/`.
+//! psrestir recovers material textures (base color, roughness, metallic) of a scene whose
+//! geometry, lights and cameras are known, from target images, by gradient descent (Adam).
+//! Its gradient estimator reuses Monte Carlo samples across iterations through two
+//! reservoirs per texel (parameter-space ReSTIR); the plain Monte Carlo estimator is there
+//! as the baseline. All GPU work is WGSL compute shaders on [`wgpu`].
+//!
+//! # Use from a wgpu application
+//! The application keeps its device and queue; psrestir checks their limits and works on
+//! them ([`Gpu::from_device`]). A problem is a [`Scene`] (loaded with [`scene::load`] or
+//! built in code), the cameras to render, the textures to recover ([`TextureSpec`]) and one
+//! target image per camera ([`Problem`]). An [`Optimizer`] steps it, runs it for a number of
+//! iterations or a time budget ([`Optimizer::run`]), renders the current state, estimates
+//! gradients, and hands the textures over as a `wgpu::Buffer`
+//! ([`Optimizer::params_buffer`]), a `wgpu::Texture` ([`Optimizer::create_texture`]) or
+//! CPU values ([`Optimizer::texture_values`]). Every fallible call returns [`Error`].
+//!
+//! ```no_run
+//! use psrestir::glam::Vec3;
+//! use psrestir::scene::{Camera, Material, PunctualLight, Triangle};
+//! use psrestir::{Gpu, Init, Optimizer, Problem, Scene, Settings, Slot, Stop, TextureSpec};
+//! use std::ops::ControlFlow;
+//!
+//! # fn main() -> psrestir::Result<()> {
+//! // A gray plane under a point light, seen from above.
+//! let plane = Material { name: "plane".into(), metallic: 0.0, roughness: 0.6, ..Default::default() };
+//! let mut scene = Scene { materials: vec![plane], ..Default::default() };
+//! scene.triangles.extend(Triangle::quad(Vec3::new(-1.0, 0.0, 1.0), 2.0 * Vec3::X, -2.0 * Vec3::Z, 0));
+//! scene.cameras.push(Camera::look_at("top", Vec3::new(0.0, 2.5, 0.0), Vec3::ZERO, Vec3::NEG_Z, 0.8));
+//! scene.lights.push(PunctualLight::point("lamp", Vec3::new(0.3, 2.0, 0.4), Vec3::splat(6.0)));
+//!
+//! // Recover an 8x8 base color texture from one 64x64 photo (here: a render of the truth).
+//! let texture = TextureSpec {
+//!     material: "plane".into(),
+//!     slot: Slot::BaseColor,
+//!     resolution: [8, 8],
+//!     init: Init::Vector(vec![0.5; 3]),
+//!     learning_rate: 0.03,
+//! };
+//! let mut problem = Problem::new(scene.clone(), vec![0], &[texture], Default::default())?;
+//! let mut truth = scene;
+//! truth.materials[0].base_color = psrestir::glam::Vec4::new(0.8, 0.3, 0.1, 1.0);
+//! let gpu = Gpu::new()?; // or Gpu::from_device(device, queue, adapter.get_info())?
+//! problem.render_targets(&gpu, truth, 64, 64, 256, 1)?;
+//!
+//! let mut opt = Optimizer::for_problem(&gpu, &problem, Settings::new(64, 64, vec![0]))?;
+//! opt.run(Stop::iterations(100), |p| {
+//!     if p.iteration % 25 == 0 {
+//!         println!("iteration {}: loss {:.3e}", p.iteration, p.loss);
+//!     }
+//!     ControlFlow::Continue(())
+//! })?;
+//! let base_color: Vec<f32> = opt.texture_values(0)?; // 8 x 8 x RGB
+//! let on_gpu: psrestir::wgpu::Texture = opt.create_texture(0)?; // Rgba32Float, bindable
+//! # Ok(())
+//! # }
+//! ```
+//!
+//! The `psrestir` binary is built on the same API: task files ([`Task`]) are turned into
+//! problems with [`Problem::from_task`], and [`optim::run::run`] adds progress, metrics,
+//! checkpoints and outputs. `examples/` holds two complete programs.
+#![warn(missing_docs)]
 
 pub mod bench;
 pub mod error;
@@ -14,3 +72,15 @@ pub mod scene;
 pub mod task;
 
 pub use error::{Error, Result};
+pub use gpu::Gpu;
+pub use image_io::Image;
+pub use optim::{
+    Method, Optimizer, OptimizerState, Problem, Progress, RestirOptions, Settings, Stop,
+};
+pub use scene::Scene;
+pub use task::{Filter, Init, Loss, Slot, Task, TextureSpec};
+
+/// The glam version of psrestir's vector types (scenes built in code use it).
+pub use glam;
+/// The wgpu version psrestir works with (an application's device must come from it).
+pub use wgpu;

@@ -223,6 +223,50 @@ fn unit() -> f32 {
     1.0
 }
 
+/// Check one texture to optimize, listed after `earlier`: on failure, the key at fault
+/// (`resolution`, `init`, `learning_rate` or `slot`) and what is wrong.
+pub fn check_texture(
+    tex: &TextureSpec,
+    earlier: &[TextureSpec],
+) -> std::result::Result<(), (&'static str, String)> {
+    let [w, h] = tex.resolution;
+    if !(1..=4096).contains(&w) || !(1..=4096).contains(&h) {
+        return Err(("resolution", "each side must be between 1 and 4096".into()));
+    }
+    let init = tex.init_values();
+    if init.len() != tex.slot.channels() as usize {
+        return Err((
+            "init",
+            format!(
+                "{} takes {} value(s), got {}",
+                tex.slot.name(),
+                tex.slot.channels(),
+                init.len()
+            ),
+        ));
+    }
+    let (lo, hi) = tex.slot.range();
+    if init
+        .iter()
+        .any(|v| !(v.is_finite() && *v >= lo && *v <= hi))
+    {
+        return Err(("init", format!("values must lie in [{lo}, {hi}]")));
+    }
+    if !(tex.learning_rate.is_finite() && tex.learning_rate >= 0.0) {
+        return Err(("learning_rate", "must be a finite number >= 0".into()));
+    }
+    if earlier
+        .iter()
+        .any(|o| o.material == tex.material && o.slot == tex.slot)
+    {
+        return Err((
+            "slot",
+            format!("{} of `{}` is listed twice", tex.slot.name(), tex.material),
+        ));
+    }
+    Ok(())
+}
+
 impl Task {
     /// Read and check a task file.
     pub fn load(path: &Path) -> Result<Task> {
@@ -291,42 +335,8 @@ impl Task {
             return Err(self.bad("textures", "name at least one texture to optimize"));
         }
         for (i, tex) in self.textures.iter().enumerate() {
-            let key = |k: &str| format!("textures[{i}].{k}");
-            let [w, h] = tex.resolution;
-            if !(1..=4096).contains(&w) || !(1..=4096).contains(&h) {
-                return Err(self.bad(&key("resolution"), "each side must be between 1 and 4096"));
-            }
-            let init = tex.init_values();
-            if init.len() != tex.slot.channels() as usize {
-                return Err(self.bad(
-                    &key("init"),
-                    format!(
-                        "{} takes {} value(s), got {}",
-                        tex.slot.name(),
-                        tex.slot.channels(),
-                        init.len()
-                    ),
-                ));
-            }
-            let (lo, hi) = tex.slot.range();
-            if init
-                .iter()
-                .any(|v| !(v.is_finite() && *v >= lo && *v <= hi))
-            {
-                return Err(self.bad(&key("init"), format!("values must lie in [{lo}, {hi}]")));
-            }
-            if !(tex.learning_rate.is_finite() && tex.learning_rate >= 0.0) {
-                return Err(self.bad(&key("learning_rate"), "must be a finite number >= 0"));
-            }
-            if self.textures[..i]
-                .iter()
-                .any(|o| o.material == tex.material && o.slot == tex.slot)
-            {
-                return Err(self.bad(
-                    &key("slot"),
-                    format!("{} of `{}` is listed twice", tex.slot.name(), tex.material),
-                ));
-            }
+            check_texture(tex, &self.textures[..i])
+                .map_err(|(key, msg)| self.bad(&format!("textures[{i}].{key}"), msg))?;
         }
         Ok(())
     }

@@ -392,7 +392,7 @@ fn restir_beats_the_baseline_on_the_default_task() {
     task.target.spp = 128;
     let iterations = 60;
     let dir = tempfile::tempdir().unwrap();
-    let prep = psrestir::optim::run::prepare(&gpu, &task, dir.path(), false).unwrap();
+    let prep = psrestir::optim::Problem::from_task(&gpu, &task, dir.path(), false).unwrap();
     let truth = prep.reference.clone().unwrap();
     let mut final_rmse = [0f64; 2];
     let seeds = [1u32, 2, 3];

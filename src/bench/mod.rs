@@ -15,7 +15,8 @@ pub mod report;
 
 use crate::gpu::Gpu;
 use crate::image_io::Image;
-use crate::optim::run::{prepare, rmse, task_settings, Prepared};
+use crate::optim::run::{rmse, task_settings};
+use crate::optim::Problem;
 use crate::optim::{pass_seed, Method, Optimizer, PassTimes, RestirOptions, Settings};
 use crate::task::Task;
 use crate::{Error, Result};
@@ -293,7 +294,7 @@ impl Progress {
     }
 }
 
-fn settings(prep: &Prepared, task: &Task, method: Method, o: &BenchOptions) -> Settings {
+fn settings(prep: &Problem, task: &Task, method: Method, o: &BenchOptions) -> Settings {
     task_settings(task, &prep.cameras, method, o.restir)
 }
 
@@ -320,7 +321,7 @@ struct GradientPhase {
 fn gradient_phase(
     gpu: &Gpu,
     task: &Task,
-    prep: &Prepared,
+    prep: &Problem,
     o: &BenchOptions,
     progress: &Progress,
 ) -> Result<GradientPhase> {
@@ -454,7 +455,7 @@ fn gradient_phase(
 
 /// Image relMSE of the current textures, mean over the task's cameras, and the render of
 /// the first camera.
-fn evaluate(opt: &Optimizer, prep: &Prepared, task: &Task, spp: u32) -> Result<(f64, Image)> {
+fn evaluate(opt: &Optimizer, prep: &Problem, task: &Task, spp: u32) -> Result<(f64, Image)> {
     let mut sum = 0.0;
     let mut first = None;
     for (k, target) in prep.targets.iter().enumerate() {
@@ -482,7 +483,7 @@ struct OptimizationRun {
 fn optimization_phase(
     gpu: &Gpu,
     task: &Task,
-    prep: &Prepared,
+    prep: &Problem,
     o: &BenchOptions,
     method: Method,
     progress: &Progress,
@@ -610,7 +611,7 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
             b.set_prefix(name.clone());
         }
         progress.message(format!("{name}: rendering targets"));
-        let prep = prepare(gpu, task, &dir, false)?;
+        let prep = Problem::from_task(gpu, task, &dir, false)?;
         progress.done();
         let g = gradient_phase(gpu, task, &prep, o, &progress)?;
         let init = Optimizer::new(

@@ -3,7 +3,8 @@
 use super::{BenchReport, CurvePoint, FinalImages, GradientSnapshot, SceneResult};
 use crate::image_io::{write_atomic, write_atomic_with};
 use crate::optim::plot::{plot, text, Panel, Series};
-use crate::optim::run::{false_color, gradient_scalars, Prepared};
+use crate::optim::run::{false_color, gradient_scalars};
+use crate::optim::Problem;
 use crate::{Error, Result};
 use image::{Rgb, RgbImage};
 use std::fmt::Write as _;
@@ -55,7 +56,7 @@ fn srgb(img: &crate::image_io::Image) -> RgbImage {
 
 /// Signed false color of one texture's gradient, at a shared scale; small textures are
 /// enlarged so that every tile is at least 192 pixels wide.
-fn gradient_tile(prep: &Prepared, g: &[f32], i: usize, scale: f32) -> RgbImage {
+fn gradient_tile(prep: &Problem, g: &[f32], i: usize, scale: f32) -> RgbImage {
     let t = &prep.set.textures[i];
     let v = gradient_scalars(&prep.set, g, i);
     let bytes: Vec<u8> = v.iter().flat_map(|&x| false_color(x / scale)).collect();
@@ -76,7 +77,7 @@ fn gradient_tile(prep: &Prepared, g: &[f32], i: usize, scale: f32) -> RgbImage {
 /// The per-scene files: `error_vs_time.png`, `gradients.png`, `final.png`.
 pub fn write_scene_files(
     dir: &Path,
-    prep: &Prepared,
+    prep: &Problem,
     r: &SceneResult,
     g: &GradientSnapshot,
     finals: &FinalImages,

@@ -38,6 +38,42 @@ impl std::fmt::Debug for Gpu {
     }
 }
 
+/// Each limit below what psrestir needs, as "name is X, psrestir needs Y".
+fn limit_shortfalls(limits: &wgpu::Limits) -> Vec<String> {
+    let need = [
+        (
+            "max_storage_buffers_per_shader_stage",
+            limits.max_storage_buffers_per_shader_stage,
+            REQUIRED_STORAGE_BUFFERS,
+        ),
+        (
+            "max_storage_textures_per_shader_stage",
+            limits.max_storage_textures_per_shader_stage,
+            1,
+        ),
+        ("max_bind_groups", limits.max_bind_groups, 2),
+        (
+            "max_compute_invocations_per_workgroup",
+            limits.max_compute_invocations_per_workgroup,
+            64,
+        ),
+        (
+            "max_compute_workgroup_size_x",
+            limits.max_compute_workgroup_size_x,
+            64,
+        ),
+        (
+            "max_compute_workgroups_per_dimension",
+            limits.max_compute_workgroups_per_dimension,
+            1024,
+        ),
+    ];
+    need.iter()
+        .filter(|(_, have, want)| have < want)
+        .map(|(name, have, want)| format!("{name} is {have}, psrestir needs {want}"))
+        .collect()
+}
+
 fn backends() -> wgpu::Backends {
     if let Ok(s) = std::env::var("WGPU_BACKEND") {
         return wgpu::Backends::from_comma_list(&s);
@@ -81,18 +117,20 @@ impl Gpu {
             })
             .await
             .map_err(|e| Error::Unsuitable(format!("{}: {e}", info.name)))?;
-        let gpu = Gpu::from_device(device, queue, info);
+        let gpu = Gpu::wrap(device, queue, info);
         log::info!("GPU adapter: {}", gpu.describe());
         Ok(gpu)
     }
 
     /// The limits psrestir asks for: the defaults, raised to what the adapter offers for
-    /// buffer sizes, and enough storage buffers per stage.
+    /// buffer sizes, and enough storage buffers per stage. An application that creates the
+    /// device itself passes these (or higher) as its `required_limits`.
     pub fn required_limits(adapter: &wgpu::Limits) -> Result<wgpu::Limits> {
-        if adapter.max_storage_buffers_per_shader_stage < REQUIRED_STORAGE_BUFFERS {
+        let short = limit_shortfalls(adapter);
+        if !short.is_empty() {
             return Err(Error::Unsuitable(format!(
-                "the adapter allows {} storage buffers per shader stage, psrestir needs {}",
-                adapter.max_storage_buffers_per_shader_stage, REQUIRED_STORAGE_BUFFERS
+                "the adapter's limits are too low: {}",
+                short.join("; ")
             )));
         }
         Ok(wgpu::Limits {
@@ -104,8 +142,38 @@ impl Gpu {
         })
     }
 
-    /// Wrap a device that the application already owns.
-    pub fn from_device(device: wgpu::Device, queue: wgpu::Queue, info: wgpu::AdapterInfo) -> Gpu {
+    /// Wrap a device and queue that the application already owns, after checking that the
+    /// device was created with the limits psrestir needs (ask for
+    /// [`Gpu::required_limits`]`(&adapter.limits())` in its `DeviceDescriptor`). No feature
+    /// is required; timestamp queries are used for per-pass timings when the device has
+    /// them. The error names every limit that falls short.
+    ///
+    /// psrestir installs the device's uncaptured-error handler, which records wgpu errors so
+    /// that each call can return them as [`Error::Gpu`]; an application that installs its own
+    /// handler afterwards takes those errors over.
+    pub fn from_device(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        info: wgpu::AdapterInfo,
+    ) -> Result<Gpu> {
+        Self::check_limits(&device.limits())?;
+        Ok(Self::wrap(device, queue, info))
+    }
+
+    /// Check a device's limits against what psrestir needs; the error lists each shortfall.
+    pub fn check_limits(limits: &wgpu::Limits) -> Result<()> {
+        let short = limit_shortfalls(limits);
+        if short.is_empty() {
+            return Ok(());
+        }
+        Err(Error::Unsuitable(format!(
+            "the device's limits are too low: {}. Create the device with \
+             `required_limits: psrestir::gpu::Gpu::required_limits(&adapter.limits())?`",
+            short.join("; ")
+        )))
+    }
+
+    fn wrap(device: wgpu::Device, queue: wgpu::Queue, info: wgpu::AdapterInfo) -> Gpu {
         let errors: Arc<Mutex<Vec<String>>> = Arc::default();
         let sink = errors.clone();
         device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {

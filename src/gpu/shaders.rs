@@ -34,6 +34,7 @@ pub const SOURCES: &[(&str, &str)] = sources!(
     "reservoir_test",
     "restir_candidates",
     "restir_merge",
+    "texture_export",
 );
 
 /// The passes (top-level WGSL files with an entry point `main`).

@@ -7,6 +7,7 @@ pub mod checkpoint;
 pub mod export;
 pub mod loss;
 pub mod plot;
+pub mod problem;
 pub mod restir;
 pub mod run;
 
@@ -18,6 +19,7 @@ use crate::render::{camera_info, encode_timed_pass, Renderer, Techniques, WORKGR
 use crate::scene::Scene;
 use crate::task::Loss;
 use crate::{Error, Result};
+pub use problem::Problem;
 pub use restir::{Method, RestirOptions};
 
 /// How each iteration samples.
@@ -41,6 +43,64 @@ pub struct Settings {
     pub method: Method,
     /// ReSTIR options (used when `method` is ReSTIR).
     pub restir: RestirOptions,
+}
+
+impl Settings {
+    /// The defaults of a task file (4 primal and 1 gradient samples per pixel, L2 loss,
+    /// seed 1, ReSTIR with its default options) for `cameras` at `width` x `height`.
+    pub fn new(width: u32, height: u32, cameras: Vec<usize>) -> Settings {
+        Settings {
+            width,
+            height,
+            cameras,
+            primal_spp: 4,
+            gradient_spp: 1,
+            loss: Loss::L2,
+            seed: 1,
+            method: Method::Restir,
+            restir: RestirOptions::default(),
+        }
+    }
+}
+
+/// When [`Optimizer::run`] returns: after `iterations` more iterations, after `time_budget`,
+/// or at whichever comes first. At least one must be given.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Stop {
+    /// Iterations to run in this call.
+    pub iterations: Option<u32>,
+    /// Wall-clock time for this call.
+    pub time_budget: Option<std::time::Duration>,
+}
+
+impl Stop {
+    /// Stop after `n` iterations.
+    pub fn iterations(n: u32) -> Stop {
+        Stop {
+            iterations: Some(n),
+            time_budget: None,
+        }
+    }
+    /// Stop once `d` has passed (the iteration under way finishes first).
+    pub fn time(d: std::time::Duration) -> Stop {
+        Stop {
+            iterations: None,
+            time_budget: Some(d),
+        }
+    }
+}
+
+/// What the callback of [`Optimizer::run`] sees after each iteration.
+#[derive(Clone, Copy, Debug)]
+pub struct Progress {
+    /// Iterations done in total ([`Optimizer::iteration`]).
+    pub iteration: u32,
+    /// Iterations done in this call.
+    pub in_this_run: u32,
+    /// Loss of the iteration's primal render.
+    pub loss: f64,
+    /// Time since the call began.
+    pub elapsed: std::time::Duration,
 }
 
 fn mix64(mut x: u64) -> u64 {
@@ -172,6 +232,15 @@ pub struct RestirSnapshot {
     pub have_prev: bool,
 }
 
+fn export_entry(binding: u32, ty: wgpu::BindingType) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty,
+        count: None,
+    }
+}
+
 /// GPU state of the ReSTIR estimator.
 struct RestirState {
     candidate_pipeline: wgpu::ComputePipeline,
@@ -211,6 +280,8 @@ pub struct Optimizer {
     accum: wgpu::Buffer,
     timing: Option<Timing>,
     restir: Option<RestirState>,
+    /// The texture_export pipeline, built on first use.
+    export_pipeline: std::sync::OnceLock<wgpu::ComputePipeline>,
     /// Iterations done (Adam steps taken).
     pub iteration: u32,
 }
@@ -566,6 +637,7 @@ impl Optimizer {
             accum,
             timing,
             restir: restir_parts.map(|(_, st)| st),
+            export_pipeline: std::sync::OnceLock::new(),
             iteration: 0,
         })
     }
@@ -821,6 +893,190 @@ impl Optimizer {
             self.gpu.queue.write_buffer(buf, 0, bytemuck::cast_slice(v));
         }
         self.gpu.check("write moments")
+    }
+
+    /// An optimizer for `problem`: its scene, textures and targets, with the sampling options
+    /// of `settings` (whose cameras, width and height are taken from the problem).
+    pub fn for_problem(gpu: &Gpu, problem: &Problem, settings: Settings) -> Result<Optimizer> {
+        let first = problem.targets.first().ok_or_else(|| {
+            Error::Invalid("the problem has no targets: set or render them first".into())
+        })?;
+        let settings = Settings {
+            width: first.width,
+            height: first.height,
+            cameras: problem.cameras.clone(),
+            ..settings
+        };
+        Optimizer::new(
+            gpu,
+            &problem.scene,
+            problem.set.clone(),
+            settings,
+            &problem.targets,
+        )
+    }
+
+    /// Run iterations until `stop`, calling `on_iteration` after each; the callback returns
+    /// [`ControlFlow::Break`](std::ops::ControlFlow::Break) to stop early. Returns the
+    /// progress after the last iteration run (`None` if none ran).
+    pub fn run(
+        &mut self,
+        stop: Stop,
+        mut on_iteration: impl FnMut(&Progress) -> std::ops::ControlFlow<()>,
+    ) -> Result<Option<Progress>> {
+        if stop.iterations.is_none() && stop.time_budget.is_none() {
+            return Err(Error::Invalid(
+                "Optimizer::run needs a number of iterations, a time budget or both".into(),
+            ));
+        }
+        let start = std::time::Instant::now();
+        let mut last = None;
+        let mut done = 0;
+        loop {
+            if stop.iterations.is_some_and(|n| done >= n)
+                || stop.time_budget.is_some_and(|b| start.elapsed() >= b)
+            {
+                break;
+            }
+            let stats = self.step()?;
+            done += 1;
+            let p = Progress {
+                iteration: self.iteration,
+                in_this_run: done,
+                loss: stats.loss,
+                elapsed: start.elapsed(),
+            };
+            last = Some(p);
+            if on_iteration(&p).is_break() {
+                break;
+            }
+        }
+        Ok(last)
+    }
+
+    /// The GPU buffer that holds the current values of all optimized textures (`f32`s, laid
+    /// out as [`Optimizer::set`] describes: texture `i` starts at float
+    /// `set.textures[i].offset`, row-major, `channels()` floats per texel). It has
+    /// `STORAGE | COPY_SRC | COPY_DST` usage; the application may bind or copy it between
+    /// calls. Writes to it change what the next iteration optimizes from.
+    pub fn params_buffer(&self) -> &wgpu::Buffer {
+        &self.renderer.scene.params
+    }
+
+    /// Current values of texture `i` (index into `set.textures`), copied to the CPU.
+    pub fn texture_values(&self, i: usize) -> Result<Vec<f32>> {
+        let t = self.set.textures.get(i).ok_or_else(|| {
+            Error::Invalid(format!(
+                "texture {i} does not exist ({} optimized)",
+                self.set.textures.len()
+            ))
+        })?;
+        let all = self.read_params()?;
+        Ok(all[t.offset as usize..t.offset as usize + t.len()].to_vec())
+    }
+
+    /// Texture `i` (index into `set.textures`) as a new `Rgba32Float` GPU texture of its size
+    /// that the application can bind: RGB for base color, the value in R, G and B for
+    /// roughness and metallic, alpha 1. Usage: `TEXTURE_BINDING | STORAGE_BINDING |
+    /// COPY_SRC`. The copy is made on the GPU when this is called.
+    pub fn create_texture(&self, i: usize) -> Result<wgpu::Texture> {
+        let t = self.set.textures.get(i).ok_or_else(|| {
+            Error::Invalid(format!(
+                "texture {i} does not exist ({} optimized)",
+                self.set.textures.len()
+            ))
+        })?;
+        let device = &self.gpu.device;
+        let label = format!("texture_export {}", t.name());
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(&label),
+            size: wgpu::Extent3d {
+                width: t.width,
+                height: t.height,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba32Float,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let pipeline = match self.export_pipeline.get() {
+            Some(p) => p,
+            None => {
+                let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                    label: Some("texture_export"),
+                    entries: &[
+                        export_entry(
+                            0,
+                            wgpu::BindingType::Buffer {
+                                ty: wgpu::BufferBindingType::Uniform,
+                                has_dynamic_offset: false,
+                                min_binding_size: None,
+                            },
+                        ),
+                        export_entry(
+                            1,
+                            wgpu::BindingType::Buffer {
+                                ty: wgpu::BufferBindingType::Storage { read_only: true },
+                                has_dynamic_offset: false,
+                                min_binding_size: None,
+                            },
+                        ),
+                        export_entry(
+                            2,
+                            wgpu::BindingType::StorageTexture {
+                                access: wgpu::StorageTextureAccess::WriteOnly,
+                                format: wgpu::TextureFormat::Rgba32Float,
+                                view_dimension: wgpu::TextureViewDimension::D2,
+                            },
+                        ),
+                    ],
+                });
+                let p = self.gpu.compute_pipeline("texture_export", &[&layout])?;
+                self.export_pipeline.get_or_init(|| p)
+            }
+        };
+        let params = GpuExportParams {
+            offset: t.offset,
+            width: t.width,
+            height: t.height,
+            channels: t.channels(),
+        };
+        let uniform = self
+            .gpu
+            .uniform("texture_export params", bytemuck::bytes_of(&params));
+        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("texture_export"),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: uniform.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: self.renderer.scene.params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(&view),
+                },
+            ],
+        });
+        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("texture_export"),
+        });
+        let max_dim = device.limits().max_compute_workgroups_per_dimension;
+        let grid = grid_2d(t.width * t.height, WORKGROUP, max_dim);
+        crate::render::encode_pass(&mut enc, "texture_export", pipeline, &[&group], grid);
+        self.gpu.queue.submit([enc.finish()]);
+        self.gpu.check("texture_export")?;
+        Ok(texture)
     }
 
     /// Everything a later run needs to continue exactly where this one stands: iteration,

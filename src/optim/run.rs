@@ -1,12 +1,11 @@
 //! A whole optimization run from a task file: targets, the iteration loop with progress,
 //! metrics and checkpoints, and the outputs.
 use super::checkpoint::{Checkpoint, Header, MetricRow};
-use super::{FaultCounts, Optimizer, PassTimes, Settings};
+use super::problem::camera_file_name;
+use super::{FaultCounts, Optimizer, PassTimes, Problem, Settings};
 use crate::gpu::Gpu;
 use crate::image_io::{self, Image};
 use crate::render::params::ParamSet;
-use crate::render::Renderer;
-use crate::scene::{self, EnvMap, Scene};
 use crate::task::{Slot, Task};
 use crate::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -52,142 +51,6 @@ pub struct RunSummary {
     pub faults: FaultCounts,
     /// Mean GPU time per iteration of each kind of pass in this session (timestamp queries).
     pub pass_times: Option<PassTimes>,
-}
-
-/// Scenes, targets and textures of a task, ready to optimize.
-pub struct Prepared {
-    /// The scene to optimize.
-    pub scene: Scene,
-    /// Ground-truth scene, when the task has one.
-    pub truth: Option<Scene>,
-    /// Camera indices.
-    pub cameras: Vec<usize>,
-    /// One target per camera.
-    pub targets: Vec<Image>,
-    /// Optimized textures at their initial values.
-    pub set: ParamSet,
-    /// Ground-truth values laid out like `set.values`, when known.
-    pub reference: Option<Vec<f32>>,
-}
-
-fn load_scene(task: &Task, path: &Path) -> Result<Scene> {
-    let mut s = scene::load(&task.resolve(path))?;
-    if let Some(env) = &task.env {
-        let mut e = EnvMap::load(&task.resolve(env))?;
-        e.scale = task.env_scale;
-        s.env = Some(e);
-    }
-    Ok(s)
-}
-
-fn camera_file_name(scene: &Scene, cam: usize) -> String {
-    format!("{cam}_{}", image_io::file_safe(&scene.cameras[cam].name))
-}
-
-/// Load the scenes, find the cameras, render or load the targets (reusing `target_*.exr` in
-/// `out` when `reuse` and present), and lay out the textures.
-pub fn prepare(gpu: &Gpu, task: &Task, out: &Path, reuse: bool) -> Result<Prepared> {
-    let scene = load_scene(task, &task.scene)?;
-    let cameras: Vec<usize> = match &task.cameras {
-        Some(names) => names
-            .iter()
-            .map(|n| scene.camera(Some(n)))
-            .collect::<Result<_>>()?,
-        None => {
-            scene.camera(None)?;
-            (0..scene.cameras.len()).collect()
-        }
-    };
-    let set = ParamSet::from_specs(&scene, &task.textures, task.optimizer.filter, &task.path)?;
-    let (w, h) = (task.width, task.height);
-    let truth = match &task.target.scene {
-        Some(p) => Some(load_scene(task, p)?),
-        None => None,
-    };
-    let mut targets = Vec::new();
-    for (k, &cam) in cameras.iter().enumerate() {
-        let cached = out.join(format!("target_{}.exr", camera_file_name(&scene, cam)));
-        let img = if reuse && cached.exists() {
-            image_io::load_linear(&cached)?
-        } else if let Some(truth) = &truth {
-            if truth.cameras.len() != scene.cameras.len() {
-                return Err(Error::file(
-                    &task.path,
-                    "the target scene's cameras differ from the scene's",
-                ));
-            }
-            let r = Renderer::new(gpu, truth)?;
-            let img = r
-                .render(
-                    &crate::render::RenderSettings {
-                        width: w,
-                        height: h,
-                        spp: task.target.spp,
-                        seed: super::pass_seed(task.seed, u32::MAX, k as u32, 2),
-                        camera: cam,
-                        techniques: crate::render::Techniques::Mis,
-                    },
-                    |_| {},
-                )?
-                .image;
-            img.save(&cached)?;
-            img
-        } else {
-            let images = task
-                .target
-                .images
-                .as_ref()
-                .ok_or_else(|| Error::file(&task.path, "`target`: no images"))?;
-            let name = &scene.cameras[cam].name;
-            let p = images
-                .get(name)
-                .or_else(|| images.get(&cam.to_string()))
-                .ok_or_else(|| {
-                    Error::file(
-                        &task.path,
-                        format!("`target.images`: no image for camera `{name}`"),
-                    )
-                })?;
-            let img = image_io::load_linear(&task.resolve(p))?;
-            if (img.width, img.height) != (w, h) {
-                return Err(Error::file(
-                    task.resolve(p),
-                    format!(
-                        "target is {}x{}, the task renders {w}x{h}",
-                        img.width, img.height
-                    ),
-                ));
-            }
-            img
-        };
-        targets.push(img);
-    }
-    let reference = match &truth {
-        Some(t) => {
-            let mut all = Vec::with_capacity(set.values.len());
-            for i in 0..set.textures.len() {
-                all.extend(set.reference_values(i, t).ok_or_else(|| {
-                    Error::file(
-                        &task.path,
-                        format!(
-                            "the target scene has no material `{}`",
-                            set.textures[i].material_name
-                        ),
-                    )
-                })?);
-            }
-            Some(all)
-        }
-        None => None,
-    };
-    Ok(Prepared {
-        scene,
-        truth,
-        cameras,
-        targets,
-        set,
-        reference,
-    })
 }
 
 /// The optimizer settings a task asks for, with the given estimator.
@@ -310,7 +173,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     } else {
         None
     };
-    let prep = prepare(gpu, task, &out, opts.resume)?;
+    let prep = Problem::from_task(gpu, task, &out, opts.resume)?;
     let settings = task_settings(task, &prep.cameras, opts.method, opts.restir);
     let initial_rmse = prep.reference.as_ref().map(|r| rmse(&prep.set.values, r));
     let mut opt = Optimizer::new(gpu, &prep.scene, prep.set.clone(), settings, &prep.targets)?;
@@ -470,7 +333,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
 fn write_outputs(
     out: &Path,
     task: &Task,
-    prep: &Prepared,
+    prep: &Problem,
     opt: &Optimizer,
     values: &[f32],
     rows: &[MetricRow],
@@ -533,7 +396,7 @@ pub fn write_gradient(
     restir: super::RestirOptions,
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
-    let prep = prepare(gpu, task, dir, false)?;
+    let prep = Problem::from_task(gpu, task, dir, false)?;
     let settings = task_settings(task, &prep.cameras, method, restir);
     let mut opt = Optimizer::new(gpu, &prep.scene, prep.set.clone(), settings, &prep.targets)?;
     let (grad, _) = opt.estimate_gradient(0)?;

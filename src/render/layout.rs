@@ -218,6 +218,16 @@ pub struct GpuAdamParams {
     pub _pad: [u32; 2],
 }
 
+/// `ExportParams` in texture_export.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuExportParams {
+    pub offset: u32,
+    pub width: u32,
+    pub height: u32,
+    pub channels: u32,
+}
+
 /// `TraceParams` in trace_rays.wgsl.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
@@ -269,6 +279,11 @@ mod tests {
                 size_of::<GpuCandidateParams>(),
             ),
             ("restir_merge", "MergeParams", size_of::<GpuMergeParams>()),
+            (
+                "texture_export",
+                "ExportParams",
+                size_of::<GpuExportParams>(),
+            ),
         ] {
             assert_eq!(size, wgsl_size(pass, name), "{name}");
         }

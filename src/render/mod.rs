@@ -1,5 +1,8 @@
 //! The direct-lighting renderer: scene upload, the `render` pass and the `trace_rays` pass.
 
+// Field-for-field mirrors of WGSL structs: each struct names its WGSL twin, whose comments
+// document the fields.
+#[allow(missing_docs)]
 pub mod layout;
 pub mod params;
 
@@ -438,7 +441,7 @@ pub struct RayHit {
 }
 
 /// Record one compute pass: `groups[k]` is bound at group k.
-pub fn encode_pass(
+pub(crate) fn encode_pass(
     enc: &mut wgpu::CommandEncoder,
     label: &str,
     pipeline: &wgpu::ComputePipeline,
@@ -450,7 +453,7 @@ pub fn encode_pass(
 
 /// [`encode_pass`], writing timestamps `2k` and `2k + 1` of the query set at the pass's start
 /// and end when given `(query set, k)`.
-pub fn encode_timed_pass(
+pub(crate) fn encode_timed_pass(
     enc: &mut wgpu::CommandEncoder,
     label: &str,
     pipeline: &wgpu::ComputePipeline,

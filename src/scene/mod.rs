@@ -30,6 +30,21 @@ pub struct Triangle {
 }
 
 impl Triangle {
+    /// The two triangles of a parallelogram with corner `corner` and edges `u` and `v`, flat
+    /// shaded, its front face along `u x v`, UV (0, 0) at `corner` and (1, 1) at the
+    /// opposite corner (for building scenes in code).
+    pub fn quad(corner: Vec3, u: Vec3, v: Vec3, material: u32) -> [Triangle; 2] {
+        let n = u.cross(v).normalize();
+        let p = [corner, corner + u, corner + u + v, corner + v];
+        let uv = [Vec2::ZERO, Vec2::X, Vec2::ONE, Vec2::Y];
+        [[0, 1, 2], [0, 2, 3]].map(|k: [usize; 3]| Triangle {
+            p: k.map(|i| p[i]),
+            n: [n; 3],
+            uv: k.map(|i| uv[i]),
+            material,
+        })
+    }
+
     /// Twice the area, as the length of the cross product of two edges.
     pub fn area(&self) -> f32 {
         0.5 * (self.p[1] - self.p[0])
@@ -117,6 +132,27 @@ pub struct Camera {
     pub aspect: Option<f32>,
 }
 
+impl Camera {
+    /// A camera at `eye` looking at `target`, `up` giving the vertical, with a vertical field
+    /// of view of `yfov` radians (for building scenes in code).
+    pub fn look_at(name: &str, eye: Vec3, target: Vec3, up: Vec3, yfov: f32) -> Camera {
+        let f = (target - eye).normalize();
+        let r = f.cross(up).normalize();
+        let u = r.cross(f);
+        Camera {
+            name: name.into(),
+            world: Mat4::from_cols(
+                r.extend(0.0),
+                u.extend(0.0),
+                (-f).extend(0.0),
+                eye.extend(1.0),
+            ),
+            yfov,
+            aspect: None,
+        }
+    }
+}
+
 /// Kind of a KHR_lights_punctual light.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum PunctualKind {
@@ -148,6 +184,20 @@ pub struct PunctualLight {
     pub intensity: Vec3,
     /// Range (0 = infinite).
     pub range: f32,
+}
+
+impl PunctualLight {
+    /// A point light at `position` with `intensity` (candela, RGB).
+    pub fn point(name: &str, position: Vec3, intensity: Vec3) -> PunctualLight {
+        PunctualLight {
+            name: name.into(),
+            kind: PunctualKind::Point,
+            position,
+            direction: Vec3::NEG_Z,
+            intensity,
+            range: 0.0,
+        }
+    }
 }
 
 /// Everything the renderer needs, in world space.

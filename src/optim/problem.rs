@@ -1,0 +1,239 @@
+//! An optimization problem in memory: the scene, the cameras, the textures to recover and one
+//! target image per camera. A task file describes one ([`Problem::from_task`]); an application
+//! can also build one from data it already holds ([`Problem::new`]).
+use super::pass_seed;
+use crate::gpu::Gpu;
+use crate::image_io::{self, Image};
+use crate::render::params::ParamSet;
+use crate::render::{RenderSettings, Renderer, Techniques};
+use crate::scene::{self, EnvMap, Scene};
+use crate::task::{Filter, Task, TextureSpec};
+use crate::{Error, Result};
+use std::path::Path;
+
+/// Scenes, targets and textures of an optimization, ready for an
+/// [`Optimizer`](super::Optimizer).
+#[derive(Clone, Debug)]
+pub struct Problem {
+    /// The scene to optimize (its geometry, lights and cameras are known and fixed).
+    pub scene: Scene,
+    /// Ground-truth scene, when the targets were rendered from one.
+    pub truth: Option<Scene>,
+    /// The cameras rendered every iteration (indices into `scene.cameras`).
+    pub cameras: Vec<usize>,
+    /// One target image per camera, in the order of `cameras` (empty until set).
+    pub targets: Vec<Image>,
+    /// The optimized textures, laid out in one array, at their initial values.
+    pub set: ParamSet,
+    /// Ground-truth texture values laid out like `set.values`, when known.
+    pub reference: Option<Vec<f32>>,
+}
+
+impl Problem {
+    /// A problem on `scene` seen by `cameras`, recovering `textures` (checked as a task file's
+    /// `[[textures]]` are). Give it targets with [`Problem::set_targets`] or
+    /// [`Problem::render_targets`] before optimizing.
+    pub fn new(
+        scene: Scene,
+        cameras: Vec<usize>,
+        textures: &[TextureSpec],
+        filter: Filter,
+    ) -> Result<Problem> {
+        if cameras.is_empty() {
+            return Err(Error::Invalid("a problem needs at least one camera".into()));
+        }
+        if let Some(&c) = cameras.iter().find(|&&c| c >= scene.cameras.len()) {
+            return Err(Error::Invalid(format!(
+                "camera {c} does not exist (the scene has {})",
+                scene.cameras.len()
+            )));
+        }
+        if textures.is_empty() {
+            return Err(Error::Invalid(
+                "name at least one texture to optimize".into(),
+            ));
+        }
+        for (i, t) in textures.iter().enumerate() {
+            crate::task::check_texture(t, &textures[..i])
+                .map_err(|(key, msg)| Error::Invalid(format!("textures[{i}].{key}: {msg}")))?;
+        }
+        let set = ParamSet::from_specs(&scene, textures, filter, Path::new("<problem>"))?;
+        Ok(Problem {
+            scene,
+            truth: None,
+            cameras,
+            targets: Vec::new(),
+            set,
+            reference: None,
+        })
+    }
+
+    /// Use `images` as the targets, one per camera, all `width` x `height`.
+    pub fn set_targets(&mut self, images: Vec<Image>) -> Result<()> {
+        if images.len() != self.cameras.len() {
+            return Err(Error::Invalid(format!(
+                "{} target images for {} cameras",
+                images.len(),
+                self.cameras.len()
+            )));
+        }
+        if let Some(i) = images
+            .iter()
+            .position(|im| (im.width, im.height) != (images[0].width, images[0].height))
+        {
+            return Err(Error::Invalid(format!(
+                "target {i} is {}x{}, target 0 is {}x{}",
+                images[i].width, images[i].height, images[0].width, images[0].height
+            )));
+        }
+        self.targets = images;
+        Ok(())
+    }
+
+    /// Render the targets from `truth` (the same geometry and cameras with the true
+    /// materials) at `spp` samples per pixel, and take the ground-truth texture values from
+    /// it for texture RMSE. The seed of camera `k` derives from `seed` as in a task run.
+    pub fn render_targets(
+        &mut self,
+        gpu: &Gpu,
+        truth: Scene,
+        width: u32,
+        height: u32,
+        spp: u32,
+        seed: u32,
+    ) -> Result<()> {
+        if truth.cameras.len() != self.scene.cameras.len() {
+            return Err(Error::Invalid(
+                "the target scene's cameras differ from the scene's".into(),
+            ));
+        }
+        let r = Renderer::new(gpu, &truth)?;
+        let mut targets = Vec::new();
+        for (k, &camera) in self.cameras.iter().enumerate() {
+            let settings = RenderSettings {
+                width,
+                height,
+                spp,
+                seed: pass_seed(seed, u32::MAX, k as u32, 2),
+                camera,
+                techniques: Techniques::Mis,
+            };
+            targets.push(r.render(&settings, |_| {})?.image);
+        }
+        self.set_truth(truth)?;
+        self.targets = targets;
+        Ok(())
+    }
+
+    /// Record the ground-truth scene and take the reference texture values from it.
+    fn set_truth(&mut self, truth: Scene) -> Result<()> {
+        let mut all = Vec::with_capacity(self.set.values.len());
+        for i in 0..self.set.textures.len() {
+            all.extend(self.set.reference_values(i, &truth).ok_or_else(|| {
+                Error::Invalid(format!(
+                    "the target scene has no material `{}`",
+                    self.set.textures[i].material_name
+                ))
+            })?);
+        }
+        self.reference = Some(all);
+        self.truth = Some(truth);
+        Ok(())
+    }
+
+    /// Load a task's scenes, find its cameras, render or load its targets (reusing
+    /// `target_*.exr` in `out` when `reuse` and present; rendered targets are saved there),
+    /// and lay out its textures.
+    pub fn from_task(gpu: &Gpu, task: &Task, out: &Path, reuse: bool) -> Result<Problem> {
+        let scene = load_scene(task, &task.scene)?;
+        let cameras: Vec<usize> = match &task.cameras {
+            Some(names) => names
+                .iter()
+                .map(|n| scene.camera(Some(n)))
+                .collect::<Result<_>>()?,
+            None => {
+                scene.camera(None)?;
+                (0..scene.cameras.len()).collect()
+            }
+        };
+        let set = ParamSet::from_specs(&scene, &task.textures, task.optimizer.filter, &task.path)?;
+        let mut p = Problem {
+            scene,
+            truth: None,
+            cameras,
+            targets: Vec::new(),
+            set,
+            reference: None,
+        };
+        let (w, h) = (task.width, task.height);
+        let cached: Vec<_> = p
+            .cameras
+            .iter()
+            .map(|&cam| out.join(format!("target_{}.exr", camera_file_name(&p.scene, cam))))
+            .collect();
+        let in_task = |e: Error| match e {
+            Error::Invalid(m) => Error::file(&task.path, m),
+            e => e,
+        };
+        if let Some(path) = &task.target.scene {
+            let truth = load_scene(task, path)?;
+            if reuse && cached.iter().all(|c| c.exists()) {
+                p.set_truth(truth).map_err(in_task)?;
+                for c in &cached {
+                    p.targets.push(image_io::load_linear(c)?);
+                }
+            } else {
+                p.render_targets(gpu, truth, w, h, task.target.spp, task.seed)
+                    .map_err(in_task)?;
+                for (img, c) in p.targets.iter().zip(&cached) {
+                    img.save(c)?;
+                }
+            }
+        } else {
+            let images = task
+                .target
+                .images
+                .as_ref()
+                .ok_or_else(|| Error::file(&task.path, "`target`: no images"))?;
+            for &cam in &p.cameras {
+                let name = &p.scene.cameras[cam].name;
+                let path = images
+                    .get(name)
+                    .or_else(|| images.get(&cam.to_string()))
+                    .ok_or_else(|| {
+                        Error::file(
+                            &task.path,
+                            format!("`target.images`: no image for camera `{name}`"),
+                        )
+                    })?;
+                let img = image_io::load_linear(&task.resolve(path))?;
+                if (img.width, img.height) != (w, h) {
+                    return Err(Error::file(
+                        task.resolve(path),
+                        format!(
+                            "target is {}x{}, the task renders {w}x{h}",
+                            img.width, img.height
+                        ),
+                    ));
+                }
+                p.targets.push(img);
+            }
+        }
+        Ok(p)
+    }
+}
+
+fn load_scene(task: &Task, path: &Path) -> Result<Scene> {
+    let mut s = scene::load(&task.resolve(path))?;
+    if let Some(env) = &task.env {
+        let mut e = EnvMap::load(&task.resolve(env))?;
+        e.scale = task.env_scale;
+        s.env = Some(e);
+    }
+    Ok(s)
+}
+
+/// `<index>_<name>` of a camera, safe in file names.
+pub(crate) fn camera_file_name(scene: &Scene, cam: usize) -> String {
+    format!("{cam}_{}", image_io::file_safe(&scene.cameras[cam].name))
+}

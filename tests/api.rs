@@ -1,0 +1,208 @@
+//! The library API as an application uses it: the two examples run to completion and
+//! recover their textures; a device without the limits psrestir needs is refused with the
+//! limits named; two optimizers on one device, their steps interleaved, each end where they
+//! would alone; textures come out as a GPU texture equal to the CPU values.
+#[path = "../examples/gltf_textures.rs"]
+mod gltf_textures;
+#[path = "../examples/in_memory.rs"]
+mod in_memory;
+
+use psrestir::{Filter, Gpu, Method, Optimizer, Problem, Settings, Stop};
+use std::ops::ControlFlow;
+
+fn no_gpu() -> bool {
+    let none = std::env::var_os("CI").is_none() && Gpu::new().is_err();
+    if none {
+        eprintln!("skipped: no GPU adapter");
+    }
+    none
+}
+
+#[test]
+fn in_memory_example_recovers_the_texture() {
+    if no_gpu() {
+        return;
+    }
+    let (before, after) = in_memory::run(150).unwrap();
+    // From gray to the checkerboard: the error must fall by well over half (it falls to
+    // about a tenth in 150 iterations; bilinear 8x8 texels cannot copy the sharp 4x4
+    // checker exactly).
+    assert!(after < 0.5 * before, "RMSE {before} -> {after}");
+}
+
+#[test]
+fn gltf_example_writes_the_recovered_texture() {
+    if no_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/default/scene.gltf");
+    let o = gltf_textures::run(&scene, dir.path(), 60).unwrap();
+    assert!(o.rmse.1 < o.rmse.0, "RMSE {:?}", o.rmse);
+    let exr = psrestir::image_io::load_linear(&o.files[0]).unwrap();
+    assert_eq!((exr.width, exr.height), (64, 32));
+    let png = image::open(&o.files[1]).unwrap();
+    assert_eq!((png.width(), png.height()), (64, 32));
+}
+
+#[test]
+fn a_device_without_the_needed_limits_is_refused_by_name() {
+    if no_gpu() {
+        return;
+    }
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+    desc.backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY);
+    let instance = wgpu::Instance::new(desc);
+    let adapter =
+        pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
+            .unwrap();
+    // WebGPU's default limits: 8 storage buffers per stage, psrestir binds 16.
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        required_limits: wgpu::Limits::default(),
+        ..Default::default()
+    }))
+    .unwrap();
+    let e = Gpu::from_device(device, queue, adapter.get_info())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("max_storage_buffers_per_shader_stage is 8, psrestir needs 16")
+            && e.contains("required_limits"),
+        "{e}"
+    );
+    // With the limits psrestir asks for, the same adapter is accepted.
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        required_limits: Gpu::required_limits(&adapter.limits()).unwrap(),
+        ..Default::default()
+    }))
+    .unwrap();
+    Gpu::from_device(device, queue, adapter.get_info()).unwrap();
+}
+
+/// A plane problem whose checkerboard has the colors `colors`.
+fn problem(gpu: &Gpu, colors: [[u8; 3]; 2]) -> Problem {
+    let mut p = Problem::new(
+        in_memory::scene(),
+        vec![0],
+        &[in_memory::texture()],
+        Filter::Bilinear,
+    )
+    .unwrap();
+    p.render_targets(gpu, in_memory::truth(colors), 32, 32, 128, 3)
+        .unwrap();
+    p
+}
+
+fn settings(method: Method) -> Settings {
+    Settings {
+        primal_spp: 2,
+        gradient_spp: 2,
+        method,
+        ..Settings::new(32, 32, vec![0])
+    }
+}
+
+#[test]
+fn two_optimizers_on_one_device_interleaved_end_as_alone() {
+    if no_gpu() {
+        return;
+    }
+    let gpu = Gpu::new().unwrap();
+    let (pa, pb) = (
+        problem(&gpu, [[230, 60, 40], [40, 90, 220]]),
+        problem(&gpu, [[20, 200, 60], [240, 240, 30]]),
+    );
+    const N: u32 = 40;
+    for method in [Method::Baseline, Method::Restir] {
+        let alone = |p: &Problem| {
+            let mut o = Optimizer::for_problem(&gpu, p, settings(method)).unwrap();
+            o.run(Stop::iterations(N), |_| ControlFlow::Continue(()))
+                .unwrap();
+            o.texture_values(0).unwrap()
+        };
+        let (a, b) = (alone(&pa), alone(&pb));
+        let (a2, b2) = (alone(&pa), alone(&pb));
+        let mut oa = Optimizer::for_problem(&gpu, &pa, settings(method)).unwrap();
+        let mut ob = Optimizer::for_problem(&gpu, &pb, settings(method)).unwrap();
+        for _ in 0..N {
+            oa.step().unwrap();
+            ob.step().unwrap();
+        }
+        let (ia, ib) = (oa.texture_values(0).unwrap(), ob.texture_values(0).unwrap());
+        let d = in_memory::rmse;
+        let (aa, bb, ab) = (d(&a, &a2), d(&b, &b2), d(&a, &b));
+        assert!(ab > 0.5, "the two problems should end far apart ({ab})");
+        let (ia_a, ib_b) = (d(&ia, &a), d(&ib, &b));
+        eprintln!(
+            "{method:?}: alone vs alone {aa:.2e} {bb:.2e}; interleaved vs alone {ia_a:.2e} {ib_b:.2e}; a vs b {ab:.2e}"
+        );
+        // Crossed state (one optimizer reading the other's buffers) would put the results
+        // about `ab` (0.7) apart. The baseline is deterministic up to the order of float
+        // atomics (1e-8 here), so it must match tightly. ReSTIR's reservoirs depend on the
+        // order in which invocations take their locks, and 40 Adam steps amplify that: two
+        // runs alone end 0.02 to 0.11 apart (eight pairs measured), so 0.2.
+        let tol = match method {
+            Method::Baseline => 1e-5,
+            Method::Restir => 0.2,
+        };
+        assert!(
+            ia_a <= tol,
+            "{method:?}: A interleaved ends {ia_a} from A alone"
+        );
+        assert!(
+            ib_b <= tol,
+            "{method:?}: B interleaved ends {ib_b} from B alone"
+        );
+    }
+}
+
+#[test]
+fn the_gpu_texture_holds_the_current_values() {
+    if no_gpu() {
+        return;
+    }
+    let gpu = Gpu::new().unwrap();
+    let p = problem(&gpu, [[230, 60, 40], [40, 90, 220]]);
+    let mut o = Optimizer::for_problem(&gpu, &p, settings(Method::Restir)).unwrap();
+    o.run(Stop::iterations(5), |_| ControlFlow::Continue(()))
+        .unwrap();
+    let values = o.texture_values(0).unwrap();
+    let tex = o.create_texture(0).unwrap();
+    assert_eq!((tex.width(), tex.height()), (8, 8));
+    // Read the texture back: 8 texels x 16 bytes per row, padded to 256.
+    let buf = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("test readback"),
+        size: 256 * 8,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let mut enc = gpu.device.create_command_encoder(&Default::default());
+    enc.copy_texture_to_buffer(
+        tex.as_image_copy(),
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buf,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(256),
+                rows_per_image: Some(8),
+            },
+        },
+        tex.size(),
+    );
+    gpu.queue.submit([enc.finish()]);
+    let rows: Vec<f32> = gpu.read_pod(&buf).unwrap();
+    for y in 0..8 {
+        for x in 0..8 {
+            let t = &rows[y * 64 + x * 4..y * 64 + x * 4 + 4];
+            let v = &values[(y * 8 + x) * 3..(y * 8 + x) * 3 + 3];
+            assert_eq!(&t[..3], v, "texel ({x}, {y})");
+            assert_eq!(t[3], 1.0);
+        }
+    }
+    // The parameter buffer is the same data, laid out as documented.
+    let all: Vec<f32> = gpu.read_pod(o.params_buffer()).unwrap();
+    let off = o.set.textures[0].offset as usize;
+    assert_eq!(&all[off..off + values.len()], &values[..]);
+    let e = o.create_texture(1).unwrap_err().to_string();
+    assert!(e.contains("texture 1 does not exist"), "{e}");
+}
