@@ -151,6 +151,21 @@ impl Gpu {
     /// psrestir installs the device's uncaptured-error handler, which records wgpu errors so
     /// that each call can return them as [`Error::Gpu`]; an application that installs its own
     /// handler afterwards takes those errors over.
+    ///
+    /// ```no_run
+    /// use psrestir::{wgpu, Gpu};
+    /// # fn main() -> Result<(), Box<dyn std::error::Error>> {
+    /// let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle());
+    /// let adapter = pollster::block_on(instance.request_adapter(&Default::default()))?;
+    /// let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+    ///     required_limits: Gpu::required_limits(&adapter.limits())?,
+    ///     ..Default::default()
+    /// }))?;
+    /// // The application keeps using `device` and `queue` (they are reference-counted).
+    /// let gpu = Gpu::from_device(device.clone(), queue.clone(), adapter.get_info())?;
+    /// # Ok(())
+    /// # }
+    /// ```
     pub fn from_device(
         device: wgpu::Device,
         queue: wgpu::Queue,
