@@ -11,7 +11,11 @@
 // Texel t owns reservoirs 2t (positive part of the target) and 2t + 1 (negative part).
 // Passes that offer candidates declare `fresh` (the reservoirs, as atomics) and `locks`.
 
-const LOCK_BOUND: u32 = 1024u;
+// Tries before an offer gives up (and is counted as lost). Invocations of one SIMD group
+// never wait on each other (the holder finishes in the iteration that took the lock), so the
+// bound only matters when the OS preempts a lavapipe thread that holds a lock: 1024 tries ran
+// out then, under load, and biased the estimate; 2^18 tries (a few ms) outlast a preemption.
+const LOCK_BOUND: u32 = 262144u;
 
 // Streaming update from many invocations at once. Design: a per-reservoir lock taken with
 // atomicCompareExchangeWeak, the critical section and the release inside the loop iteration
