@@ -8,6 +8,8 @@ use psrestir::render::{RenderSettings, Renderer, Techniques};
 use psrestir::scene::{self, EnvMap};
 use psrestir::task::Task;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 #[derive(Parser)]
 #[command(
@@ -324,6 +326,19 @@ fn run(cli: Cli) -> Result<()> {
             }
             let (method, restir) = estimator.resolve()?;
             let gpu = Gpu::new()?;
+            // Ctrl-C (or SIGTERM) finishes the iteration under way, then writes the checkpoint
+            // and the outputs; a second one exits at once.
+            let interrupt = Arc::new(AtomicBool::new(false));
+            let flag = interrupt.clone();
+            ctrlc::set_handler(move || {
+                if flag.swap(true, Ordering::SeqCst) {
+                    std::process::exit(130);
+                }
+                eprintln!(
+                    "\ninterrupted: writing the checkpoint and outputs (Ctrl-C again to quit now)"
+                );
+            })
+            .context("installing the Ctrl-C handler")?;
             let summary = optim::run::run(
                 &gpu,
                 &task,
@@ -335,6 +350,7 @@ fn run(cli: Cli) -> Result<()> {
                     out,
                     resume,
                     progress: true,
+                    interrupt: Some(interrupt),
                 },
             )
             .with_context(|| format!("optimizing {}", path.display()))?;
@@ -355,6 +371,15 @@ fn run(cli: Cli) -> Result<()> {
                     "GPU time per iteration: primal {:.1} ms, loss {:.2} ms, gradient {:.1} ms, merge {:.1} ms, Adam {:.2} ms",
                     t.primal_ms, t.loss_ms, t.gradient_ms, t.merge_ms, t.adam_ms
                 );
+            }
+            if summary.interrupted {
+                println!(
+                    "interrupted at iteration {}; continue with: psrestir optimize {} --out {} --resume",
+                    summary.iterations,
+                    path.display(),
+                    summary.out.display()
+                );
+                std::process::exit(130);
             }
         }
         Command::Gradient {

@@ -248,3 +248,67 @@ fn killed_run_resumes_from_its_checkpoint() {
         "resumed run settles at {rb}, uninterrupted at {ra}"
     );
 }
+
+#[test]
+fn ctrl_c_writes_the_checkpoint_and_outputs_then_resumes() {
+    if no_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let iterations = 2000;
+    let task = write_task(dir.path(), iterations);
+    let out = dir.path().join("c");
+    let bin = env!("CARGO_BIN_EXE_psrestir");
+    let mut child = Command::new(bin)
+        .arg("optimize")
+        .arg(&task)
+        .arg("--out")
+        .arg(&out)
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Interrupt once the run is under way (its first checkpoint exists).
+    let t0 = Instant::now();
+    while !out.join("checkpoint.bin").exists() {
+        assert!(
+            t0.elapsed() < Duration::from_secs(300),
+            "no checkpoint appeared"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(200));
+    let st = Command::new("kill")
+        .arg("-INT")
+        .arg(child.id().to_string())
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let output = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert_eq!(output.status.code(), Some(130), "{stdout}");
+    assert!(stdout.contains("--resume"), "{stdout}");
+    // Everything a normal end writes is there, and the checkpoint holds the last iteration.
+    let rows = metrics(&out);
+    let done = rows.len() as u32;
+    assert!(done > 0 && done < iterations as u32, "{done} iterations");
+    let ckpt = psrestir::optim::checkpoint::Checkpoint::load(&out.join("checkpoint.bin")).unwrap();
+    assert_eq!(ckpt.state.iteration, done);
+    assert!(ckpt.state.restir.is_some(), "the ReSTIR state is saved");
+    for f in ["optimized.glb", "plot.png", "plane_base_color.exr"] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+    no_temporaries(&out);
+    // --resume continues from there to the end.
+    let st = Command::new(bin)
+        .arg("optimize")
+        .arg(&task)
+        .arg("--out")
+        .arg(&out)
+        .arg("--resume")
+        .args(["--iterations", &(done + 20).to_string()])
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let its: Vec<u32> = metrics(&out).iter().map(|r| r.0).collect();
+    assert_eq!(its, (1..=done + 20).collect::<Vec<_>>());
+}

@@ -28,6 +28,9 @@ pub struct RunOptions {
     pub method: super::Method,
     /// ReSTIR options.
     pub restir: super::RestirOptions,
+    /// Set (e.g. from a Ctrl-C handler) to stop after the iteration under way: the run then
+    /// writes its checkpoint and outputs as at a normal end and returns with `interrupted`.
+    pub interrupt: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
 }
 
 /// What a run did.
@@ -51,6 +54,8 @@ pub struct RunSummary {
     pub faults: FaultCounts,
     /// Mean GPU time per iteration of each kind of pass in this session (timestamp queries).
     pub pass_times: Option<PassTimes>,
+    /// Whether the run stopped early because `RunOptions::interrupt` was set.
+    pub interrupted: bool,
 }
 
 /// The optimizer settings a task asks for, with the given estimator.
@@ -253,9 +258,17 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     let ckpt_every = task.optimizer.checkpoint_every;
     let mut pass_sum: Option<PassTimes> = None;
     let mut timed = 0u32;
+    let interrupted = || {
+        opts.interrupt
+            .as_ref()
+            .is_some_and(|f| f.load(std::sync::atomic::Ordering::SeqCst))
+    };
     loop {
         let elapsed = elapsed_before + session_start.elapsed().as_secs_f64();
-        if max_iter.is_some_and(|n| opt.iteration >= n) || budget.is_some_and(|b| elapsed >= b) {
+        if max_iter.is_some_and(|n| opt.iteration >= n)
+            || budget.is_some_and(|b| elapsed >= b)
+            || interrupted()
+        {
             break;
         }
         let stats = opt.step()?;
@@ -327,6 +340,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         pass_times: pass_sum
             .filter(|_| timed > 0)
             .map(|s| s.divided(timed as f64)),
+        interrupted: interrupted(),
     })
 }
 
