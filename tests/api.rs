@@ -206,3 +206,50 @@ fn the_gpu_texture_holds_the_current_values() {
     let e = o.create_texture(1).unwrap_err().to_string();
     assert!(e.contains("texture 1 does not exist"), "{e}");
 }
+
+#[test]
+fn a_task_too_large_for_the_device_is_refused_before_allocating() {
+    if no_gpu() {
+        return;
+    }
+    // A device that binds at most 1 MiB per storage buffer.
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+    desc.backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY);
+    let instance = wgpu::Instance::new(desc);
+    let adapter =
+        pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
+            .unwrap();
+    let limits = wgpu::Limits {
+        max_storage_buffer_binding_size: 1 << 20,
+        max_buffer_size: 1 << 20,
+        ..Gpu::required_limits(&adapter.limits()).unwrap()
+    };
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        required_limits: limits,
+        ..Default::default()
+    }))
+    .unwrap();
+    let gpu = Gpu::from_device(device, queue, adapter.get_info()).unwrap();
+    // 400x400 roughness texels: 640 kB of values, but ReSTIR's reservoirs take 96 bytes per
+    // texel (2 x 48), 15.4 MB in one buffer.
+    let spec = psrestir::TextureSpec {
+        material: "plane".into(),
+        slot: psrestir::Slot::Roughness,
+        resolution: [400, 400],
+        init: psrestir::Init::Scalar(0.5),
+        learning_rate: 0.01,
+    };
+    let mut p = Problem::new(in_memory::scene(), vec![0], &[spec], Filter::Bilinear).unwrap();
+    p.render_targets(&gpu, in_memory::scene(), 16, 16, 4, 1)
+        .unwrap();
+    let e = Optimizer::for_problem(&gpu, &p, settings(Method::Restir))
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(
+        e.contains("reservoirs even buffer needs 15360000 bytes") && e.contains("1048576 bytes"),
+        "{e}"
+    );
+    // The baseline has no reservoirs and fits.
+    Optimizer::for_problem(&gpu, &p, settings(Method::Baseline)).unwrap();
+}

@@ -232,6 +232,71 @@ pub struct RestirSnapshot {
     pub have_prev: bool,
 }
 
+/// The buffers an optimizer allocates besides the scene's, by label and size in bytes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MemoryPlan {
+    /// (label, bytes) of each buffer.
+    pub buffers: Vec<(String, u64)>,
+}
+
+impl MemoryPlan {
+    /// Total bytes.
+    pub fn total(&self) -> u64 {
+        self.buffers.iter().map(|b| b.1).sum()
+    }
+
+    /// Refuse, before anything is allocated, a buffer larger than the device binds or
+    /// allocates, naming the buffer, its size and the limit.
+    pub fn check(&self, gpu: &Gpu) -> Result<()> {
+        let l = gpu.device.limits();
+        let limit = l.max_storage_buffer_binding_size.min(l.max_buffer_size);
+        if let Some((label, bytes)) = self.buffers.iter().find(|b| b.1 > limit) {
+            return Err(Error::Unsuitable(format!(
+                "the optimizer's {label} buffer needs {bytes} bytes ({:.1} MiB), the device allows \
+                 {limit} bytes ({:.1} MiB) per storage buffer; use smaller textures or images \
+                 (the optimizer needs {:.1} MiB in all)",
+                *bytes as f64 / MIB,
+                limit as f64 / MIB,
+                self.total() as f64 / MIB
+            )));
+        }
+        Ok(())
+    }
+}
+
+const MIB: f64 = 1024.0 * 1024.0;
+
+/// The optimizer's buffers for textures `set`, images as in `settings`, `n_cams` cameras.
+pub fn memory_plan(set: &ParamSet, settings: &Settings, n_cams: usize) -> MemoryPlan {
+    let n_params = set.values.len() as u64;
+    let n_texels: u64 = set
+        .textures
+        .iter()
+        .map(|t| (t.width * t.height) as u64)
+        .sum();
+    let pixels = settings.width as u64 * settings.height as u64;
+    let mut buffers = vec![
+        ("params".to_string(), 4 * n_params),
+        ("params_prev".to_string(), 4 * n_params),
+        ("gradient".to_string(), 4 * n_params),
+        ("adam moment1".to_string(), 4 * n_params),
+        ("adam moment2".to_string(), 4 * n_params),
+        ("primal accum".to_string(), 16 * pixels),
+        ("adjoint even".to_string(), 16 * pixels * n_cams as u64),
+        ("adjoint odd".to_string(), 16 * pixels * n_cams as u64),
+    ];
+    for k in 0..n_cams {
+        buffers.push((format!("target {k}"), 16 * pixels));
+    }
+    if settings.method == Method::Restir {
+        let res = n_texels * 2 * restir::RESERVOIR_WORDS * 4;
+        buffers.push(("reservoirs even".to_string(), res));
+        buffers.push(("reservoirs odd".to_string(), res));
+        buffers.push(("reservoir locks".to_string(), n_texels * 2 * 4));
+    }
+    MemoryPlan { buffers }
+}
+
 fn export_entry(binding: u32, ty: wgpu::BindingType) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
@@ -317,6 +382,7 @@ impl Optimizer {
                 )));
             }
         }
+        memory_plan(&set, &settings, targets.len()).check(gpu)?;
         let renderer = Renderer::with_params(gpu, scene, &set)?;
         use Binding::*;
         let loss_layout = gpu.layout("loss", &[Uniform, Storage, Storage, StorageRw, StorageRw]);
