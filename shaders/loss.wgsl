@@ -25,6 +25,8 @@ const REL_EPS: f32 = 0.01;
 @group(0) @binding(2) var<storage, read> target_image: array<vec4f>;
 @group(0) @binding(3) var<storage, read_write> adjoint: array<vec4f>;
 @group(0) @binding(4) var<storage, read_write> loss_partial: array<f32>;
+// [0] pixels whose loss or adjoint was not finite (left out of both).
+@group(0) @binding(5) var<storage, read_write> loss_stats: array<atomic<u32>, 4>;
 
 var<workgroup> partial: array<f32, 64>;
 
@@ -46,6 +48,7 @@ fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(local_invocation_ind
         if !(all(abs(adj) < vec3f(3.0e38)) && abs(term) < 3.0e38) {
             adj = vec3f(0.0);
             term = 0.0;
+            atomicAdd(&loss_stats[0], 1u);
         }
         adjoint[lp.adjoint_offset + i] = vec4f(adj, 0.0);
         l = term;

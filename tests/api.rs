@@ -1,7 +1,9 @@
 //! The library API as an application uses it: the two examples run to completion and
 //! recover their textures; a device without the limits psrestir needs is refused with the
-//! limits named; two optimizers on one device, their steps interleaved, each end where they
-//! would alone; textures come out as a GPU texture equal to the CPU values.
+//! limits named; a task too large for the device is refused before allocating; two optimizers
+//! on one device, their steps interleaved, each end where they would alone; textures come out
+//! as a GPU texture equal to the CPU values; injected non-finite values are dropped and
+//! counted, never stored.
 #[path = "../examples/gltf_textures.rs"]
 mod gltf_textures;
 #[path = "../examples/in_memory.rs"]
@@ -252,4 +254,72 @@ fn a_task_too_large_for_the_device_is_refused_before_allocating() {
     );
     // The baseline has no reservoirs and fits.
     Optimizer::for_problem(&gpu, &p, settings(Method::Baseline)).unwrap();
+}
+
+#[test]
+fn non_finite_values_are_dropped_and_counted_never_stored() {
+    if no_gpu() {
+        return;
+    }
+    let gpu = Gpu::new().unwrap();
+    for method in [Method::Baseline, Method::Restir] {
+        // Inject: a quarter of the target pixels are NaN or infinite, so their adjoints and
+        // every gradient sample through them are not finite.
+        let mut p = problem(&gpu, [[230, 60, 40], [40, 90, 220]]);
+        for (i, px) in p.targets[0].rgb.iter_mut().enumerate() {
+            match i % 8 {
+                0 => *px = [f32::NAN; 3],
+                1 => *px = [f32::INFINITY, 0.5, f32::NEG_INFINITY],
+                _ => {}
+            }
+        }
+        let mut o = Optimizer::for_problem(&gpu, &p, settings(method)).unwrap();
+        o.run(Stop::iterations(10), |_| ControlFlow::Continue(()))
+            .unwrap();
+        let values = o.texture_values(0).unwrap();
+        assert!(
+            values.iter().all(|v| v.is_finite()),
+            "{method:?}: {values:?}"
+        );
+        assert!(o.read_gradient().unwrap().iter().all(|g| g.is_finite()));
+        let state = o.state().unwrap();
+        assert!(state.m1.iter().chain(&state.m2).all(|v| v.is_finite()));
+        if let Some(r) = &state.restir {
+            // Weight, confidence and value words of every reservoir.
+            for res in r.reservoirs.chunks_exact(12) {
+                for w in [3, 4, 5, 6, 7] {
+                    let x = f32::from_bits(res[w]);
+                    assert!(x.is_finite(), "{method:?}: reservoir word {w} is {x}");
+                }
+            }
+        }
+        let f = o.faults().unwrap();
+        eprintln!("{method:?}: {f:?}");
+        // 2 of every 8 pixels of 32x32, every iteration: 10 x 256.
+        assert_eq!(f.dropped_pixels, 10 * 256, "{method:?}: {f:?}");
+        // The textures still move toward the finite part of the target.
+        assert!(
+            values.iter().any(|v| (v - 0.5).abs() > 0.05),
+            "{method:?}: no progress"
+        );
+
+        // Inject into the samples: a light of infinite intensity makes every primal and
+        // gradient sample that sees it infinite.
+        let mut p = problem(&gpu, [[230, 60, 40], [40, 90, 220]]);
+        p.scene.lights[0].intensity = psrestir::glam::Vec3::splat(f32::INFINITY);
+        let mut o = Optimizer::for_problem(&gpu, &p, settings(method)).unwrap();
+        o.run(Stop::iterations(5), |_| ControlFlow::Continue(()))
+            .unwrap();
+        let values = o.texture_values(0).unwrap();
+        assert!(
+            values.iter().all(|v| v.is_finite()),
+            "{method:?}: {values:?}"
+        );
+        let state = o.state().unwrap();
+        assert!(state.m1.iter().chain(&state.m2).all(|v| v.is_finite()));
+        let f = o.faults().unwrap();
+        eprintln!("{method:?}, infinite light: {f:?}");
+        assert!(f.dropped_primal > 0, "{method:?}: {f:?}");
+        assert!(f.dropped_gradient > 0, "{method:?}: {f:?}");
+    }
 }

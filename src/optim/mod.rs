@@ -197,6 +197,9 @@ pub struct FaultCounts {
     pub skipped_adam: u32,
     /// Non-finite primal samples dropped.
     pub dropped_primal: u32,
+    /// Pixels whose loss or adjoint was not finite (e.g. a NaN in the target), counted once
+    /// per iteration and camera, and left out of the loss and the gradient.
+    pub dropped_pixels: u32,
     /// ReSTIR candidates whose reservoir lock was not taken within the bound.
     pub lost_offers: u32,
     /// Non-finite ReSTIR replays dropped.
@@ -335,7 +338,7 @@ pub struct Optimizer {
     cams: Vec<CameraState>,
     grad: wgpu::Buffer,
     moments: [wgpu::Buffer; 2],
-    stats: [wgpu::Buffer; 3],
+    stats: [wgpu::Buffer; 4],
     loss_partial: wgpu::Buffer,
     grid: (u32, u32),
     loss_pipeline: wgpu::ComputePipeline,
@@ -385,7 +388,10 @@ impl Optimizer {
         memory_plan(&set, &settings, targets.len()).check(gpu)?;
         let renderer = Renderer::with_params(gpu, scene, &set)?;
         use Binding::*;
-        let loss_layout = gpu.layout("loss", &[Uniform, Storage, Storage, StorageRw, StorageRw]);
+        let loss_layout = gpu.layout(
+            "loss",
+            &[Uniform, Storage, Storage, StorageRw, StorageRw, StorageRw],
+        );
         let gradient_layout = gpu.layout("gradient", &[Uniform, Storage, StorageRw, StorageRw]);
         let adam_layout = gpu.layout(
             "adam",
@@ -414,6 +420,7 @@ impl Optimizer {
             gpu.storage_zeroed("primal stats", 16),
             gpu.storage_zeroed("gradient stats", 16),
             gpu.storage_zeroed("adam stats", 16),
+            gpu.storage_zeroed("loss stats", 16),
         ];
         let n_loss_groups = n_pixels.div_ceil(WORKGROUP);
         let loss_partial =
@@ -607,6 +614,7 @@ impl Optimizer {
                             &target_buf,
                             &adjoint[p],
                             &loss_partial,
+                            &stats[3],
                         ],
                     )
                 }),
@@ -1229,11 +1237,13 @@ impl Optimizer {
         let p: Vec<u32> = self.gpu.read_pod(&self.stats[0])?;
         let g: Vec<u32> = self.gpu.read_pod(&self.stats[1])?;
         let a: Vec<u32> = self.gpu.read_pod(&self.stats[2])?;
+        let l: Vec<u32> = self.gpu.read_pod(&self.stats[3])?;
         let mut f = FaultCounts {
             lost_updates: g[1],
             dropped_gradient: g[2],
             skipped_adam: a[0],
             dropped_primal: p[3],
+            dropped_pixels: l[0],
             ..Default::default()
         };
         if let Some(st) = &self.restir {
