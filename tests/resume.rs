@@ -259,7 +259,7 @@ fn ctrl_c_writes_the_checkpoint_and_outputs_then_resumes() {
     let task = write_task(dir.path(), iterations);
     let out = dir.path().join("c");
     let bin = env!("CARGO_BIN_EXE_psrestir");
-    let mut child = Command::new(bin)
+    let child = Command::new(bin)
         .arg("optimize")
         .arg(&task)
         .arg("--out")
