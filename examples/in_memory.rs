@@ -72,15 +72,18 @@ pub fn truth(colors: [[u8; 3]; 2]) -> Scene {
     s
 }
 
-/// A device of the program's own: the first adapter of the platform's primary backends,
-/// asked for the limits psrestir needs.
-pub fn own_device() -> psrestir::Result<Gpu> {
+/// The first adapter of the platform's primary backends (or of `WGPU_BACKEND`).
+pub fn adapter() -> psrestir::Result<wgpu::Adapter> {
     let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
     desc.backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY);
     let instance = wgpu::Instance::new(desc);
-    let adapter =
-        pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
-            .map_err(|e| psrestir::Error::NoAdapter(format!("no GPU adapter: {e}")))?;
+    pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
+        .map_err(|e| psrestir::Error::NoAdapter(format!("no GPU adapter: {e}")))
+}
+
+/// A device of the program's own, asked for the limits psrestir needs.
+pub fn own_device() -> psrestir::Result<Gpu> {
+    let adapter = adapter()?;
     let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
         label: Some("in_memory example"),
         required_limits: Gpu::required_limits(&adapter.limits())?,

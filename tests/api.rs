@@ -52,12 +52,7 @@ fn a_device_without_the_needed_limits_is_refused_by_name() {
     if no_gpu() {
         return;
     }
-    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
-    desc.backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY);
-    let instance = wgpu::Instance::new(desc);
-    let adapter =
-        pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
-            .unwrap();
+    let adapter = in_memory::adapter().unwrap();
     // WebGPU's default limits: 8 storage buffers per stage, psrestir binds 16.
     let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
         required_limits: wgpu::Limits::default(),
@@ -215,12 +210,7 @@ fn a_task_too_large_for_the_device_is_refused_before_allocating() {
         return;
     }
     // A device that binds at most 1 MiB per storage buffer.
-    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
-    desc.backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY);
-    let instance = wgpu::Instance::new(desc);
-    let adapter =
-        pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
-            .unwrap();
+    let adapter = in_memory::adapter().unwrap();
     let limits = wgpu::Limits {
         max_storage_buffer_binding_size: 1 << 20,
         max_buffer_size: 1 << 20,

@@ -2,7 +2,7 @@
 //! scenes built in code, a CPU reference of the glTF BRDF, and noise-aware image comparisons.
 #![allow(dead_code)]
 
-use glam::{Mat4, Vec2, Vec3, Vec4};
+use glam::{Vec2, Vec3, Vec4};
 use psrestir::gpu::Gpu;
 use psrestir::scene::{Camera, Material, PunctualKind, PunctualLight, Scene, Triangle};
 use std::f32::consts::PI;
@@ -57,19 +57,9 @@ pub fn quad(c: Vec3, u: Vec3, v: Vec3, material: u32) -> Vec<Triangle> {
 }
 
 pub fn look_at(eye: Vec3, target: Vec3, up: Vec3, yfov: f32) -> Camera {
-    let f = (target - eye).normalize();
-    let r = f.cross(up).normalize();
-    let u = r.cross(f);
     Camera {
-        name: "test".into(),
-        world: Mat4::from_cols(
-            r.extend(0.0),
-            u.extend(0.0),
-            (-f).extend(0.0),
-            eye.extend(1.0),
-        ),
-        yfov,
         aspect: Some(1.0),
+        ..Camera::look_at("test", eye, target, up, yfov)
     }
 }
 
