@@ -6,6 +6,7 @@
 // counted in stats[1], never silently lost.
 #import shared/rng
 #import shared/camera
+#import shared/adjoint_pixel
 #import shared/integrator
 
 // Keep in sync with GpuGradientParams in src/render/layout.rs.
@@ -82,28 +83,18 @@ fn scatter(m: Material, uv: vec2f, bg: BrdfGrad, weight: vec3f, adj: vec3f) {
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {
-    let width = gp.camera.width;
-    let n_pixels = width * gp.camera.height;
-    let xy_px = tile_pixel(id.x + id.y * gp.stride, width, gp.camera.height);
-    if xy_px.x == NONE {
-        return;
-    }
-    let px = xy_px.x;
-    let py = xy_px.y;
-    let pixel = py * width + px;
-    let adj = adjoint[gp.adjoint_offset + pixel].xyz * gp.inv_spp;
-    if all(adj == vec3f(0.0)) {
+    let a = adjoint_pixel(id.x + id.y * gp.stride, gp.camera, gp.adjoint_offset, gp.inv_spp);
+    if a.pixel == NONE {
         return;
     }
     techniques = gp.techniques;
-    let xy = vec2f(f32(px), f32(py));
     for (var s = 0u; s < gp.spp; s++) {
-        rng_init(gp.seed, (gp.sample_offset + s) * n_pixels + pixel, 0u);
-        let d = camera_direction(gp.camera, xy + rand2());
+        rng_init(gp.seed, (gp.sample_offset + s) * a.n_pixels + a.pixel, 0u);
+        let d = camera_direction(gp.camera, a.xy + rand2());
         let g = gradient_sample(gp.camera.origin, d);
         if g.valid {
-            scatter(g.m, g.sf.uv, g.nee_grad, g.nee.weight, adj);
-            scatter(g.m, g.sf.uv, g.bsdf_grad, g.bsdf.weight, adj);
+            scatter(g.m, g.sf.uv, g.nee_grad, g.nee.weight, a.adj);
+            scatter(g.m, g.sf.uv, g.bsdf_grad, g.bsdf.weight, a.adj);
         }
     }
     atomicAdd(&gstats[0], gp.spp);

@@ -7,6 +7,7 @@
 // the weight is q itself.
 #import shared/rng
 #import shared/camera
+#import shared/adjoint_pixel
 #import shared/integrator
 #import shared/reservoir
 
@@ -78,32 +79,22 @@ fn offer_contribution(m: Material, hit: Hit, uv: vec2f, bg: BrdfGrad, weight: ve
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {
-    let width = cp.camera.width;
-    let n_pixels = width * cp.camera.height;
-    let xy_px = tile_pixel(id.x + id.y * cp.stride, width, cp.camera.height);
-    if xy_px.x == NONE {
-        return;
-    }
-    let px = xy_px.x;
-    let py = xy_px.y;
-    let pixel = py * width + px;
-    let adj = adjoint[cp.adjoint_offset + pixel].xyz * cp.inv_spp;
-    if all(adj == vec3f(0.0)) {
+    let a = adjoint_pixel(id.x + id.y * cp.stride, cp.camera, cp.adjoint_offset, cp.inv_spp);
+    if a.pixel == NONE {
         return;
     }
     techniques = TECH_MIS;
-    let xy = vec2f(f32(px), f32(py));
     for (var s = 0u; s < cp.spp; s++) {
-        let sample = s * n_pixels + pixel;
+        let sample = s * a.n_pixels + a.pixel;
         rng_init(cp.seed, sample, 0u);
-        let d = camera_direction(cp.camera, xy + rand2());
+        let d = camera_direction(cp.camera, a.xy + rand2());
         let g = gradient_sample(cp.camera.origin, d);
         if !g.valid {
             continue;
         }
         let cam_bits = cp.camera_index << 1u;
-        offer_contribution(g.m, g.hit, g.sf.uv, g.nee_grad, g.nee.weight, adj, sample, cam_bits);
-        offer_contribution(g.m, g.hit, g.sf.uv, g.bsdf_grad, g.bsdf.weight, adj, sample, cam_bits | 1u);
+        offer_contribution(g.m, g.hit, g.sf.uv, g.nee_grad, g.nee.weight, a.adj, sample, cam_bits);
+        offer_contribution(g.m, g.hit, g.sf.uv, g.bsdf_grad, g.bsdf.weight, a.adj, sample, cam_bits | 1u);
     }
     atomicAdd(&cstats[0], offered);
     if lost > 0u {

@@ -26,6 +26,7 @@ pub const SOURCES: &[(&str, &str)] = sources!(
     "shared/params",
     "shared/integrator",
     "shared/reservoir",
+    "shared/adjoint_pixel",
     "render",
     "trace_rays",
     "gradient",

@@ -58,14 +58,18 @@ impl Problem {
                 .map_err(|(key, msg)| Error::Invalid(format!("textures[{i}].{key}: {msg}")))?;
         }
         let set = ParamSet::from_specs(&scene, textures, filter, Path::new("<problem>"))?;
-        Ok(Problem {
+        Ok(Problem::without_targets(scene, cameras, set))
+    }
+
+    fn without_targets(scene: Scene, cameras: Vec<usize>, set: ParamSet) -> Problem {
+        Problem {
             scene,
             truth: None,
             cameras,
             targets: Vec::new(),
             set,
             reference: None,
-        })
+        }
     }
 
     /// Use `images` as the targets, one per camera, all `width` x `height`.
@@ -157,14 +161,7 @@ impl Problem {
             }
         };
         let set = ParamSet::from_specs(&scene, &task.textures, task.optimizer.filter, &task.path)?;
-        let mut p = Problem {
-            scene,
-            truth: None,
-            cameras,
-            targets: Vec::new(),
-            set,
-            reference: None,
-        };
+        let mut p = Problem::without_targets(scene, cameras, set);
         let (w, h) = (task.width, task.height);
         let cached: Vec<_> = p
             .cameras
