@@ -263,12 +263,15 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
             .as_ref()
             .is_some_and(|f| f.load(std::sync::atomic::Ordering::SeqCst))
     };
+    // Only an interrupt that stops the loop early counts (one during the final writes does not).
+    let mut was_interrupted = false;
     loop {
         let elapsed = elapsed_before + session_start.elapsed().as_secs_f64();
-        if max_iter.is_some_and(|n| opt.iteration >= n)
-            || budget.is_some_and(|b| elapsed >= b)
-            || interrupted()
-        {
+        if max_iter.is_some_and(|n| opt.iteration >= n) || budget.is_some_and(|b| elapsed >= b) {
+            break;
+        }
+        if interrupted() {
+            was_interrupted = true;
             break;
         }
         let stats = opt.step()?;
@@ -340,7 +343,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         pass_times: pass_sum
             .filter(|_| timed > 0)
             .map(|s| s.divided(timed as f64)),
-        interrupted: interrupted(),
+        interrupted: was_interrupted,
     })
 }
 
