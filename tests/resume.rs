@@ -136,6 +136,13 @@ fn killed_run_resumes_from_its_checkpoint() {
     if no_gpu() {
         return;
     }
+    kill_and_resume("baseline");
+    kill_and_resume("restir");
+}
+
+/// Run the plane task uninterrupted, then again killed twice with SIGKILL after checkpoints
+/// and resumed, with the estimator `method`, and compare.
+fn kill_and_resume(method: &str) {
     let dir = tempfile::tempdir().unwrap();
     let iterations = 300;
     let task = write_task(dir.path(), iterations);
@@ -146,6 +153,7 @@ fn killed_run_resumes_from_its_checkpoint() {
     let st = Command::new(bin)
         .arg("optimize")
         .arg(&task)
+        .args(["--method", method])
         .arg("--out")
         .arg(&a)
         .status()
@@ -158,7 +166,11 @@ fn killed_run_resumes_from_its_checkpoint() {
     let mut kills = 0;
     for round in 0..3 {
         let mut cmd = Command::new(bin);
-        cmd.arg("optimize").arg(&task).arg("--out").arg(&b);
+        cmd.arg("optimize")
+            .arg(&task)
+            .args(["--method", method])
+            .arg("--out")
+            .arg(&b);
         if round > 0 {
             cmd.arg("--resume");
         }
@@ -228,25 +240,34 @@ fn killed_run_resumes_from_its_checkpoint() {
         assert!(b.join(f).exists(), "{f} missing");
     }
     psrestir::scene::load(&b.join("optimized.glb")).unwrap();
-    // Same quality as the uninterrupted run. The runs are not bit-identical (the order of
-    // float atomics and reservoir locks varies), and with a constant learning rate the RMSE of
-    // the 16 texels jitters between 0.004 and 0.04 over the last iterations, so the final value
-    // of one run says little. The median over the last 100 iterations is steady: 0.0070 to
-    // 0.0109 over five uninterrupted runs. Both must be far below the start and within a
-    // factor 2 of each other.
+    let r0 = ref_rows[0].1;
+    if method == "baseline" {
+        // The baseline is deterministic up to the order of float additions (two runs agree
+        // to 1e-8 in texture RMSE at every iteration), so a resume that restores textures,
+        // Adam moments and the random numbers exactly follows the uninterrupted run.
+        for (x, y) in ref_rows.iter().zip(&rows) {
+            assert!(
+                (x.1 - y.1).abs() <= 1e-5,
+                "baseline: iteration {}: resumed RMSE {}, uninterrupted {}",
+                x.0,
+                y.1,
+                x.1
+            );
+        }
+        return;
+    }
+    // ReSTIR is not: which candidate takes a reservoir lock first varies, and Adam amplifies
+    // it, so the runs differ (the median RMSE of the last 100 iterations ranges over 0.006 to
+    // 0.017 across runs of this task). Both must have converged; that the restored state
+    // continues exactly is tested in tests/restir.rs.
     let median_tail = |rows: &[(u32, f64)]| {
         let mut v: Vec<f64> = rows[rows.len() - 100..].iter().map(|r| r.1).collect();
         v.sort_by(f64::total_cmp);
         v[50]
     };
     let (ra, rb) = (median_tail(&ref_rows), median_tail(&rows));
-    let r0 = ref_rows[0].1;
     eprintln!("texture RMSE: first {r0:.4}, median of the last 100: uninterrupted {ra:.4}, resumed {rb:.4}");
     assert!(ra < r0 / 10.0 && rb < r0 / 10.0, "{ra} {rb} vs {r0}");
-    assert!(
-        ra.max(rb) <= 2.0 * ra.min(rb),
-        "resumed run settles at {rb}, uninterrupted at {ra}"
-    );
 }
 
 #[test]
