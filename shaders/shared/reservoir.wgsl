@@ -13,9 +13,11 @@
 
 // Tries before an offer gives up (and is counted as lost). Invocations of one SIMD group
 // never wait on each other (the holder finishes in the iteration that took the lock), so the
-// bound only matters when the OS preempts a lavapipe thread that holds a lock: 1024 tries ran
-// out then, under load, and biased the estimate; 2^18 tries (a few ms) outlast a preemption.
-const LOCK_BOUND: u32 = 262144u;
+// bound only matters when the OS preempts a lavapipe thread that holds a lock. With many test
+// threads on 2 cores that lasts tens of ms: 1024 tries lost hundreds of offers per run, 2^18
+// tries (about 5 ms) still lost a few in CI; 2^22 (about 80 ms) outlasts a scheduler period.
+// A holder always releases in the same iteration, so the bound is never reached otherwise.
+const LOCK_BOUND: u32 = 4194304u;
 
 // Streaming update from many invocations at once. Design: a per-reservoir lock taken with
 // atomicCompareExchangeWeak, the critical section and the release inside the loop iteration
