@@ -51,3 +51,25 @@ impl Error {
 
 /// Result with the library's [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Run `f`, a decoder working on the file at `path`, turning a panic inside it into
+/// [`Error::File`]. Third-party decoders have panicked on malformed files (found by fuzzing,
+/// see `tests/fuzz.rs`); a malformed file must give an error, not take the application down.
+/// `what` names the decoder in the message. (A build with `panic = "abort"` still aborts.)
+pub(crate) fn catch_panic<T>(
+    path: &std::path::Path,
+    what: &str,
+    f: impl FnOnce() -> Result<T>,
+) -> Result<T> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|p| {
+        let msg = p
+            .downcast_ref::<String>()
+            .cloned()
+            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+            .unwrap_or_default();
+        Err(Error::file(
+            path,
+            format!("{what} failed on this file ({msg}); the file is malformed or unsupported"),
+        ))
+    })
+}

@@ -145,10 +145,9 @@ impl Problem {
         Ok(())
     }
 
-    /// Load a task's scenes, find its cameras, render or load its targets (reusing
-    /// `target_*.exr` in `out` when `reuse` and present; rendered targets are saved there),
-    /// and lay out its textures.
-    pub fn from_task(gpu: &Gpu, task: &Task, out: &Path, reuse: bool) -> Result<Problem> {
+    /// Load a task's scene, find its cameras and lay out its textures, without targets (no
+    /// GPU needed; [`Problem::from_task`] adds them).
+    pub fn load(task: &Task) -> Result<Problem> {
         let scene = load_scene(task, &task.scene)?;
         let cameras: Vec<usize> = match &task.cameras {
             Some(names) => names
@@ -161,7 +160,14 @@ impl Problem {
             }
         };
         let set = ParamSet::from_specs(&scene, &task.textures, task.optimizer.filter, &task.path)?;
-        let mut p = Problem::without_targets(scene, cameras, set);
+        Ok(Problem::without_targets(scene, cameras, set))
+    }
+
+    /// Load a task's scenes, find its cameras, render or load its targets (reusing
+    /// `target_*.exr` in `out` when `reuse` and present; rendered targets are saved there),
+    /// and lay out its textures.
+    pub fn from_task(gpu: &Gpu, task: &Task, out: &Path, reuse: bool) -> Result<Problem> {
+        let mut p = Problem::load(task)?;
         let (w, h) = (task.width, task.height);
         let cached: Vec<_> = p
             .cameras

@@ -58,6 +58,7 @@ impl GpuScene {
     /// Upload a scene: BVH, triangles, materials, textures, lights, environment, and the
     /// optimized textures that replace material inputs.
     pub fn new(gpu: &Gpu, scene: &Scene, param_set: &ParamSet) -> Result<GpuScene> {
+        scene.validate()?;
         let limits = gpu.device.limits();
         let max_binding = limits.max_storage_buffer_binding_size;
         let check = |label: &str, bytes: usize| -> Result<()> {
@@ -251,6 +252,13 @@ impl GpuScene {
             }
         }
         let total: f64 = power.iter().map(|&p| p.max(0.0) as f64).sum();
+        if total <= 0.0 {
+            log::warn!(
+                "{}: the scene has no light with positive power (no punctual light, emissive \
+                 triangle of non-zero area or environment): every render is black",
+                scene.source.display()
+            );
+        }
         let mut acc = 0f64;
         for (l, p) in lights.iter_mut().zip(&power) {
             let pmf = if total > 0.0 {

@@ -36,11 +36,18 @@ impl EnvMap {
                 ))
             }
         };
-        if rgb.iter().flatten().any(|v| !v.is_finite() || *v < 0.0) {
-            return Err(Error::file(
-                path,
-                "environment map has negative or non-finite texels",
-            ));
+        if rgb.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(Error::file(path, "environment map has non-finite texels"));
+        }
+        // Lossy EXR compression (B44, PXR24) leaves small negative values near zero.
+        let mut rgb = rgb;
+        let negative = rgb.iter().flatten().filter(|v| **v < 0.0).count();
+        if negative > 0 {
+            log::warn!(
+                "{}: {negative} negative texel values set to 0 (radiance cannot be negative)",
+                path.display()
+            );
+            rgb.iter_mut().flatten().for_each(|v| *v = v.max(0.0));
         }
         Ok(EnvMap {
             width,

@@ -21,19 +21,35 @@ pub struct Image8 {
     pub rgba: Vec<[u8; 4]>,
 }
 
-/// Why an image of the declared size is refused (it would exhaust memory), if it is.
-pub fn size_problem(w: u64, h: u64, bytes_per_pixel: u64) -> Option<String> {
+/// Most decoded bytes per byte of file that psrestir believes: above the best ratio of the
+/// compressions used (deflate's 1032:1 on 8-bit grey, expanded 4x to RGBA), so that a small
+/// file declaring a huge image (a memory bomb, found by fuzzing) is refused before decoding.
+pub const MAX_EXPANSION: u64 = 4200;
+/// Decoded size below which [`MAX_EXPANSION`] is not applied.
+const EXPANSION_FLOOR: u64 = 16 << 20;
+
+/// Why an image of the declared size is refused (it would exhaust memory), if it is: an
+/// empty size, a side over [`MAX_IMAGE_DIM`], more than [`MAX_IMAGE_BYTES`] decoded at
+/// `bytes_per_pixel`, or more than [`MAX_EXPANSION`] times the `file_len` bytes it comes from.
+pub fn size_problem(w: u64, h: u64, bytes_per_pixel: u64, file_len: u64) -> Option<String> {
     if w == 0 || h == 0 {
         return Some(format!("image has an empty size {w}x{h}"));
     }
     let too_big = w > MAX_IMAGE_DIM as u64
         || h > MAX_IMAGE_DIM as u64
         || w * h * bytes_per_pixel > MAX_IMAGE_BYTES;
-    too_big.then(|| {
-        format!(
+    if too_big {
+        return Some(format!(
             "image declares {w}x{h} pixels, over the limit of {MAX_IMAGE_DIM}x{MAX_IMAGE_DIM} \
              and {} MiB decoded; refused before decoding",
             MAX_IMAGE_BYTES >> 20
+        ));
+    }
+    let decoded = w * h * bytes_per_pixel;
+    (decoded > EXPANSION_FLOOR && decoded > MAX_EXPANSION * file_len).then(|| {
+        format!(
+            "image declares {w}x{h} pixels, more than a file of {file_len} bytes can hold \
+             (truncated or corrupt); refused before decoding"
         )
     })
 }
@@ -75,14 +91,17 @@ pub fn decode_texture(bytes: &[u8], path: &Path, what: &str, name: &str) -> Resu
     )
     .into_dimensions()
     .map_err(|e| Error::file(path, format!("{what}: {e}")))?;
-    if let Some(problem) = size_problem(w as u64, h as u64, 4) {
+    if let Some(problem) = size_problem(w as u64, h as u64, 4, bytes.len() as u64) {
         return Err(Error::file(path, format!("{what}: {problem}")));
     }
     let mut reader = reader;
     reader.limits(limits());
-    let img = reader
-        .decode()
-        .map_err(|e| Error::file(path, format!("{what}: {e}")))?;
+    // zune-jpeg 0.5.15 panics on some corrupt JPEGs (tests/fuzz_regressions/jpeg).
+    let img = crate::error::catch_panic(path, &format!("{what}: the image decoder"), || {
+        reader
+            .decode()
+            .map_err(|e| Error::file(path, format!("{what}: {e}")))
+    })?;
     let rgba = img.to_rgba8();
     Ok(Image8 {
         name: name.to_string(),
@@ -98,42 +117,59 @@ pub fn decode_hdr(bytes: &[u8], path: &Path) -> Result<(u32, u32, Vec<[f32; 3]>)
     let (w, h) = image::ImageReader::with_format(Cursor::new(bytes), image::ImageFormat::Hdr)
         .into_dimensions()
         .map_err(|e| Error::file(path, format!("not a Radiance HDR image: {e}")))?;
-    if let Some(problem) = size_problem(w as u64, h as u64, 12) {
+    if let Some(problem) = size_problem(w as u64, h as u64, 12, bytes.len() as u64) {
         return Err(Error::file(path, problem));
     }
     let mut reader = reader;
     reader.limits(limits());
-    let img = reader
-        .decode()
-        .map_err(|e| Error::file(path, format!("Radiance HDR: {e}")))?
-        .to_rgb32f();
+    let img = crate::error::catch_panic(path, "the Radiance HDR decoder", || {
+        reader
+            .decode()
+            .map_err(|e| Error::file(path, format!("Radiance HDR: {e}")))
+    })?
+    .to_rgb32f();
     Ok((w, h, bytemuck::cast_slice(img.as_raw()).to_vec()))
 }
 
 /// Decode the first RGB(A) layer of an OpenEXR image into linear RGB floats.
 pub fn decode_exr(path: &Path) -> Result<(u32, u32, Vec<[f32; 3]>)> {
-    use exr::prelude::read_first_rgba_layer_from_file;
+    crate::error::catch_panic(path, "the OpenEXR decoder", || decode_exr_unguarded(path))
+}
+
+fn decode_exr_unguarded(path: &Path) -> Result<(u32, u32, Vec<[f32; 3]>)> {
+    use exr::prelude::traits::*;
     let meta = exr::meta::MetaData::read_from_file(path, false)
         .map_err(|e| Error::file(path, format!("not a readable OpenEXR file: {e}")))?;
-    let header = meta
-        .headers
-        .first()
-        .ok_or_else(|| Error::file(path, "OpenEXR file has no layer"))?;
-    let size = header.layer_size;
-    if let Some(problem) = size_problem(size.0 as u64, size.1 as u64, 16) {
-        return Err(Error::file(path, problem));
+    if meta.headers.is_empty() {
+        return Err(Error::file(path, "OpenEXR file has no layer"));
     }
-    let image = read_first_rgba_layer_from_file(
-        path,
-        |res, _| {
-            let (w, h) = (res.width(), res.height());
-            (w, vec![[0f32; 3]; w * h])
-        },
-        |(w, px): &mut (usize, Vec<[f32; 3]>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-            px[pos.y() * *w + pos.x()] = [r, g, b];
-        },
-    )
-    .map_err(|e| Error::file(path, format!("OpenEXR: {e}")))?;
+    let file_len = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
+    // Any layer may be the one read: check them all.
+    for header in meta.headers.iter() {
+        let size = header.layer_size;
+        if let Some(problem) = size_problem(size.0 as u64, size.1 as u64, 16, file_len) {
+            return Err(Error::file(path, problem));
+        }
+    }
+    // Sequential: a panic in a decoder on a worker thread of the parallel reader aborts the
+    // process (rayon), where on this thread it becomes an error (`catch_panic`).
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .rgba_channels(
+            |res, _| {
+                let (w, h) = (res.width(), res.height());
+                (w, vec![[0f32; 3]; w * h])
+            },
+            |(w, px): &mut (usize, Vec<[f32; 3]>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                px[pos.y() * *w + pos.x()] = [r, g, b];
+            },
+        )
+        .first_valid_layer()
+        .all_attributes()
+        .non_parallel()
+        .from_file(path)
+        .map_err(|e| Error::file(path, format!("OpenEXR: {e}")))?;
     let (w, px) = image.layer_data.channel_data.pixels;
     let h = px.len() / w.max(1);
     Ok((w as u32, h as u32, px))

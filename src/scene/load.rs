@@ -4,11 +4,13 @@
 //! URIs with a scheme other than `data:` are refused.
 use super::{
     images, Camera, Material, PunctualKind, PunctualLight, Scene, TextureSlot, Triangle, Wrap,
+    MAX_COORD,
 };
 use crate::{Error, Result};
 use base64::Engine;
 use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
 use std::collections::HashMap;
+use std::f32::consts::PI;
 use std::path::{Component, Path, PathBuf};
 
 /// Largest scene, buffer or image file psrestir reads (bytes).
@@ -19,7 +21,21 @@ pub const MAX_TRIANGLES: usize = 64 << 20;
 /// Load a `.gltf` or `.glb` file.
 pub fn load(path: &Path) -> Result<Scene> {
     let bytes = read_file(path)?;
-    let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| gltf_error(path, e))?;
+    crate::error::catch_panic(path, "the glTF reader", || load_bytes(path, &bytes))
+}
+
+fn load_bytes(path: &Path, bytes: &[u8]) -> Result<Scene> {
+    let json: Option<serde_json::Value> = if bytes.starts_with(b"glTF") {
+        gltf::binary::Glb::from_slice(bytes)
+            .ok()
+            .and_then(|glb| serde_json::from_slice(&glb.json).ok())
+    } else {
+        serde_json::from_slice(bytes).ok()
+    };
+    if let Some(json) = &json {
+        precheck(json).map_err(|msg| Error::file(path, format!("invalid glTF: {msg}")))?;
+    }
+    let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| gltf_error(path, e))?;
     let base = path
         .parent()
         .map(Path::to_path_buf)
@@ -44,6 +60,92 @@ pub fn load(path: &Path) -> Result<Scene> {
         log::warn!("{}: {w}", path.display());
     }
     Ok(loader.scene)
+}
+
+/// Checks of the JSON that the gltf crate's validation does not make and without which it
+/// panics or misreads data (each found by fuzzing; the inputs are in
+/// `tests/fuzz_regressions/`): accessor references of primitives in range, the accessor
+/// types the specification requires for the attributes psrestir reads, and images in buffer
+/// views with a MIME type.
+fn precheck(json: &serde_json::Value) -> std::result::Result<(), String> {
+    use serde_json::Value;
+    let empty = Vec::new();
+    let accessors = json["accessors"].as_array().unwrap_or(&empty);
+    let n_views = json["bufferViews"].as_array().map_or(0, Vec::len);
+    for (mi, mesh) in json["meshes"]
+        .as_array()
+        .unwrap_or(&empty)
+        .iter()
+        .enumerate()
+    {
+        for (pi, prim) in mesh["primitives"]
+            .as_array()
+            .unwrap_or(&empty)
+            .iter()
+            .enumerate()
+        {
+            let what = format!("mesh {mi} primitive {pi}");
+            let mut refs: Vec<(String, &Value)> = Vec::new();
+            if let Some(a) = prim["attributes"].as_object() {
+                refs.extend(a.iter().map(|(k, v)| (k.clone(), v)));
+            }
+            for (t, target) in prim["targets"]
+                .as_array()
+                .unwrap_or(&empty)
+                .iter()
+                .enumerate()
+            {
+                if let Some(a) = target.as_object() {
+                    refs.extend(a.iter().map(|(k, v)| (format!("target {t} {k}"), v)));
+                }
+            }
+            if !prim["indices"].is_null() {
+                refs.push(("indices".into(), &prim["indices"]));
+            }
+            for (name, v) in refs {
+                let Some(acc) = v.as_u64().and_then(|i| accessors.get(i as usize)) else {
+                    return Err(format!(
+                        "{what}: {name} refers to accessor {v}, the file has {}",
+                        accessors.len()
+                    ));
+                };
+                let ty = acc["type"].as_str().unwrap_or("");
+                let ct = acc["componentType"].as_u64().unwrap_or(0);
+                let ok = match name.as_str() {
+                    "POSITION" | "NORMAL" => ty == "VEC3" && ct == 5126,
+                    "TEXCOORD_0" => ty == "VEC2" && matches!(ct, 5121 | 5123 | 5126),
+                    "indices" => ty == "SCALAR" && matches!(ct, 5121 | 5123 | 5125),
+                    _ => true,
+                };
+                if !ok {
+                    return Err(format!(
+                        "{what}: {name} accessor is {ty} of component type {ct}, which the \
+                         glTF specification does not allow there"
+                    ));
+                }
+            }
+        }
+    }
+    for (i, img) in json["images"]
+        .as_array()
+        .unwrap_or(&empty)
+        .iter()
+        .enumerate()
+    {
+        match (img["bufferView"].as_u64(), img["uri"].is_string()) {
+            (Some(v), false) => {
+                if v as usize >= n_views {
+                    return Err(format!("image {i} refers to buffer view {v} of {n_views}"));
+                }
+                if !img["mimeType"].is_string() {
+                    return Err(format!("image {i} is in a buffer view but has no mimeType"));
+                }
+            }
+            (None, true) => {}
+            _ => return Err(format!("image {i} needs exactly one of uri and bufferView")),
+        }
+    }
+    Ok(())
 }
 
 fn read_file(path: &Path) -> Result<Vec<u8>> {
@@ -454,7 +556,21 @@ impl<'a> Loader<'a> {
                 return Err(self.err(format!("{what}: attribute counts differ")));
             }
             let material = self.material_index(prim.material().index());
-            let mut skipped = 0;
+            if uvs.is_none() {
+                let m = &self.scene.materials[material as usize];
+                let textured = m.base_color_texture.is_some()
+                    || m.metallic_roughness_texture.is_some()
+                    || m.emissive_texture.is_some();
+                if textured {
+                    self.scene.warnings.push(format!(
+                        "{what}: no TEXCOORD_0 but material `{}` is textured: its textures are \
+                         read at UV (0, 0) there, and texture optimization of that material \
+                         gets no gradient from it",
+                        m.name
+                    ));
+                }
+            }
+            let (mut skipped, mut degenerate) = (0, 0);
             for f in indices.chunks_exact(3) {
                 if self.scene.triangles.len() >= MAX_TRIANGLES {
                     return Err(self.err(format!("more than {MAX_TRIANGLES} triangles")));
@@ -464,15 +580,23 @@ impl<'a> Loader<'a> {
                     idx.swap(1, 2);
                 }
                 let p = idx.map(|i| world.transform_point3(positions[i]));
-                if p.iter().any(|v| !v.is_finite()) {
+                if p.iter()
+                    .any(|v| !v.is_finite() || v.abs().max_element() > MAX_COORD)
+                {
                     skipped += 1;
                     continue;
                 }
                 let face = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+                if face == Vec3::ZERO {
+                    // Zero area (collinear or repeated vertices): never hit, never a light.
+                    degenerate += 1;
+                    continue;
+                }
                 let n = idx.map(|i| match &normals {
                     Some(ns) => {
                         let v = (normal_m * ns[i]).normalize_or_zero();
-                        if v.is_finite() && v != Vec3::ZERO {
+                        // Also catches vectors so short that normalizing them loses precision.
+                        if v.is_finite() && (v.length() - 1.0).abs() < 1e-4 {
                             v
                         } else {
                             face
@@ -488,7 +612,13 @@ impl<'a> Loader<'a> {
             }
             if skipped > 0 {
                 self.scene.warnings.push(format!(
-                    "{what}: {skipped} triangles with non-finite positions skipped"
+                    "{what}: {skipped} triangles with non-finite positions or positions \
+                     beyond ±{MAX_COORD:e} skipped"
+                ));
+            }
+            if degenerate > 0 {
+                self.scene.warnings.push(format!(
+                    "{what}: {degenerate} degenerate (zero-area) triangles skipped"
                 ));
             }
         }
@@ -502,12 +632,23 @@ impl<'a> Loader<'a> {
             .map(str::to_string)
             .unwrap_or_else(|| format!("camera {}", self.scene.cameras.len()));
         match cam.projection() {
-            gltf::camera::Projection::Perspective(p) => self.scene.cameras.push(Camera {
-                name,
-                world,
-                yfov: p.yfov(),
-                aspect: p.aspect_ratio(),
-            }),
+            gltf::camera::Projection::Perspective(p) => {
+                let fov_ok = p.yfov().is_finite() && p.yfov() > 0.0 && p.yfov() < PI;
+                let aspect_ok = p.aspect_ratio().is_none_or(|a| a.is_finite() && a > 0.0);
+                if !fov_ok || !aspect_ok {
+                    self.scene.warnings.push(format!(
+                        "camera `{name}` has a field of view outside (0, pi) or a \
+                         non-positive aspect ratio, skipped"
+                    ));
+                    return;
+                }
+                self.scene.cameras.push(Camera {
+                    name,
+                    world,
+                    yfov: p.yfov(),
+                    aspect: p.aspect_ratio(),
+                })
+            }
             gltf::camera::Projection::Orthographic(_) => self.scene.warnings.push(format!(
                 "camera `{name}` is orthographic, skipped (perspective only)"
             )),
@@ -537,10 +678,29 @@ impl<'a> Loader<'a> {
                 "light `{name}` has a negative or non-finite intensity"
             )));
         }
+        if let PunctualKind::Spot {
+            inner_cone,
+            outer_cone,
+        } = kind
+        {
+            // glTF: 0 <= inner < outer <= pi/2.
+            if !(0.0..PI / 2.0 + 1e-6).contains(&outer_cone)
+                || !(0.0..=outer_cone).contains(&inner_cone)
+            {
+                return Err(self.err(format!(
+                    "spot light `{name}`: cone angles must satisfy 0 <= inner ({inner_cone}) \
+                     <= outer ({outer_cone}) <= pi/2"
+                )));
+            }
+        }
+        let position = world.transform_point3(Vec3::ZERO);
+        if !position.is_finite() || position.abs().max_element() > MAX_COORD {
+            return Err(self.err(format!("light `{name}` is placed beyond ±{MAX_COORD:e}")));
+        }
         self.scene.lights.push(PunctualLight {
             name,
             kind,
-            position: world.transform_point3(Vec3::ZERO),
+            position,
             direction: world
                 .transform_vector3(Vec3::NEG_Z)
                 .normalize_or(Vec3::NEG_Z),

@@ -16,6 +16,10 @@ pub use env::EnvMap;
 pub use images::Image8;
 pub use load::{load, load_source};
 
+/// Largest vertex coordinate (absolute value) psrestir accepts: beyond it, f32 ray tracing
+/// loses all precision and bounds overflow.
+pub const MAX_COORD: f32 = 1e15;
+
 /// One world-space triangle with its shading attributes.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Triangle {
@@ -249,6 +253,143 @@ impl Scene {
             &self.source,
             format!("no camera `{which}`; the scene has {}", names.join(", ")),
         ))
+    }
+
+    /// Check that the scene is one the renderer can take: finite geometry within
+    /// ±[`MAX_COORD`], unit normals, material, image and texture references in range, images
+    /// holding width x height pixels, finite non-negative material factors and light
+    /// intensities, cameras with a field of view in (0, pi), a finite non-negative
+    /// environment. Loaded scenes pass by construction (the loader skips or refuses what
+    /// fails); scenes built in code are checked here before they reach the GPU, where such
+    /// data would otherwise turn into NaN images or out-of-range reads.
+    pub fn validate(&self) -> crate::Result<()> {
+        let bad = |msg: String| -> crate::Error {
+            if self.source.as_os_str().is_empty() {
+                crate::Error::Invalid(format!("invalid scene: {msg}"))
+            } else {
+                crate::Error::file(&self.source, msg)
+            }
+        };
+        let n_mat = self.materials.len();
+        for (i, t) in self.triangles.iter().enumerate() {
+            if t.material as usize >= n_mat {
+                return Err(bad(format!(
+                    "triangle {i} uses material {} of {n_mat}",
+                    t.material
+                )));
+            }
+            if t.p
+                .iter()
+                .any(|p| !p.is_finite() || p.abs().max_element() > MAX_COORD)
+            {
+                return Err(bad(format!(
+                    "triangle {i} has a non-finite vertex or one beyond ±{MAX_COORD:e}"
+                )));
+            }
+            if t.n
+                .iter()
+                .any(|n| !n.is_finite() || (n.length() - 1.0).abs() > 1e-3)
+            {
+                return Err(bad(format!(
+                    "triangle {i} has a normal that is not unit length"
+                )));
+            }
+            if t.uv.iter().any(|uv| !uv.is_finite()) {
+                return Err(bad(format!("triangle {i} has a non-finite UV")));
+            }
+        }
+        for (i, img) in self.images.iter().enumerate() {
+            if img.width == 0
+                || img.height == 0
+                || img.rgba.len() as u64 != img.width as u64 * img.height as u64
+            {
+                return Err(bad(format!(
+                    "image {i} (`{}`) is {}x{} but holds {} pixels",
+                    img.name,
+                    img.width,
+                    img.height,
+                    img.rgba.len()
+                )));
+            }
+        }
+        for m in &self.materials {
+            let finite = m.base_color.is_finite()
+                && m.emissive.is_finite()
+                && m.metallic.is_finite()
+                && m.roughness.is_finite();
+            if !finite || m.emissive.min_element() < 0.0 {
+                return Err(bad(format!(
+                    "material `{}` has non-finite or negative factors",
+                    m.name
+                )));
+            }
+            let slots = [
+                &m.base_color_texture,
+                &m.metallic_roughness_texture,
+                &m.emissive_texture,
+            ];
+            for s in slots.into_iter().flatten() {
+                if s.image >= self.images.len() {
+                    return Err(bad(format!(
+                        "material `{}` uses image {} of {}",
+                        m.name,
+                        s.image,
+                        self.images.len()
+                    )));
+                }
+                if s.transform.iter().flatten().any(|v| !v.is_finite()) {
+                    return Err(bad(format!(
+                        "material `{}` has a non-finite texture transform",
+                        m.name
+                    )));
+                }
+            }
+        }
+        for c in &self.cameras {
+            let fov_ok = c.yfov.is_finite() && c.yfov > 0.0 && c.yfov < std::f32::consts::PI;
+            let aspect_ok = c.aspect.is_none_or(|a| a.is_finite() && a > 0.0);
+            if !c.world.is_finite() || !fov_ok || !aspect_ok {
+                return Err(bad(format!(
+                    "camera `{}` has a non-finite transform, a field of view outside (0, pi)                      or a non-positive aspect ratio",
+                    c.name
+                )));
+            }
+        }
+        for l in &self.lights {
+            let ok = l.position.is_finite()
+                && l.direction.is_finite()
+                && l.intensity.is_finite()
+                && l.intensity.min_element() >= 0.0
+                && l.range.is_finite()
+                && match l.kind {
+                    PunctualKind::Spot {
+                        inner_cone,
+                        outer_cone,
+                    } => inner_cone.is_finite() && outer_cone.is_finite(),
+                    _ => true,
+                };
+            if !ok {
+                return Err(bad(format!(
+                    "light `{}` has non-finite values or a negative intensity",
+                    l.name
+                )));
+            }
+        }
+        if let Some(env) = &self.env {
+            if env.width == 0
+                || env.height == 0
+                || env.rgb.len() as u64 != env.width as u64 * env.height as u64
+                || !(env.scale.is_finite() && env.scale >= 0.0)
+                || env.rgb.iter().flatten().any(|v| !v.is_finite() || *v < 0.0)
+            {
+                return Err(bad(
+                    "the environment map's size, pixels or scale are invalid (sizes must \
+                     match, values be finite and non-negative)"
+                        .into(),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Centre and radius of a sphere around every triangle.
