@@ -18,7 +18,32 @@ pub enum Error {
     /// The adapter lacks a feature or limit that psrestir needs.
     #[error("GPU adapter unsuitable: {0}")]
     Unsuitable(String),
-    /// A GPU operation failed (validation error, out of memory, device lost).
+    /// The GPU ran out of memory.
+    #[error(
+        "GPU out of memory in {label}: {msg}. Lower the image size (width, height), the \
+         texture resolution or the samples per pass, or free GPU memory held by other programs"
+    )]
+    OutOfMemory {
+        /// The pass or buffer involved.
+        label: String,
+        /// What wgpu reported.
+        msg: String,
+    },
+    /// The GPU device was lost (driver reset, GPU removed, or the device destroyed); nothing
+    /// more can run on it.
+    #[error(
+        "the GPU device was lost in {label}: {msg}. Work on it cannot continue: restart, \
+         and continue an optimization from its last checkpoint with `psrestir optimize \
+         --resume`; if the driver reset the GPU because a dispatch ran too long, lower the \
+         samples per pass or the image size"
+    )]
+    DeviceLost {
+        /// The pass or operation that found the loss.
+        label: String,
+        /// The reason wgpu gave.
+        msg: String,
+    },
+    /// A GPU operation failed (a validation or internal error).
     #[error("GPU error in {label}: {msg}")]
     Gpu {
         /// The pass or buffer involved.
@@ -61,7 +86,10 @@ pub(crate) fn catch_panic<T>(
     what: &str,
     f: impl FnOnce() -> Result<T>,
 ) -> Result<T> {
-    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|p| {
+    let was = GUARDED.with(|g| g.replace(true));
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+    GUARDED.with(|g| g.set(was));
+    result.unwrap_or_else(|p| {
         let msg = p
             .downcast_ref::<String>()
             .cloned()
@@ -72,4 +100,15 @@ pub(crate) fn catch_panic<T>(
             format!("{what} failed on this file ({msg}); the file is malformed or unsupported"),
         ))
     })
+}
+
+thread_local! {
+    static GUARDED: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Whether this thread is running a decoder under psrestir's panic guard, which turns a panic
+/// into an [`Error::File`]. An application's panic hook can stay quiet while it is true (the
+/// `psrestir` binary's does), since the error will be reported.
+pub fn panic_is_guarded() -> bool {
+    GUARDED.with(|g| g.get())
 }

@@ -219,6 +219,14 @@ fn main() {
     if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
         std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
     }
+    // A panic inside a third-party decoder is caught and reported as an error naming the
+    // file; the default hook would also print it as a crash.
+    let default_hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        if !psrestir::error::panic_is_guarded() {
+            default_hook(info)
+        }
+    }));
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("psrestir=info"))
         .format_timestamp(None)
         .init();

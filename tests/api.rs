@@ -313,3 +313,94 @@ fn non_finite_values_are_dropped_and_counted_never_stored() {
         assert!(f.dropped_gradient > 0, "{method:?}: {f:?}");
     }
 }
+
+#[test]
+fn a_lost_device_is_a_clear_error_not_a_panic() {
+    if no_gpu() {
+        return;
+    }
+    let gpu = Gpu::new().unwrap();
+    let p = problem(&gpu, [[230, 60, 40], [40, 90, 220]]);
+    let mut o = Optimizer::for_problem(&gpu, &p, settings(Method::Restir)).unwrap();
+    o.step().unwrap();
+    // What a driver reset looks like to the application: the device is gone.
+    gpu.device.destroy();
+    let e = o.step().unwrap_err();
+    assert!(matches!(e, psrestir::Error::DeviceLost { .. }), "{e:?}");
+    let text = e.to_string();
+    assert!(
+        text.contains("device was lost") && text.contains("--resume"),
+        "{text}"
+    );
+    // It stays lost: every later call says so, none panics.
+    assert!(matches!(
+        o.texture_values(0).unwrap_err(),
+        psrestir::Error::DeviceLost { .. }
+    ));
+}
+
+#[test]
+fn scenes_built_in_code_are_checked_before_they_reach_the_gpu() {
+    if no_gpu() {
+        return;
+    }
+    use psrestir::glam::{Vec2, Vec3};
+    let gpu = Gpu::new().unwrap();
+    let cases: Vec<(&str, Box<dyn Fn(&mut psrestir::Scene)>, &str)> = vec![
+        (
+            "material out of range",
+            Box::new(|s| s.triangles[0].material = 99),
+            "uses material 99",
+        ),
+        (
+            "NaN vertex",
+            Box::new(|s| s.triangles[1].p[2].x = f32::NAN),
+            "triangle 1 has a non-finite vertex",
+        ),
+        (
+            "zero normal",
+            Box::new(|s| s.triangles[0].n[0] = Vec3::ZERO),
+            "normal that is not unit length",
+        ),
+        (
+            "infinite UV",
+            Box::new(|s| s.triangles[0].uv[1] = Vec2::new(f32::INFINITY, 0.0)),
+            "non-finite UV",
+        ),
+        (
+            "image of the wrong size",
+            Box::new(|s| s.images[0].rgba.pop().map(|_| ()).unwrap_or(())),
+            "holds 15 pixels",
+        ),
+        (
+            "texture of a missing image",
+            Box::new(|s| {
+                if let Some(t) = s.materials[0].base_color_texture.as_mut() {
+                    t.image = 5
+                }
+            }),
+            "uses image 5",
+        ),
+        (
+            "negative light",
+            Box::new(|s| s.lights[0].intensity = Vec3::splat(-1.0)),
+            "negative intensity",
+        ),
+        (
+            "camera without a field of view",
+            Box::new(|s| s.cameras[0].yfov = 0.0),
+            "field of view outside (0, pi)",
+        ),
+    ];
+    for (what, break_it, expect) in cases {
+        let mut s = in_memory::truth([[200, 40, 40], [40, 40, 200]]);
+        assert!(s.validate().is_ok(), "the example scene is valid");
+        break_it(&mut s);
+        let e = psrestir::render::Renderer::new(&gpu, &s)
+            .map(|_| ())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(expect), "{what}: {e}");
+        assert!(e.starts_with("invalid scene"), "{what}: {e}");
+    }
+}

@@ -357,3 +357,128 @@ fn a_missing_gpu_driver_says_how_to_install_one() {
     );
     assert!(!err.contains("panicked"), "{err}");
 }
+
+/// The one-triangle scene of `textured`, with `edit` applied to its JSON.
+fn edited(dir: &Path, name: &str, edit: impl Fn(&mut serde_json::Value)) -> PathBuf {
+    let p = textured(dir, "tex.png");
+    std::fs::write(
+        dir.join("tex.png"),
+        png_bytes(1, 1, &[[200, 100, 50, 255]]).unwrap(),
+    )
+    .unwrap();
+    let mut doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&p).unwrap()).unwrap();
+    edit(&mut doc);
+    let out = dir.join(name);
+    std::fs::write(&out, serde_json::to_vec(&doc).unwrap()).unwrap();
+    out
+}
+
+// Found by fuzzing (tests/fuzz.rs): each made the gltf crate panic before psrestir checked
+// the JSON itself.
+
+#[test]
+fn an_accessor_reference_out_of_range_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = edited(dir.path(), "acc.gltf", |d| {
+        d["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = json!(34962)
+    });
+    refused(
+        &p,
+        &["mesh 0 primitive 0", "POSITION refers to accessor 34962"],
+    );
+}
+
+#[test]
+fn an_accessor_of_the_wrong_type_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = edited(dir.path(), "type.gltf", |d| {
+        d["accessors"][0]["type"] = json!("VEC2")
+    });
+    refused(&p, &["POSITION accessor is VEC2", "does not allow"]);
+    let p = edited(dir.path(), "idx.gltf", |d| {
+        d["meshes"][0]["primitives"][0]["indices"] = json!(0)
+    });
+    refused(&p, &["indices accessor is VEC3 of component type 5126"]);
+}
+
+#[test]
+fn an_image_in_a_buffer_view_without_a_mime_type_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = edited(dir.path(), "mime.gltf", |d| {
+        d["images"][0] = json!({"bufferView": 0})
+    });
+    refused(&p, &["image 0 is in a buffer view but has no mimeType"]);
+}
+
+#[test]
+fn a_jpeg_that_panics_the_decoder_is_refused() {
+    // zune-jpeg 0.5.15 panics on this file (an unwrap in its AVX2 IDCT).
+    let dir = tempfile::tempdir().unwrap();
+    let p = textured(dir.path(), "tex.jpg");
+    let bad = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/fuzz_regressions/jpeg/c5bd64b4"
+    );
+    std::fs::copy(bad, dir.path().join("tex.jpg")).unwrap();
+    refused(&p, &["tex.jpg", "the image decoder failed on this file"]);
+}
+
+#[test]
+fn a_small_jpeg_declaring_a_huge_image_is_refused_before_decoding() {
+    // 1.8 GiB were allocated for this file before the expansion limit.
+    let dir = tempfile::tempdir().unwrap();
+    let p = textured(dir.path(), "tex.jpg");
+    let bad = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/fuzz_regressions/jpeg/2bced699"
+    );
+    std::fs::copy(bad, dir.path().join("tex.jpg")).unwrap();
+    refused(&p, &["more than a file of", "refused before decoding"]);
+}
+
+#[test]
+fn degenerate_triangles_and_missing_uvs_are_skipped_or_warned_about() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut b = GltfBuilder::new();
+    let img = b.add_image_embedded(
+        "tex",
+        &png_bytes(1, 1, &[[9, 9, 9, 255]]).unwrap(),
+        "image/png",
+    );
+    let tex = b.add_texture(img, None);
+    let mat = b.add_material(
+        json!({"name": "painted", "pbrMetallicRoughness": {"baseColorTexture": {"index": tex}}}),
+    );
+    // Two triangles: one proper, one with all three vertices on a line.
+    let mesh = b.add_mesh(
+        "m",
+        &[
+            [0.0; 3],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0; 3],
+            [1.0, 1.0, 1.0],
+            [2.0, 2.0, 2.0],
+        ],
+        None,
+        None,
+        None,
+        Some(mat),
+    );
+    let n = b.add_node(json!({"mesh": mesh}));
+    b.set_scene(&[n]);
+    let p = dir.path().join("degenerate.gltf");
+    b.write_gltf(&p, false).unwrap();
+    let s = load(&p).unwrap();
+    assert_eq!(s.triangles.len(), 1, "the degenerate triangle is skipped");
+    s.validate().unwrap();
+    let all = s.warnings.join("\n");
+    assert!(
+        all.contains("1 degenerate (zero-area) triangles skipped"),
+        "{all}"
+    );
+    assert!(
+        all.contains("no TEXCOORD_0 but material `painted` is textured"),
+        "{all}"
+    );
+}

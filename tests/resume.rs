@@ -1,6 +1,6 @@
-//! A run killed mid-way (SIGKILL) continues with --resume from its last checkpoint: the
-//! metrics have no gap and no repeat, no output is left half-written, and the result is as
-//! good as an uninterrupted run's.
+//! A run killed at random moments (SIGKILL) continues with --resume from its last checkpoint:
+//! the metrics have no gap and no repeat, no output is ever left half-written, and the result
+//! is as good as an uninterrupted run's.
 use psrestir::scene::authoring::{png_bytes, GltfBuilder};
 use serde_json::json;
 use std::path::Path;
@@ -140,8 +140,44 @@ fn killed_run_resumes_from_its_checkpoint() {
     kill_and_resume("restir");
 }
 
-/// Run the plane task uninterrupted, then again killed twice with SIGKILL after checkpoints
-/// and resumed, with the estimator `method`, and compare.
+/// Every output under its real name in `dir` is whole: the checkpoint loads, the metrics
+/// parse, every image decodes and the optimized scene loads. (A kill during a write may leave
+/// a temporary file, which the next run removes.)
+fn outputs_whole(dir: &Path) {
+    for e in std::fs::read_dir(dir).unwrap() {
+        let path = e.unwrap().path();
+        let name = path.file_name().unwrap().to_string_lossy().to_string();
+        if name.ends_with(".tmp") {
+            continue;
+        }
+        let ext = path
+            .extension()
+            .map(|x| x.to_string_lossy().to_string())
+            .unwrap_or_default();
+        let whole = match ext.as_str() {
+            "bin" => psrestir::optim::checkpoint::Checkpoint::load(&path)
+                .map(|_| ())
+                .map_err(|e| e.to_string()),
+            "csv" => {
+                metrics(dir);
+                Ok(())
+            }
+            "png" | "exr" => psrestir::image_io::load_linear(&path)
+                .map(|_| ())
+                .map_err(|e| e.to_string()),
+            "glb" => psrestir::scene::load(&path)
+                .map(|_| ())
+                .map_err(|e| e.to_string()),
+            _ => Ok(()),
+        };
+        assert!(whole.is_ok(), "{name} is not whole: {whole:?}");
+    }
+}
+
+/// Run the plane task uninterrupted, then again killed with SIGKILL at random moments (up to
+/// four times: during the target render, between checkpoints, during writes) and resumed,
+/// with the estimator `method`, and compare. After each kill every output is whole; each
+/// resume starts at the iteration of the checkpoint on disk.
 fn kill_and_resume(method: &str) {
     let dir = tempfile::tempdir().unwrap();
     let iterations = 300;
@@ -149,7 +185,8 @@ fn kill_and_resume(method: &str) {
     let bin = env!("CARGO_BIN_EXE_psrestir");
     let (a, b) = (dir.path().join("a"), dir.path().join("b"));
 
-    // Uninterrupted reference.
+    // Uninterrupted reference, timed to choose the kill moments.
+    let t0 = Instant::now();
     let st = Command::new(bin)
         .arg("optimize")
         .arg(&task)
@@ -159,53 +196,107 @@ fn kill_and_resume(method: &str) {
         .status()
         .unwrap();
     assert!(st.success());
+    let full = t0.elapsed().as_secs_f64();
     let ref_rows = metrics(&a);
     assert_eq!(ref_rows.len(), iterations);
 
-    // Killed twice at checkpoints, then resumed to the end.
-    let mut kills = 0;
-    for round in 0..3 {
+    // Kill moments: uniform over the run's length, from a seed printed for repetition.
+    let seed = std::env::var("PSRESTIR_KILL_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| {
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap()
+                .subsec_nanos() as u64
+        });
+    let mut state = seed;
+    let mut uniform = move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    eprintln!("{method}: uninterrupted run {full:.1} s; kill seed {seed} (PSRESTIR_KILL_SEED)");
+
+    let ckpt = b.join("checkpoint.bin");
+    let (mut kills, mut resumes) = (0, 0);
+    for round in 0..5 {
+        let resume_from = psrestir::optim::checkpoint::Checkpoint::load(&ckpt)
+            .ok()
+            .map(|c| c.state.iteration);
         let mut cmd = Command::new(bin);
         cmd.arg("optimize")
             .arg(&task)
             .args(["--method", method])
             .arg("--out")
-            .arg(&b);
-        if round > 0 {
+            .arg(&b)
+            .stderr(std::process::Stdio::piped());
+        if resume_from.is_some() {
             cmd.arg("--resume");
         }
         let mut child = cmd.spawn().unwrap();
-        if round == 2 {
+        let stderr = child.stderr.take().unwrap();
+        let log = std::thread::spawn(move || {
+            let mut s = String::new();
+            std::io::Read::read_to_string(&mut { stderr }, &mut s).unwrap();
+            s
+        });
+        let finished = if round == 4 {
             assert!(child.wait().unwrap().success());
+            true
+        } else {
+            if resume_from.is_none() && round >= 2 {
+                // Every kill so far came before the first checkpoint: let this run write one,
+                // so that a resume is tested in every run of the test.
+                let t = Instant::now();
+                while !ckpt.exists() && child.try_wait().unwrap().is_none() {
+                    assert!(t.elapsed() < Duration::from_secs(300), "no checkpoint");
+                    std::thread::sleep(Duration::from_millis(5));
+                }
+            }
+            let at = Duration::from_secs_f64(0.1 + 0.9 * full * uniform());
+            let t = Instant::now();
+            while t.elapsed() < at && child.try_wait().unwrap().is_none() {
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            match child.try_wait().unwrap() {
+                Some(st) => {
+                    assert!(st.success());
+                    true
+                }
+                None => {
+                    child.kill().unwrap();
+                    child.wait().unwrap();
+                    kills += 1;
+                    eprintln!(
+                        "{method}: killed after {:.2} s (resumed from {resume_from:?})",
+                        at.as_secs_f64()
+                    );
+                    false
+                }
+            }
+        };
+        let log = log.join().unwrap();
+        if let Some(k) = resume_from {
+            // The run went far enough to say where it resumed: it names the checkpoint's
+            // iteration.
+            if log.contains("resuming at iteration") {
+                assert!(
+                    log.contains(&format!("resuming at iteration {k} ")),
+                    "resumed elsewhere than the checkpoint's iteration {k}: {log}"
+                );
+            }
+        }
+        if b.exists() {
+            outputs_whole(&b);
+        }
+        resumes += resume_from.is_some() as u32;
+        if finished {
             break;
         }
-        // Wait for a checkpoint newer than the one we started from, then SIGKILL.
-        let ckpt = b.join("checkpoint.bin");
-        let before = std::fs::metadata(&ckpt).and_then(|m| m.modified()).ok();
-        let t0 = Instant::now();
-        loop {
-            let now = std::fs::metadata(&ckpt).and_then(|m| m.modified()).ok();
-            if now.is_some() && now != before {
-                break;
-            }
-            assert!(
-                t0.elapsed() < Duration::from_secs(300),
-                "no checkpoint appeared"
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        std::thread::sleep(Duration::from_millis(150));
-        if child.try_wait().unwrap().is_none() {
-            child.kill().unwrap();
-            kills += 1;
-        }
-        child.wait().unwrap();
-        // A kill during a write may leave a temporary file (the next run removes it), but
-        // the files under their real names are whole: the checkpoint loads and the metrics
-        // parse.
-        psrestir::optim::checkpoint::Checkpoint::load(&ckpt).unwrap();
-        metrics(&b);
     }
+    assert!(resumes >= 1, "no run resumed from a checkpoint");
     assert!(
         kills >= 1,
         "the run finished before it could be interrupted"

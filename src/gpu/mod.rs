@@ -29,7 +29,33 @@ pub struct Gpu {
     /// has them; nothing depends on them).
     pub timestamps: bool,
     /// Uncaptured errors, recorded instead of panicking; checked after each submission.
-    errors: Arc<Mutex<Vec<String>>>,
+    errors: Arc<Mutex<Vec<Fault>>>,
+    /// Why the device was lost, once it is.
+    lost: Arc<Mutex<Option<String>>>,
+}
+
+/// A recorded device error, by kind.
+#[derive(Clone, Debug, PartialEq)]
+enum Fault {
+    OutOfMemory(String),
+    Other(String),
+}
+
+impl Fault {
+    fn of(e: &wgpu::Error) -> Fault {
+        match e {
+            wgpu::Error::OutOfMemory { .. } => Fault::OutOfMemory(e.to_string()),
+            _ => Fault::Other(e.to_string()),
+        }
+    }
+
+    fn into_error(self, label: &str) -> Error {
+        let label = label.to_string();
+        match self {
+            Fault::OutOfMemory(msg) => Error::OutOfMemory { label, msg },
+            Fault::Other(msg) => Error::Gpu { label, msg },
+        }
+    }
 }
 
 impl std::fmt::Debug for Gpu {
@@ -189,13 +215,20 @@ impl Gpu {
     }
 
     fn wrap(device: wgpu::Device, queue: wgpu::Queue, info: wgpu::AdapterInfo) -> Gpu {
-        let errors: Arc<Mutex<Vec<String>>> = Arc::default();
+        let errors: Arc<Mutex<Vec<Fault>>> = Arc::default();
         let sink = errors.clone();
         device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
             if let Ok(mut v) = sink.lock() {
-                v.push(e.to_string());
+                v.push(Fault::of(&e));
             }
         }));
+        let lost: Arc<Mutex<Option<String>>> = Arc::default();
+        let lost_sink = lost.clone();
+        device.set_device_lost_callback(move |reason, msg| {
+            if let Ok(mut l) = lost_sink.lock() {
+                *l = Some(format!("{reason:?}: {msg}"));
+            }
+        });
         let timestamps = device.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         Gpu {
             device,
@@ -203,6 +236,7 @@ impl Gpu {
             info,
             timestamps,
             errors,
+            lost,
         }
     }
 
@@ -214,20 +248,30 @@ impl Gpu {
         )
     }
 
-    /// Return the first uncaptured error since the last call, if any.
+    /// Return the first uncaptured error since the last call, if any: [`Error::DeviceLost`]
+    /// once the device is lost, [`Error::OutOfMemory`] for allocation failures,
+    /// [`Error::Gpu`] for the rest.
     pub fn check(&self, label: &str) -> Result<()> {
+        if let Some(reason) = self.lost_reason() {
+            return Err(Error::DeviceLost {
+                label: label.into(),
+                msg: reason,
+            });
+        }
         let mut v = self.errors.lock().map_err(|_| Error::Gpu {
             label: label.into(),
             msg: "error sink poisoned".into(),
         })?;
         if let Some(first) = v.first().cloned() {
             v.clear();
-            return Err(Error::Gpu {
-                label: label.into(),
-                msg: first,
-            });
+            return Err(first.into_error(label));
         }
         Ok(())
+    }
+
+    /// Why the device was lost, if it was.
+    pub fn lost_reason(&self) -> Option<String> {
+        self.lost.lock().ok().and_then(|l| l.clone())
     }
 
     /// A storage buffer initialised with `data`, padded to at least 256 bytes so that an empty
@@ -272,13 +316,14 @@ impl Gpu {
 
     /// Wait for all submitted work.
     pub fn wait(&self, label: &str) -> Result<()> {
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| Error::Gpu {
-                label: label.into(),
-                msg: e.to_string(),
-            })?;
-        self.check(label)
+        let polled = self.device.poll(wgpu::PollType::wait_indefinitely());
+        // A loss found while waiting comes out as the loss, not as the poll's error.
+        self.check(label)?;
+        polled.map_err(|e| Error::Gpu {
+            label: label.into(),
+            msg: e.to_string(),
+        })?;
+        Ok(())
     }
 
     /// Copy `buffer` back to the CPU (waits for the GPU).
@@ -448,5 +493,30 @@ pub fn grid_2d(n: u32, wg: u32, max_dim: u32) -> (u32, u32) {
     } else {
         let y = groups.div_ceil(max_dim);
         (groups.div_ceil(y), y)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Fault;
+    use crate::Error;
+
+    #[test]
+    fn out_of_memory_is_told_apart_from_other_device_errors() {
+        let oom = wgpu::Error::OutOfMemory {
+            source: "allocation failed".into(),
+        };
+        let e = Fault::of(&oom).into_error("reservoirs even");
+        assert!(matches!(e, Error::OutOfMemory { .. }), "{e:?}");
+        let text = e.to_string();
+        assert!(text.contains("reservoirs even") && text.contains("Lower the image size"));
+        let validation = wgpu::Error::Validation {
+            source: "bad binding".into(),
+            description: "bad binding".into(),
+        };
+        assert!(matches!(
+            Fault::of(&validation).into_error("render"),
+            Error::Gpu { .. }
+        ));
     }
 }
