@@ -1,5 +1,5 @@
 // Adam step for one optimized texture, then clamping to the valid range. Non-finite
-// gradients leave their parameter unchanged and are counted.
+// gradients leave their parameter unchanged and are counted; huge ones are clamped.
 
 // Keep in sync with GpuAdamParams in src/render/layout.rs.
 struct AdamParams {
@@ -31,11 +31,15 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
         return;
     }
     let i = ap.offset + gid.x;
-    let g = grad[i];
-    if !(abs(g) < 3.0e38) {
+    let g_in = grad[i];
+    if !(abs(g_in) < 3.0e38) {
         atomicAdd(&adam_stats[0], 1u);
         return;
     }
+    // Beyond 1e18, g * g would overflow the second moment to infinity (a finite but huge
+    // sample does this). Adam's step hardly depends on the gradient's scale, so clamping
+    // there keeps the moments finite at no cost to ordinary gradients.
+    let g = clamp(g_in, -1.0e18, 1.0e18);
     let m = ap.beta1 * moment1[i] + (1.0 - ap.beta1) * g;
     let v = ap.beta2 * moment2[i] + (1.0 - ap.beta2) * g * g;
     moment1[i] = m;

@@ -244,6 +244,23 @@ fn a_task_too_large_for_the_device_is_refused_before_allocating() {
     );
     // The baseline has no reservoirs and fits.
     Optimizer::for_problem(&gpu, &p, settings(Method::Baseline)).unwrap();
+
+    // A scene whose images hold more than one binding can: 600x600 RGBA8 = 1.44 MB.
+    let mut big = in_memory::truth([[200, 40, 40], [40, 40, 200]]);
+    big.images[0] = psrestir::scene::Image8 {
+        name: "big".into(),
+        width: 600,
+        height: 600,
+        rgba: vec![[128; 4]; 600 * 600],
+    };
+    let e = psrestir::render::Renderer::new(&gpu, &big)
+        .map(|_| ())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("the texture buffer needs 1440000 bytes") && e.contains("at most 1048576"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -293,10 +310,12 @@ fn non_finite_values_are_dropped_and_counted_never_stored() {
             "{method:?}: no progress"
         );
 
-        // Inject into the samples: a light of infinite intensity makes every primal and
-        // gradient sample that sees it infinite.
+        // Inject into the samples: a light of the largest finite intensity (an infinite one
+        // is refused by `Scene::validate`) 2 cm above the plane makes the samples around it
+        // overflow to infinity.
         let mut p = problem(&gpu, [[230, 60, 40], [40, 90, 220]]);
-        p.scene.lights[0].intensity = psrestir::glam::Vec3::splat(f32::INFINITY);
+        p.scene.lights[0].intensity = psrestir::glam::Vec3::splat(f32::MAX);
+        p.scene.lights[0].position = psrestir::glam::Vec3::new(0.3, 0.02, 0.4);
         let mut o = Optimizer::for_problem(&gpu, &p, settings(method)).unwrap();
         o.run(Stop::iterations(5), |_| ControlFlow::Continue(()))
             .unwrap();
@@ -308,7 +327,7 @@ fn non_finite_values_are_dropped_and_counted_never_stored() {
         let state = o.state().unwrap();
         assert!(state.m1.iter().chain(&state.m2).all(|v| v.is_finite()));
         let f = o.faults().unwrap();
-        eprintln!("{method:?}, infinite light: {f:?}");
+        eprintln!("{method:?}, light of intensity f32::MAX: {f:?}");
         assert!(f.dropped_primal > 0, "{method:?}: {f:?}");
         assert!(f.dropped_gradient > 0, "{method:?}: {f:?}");
     }

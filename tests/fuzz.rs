@@ -15,8 +15,10 @@
 //! Inputs kept in `tests/fuzz_regressions/<target>/` (earlier findings) are replayed first.
 //!
 //! `PSRESTIR_FUZZ_SECONDS` sets the time per target (default 8 s), `PSRESTIR_FUZZ_SEED` the
-//! random seed (default: the clock; printed, so a run can be repeated). A long run:
-//! `PSRESTIR_FUZZ_SECONDS=600 cargo test --release --test fuzz -- --nocapture`.
+//! random seed (default 1). The inputs depend only on the seed, so a shorter run replays a
+//! prefix of a longer one: the test suite's run with the default seed is a prefix of runs that
+//! passed, and new ground is covered by long runs with other seeds:
+//! `PSRESTIR_FUZZ_SEED=$RANDOM PSRESTIR_FUZZ_SECONDS=600 cargo test --release --test fuzz -- --nocapture`.
 use psrestir::optim::Problem;
 use psrestir::scene::{self, bvh, images, EnvMap};
 use psrestir::task::Task;
@@ -600,12 +602,7 @@ fn seed() -> u64 {
     std::env::var("PSRESTIR_FUZZ_SEED")
         .ok()
         .and_then(|s| s.parse().ok())
-        .unwrap_or_else(|| {
-            std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .unwrap()
-                .as_nanos() as u64
-        })
+        .unwrap_or(1)
 }
 
 /// A coarse class of an outcome: "ok", or the refusal message with its digits and file names

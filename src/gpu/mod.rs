@@ -174,9 +174,10 @@ impl Gpu {
     /// is required; timestamp queries are used for per-pass timings when the device has
     /// them. The error names every limit that falls short.
     ///
-    /// psrestir installs the device's uncaptured-error handler, which records wgpu errors so
-    /// that each call can return them as [`Error::Gpu`]; an application that installs its own
-    /// handler afterwards takes those errors over.
+    /// psrestir installs the device's uncaptured-error handler and device-lost callback,
+    /// which record wgpu errors so that each call can return them as [`Error::OutOfMemory`],
+    /// [`Error::DeviceLost`] or [`Error::Gpu`]; an application that installs its own
+    /// afterwards takes those errors over.
     ///
     /// ```no_run
     /// use psrestir::{wgpu, Gpu};

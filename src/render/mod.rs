@@ -50,8 +50,10 @@ fn wrap_bits(w: Wrap) -> u32 {
     }
 }
 
-fn luminance(c: Vec3) -> f32 {
-    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+/// Luminance in f64, so that the power of a light with an intensity near f32::MAX stays
+/// finite.
+fn luminance(c: Vec3) -> f64 {
+    0.2126 * c.x as f64 + 0.7152 * c.y as f64 + 0.0722 * c.z as f64
 }
 
 impl GpuScene {
@@ -64,10 +66,10 @@ impl GpuScene {
         let check = |label: &str, bytes: usize| -> Result<()> {
             if bytes as u64 > max_binding {
                 return Err(Error::Unsuitable(format!(
-                    "{}: {label} needs {} MiB, the adapter binds at most {} MiB per buffer",
+                    "{}: {label} needs {bytes} bytes, the device binds at most {max_binding} \
+                     bytes per buffer (all images share one buffer: use smaller textures, or a \
+                     GPU with larger limits)",
                     scene.source.display(),
-                    bytes >> 20,
-                    max_binding >> 20
                 )));
             }
             Ok(())
@@ -174,8 +176,9 @@ impl GpuScene {
 
         // Lights, with selection probability proportional to a power estimate.
         let (_, radius) = scene.bounding_sphere();
+        use std::f64::consts::PI;
         let mut lights: Vec<GpuLight> = Vec::new();
-        let mut power: Vec<f32> = Vec::new();
+        let mut power: Vec<f64> = Vec::new();
         for l in &scene.lights {
             let mut g = GpuLight {
                 position: l.position.to_array(),
@@ -188,7 +191,7 @@ impl GpuScene {
             match l.kind {
                 PunctualKind::Point => {
                     g.kind = LIGHT_POINT;
-                    power.push(4.0 * std::f32::consts::PI * lum);
+                    power.push(4.0 * PI * lum);
                 }
                 PunctualKind::Spot {
                     inner_cone,
@@ -198,13 +201,11 @@ impl GpuScene {
                     let scale = 1.0 / (inner_cone.cos() - outer_cone.cos()).max(1e-3);
                     g.spot_scale = scale;
                     g.spot_offset = -outer_cone.cos() * scale;
-                    power.push(
-                        2.0 * std::f32::consts::PI * (1.0 - outer_cone.cos()).max(1e-3) * lum,
-                    );
+                    power.push(2.0 * PI * (1.0 - outer_cone.cos() as f64).max(1e-3) * lum);
                 }
                 PunctualKind::Directional => {
                     g.kind = LIGHT_DIRECTIONAL;
-                    power.push(std::f32::consts::PI * radius * radius * lum);
+                    power.push(PI * (radius as f64).powi(2) * lum);
                 }
             }
             lights.push(g);
@@ -222,7 +223,7 @@ impl GpuScene {
                     ..Default::default()
                 });
                 let sides = if m.double_sided { 2.0 } else { 1.0 };
-                power.push(std::f32::consts::PI * lum * area * sides);
+                power.push(PI * lum * area as f64 * sides);
             }
         }
         let mut env_table = vec![0f32; 4];
@@ -248,10 +249,10 @@ impl GpuScene {
                     kind: LIGHT_ENV,
                     ..Default::default()
                 });
-                power.push(p);
+                power.push(p as f64);
             }
         }
-        let total: f64 = power.iter().map(|&p| p.max(0.0) as f64).sum();
+        let total: f64 = power.iter().map(|&p| p.max(0.0)).sum();
         if total <= 0.0 {
             log::warn!(
                 "{}: the scene has no light with positive power (no punctual light, emissive \
@@ -261,11 +262,7 @@ impl GpuScene {
         }
         let mut acc = 0f64;
         for (l, p) in lights.iter_mut().zip(&power) {
-            let pmf = if total > 0.0 {
-                p.max(0.0) as f64 / total
-            } else {
-                0.0
-            };
+            let pmf = if total > 0.0 { p.max(0.0) / total } else { 0.0 };
             acc += pmf;
             l.pmf = pmf as f32;
             l.cdf = acc as f32;
