@@ -44,7 +44,10 @@ pub enum Error {
         msg: String,
     },
     /// A GPU operation failed (a validation or internal error).
-    #[error("GPU error in {label}: {msg}")]
+    #[error(
+        "GPU error in {label}: {msg}. This is a bug in psrestir or in the GPU driver; please \
+         report it with the output of `psrestir adapter`"
+    )]
     Gpu {
         /// The pass or buffer involved.
         label: String,

@@ -249,7 +249,7 @@ impl GpuScene {
                     kind: LIGHT_ENV,
                     ..Default::default()
                 });
-                power.push(p as f64);
+                power.push(p);
             }
         }
         let total: f64 = power.iter().map(|&p| p.max(0.0)).sum();

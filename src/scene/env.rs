@@ -84,12 +84,13 @@ impl EnvMap {
     }
 
     /// Power proxy for light selection: pi x mean radiance weighted by solid angle, times the
-    /// scene's cross-section.
-    pub fn power(&self, scene_radius: f32) -> f32 {
+    /// scene's cross-section. In f64: texels near f32::MAX overflowed it in f32 (found by
+    /// fuzzing).
+    pub fn power(&self, scene_radius: f32) -> f64 {
         let f = self.weights();
-        let n = (self.width * self.height) as f64;
+        let n = (self.width as f64) * (self.height as f64);
         let mean = f.iter().sum::<f64>() / n * std::f64::consts::PI / 2.0;
-        (mean * self.scale as f64) as f32 * std::f32::consts::PI * scene_radius * scene_radius
+        mean * self.scale as f64 * std::f64::consts::PI * (scene_radius as f64).powi(2)
     }
 
     /// The GPU table (see `SceneInfo` in shaders/shared/types.wgsl): RGB texels, then the
