@@ -1,25 +1,13 @@
 //! Broken and hostile scene files: each gets a clear error naming the file and the problem,
 //! from the library and from the command line (non-zero exit, no panic).
+mod common;
+
+use common::crc32;
 use psrestir::scene::authoring::{png_bytes, GltfBuilder};
 use psrestir::scene::load;
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-
-fn crc32(bytes: &[u8]) -> u32 {
-    let mut c = 0xffff_ffffu32;
-    for &b in bytes {
-        c ^= b as u32;
-        for _ in 0..8 {
-            c = if c & 1 != 0 {
-                0xedb8_8320 ^ (c >> 1)
-            } else {
-                c >> 1
-            };
-        }
-    }
-    !c
-}
 
 /// A PNG whose header declares width x height (and no pixel data).
 fn png_header_only(width: u32, height: u32) -> Vec<u8> {

@@ -19,7 +19,11 @@
 //! prefix of a longer one: the test suite's run with the default seed is a prefix of runs that
 //! passed, and new ground is covered by long runs with other seeds:
 //! `PSRESTIR_FUZZ_SEED=$RANDOM PSRESTIR_FUZZ_SECONDS=600 cargo test --release --test fuzz -- --nocapture`.
+mod common;
+
+use common::crc32;
 use psrestir::optim::Problem;
+use psrestir::scene::authoring::glb_bytes;
 use psrestir::scene::{self, bvh, images, EnvMap};
 use psrestir::task::Task;
 use serde_json::Value;
@@ -207,21 +211,6 @@ fn mutate_bytes(rng: &mut Rng, data: &mut Vec<u8>, corpus: &[Vec<u8>]) {
             _ => data.push(rng.next() as u8),
         }
     }
-}
-
-fn crc32(bytes: &[u8]) -> u32 {
-    let mut c = 0xffff_ffffu32;
-    for &b in bytes {
-        c ^= b as u32;
-        for _ in 0..8 {
-            c = if c & 1 != 0 {
-                0xedb8_8320 ^ (c >> 1)
-            } else {
-                c >> 1
-            };
-        }
-    }
-    !c
 }
 
 /// Recompute the CRC of every PNG chunk whose length still fits in the file, so that the
@@ -807,30 +796,6 @@ fn with_dir(k: usize, bytes: Vec<u8>) -> Vec<u8> {
     v
 }
 
-/// A GLB of `json` and `bin`.
-fn glb(json: &[u8], bin: &[u8]) -> Vec<u8> {
-    let mut j = json.to_vec();
-    while j.len() % 4 != 0 {
-        j.push(b' ');
-    }
-    let mut b = bin.to_vec();
-    while b.len() % 4 != 0 {
-        b.push(0);
-    }
-    let total = 12 + 8 + j.len() + 8 + b.len();
-    let mut out = Vec::with_capacity(total);
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(j.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(&j);
-    out.extend_from_slice(&(b.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"BIN\0");
-    out.extend_from_slice(&b);
-    out
-}
-
 /// The JSON and binary chunks of a GLB, when its chunk headers are intact.
 fn glb_parts(data: &[u8]) -> Option<(Vec<u8>, Vec<u8>)> {
     let jl = u32::from_le_bytes(data.get(12..16)?.try_into().ok()?) as usize;
@@ -852,6 +817,17 @@ fn after_load(s: &scene::Scene) -> Outcome {
     let (c, r) = s.bounding_sphere();
     assert!(c.is_finite() && r.is_finite(), "bounds {c} {r}");
     Ok(())
+}
+
+/// Write a scene input as `name` in its folder, load it (and its source parts), and check
+/// the result.
+fn load_scene_file(input: &[u8], dirs: &[PathBuf], name: &str) -> Outcome {
+    let (dir, bytes) = split_dir(input, dirs).ok_or("empty")?;
+    let path = dir.join(name);
+    std::fs::write(&path, &bytes).unwrap();
+    let s = scene::load(&path).map_err(|e| e.to_string())?;
+    scene::load_source(&path).map_err(|e| e.to_string())?;
+    after_load(&s)
 }
 
 fn mutate_json_text(rng: &mut Rng, text: &[u8], corpus: &[Vec<u8>]) -> Vec<u8> {
@@ -879,14 +855,7 @@ fn fuzz_gltf() {
         .enumerate()
         .map(|(k, d)| with_dir(k, std::fs::read(d.join("scene.gltf")).unwrap()))
         .collect();
-    let run = |input: &[u8]| -> Outcome {
-        let (dir, bytes) = split_dir(input, &dirs).ok_or("empty")?;
-        let path = dir.join("fuzz.gltf");
-        std::fs::write(&path, &bytes).unwrap();
-        let s = scene::load(&path).map_err(|e| e.to_string())?;
-        scene::load_source(&path).map_err(|e| e.to_string())?;
-        after_load(&s)
-    };
+    let run = |input: &[u8]| load_scene_file(input, &dirs, "fuzz.gltf");
     let mutate = |rng: &mut Rng, parent: &[u8], corpus: &[Vec<u8>]| -> Vec<u8> {
         let (&k, text) = parent.split_first().unwrap();
         with_dir(k as usize, mutate_json_text(rng, text, corpus))
@@ -911,17 +880,10 @@ fn fuzz_glb() {
                 serde_json::from_slice(&std::fs::read(d.join("scene.gltf")).unwrap()).unwrap();
             let bin = std::fs::read(d.join("scene.bin")).unwrap();
             doc["buffers"][0].as_object_mut().unwrap().remove("uri");
-            with_dir(k, glb(&serde_json::to_vec(&doc).unwrap(), &bin))
+            with_dir(k, glb_bytes(&serde_json::to_vec(&doc).unwrap(), &bin))
         })
         .collect();
-    let run = |input: &[u8]| -> Outcome {
-        let (dir, bytes) = split_dir(input, &dirs).ok_or("empty")?;
-        let path = dir.join("fuzz.glb");
-        std::fs::write(&path, &bytes).unwrap();
-        let s = scene::load(&path).map_err(|e| e.to_string())?;
-        scene::load_source(&path).map_err(|e| e.to_string())?;
-        after_load(&s)
-    };
+    let run = |input: &[u8]| load_scene_file(input, &dirs, "fuzz.glb");
     let mutate = |rng: &mut Rng, parent: &[u8], corpus: &[Vec<u8>]| -> Vec<u8> {
         let (&k, data) = parent.split_first().unwrap();
         let out = match glb_parts(data) {
@@ -931,7 +893,7 @@ fn fuzz_glb() {
                 if rng.chance(0.2) {
                     mutate_bytes(rng, &mut bin, &[]);
                 }
-                glb(&json, &bin)
+                glb_bytes(&json, &bin)
             }
             _ => {
                 let mut d = data.to_vec();
@@ -1091,15 +1053,10 @@ fn fuzz_jpeg() {
         .encode_image(&grey)
         .unwrap();
     seeds.push(out);
-    let mutate = |rng: &mut Rng, parent: &[u8], corpus: &[Vec<u8>]| -> Vec<u8> {
-        let mut d = parent.to_vec();
-        mutate_bytes(rng, &mut d, corpus);
-        d
-    };
     fuzz(Target {
         name: "jpeg",
         seeds,
-        mutate: &mutate,
+        mutate: &mutated,
         run: &decode_texture,
     });
 }
@@ -1118,6 +1075,29 @@ fn env_and_target(path: &Path) -> Outcome {
     Ok(())
 }
 
+/// Byte-level mutation only.
+fn mutated(rng: &mut Rng, parent: &[u8], corpus: &[Vec<u8>]) -> Vec<u8> {
+    let mut d = parent.to_vec();
+    mutate_bytes(rng, &mut d, corpus);
+    d
+}
+
+/// Fuzz files with extension `ext` read as environment maps and target images.
+fn fuzz_env_image(ext: &str, seeds: Vec<Vec<u8>>) {
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join(format!("fuzz.{ext}"));
+    let run = |input: &[u8]| -> Outcome {
+        std::fs::write(&path, input).unwrap();
+        env_and_target(&path)
+    };
+    fuzz(Target {
+        name: ext,
+        seeds,
+        mutate: &mutated,
+        run: &run,
+    });
+}
+
 #[test]
 fn fuzz_hdr() {
     let mut seeds = Vec::new();
@@ -1132,23 +1112,7 @@ fn fuzz_hdr() {
             .unwrap();
         seeds.push(out);
     }
-    let tmp = tempfile::tempdir().unwrap();
-    let path = tmp.path().join("fuzz.hdr");
-    let run = |input: &[u8]| -> Outcome {
-        std::fs::write(&path, input).unwrap();
-        env_and_target(&path)
-    };
-    let mutate = |rng: &mut Rng, parent: &[u8], corpus: &[Vec<u8>]| -> Vec<u8> {
-        let mut d = parent.to_vec();
-        mutate_bytes(rng, &mut d, corpus);
-        d
-    };
-    fuzz(Target {
-        name: "hdr",
-        seeds,
-        mutate: &mutate,
-        run: &run,
-    });
+    fuzz_env_image("hdr", seeds);
 }
 
 #[test]
@@ -1217,20 +1181,5 @@ fn fuzz_exr() {
         }
     }
     assert!(seeds.len() >= 6, "only {} EXR seeds written", seeds.len());
-    let path = tmp.path().join("fuzz.exr");
-    let run = |input: &[u8]| -> Outcome {
-        std::fs::write(&path, input).unwrap();
-        env_and_target(&path)
-    };
-    let mutate = |rng: &mut Rng, parent: &[u8], corpus: &[Vec<u8>]| -> Vec<u8> {
-        let mut d = parent.to_vec();
-        mutate_bytes(rng, &mut d, corpus);
-        d
-    };
-    fuzz(Target {
-        name: "exr",
-        seeds,
-        mutate: &mutate,
-        run: &run,
-    });
+    fuzz_env_image("exr", seeds);
 }

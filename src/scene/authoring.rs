@@ -238,30 +238,36 @@ impl GltfBuilder {
 
     /// Write a binary `.glb` with the buffer as its BIN chunk.
     pub fn write_glb(&self, path: &Path) -> Result<()> {
-        let mut json = serde_json::to_vec(&self.json_with_buffer(None))
+        let json = serde_json::to_vec(&self.json_with_buffer(None))
             .map_err(|e| Error::file(path, e.to_string()))?;
-        while json.len() % 4 != 0 {
-            json.push(b' ');
-        }
-        let mut bin = self.bin.clone();
-        while bin.len() % 4 != 0 {
-            bin.push(0);
-        }
-        let total = 12 + 8 + json.len() + if bin.is_empty() { 0 } else { 8 + bin.len() };
-        let mut out = Vec::with_capacity(total);
-        out.extend_from_slice(b"glTF");
-        out.extend_from_slice(&2u32.to_le_bytes());
-        out.extend_from_slice(&(total as u32).to_le_bytes());
-        out.extend_from_slice(&(json.len() as u32).to_le_bytes());
-        out.extend_from_slice(b"JSON");
-        out.extend_from_slice(&json);
-        if !bin.is_empty() {
-            out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-            out.extend_from_slice(b"BIN\0");
-            out.extend_from_slice(&bin);
-        }
-        crate::image_io::write_atomic(path, &out)
+        crate::image_io::write_atomic(path, &glb_bytes(&json, &self.bin))
     }
+}
+
+/// A GLB container of `json` and, when not empty, `bin` (chunks padded to 4 bytes).
+pub fn glb_bytes(json: &[u8], bin: &[u8]) -> Vec<u8> {
+    let mut json = json.to_vec();
+    while json.len() % 4 != 0 {
+        json.push(b' ');
+    }
+    let mut bin = bin.to_vec();
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let total = 12 + 8 + json.len() + if bin.is_empty() { 0 } else { 8 + bin.len() };
+    let mut out = Vec::with_capacity(total);
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&(total as u32).to_le_bytes());
+    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&json);
+    if !bin.is_empty() {
+        out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"BIN\0");
+        out.extend_from_slice(&bin);
+    }
+    out
 }
 
 /// Encode RGBA8 pixels as PNG bytes.

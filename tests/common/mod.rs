@@ -238,3 +238,19 @@ pub fn shadow_scene() -> Scene {
         .push(look_at(Vec3::new(0.0, 2.2, 1.2), Vec3::ZERO, Vec3::Y, 0.9));
     s
 }
+
+/// CRC-32 (IEEE) as PNG chunks use it.
+pub fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = 0xffff_ffffu32;
+    for &b in bytes {
+        c ^= b as u32;
+        for _ in 0..8 {
+            c = if c & 1 != 0 {
+                0xedb8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
+}
