@@ -705,6 +705,7 @@ fn fuzz(t: Target) {
 
     let start = Instant::now();
     let (mut runs, mut accepted, mut max_peak) = (0u64, 0u64, 0usize);
+    let (mut caught, mut guarded) = (0u64, HashSet::new());
     while start.elapsed() < budget && failures.len() < 5 {
         let parent = rng.pick(&corpus).clone();
         let input = (t.mutate)(&mut rng, &parent, &corpus);
@@ -727,6 +728,21 @@ fn fuzz(t: Target) {
                     ));
                 }
                 accepted += outcome.is_ok() as u64;
+                // Panics inside third-party decoders that `catch_panic` turned into errors:
+                // not failures, but counted and shown, so that they can be reported upstream.
+                if let Err(m) = &outcome {
+                    if let Some(at) = m.find("failed on this file (") {
+                        if guarded.insert(m[at..].chars().take(160).collect::<String>()) {
+                            let place = LAST_PANIC.lock().ok().and_then(|mut p| p.take());
+                            println!(
+                                "fuzz target {}: caught decoder panic: {}",
+                                t.name,
+                                place.unwrap_or_else(|| m[at..].to_string())
+                            );
+                        }
+                        caught += 1;
+                    }
+                }
                 if seen.insert(class(&outcome)) && corpus.len() < 512 {
                     corpus.push(input);
                 }
@@ -735,8 +751,8 @@ fn fuzz(t: Target) {
     }
     println!(
         "fuzz target {}: seed {seed}, {regressions} regressions replayed, {runs} executions in \
-         {:.1} s ({accepted} accepted, {} outcome classes, corpus {}), peak allocation {:.1} \
-         MiB, {} failures",
+         {:.1} s ({accepted} accepted, {} outcome classes, corpus {}, {caught} decoder panics \
+         caught), peak allocation {:.1} MiB, {} failures",
         t.name,
         start.elapsed().as_secs_f64(),
         seen.len(),

@@ -21,12 +21,15 @@ pub struct Image8 {
     pub rgba: Vec<[u8; 4]>,
 }
 
-/// Most decoded bytes per byte of file that psrestir believes: above the best ratio of the
-/// compressions used (deflate's 1032:1 on 8-bit grey, expanded 4x to RGBA), so that a small
-/// file declaring a huge image (a memory bomb, found by fuzzing) is refused before decoding.
+/// Most decoded bytes per byte of file that psrestir believes, so that a small file declaring
+/// a huge image (a memory bomb, found by fuzzing) is refused before decoding. It is above what
+/// the formats reach on flat content: deflate's 1032:1 on 8-bit grey PNG, expanded 4x to RGBA;
+/// a JPEG's DC scan needs at least 2 bits per 8x8 block (under 1100:1); EXR halves decoded to
+/// f32 (under 2800:1). Only 1- and 2-bit PNGs of flat content can exceed it, and only above
+/// [`EXPANSION_FLOOR`]; they are refused.
 pub const MAX_EXPANSION: u64 = 4200;
 /// Decoded size below which [`MAX_EXPANSION`] is not applied.
-const EXPANSION_FLOOR: u64 = 16 << 20;
+pub const EXPANSION_FLOOR: u64 = 16 << 20;
 
 /// Why an image of the declared size is refused (it would exhaust memory), if it is: an
 /// empty size, a side over [`MAX_IMAGE_DIM`], more than [`MAX_IMAGE_BYTES`] decoded at
