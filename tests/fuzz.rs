@@ -649,9 +649,11 @@ fn fuzz(t: Target) {
     let budget = Duration::from_secs_f64(seconds());
     let mut rng = Rng(seed);
     let mut failures: Vec<String> = Vec::new();
-    let check = |input: &[u8], failures: &mut Vec<String>| -> Option<Outcome> {
+    // Run one input; a panic or an allocation over the bound is recorded as a failure. Returns
+    // the outcome (None after a panic) and the peak allocation.
+    let check = |input: &[u8], failures: &mut Vec<String>| -> (Option<Outcome>, usize) {
         let (result, peak) = execute(t.name, input, t.run);
-        match result {
+        let outcome = match result {
             Err(msg) => {
                 let path = save_finding(t.name, input);
                 failures.push(format!("panic `{msg}` on {}", path.display()));
@@ -669,7 +671,8 @@ fn fuzz(t: Target) {
                 }
                 Some(outcome)
             }
-        }
+        };
+        (outcome, peak)
     };
 
     // Regressions: earlier findings, which must load or be refused without a panic.
@@ -691,7 +694,7 @@ fn fuzz(t: Target) {
     let mut corpus: Vec<Vec<u8>> = Vec::new();
     let mut seen: HashSet<String> = HashSet::new();
     for s in &t.seeds {
-        if let Some(outcome) = check(s, &mut failures) {
+        if let (Some(outcome), _) = check(s, &mut failures) {
             assert!(
                 outcome.is_ok(),
                 "fuzz target {}: seed {} is refused: {outcome:?}",
@@ -709,43 +712,28 @@ fn fuzz(t: Target) {
     while start.elapsed() < budget && failures.len() < 5 {
         let parent = rng.pick(&corpus).clone();
         let input = (t.mutate)(&mut rng, &parent, &corpus);
-        let (result, peak) = execute(t.name, &input, t.run);
+        let (outcome, peak) = check(&input, &mut failures);
         runs += 1;
         max_peak = max_peak.max(peak);
-        match result {
-            Err(msg) => {
-                let path = save_finding(t.name, &input);
-                failures.push(format!("panic `{msg}` on {}", path.display()));
-            }
-            Ok(outcome) => {
-                if peak > MEMORY_BOUND {
-                    let path = save_finding(t.name, &input);
-                    failures.push(format!(
-                        "{} MiB allocated (bound {} MiB) on {}",
-                        peak >> 20,
-                        MEMORY_BOUND >> 20,
-                        path.display()
-                    ));
-                }
-                accepted += outcome.is_ok() as u64;
-                // Panics inside third-party decoders that `catch_panic` turned into errors:
-                // not failures, but counted and shown, so that they can be reported upstream.
-                if let Err(m) = &outcome {
-                    if let Some(at) = m.find("failed on this file (") {
-                        if guarded.insert(m[at..].chars().take(160).collect::<String>()) {
-                            let place = LAST_PANIC.lock().ok().and_then(|mut p| p.take());
-                            println!(
-                                "fuzz target {}: caught decoder panic: {}",
-                                t.name,
-                                place.unwrap_or_else(|| m[at..].to_string())
-                            );
-                        }
-                        caught += 1;
+        if let Some(outcome) = outcome {
+            accepted += outcome.is_ok() as u64;
+            // Panics inside third-party decoders that `catch_panic` turned into errors:
+            // not failures, but counted and shown, so that they can be reported upstream.
+            if let Err(m) = &outcome {
+                if let Some(at) = m.find("failed on this file (") {
+                    if guarded.insert(m[at..].chars().take(160).collect::<String>()) {
+                        let place = LAST_PANIC.lock().ok().and_then(|mut p| p.take());
+                        println!(
+                            "fuzz target {}: caught decoder panic: {}",
+                            t.name,
+                            place.unwrap_or_else(|| m[at..].to_string())
+                        );
                     }
+                    caught += 1;
                 }
-                if seen.insert(class(&outcome)) && corpus.len() < 512 {
-                    corpus.push(input);
-                }
+            }
+            if seen.insert(class(&outcome)) && corpus.len() < 512 {
+                corpus.push(input);
             }
         }
     }

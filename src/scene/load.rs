@@ -3,8 +3,8 @@
 //! External files are read only from the scene's folder and below: absolute paths, `..` and
 //! URIs with a scheme other than `data:` are refused.
 use super::{
-    images, Camera, Material, PunctualKind, PunctualLight, Scene, TextureSlot, Triangle, Wrap,
-    MAX_COORD,
+    images, in_bounds, Camera, Material, PunctualKind, PunctualLight, Scene, TextureSlot, Triangle,
+    Wrap, MAX_COORD,
 };
 use crate::{Error, Result};
 use base64::Engine;
@@ -580,9 +580,7 @@ impl<'a> Loader<'a> {
                     idx.swap(1, 2);
                 }
                 let p = idx.map(|i| world.transform_point3(positions[i]));
-                if p.iter()
-                    .any(|v| !v.is_finite() || v.abs().max_element() > MAX_COORD)
-                {
+                if !p.iter().all(|&v| in_bounds(v)) {
                     skipped += 1;
                     continue;
                 }
@@ -633,9 +631,7 @@ impl<'a> Loader<'a> {
             .unwrap_or_else(|| format!("camera {}", self.scene.cameras.len()));
         match cam.projection() {
             gltf::camera::Projection::Perspective(p) => {
-                let fov_ok = p.yfov().is_finite() && p.yfov() > 0.0 && p.yfov() < PI;
-                let aspect_ok = p.aspect_ratio().is_none_or(|a| a.is_finite() && a > 0.0);
-                if !fov_ok || !aspect_ok {
+                if !Camera::projection_valid(p.yfov(), p.aspect_ratio()) {
                     self.scene.warnings.push(format!(
                         "camera `{name}` has a field of view outside (0, pi) or a \
                          non-positive aspect ratio, skipped"
@@ -694,7 +690,7 @@ impl<'a> Loader<'a> {
             }
         }
         let position = world.transform_point3(Vec3::ZERO);
-        if !position.is_finite() || position.abs().max_element() > MAX_COORD {
+        if !in_bounds(position) {
             return Err(self.err(format!("light `{name}` is placed beyond ±{MAX_COORD:e}")));
         }
         self.scene.lights.push(PunctualLight {

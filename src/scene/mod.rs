@@ -20,6 +20,11 @@ pub use load::{load, load_source};
 /// loses all precision and bounds overflow.
 pub const MAX_COORD: f32 = 1e15;
 
+/// Whether `p` is finite and within ±[`MAX_COORD`].
+pub fn in_bounds(p: Vec3) -> bool {
+    p.is_finite() && p.abs().max_element() <= MAX_COORD
+}
+
 /// One world-space triangle with its shading attributes.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Triangle {
@@ -137,6 +142,15 @@ pub struct Camera {
 }
 
 impl Camera {
+    /// Whether a vertical field of view `yfov` (radians) and an `aspect` ratio make a
+    /// perspective projection: `yfov` in (0, pi), `aspect` finite and positive when given.
+    pub fn projection_valid(yfov: f32, aspect: Option<f32>) -> bool {
+        yfov.is_finite()
+            && yfov > 0.0
+            && yfov < std::f32::consts::PI
+            && aspect.is_none_or(|a| a.is_finite() && a > 0.0)
+    }
+
     /// A camera at `eye` looking at `target`, `up` giving the vertical, with a vertical field
     /// of view of `yfov` radians (for building scenes in code).
     pub fn look_at(name: &str, eye: Vec3, target: Vec3, up: Vec3, yfov: f32) -> Camera {
@@ -278,10 +292,7 @@ impl Scene {
                     t.material
                 )));
             }
-            if t.p
-                .iter()
-                .any(|p| !p.is_finite() || p.abs().max_element() > MAX_COORD)
-            {
+            if !t.p.iter().all(|&p| in_bounds(p)) {
                 return Err(bad(format!(
                     "triangle {i} has a non-finite vertex or one beyond ±{MAX_COORD:e}"
                 )));
@@ -346,9 +357,7 @@ impl Scene {
             }
         }
         for c in &self.cameras {
-            let fov_ok = c.yfov.is_finite() && c.yfov > 0.0 && c.yfov < std::f32::consts::PI;
-            let aspect_ok = c.aspect.is_none_or(|a| a.is_finite() && a > 0.0);
-            if !c.world.is_finite() || !fov_ok || !aspect_ok {
+            if !c.world.is_finite() || !Camera::projection_valid(c.yfov, c.aspect) {
                 return Err(bad(format!(
                     "camera `{}` has a non-finite transform, a field of view outside (0, pi)                      or a non-positive aspect ratio",
                     c.name
@@ -356,7 +365,7 @@ impl Scene {
             }
         }
         for l in &self.lights {
-            let ok = l.position.is_finite()
+            let ok = in_bounds(l.position)
                 && l.direction.is_finite()
                 && l.intensity.is_finite()
                 && l.intensity.min_element() >= 0.0
@@ -370,7 +379,8 @@ impl Scene {
                 };
             if !ok {
                 return Err(bad(format!(
-                    "light `{}` has non-finite values or a negative intensity",
+                    "light `{}` has non-finite values, a negative intensity or a position \
+                     beyond ±{MAX_COORD:e}",
                     l.name
                 )));
             }
