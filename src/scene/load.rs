@@ -437,11 +437,7 @@ impl<'a> Loader<'a> {
                 emissive_texture,
                 double_sided: m.double_sided(),
             };
-            let finite = mat.base_color.is_finite()
-                && mat.emissive.is_finite()
-                && mat.metallic.is_finite()
-                && mat.roughness.is_finite();
-            if !finite || mat.emissive.min_element() < 0.0 {
+            if !mat.factors_valid() {
                 return Err(self.err(format!(
                     "material `{}` has non-finite or negative factors",
                     mat.name

@@ -112,6 +112,17 @@ pub struct Material {
     pub double_sided: bool,
 }
 
+impl Material {
+    /// Whether every factor is finite and the emission is not negative.
+    pub fn factors_valid(&self) -> bool {
+        self.base_color.is_finite()
+            && self.emissive.is_finite()
+            && self.metallic.is_finite()
+            && self.roughness.is_finite()
+            && self.emissive.min_element() >= 0.0
+    }
+}
+
 impl Default for Material {
     fn default() -> Self {
         Material {
@@ -324,11 +335,7 @@ impl Scene {
             }
         }
         for m in &self.materials {
-            let finite = m.base_color.is_finite()
-                && m.emissive.is_finite()
-                && m.metallic.is_finite()
-                && m.roughness.is_finite();
-            if !finite || m.emissive.min_element() < 0.0 {
+            if !m.factors_valid() {
                 return Err(bad(format!(
                     "material `{}` has non-finite or negative factors",
                     m.name
