@@ -1,7 +1,9 @@
 // Adam step for one optimized texture, then clamping to the valid range. Non-finite
-// gradients leave their parameter unchanged and are counted; huge ones are clamped.
+// gradients leave their parameter unchanged and are counted; huge ones are clamped. With
+// mask set (sparse Adam, Mitsuba 3's mask_updates), an entry whose gradient is exactly zero
+// keeps its value and moments.
 
-// Keep in sync with GpuAdamParams in src/render/layout.rs.
+// Mirrored by AdamParams in src/optim/adam.rs.
 struct AdamParams {
     offset: u32,
     count: u32,
@@ -14,8 +16,8 @@ struct AdamParams {
     bias2: f32,
     lo: f32,
     hi: f32,
+    mask: u32,
     _pad0: u32,
-    _pad1: u32,
 }
 
 @group(0) @binding(0) var<uniform> ap: AdamParams;
@@ -32,6 +34,9 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
     }
     let i = ap.offset + gid.x;
     let g_in = grad[i];
+    if ap.mask != 0u && g_in == 0.0 {
+        return;
+    }
     if !(abs(g_in) < 3.0e38) {
         atomicAdd(&adam_stats[0], 1u);
         return;

@@ -93,8 +93,8 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         let d = camera_direction(gp.camera, a.xy + rand2());
         let g = gradient_sample(gp.camera.origin, d);
         if g.valid {
-            scatter(g.m, g.sf.uv, g.nee_grad, g.nee.weight, a.adj);
-            scatter(g.m, g.sf.uv, g.bsdf_grad, g.bsdf.weight, a.adj);
+            scatter(g.m, g.sf.uv, g.nee_grad, g.nee.radiance * g.nee.scale, a.adj);
+            scatter(g.m, g.sf.uv, g.bsdf_grad, g.bsdf.radiance * g.bsdf.scale, a.adj);
         }
     }
     atomicAdd(&gstats[0], gp.spp);

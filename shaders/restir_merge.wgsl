@@ -1,26 +1,29 @@
-// ReSTIR merge pass, one invocation per texel: temporal reuse by generalized RIS.
-// Inputs of the merge for sign s (the positive or the negative part of the target):
+// ReSTIR merge pass, one invocation per texel: temporal reuse by generalized RIS in path
+// space. Inputs of the merge for sign s (the positive or the negative part of the target):
 //   - the fresh reservoir of this iteration for s (its W = Wsum / q_cur(y), confidence M_c);
 //   - both reservoirs kept from the previous iteration, whatever their sign was: each is
 //     offered here and its weight is zero unless its sample's current target has sign s
-//     (sign routing), confidence min(M, M_cap).
-// Kept samples are replayed from their random numbers (camera-sample index, seed, technique:
-// the shift is the identity in primary sample space, Jacobian 1) under the current textures
-// and adjoint; the fresh sample is replayed under the previous ones, both double-buffered.
-// Geometry and cameras are fixed, so a replay starts from the stored camera-ray hit and, for
-// a light sample (unoccluded when drawn, or it would have no weight), skips the shadow ray:
-// only BSDF samples trace a ray, since their direction depends on the textures.
+//     (sign routing), confidence M_k = min(M_c x merges so far, M_cap).
+// Every kept reservoir is an input of the MIS weights even when it holds no sample: its
+// unbiased contribution weight already accounts for the chance of being empty, so leaving its
+// target out of the others' weights when it happens to be empty would count that part of the
+// domain twice (a bias that grows with M_cap when the adjoint is noisy). For the same reason
+// the confidences are the same for every reservoir (a function of the iteration count), never
+// a count carried by the reservoir itself, which would correlate with its weight.
+// Geometry, cameras and lights do not change during a texture optimization, so a stored path
+// (pixel, camera-ray hit, incident direction, incident radiance; visibility was tested when it
+// was drawn) stays a valid path with the same value of everything but the BRDF and the
+// adjoint. The shift is the identity in path space (Jacobian 1): a kept sample is evaluated
+// under the current textures and adjoint, a fresh one under the previous ones (both
+// double-buffered), each by one BRDF-with-derivative evaluation. Nothing here traces a ray:
+// shared/bvh is not part of this pass (a test checks the composed module).
 // MIS: balance heuristic with confidences over the inputs' own targets.
 #import shared/rng
 #import shared/camera
-#import shared/integrator
+#import shared/surface
+#import gen/restir_layout
 
-const MAX_CAMERAS: u32 = 8u;
-const FLAG_TEMPORAL: u32 = 1u;
-const FLAG_POSITIVIZE: u32 = 2u;
-const FLAG_HAVE_PREV: u32 = 4u;
-
-// Keep in sync with GpuMergeParams in src/render/layout.rs.
+// Mirrored by MergeParams in src/optim/estimator/restir.rs. flags: MERGE_FLAG_* (generated).
 struct MergeParams {
     cameras: array<CameraInfo, MAX_CAMERAS>,
     n_texels: u32,
@@ -28,7 +31,8 @@ struct MergeParams {
     seed: u32,
     flags: u32,
     m_fresh: f32,
-    m_cap: f32,
+    // Confidence of the kept inputs this iteration (0 without reuse).
+    m_kept: f32,
     inv_spp: f32,
     n_textures: u32,
     stride: u32,
@@ -44,46 +48,63 @@ struct MergeParams {
 // Fresh reservoirs in, merged reservoirs out (each texel's invocation owns its two).
 @group(1) @binding(4) var<storage, read_write> merged: array<u32>;
 @group(1) @binding(5) var<storage, read_write> grad: array<f32>;
-// [0] replays, [1] non-finite replays dropped.
+// MERGE_STAT_* slots (generated from src/optim/estimator/restir.rs).
 @group(1) @binding(6) var<storage, read_write> mstats: array<atomic<u32>, 4>;
 
-var<private> replays: u32 = 0u;
+var<private> evaluations: u32 = 0u;
 var<private> dropped: u32 = 0u;
 
 struct Stored {
-    sample: u32,
-    seed: u32,
     info: u32,
     w: f32,
-    m: f32,
     v: vec3f,
     hit: Hit,
+    dir: vec2f,
+    radiance: vec3f,
+}
+
+fn unpack(words: array<u32, RESERVOIR_WORDS>) -> Stored {
+    var s: Stored;
+    s.info = words[RES_INFO];
+    s.w = bitcast<f32>(words[RES_W]);
+    s.v = vec3f(bitcast<f32>(words[RES_VALUE]), bitcast<f32>(words[RES_VALUE + 1u]), bitcast<f32>(words[RES_VALUE + 2u]));
+    s.hit = Hit(0.0, words[RES_TRI], bitcast<f32>(words[RES_BARY]), bitcast<f32>(words[RES_BARY + 1u]));
+    s.dir = vec2f(bitcast<f32>(words[RES_DIR]), bitcast<f32>(words[RES_DIR + 1u]));
+    s.radiance = vec3f(bitcast<f32>(words[RES_RADIANCE]), bitcast<f32>(words[RES_RADIANCE + 1u]), bitcast<f32>(words[RES_RADIANCE + 2u]));
+    return s;
 }
 
 fn load_kept(r: u32) -> Stored {
-    let b = r * RESERVOIR_WORDS;
-    return Stored(kept[b], kept[b + 1u], kept[b + 2u], bitcast<f32>(kept[b + 3u]), bitcast<f32>(kept[b + 4u]), vec3f(bitcast<f32>(kept[b + 5u]), bitcast<f32>(kept[b + 6u]), bitcast<f32>(kept[b + 7u])), Hit(bitcast<f32>(kept[b + 8u]), kept[b + 9u], bitcast<f32>(kept[b + 10u]), bitcast<f32>(kept[b + 11u])));
+    var words: array<u32, RESERVOIR_WORDS>;
+    for (var k = 0u; k < RESERVOIR_WORDS; k++) {
+        words[k] = kept[r * RESERVOIR_WORDS + k];
+    }
+    return unpack(words);
 }
 
 fn load_fresh(r: u32) -> Stored {
-    let b = r * RESERVOIR_WORDS;
-    return Stored(merged[b], merged[b + 1u], merged[b + 2u], bitcast<f32>(merged[b + 3u]), bitcast<f32>(merged[b + 4u]), vec3f(bitcast<f32>(merged[b + 5u]), bitcast<f32>(merged[b + 6u]), bitcast<f32>(merged[b + 7u])), Hit(bitcast<f32>(merged[b + 8u]), merged[b + 9u], bitcast<f32>(merged[b + 10u]), bitcast<f32>(merged[b + 11u])));
+    var words: array<u32, RESERVOIR_WORDS>;
+    for (var k = 0u; k < RESERVOIR_WORDS; k++) {
+        words[k] = merged[r * RESERVOIR_WORDS + k];
+    }
+    return unpack(words);
 }
 
 fn store_merged(r: u32, s: Stored) {
     let b = r * RESERVOIR_WORDS;
-    merged[b] = s.sample;
-    merged[b + 1u] = s.seed;
-    merged[b + 2u] = s.info;
-    merged[b + 3u] = bitcast<u32>(s.w);
-    merged[b + 4u] = bitcast<u32>(s.m);
-    merged[b + 5u] = bitcast<u32>(s.v.x);
-    merged[b + 6u] = bitcast<u32>(s.v.y);
-    merged[b + 7u] = bitcast<u32>(s.v.z);
-    merged[b + 8u] = bitcast<u32>(s.hit.t);
-    merged[b + 9u] = s.hit.tri;
-    merged[b + 10u] = bitcast<u32>(s.hit.b1);
-    merged[b + 11u] = bitcast<u32>(s.hit.b2);
+    merged[b + RES_INFO] = s.info;
+    merged[b + RES_W] = bitcast<u32>(s.w);
+    merged[b + RES_VALUE] = bitcast<u32>(s.v.x);
+    merged[b + RES_VALUE + 1u] = bitcast<u32>(s.v.y);
+    merged[b + RES_VALUE + 2u] = bitcast<u32>(s.v.z);
+    merged[b + RES_TRI] = s.hit.tri;
+    merged[b + RES_BARY] = bitcast<u32>(s.hit.b1);
+    merged[b + RES_BARY + 1u] = bitcast<u32>(s.hit.b2);
+    merged[b + RES_DIR] = bitcast<u32>(s.dir.x);
+    merged[b + RES_DIR + 1u] = bitcast<u32>(s.dir.y);
+    merged[b + RES_RADIANCE] = bitcast<u32>(s.radiance.x);
+    merged[b + RES_RADIANCE + 1u] = bitcast<u32>(s.radiance.y);
+    merged[b + RES_RADIANCE + 2u] = bitcast<u32>(s.radiance.z);
 }
 
 // The target of a value: luminance for RGB textures, the value for scalar ones.
@@ -97,79 +118,26 @@ fn target_of(v: vec3f, channels: u32) -> f32 {
 // Target of reservoir sign s (0 positive, 1 negative) for signed target q; |q| without
 // positivization.
 fn tau(q: f32, s: u32) -> f32 {
-    if (mp.flags & FLAG_POSITIVIZE) == 0u {
+    if (mp.flags & MERGE_FLAG_POSITIVIZE) == 0u {
         return abs(q);
     }
     return max(select(q, -q, s == 1u), 0.0);
 }
 
-// Value v of the stored sample for texel `local` of texture `ti`, under the current (prev =
+// Value of the stored path for texel `local` of texture `ti`, under the current (prev =
 // false) or previous textures and adjoint.
-fn replay(st: Stored, ti: u32, local: u32, prev: bool) -> vec3f {
-    replays += 1u;
-    let cam_index = min((st.info >> 1u) & 127u, MAX_CAMERAS - 1u);
-    let cam = mp.cameras[cam_index];
-    let pixel = st.sample % mp.n_pixels;
+fn evaluate(st: Stored, ti: u32, local: u32, prev: bool) -> vec3f {
+    evaluations += 1u;
+    let cam_index = min((st.info >> INFO_CAMERA_SHIFT) & INFO_CAMERA_MASK, MAX_CAMERAS - 1u);
+    let pixel = st.info & INFO_PIXEL_MASK;
     let a = cam_index * mp.n_pixels + pixel;
     var adj = adjoint[a].xyz;
     if prev {
         adj = adjoint_prev[a].xyz;
     }
-    adj *= mp.inv_spp;
-    if all(adj == vec3f(0.0)) {
-        return vec3f(0.0);
-    }
     use_prev_params = prev;
-    rng_init(st.seed, st.sample, 0u);
-    let xy = vec2f(f32(pixel % cam.width), f32(pixel / cam.width));
-    // The jittered direction (for the outgoing direction, and to keep the random numbers in
-    // step); the hit is the stored one.
-    let d = camera_direction(cam, xy + rand2());
-    if st.hit.tri >= arrayLength(&tri_shading) {
-        return vec3f(0.0);
-    }
-    let sf = surface_at(cam.origin, d, st.hit);
-    if !sf.valid {
-        return vec3f(0.0);
-    }
-    let m = materials[sf.material];
-    var slot = NONE;
-    for (var s = 0u; s < 3u; s++) {
-        if material_param(m, s) == ti {
-            slot = s;
-        }
-    }
-    if slot == NONE {
-        return vec3f(0.0);
-    }
-    let fp = footprint_merged(param_footprint(param_textures[ti], sf.uv));
-    var wf = 0.0;
-    for (var k = 0u; k < 4u; k++) {
-        if fp.texel[k] == local {
-            wf += fp.weight[k];
-        }
-    }
-    if wf == 0.0 {
-        return vec3f(0.0);
-    }
-    let mat = surface_material(sf);
-    let wo = to_local(sf.frame, sf.wo);
-    // The random numbers in the order of sample_direct: 3 for light sampling, then 3 for
-    // BSDF sampling.
-    var ds: DirectSample;
-    if (st.info & 1u) == 0u {
-        let u_pick = rand();
-        let u_light = rand2();
-        assume_visible = true;
-        ds = nee_sample(sf, mat, u_pick, u_light);
-        assume_visible = false;
-    } else {
-        _ = rand();
-        _ = rand2();
-        let u_bsdf = vec3f(rand(), rand2());
-        ds = bsdf_direct_sample(sf, mat, u_bsdf);
-    }
-    let v = wf * slot_derivative(slot, brdf_eval_cos_grad(mat, wo, to_local(sf.frame, ds.wi)), ds.weight, adj);
+    let v = path_value(mp.cameras[cam_index].origin, st.hit, oct_decode(st.dir), st.radiance, adj * mp.inv_spp, ti, local);
+    use_prev_params = false;
     if !all(abs(v) < vec3f(3.0e38)) {
         dropped += 1u;
         return vec3f(0.0);
@@ -194,38 +162,39 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     let p = param_textures[ti];
     let local = t - p.texel_offset;
     let ch = p.channels;
-    let n_signs = select(1u, 2u, (mp.flags & FLAG_POSITIVIZE) != 0u);
-    let reuse = (mp.flags & FLAG_TEMPORAL) != 0u && (mp.flags & FLAG_HAVE_PREV) != 0u;
+    let n_signs = select(1u, 2u, (mp.flags & MERGE_FLAG_POSITIVIZE) != 0u);
+    let reuse = (mp.flags & MERGE_FLAG_TEMPORAL) != 0u && (mp.flags & MERGE_FLAG_HAVE_PREV) != 0u;
 
-    // Kept samples (their previous values are stored) and fresh samples. Replays: each kept
-    // sample under the current textures and adjoint, each fresh sample under the previous
-    // ones (only needed when there is a kept sample to weigh it against). The replays are
-    // gathered into one list and run from one loop, so that the invocations of a SIMD group
-    // replay together whatever their mix of inputs.
+    // Kept samples (their values under the previous state are stored) and fresh samples
+    // (their values under the current state are stored). Evaluated: each kept sample under
+    // the current state, each fresh sample under the previous one.
     var k_st: array<Stored, 2>;
     var k_ok: array<bool, 2>;
     var k_cur: array<vec3f, 2>;
     var k_qprev: array<f32, 2>;
     var k_qcur: array<f32, 2>;
-    var k_m: array<f32, 2>;
     var f_st: array<Stored, 2>;
     var f_ok: array<bool, 2>;
     var c_qprev: array<f32, 2>;
-    var any_kept = false;
-    var jobs: array<u32, 4>;
-    var n_jobs = 0u;
     for (var r = 0u; r < 2u; r++) {
         k_ok[r] = false;
+        k_qcur[r] = 0.0;
         if reuse && r < n_signs {
             let st = load_kept(2u * t + r);
-            if st.info != NONE && st.w > 0.0 {
+            if st.w > 0.0 {
                 k_st[r] = st;
                 k_ok[r] = true;
-                any_kept = true;
                 k_qprev[r] = target_of(st.v, ch);
-                k_m[r] = min(st.m, mp.m_cap);
-                jobs[n_jobs] = r;
-                n_jobs += 1u;
+                k_cur[r] = evaluate(st, ti, local, false);
+                k_qcur[r] = target_of(k_cur[r], ch);
+                if (mp.flags & MERGE_FLAG_VERIFY) != 0u {
+                    // The stored value was computed under the previous state: evaluating the
+                    // stored path there must give it back. Record the largest relative error.
+                    let again = evaluate(st, ti, local, true);
+                    let err = length(again - st.v) / max(length(st.v), 1e-30);
+                    atomicAdd(&mstats[MERGE_STAT_VERIFIED], 1u);
+                    atomicMax(&mstats[MERGE_STAT_VERIFY_MAX_ERROR], bitcast<u32>(min(err, 3.0e38)));
+                }
             }
         }
     }
@@ -234,26 +203,20 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         c_qprev[s] = 0.0;
         if s < n_signs {
             f_st[s] = load_fresh(2u * t + s);
-            f_ok[s] = f_st[s].info != NONE && f_st[s].w > 0.0;
-            if f_ok[s] && any_kept {
-                jobs[n_jobs] = 2u + s;
-                n_jobs += 1u;
+            f_ok[s] = f_st[s].w > 0.0;
+            if f_ok[s] && reuse {
+                c_qprev[s] = target_of(evaluate(f_st[s], ti, local, true), ch);
             }
         }
     }
-    for (var j = 0u; j < n_jobs; j++) {
-        let job = jobs[j];
-        if job < 2u {
-            k_cur[job] = replay(k_st[job], ti, local, false);
-            k_qcur[job] = target_of(k_cur[job], ch);
-        } else {
-            c_qprev[job - 2u] = target_of(replay(f_st[job - 2u], ti, local, true), ch);
-        }
-    }
-
+    // Confidence-weighted balance heuristic over all inputs, empty ones included.
+    let m_c = mp.m_fresh;
+    let m_k = select(0.0, mp.m_kept, reuse);
     var g = vec3f(0.0);
     for (var s = 0u; s < 2u; s++) {
-        let empty = Stored(0u, 0u, NONE, 0.0, 0.0, vec3f(0.0), Hit(0.0, NONE, 0.0, 0.0));
+        var empty: Stored;
+        empty.info = 0u;
+        empty.w = 0.0;
         if s >= n_signs {
             store_merged(2u * t + s, empty);
             continue;
@@ -265,29 +228,23 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         var w: array<f32, 3>;
         w[0] = 0.0;
         if c_ok {
-            let own = mp.m_fresh * tau(c_qcur, s);
+            let own = m_c * tau(c_qcur, s);
             var den = own;
-            for (var r = 0u; r < 2u; r++) {
-                if k_ok[r] {
-                    den += k_m[r] * tau(c_qprev[s], r);
-                }
+            for (var r = 0u; r < n_signs; r++) {
+                den += m_k * tau(c_qprev[s], r);
             }
             let big_w = fresh.w / tau(c_qcur, s);
             w[0] = select(0.0, own / den * tau(c_qcur, s) * big_w, den > 0.0);
         }
-        var m_new = mp.m_fresh;
         for (var r = 0u; r < 2u; r++) {
             w[r + 1u] = 0.0;
             if k_ok[r] && tau(k_qcur[r], s) > 0.0 {
-                let own = k_m[r] * tau(k_qprev[r], r);
-                var den = mp.m_fresh * tau(k_qcur[r], s);
-                for (var r2 = 0u; r2 < 2u; r2++) {
-                    if k_ok[r2] {
-                        den += k_m[r2] * tau(k_qprev[r], r2);
-                    }
+                let own = m_k * tau(k_qprev[r], r);
+                var den = m_c * tau(k_qcur[r], s);
+                for (var r2 = 0u; r2 < n_signs; r2++) {
+                    den += m_k * tau(k_qprev[r], r2);
                 }
                 w[r + 1u] = select(0.0, own / den * tau(k_qcur[r], s) * k_st[r].w, den > 0.0);
-                m_new += k_m[r];
             }
         }
         let total = w[0] + w[1] + w[2];
@@ -316,15 +273,14 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
             q = tau(k_qcur[pick - 1u], s);
         }
         out.w = total / q;
-        out.m = m_new;
         store_merged(2u * t + s, out);
         g += out.v * out.w;
     }
     for (var c = 0u; c < ch; c++) {
         grad[p.offset + local * ch + c] = g[c];
     }
-    atomicAdd(&mstats[0], replays);
+    atomicAdd(&mstats[MERGE_STAT_EVALUATIONS], evaluations);
     if dropped > 0u {
-        atomicAdd(&mstats[1], dropped);
+        atomicAdd(&mstats[MERGE_STAT_DROPPED], dropped);
     }
 }

@@ -50,11 +50,30 @@ struct EstimatorArgs {
     restir: RestirArgs,
 }
 
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum ConfidenceArg {
+    /// Gradient samples per pixel (the reference code's convention).
+    Samples,
+    /// Candidates per pixel and texel: 2 techniques x gradient spp x cameras.
+    Candidates,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum ProtocolArg {
+    /// Each task's own sampling settings.
+    Default,
+    /// The paper's: primal 32 spp, gradient 1 spp, nearest filtering.
+    Paper,
+}
+
 #[derive(clap::Args)]
 struct RestirArgs {
     /// ReSTIR: cap on the confidence of the kept sample.
-    #[arg(long, default_value_t = 16.0)]
+    #[arg(long, default_value_t = optim::RestirOptions::default().m_cap)]
     m_cap: f32,
+    /// ReSTIR: confidence of the fresh candidates in the merge.
+    #[arg(long, value_enum, default_value = "samples")]
+    confidence: ConfidenceArg,
     /// ReSTIR ablation: resample within each iteration only.
     #[arg(long)]
     no_temporal: bool,
@@ -70,8 +89,13 @@ impl RestirArgs {
         }
         Ok(optim::RestirOptions {
             m_cap: self.m_cap,
+            confidence: match self.confidence {
+                ConfidenceArg::Samples => optim::Confidence::Samples,
+                ConfidenceArg::Candidates => optim::Confidence::Candidates,
+            },
             temporal: !self.no_temporal,
             positivization: !self.no_positivization,
+            verify_paths: false,
         })
     }
 }
@@ -179,6 +203,17 @@ enum Command {
         /// Gradient samples per pixel of the reference gradient.
         #[arg(long, default_value_t = 256)]
         reference_spp: u32,
+        /// Samples per pixel of the primal render of the converged adjoint (the reference and
+        /// the estimator-only errors are computed under it).
+        #[arg(long, default_value_t = 256)]
+        reference_primal_spp: u32,
+        /// Sampling settings: the tasks' own, or the paper's (primal 32 spp, gradient 1 spp,
+        /// nearest filtering).
+        #[arg(long, value_enum, default_value = "default")]
+        protocol: ProtocolArg,
+        /// Measure the gradient error only (skip the equal-time optimization).
+        #[arg(long)]
+        gradient_only: bool,
         /// Samples per pixel of the renders that measure image error.
         #[arg(long, default_value_t = 64)]
         eval_spp: u32,
@@ -460,6 +495,9 @@ fn run(cli: Cli) -> Result<()> {
             warmup,
             repeats,
             reference_spp,
+            reference_primal_spp,
+            protocol,
+            gradient_only,
             eval_spp,
             restir,
         } => {
@@ -481,6 +519,12 @@ fn run(cli: Cli) -> Result<()> {
                 warmup,
                 repeats,
                 reference_spp,
+                reference_primal_spp,
+                protocol: match protocol {
+                    ProtocolArg::Default => psrestir::bench::Protocol::Default,
+                    ProtocolArg::Paper => psrestir::bench::Protocol::Paper,
+                },
+                gradient_only,
                 eval_spp,
                 restir: restir.resolve()?,
                 out: out.clone(),

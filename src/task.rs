@@ -20,6 +20,13 @@
 //! loss = "l2"                     # or "relmse"
 //! filter = "bilinear"             # or "nearest"
 //! checkpoint_every = 25
+//! adam_mask = true                # sparse Adam: zero-gradient entries keep value and moments
+//! eval_every = 10                 # low-noise image error every N iterations (0: never)
+//! eval_spp = 16
+//!
+//! [optimizer.schedule]            # learning-rate schedule (default: constant)
+//! kind = "cosine"                 # or "constant", "step", "exponential"
+//! final = 0.05
 //!
 //! [[textures]]
 //! material = "sphere"
@@ -171,6 +178,26 @@ pub struct OptimizerSpec {
     /// Iterations between checkpoints (0: none).
     #[serde(default = "default_checkpoint")]
     pub checkpoint_every: u32,
+    /// Learning-rate schedule over the run (constant when absent).
+    #[serde(default)]
+    pub schedule: crate::optim::Schedule,
+    /// Sparse Adam: entries with an exactly zero gradient keep their value and moments.
+    #[serde(default)]
+    pub adam_mask: bool,
+    /// Iterations between evaluation renders (image relMSE of an `eval_spp` render of every
+    /// camera against its target, outside the timed budget); 0: none.
+    #[serde(default = "default_eval_every")]
+    pub eval_every: u32,
+    /// Samples per pixel of the evaluation renders.
+    #[serde(default = "default_eval_spp")]
+    pub eval_spp: u32,
+}
+
+fn default_eval_every() -> u32 {
+    10
+}
+fn default_eval_spp() -> u32 {
+    16
 }
 
 fn default_primal_spp() -> u32 {
@@ -330,6 +357,12 @@ impl Task {
         }
         if o.gradient_spp == 0 || o.gradient_spp > 4096 {
             return Err(self.bad("optimizer.gradient_spp", "must be between 1 and 4096"));
+        }
+        o.schedule
+            .check()
+            .map_err(|(key, msg)| self.bad(&format!("optimizer.schedule.{key}"), msg))?;
+        if o.eval_spp == 0 || o.eval_spp > 4096 {
+            return Err(self.bad("optimizer.eval_spp", "must be between 1 and 4096"));
         }
         if self.textures.is_empty() {
             return Err(self.bad("textures", "name at least one texture to optimize"));

@@ -42,6 +42,8 @@ fn check_gradient(slot: Slot, filter: Filter, values: &[f32], target_values: &[f
         seed: 7,
         method: psrestir::optim::Method::Baseline,
         restir: Default::default(),
+        schedule: Default::default(),
+        adam_mask: false,
     };
     // Target: the scene with other texel values, rendered with many samples.
     let blank = Image::new(W, W);

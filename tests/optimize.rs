@@ -73,6 +73,8 @@ fn setup(
         seed: 3,
         method: psrestir::optim::Method::Baseline,
         restir: Default::default(),
+        schedule: Default::default(),
+        adam_mask: false,
     };
     let init = set.values.clone();
     let opt = Optimizer::new(

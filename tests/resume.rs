@@ -198,7 +198,8 @@ fn kill_and_resume(method: &str) {
     assert!(st.success());
     let full = t0.elapsed().as_secs_f64();
     let ref_rows = metrics(&a);
-    assert_eq!(ref_rows.len(), iterations);
+    // A row for the start (iteration 0), then one per iteration.
+    assert_eq!(ref_rows.len(), iterations + 1);
 
     // Kill moments: uniform over the run's length, from a seed printed for repetition.
     let seed = std::env::var("PSRESTIR_KILL_SEED")
@@ -305,7 +306,7 @@ fn kill_and_resume(method: &str) {
     let its: Vec<u32> = rows.iter().map(|r| r.0).collect();
     assert_eq!(
         its,
-        (1..=iterations as u32).collect::<Vec<_>>(),
+        (0..=iterations as u32).collect::<Vec<_>>(),
         "metrics have a gap or a repeat"
     );
     // Each resumed process starts from the textures of the last checkpoint: the RMSE never
@@ -401,7 +402,7 @@ fn ctrl_c_writes_the_checkpoint_and_outputs_then_resumes() {
     assert!(stdout.contains("--resume"), "{stdout}");
     // Everything a normal end writes is there, and the checkpoint holds the last iteration.
     let rows = metrics(&out);
-    let done = rows.len() as u32;
+    let done = rows.len() as u32 - 1;
     assert!(done > 0 && done < iterations as u32, "{done} iterations");
     let ckpt = psrestir::optim::checkpoint::Checkpoint::load(&out.join("checkpoint.bin")).unwrap();
     assert_eq!(ckpt.state.iteration, done);
@@ -422,5 +423,5 @@ fn ctrl_c_writes_the_checkpoint_and_outputs_then_resumes() {
         .unwrap();
     assert!(st.success());
     let its: Vec<u32> = metrics(&out).iter().map(|r| r.0).collect();
-    assert_eq!(its, (1..=done + 20).collect::<Vec<_>>());
+    assert_eq!(its, (0..=done + 20).collect::<Vec<_>>());
 }

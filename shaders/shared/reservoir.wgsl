@@ -1,13 +1,12 @@
 #import shared/types
+#import gen/restir_layout
 
-// Streaming reservoir updates for parameter-space ReSTIR. Layout of a reservoir
-// (RESERVOIR_WORDS = 12 words, 48 bytes, in types.wgsl):
-//   [0] camera-sample index   [1] seed of the gradient pass that drew it
-//   [2] info: bit 0 technique (0 light sampling, 1 BSDF sampling), bits 1-7 camera; NONE = empty
-//   [3] weight sum (fresh reservoirs) or unbiased contribution weight W (merged)
-//   [4] confidence M          [5-7] the sample's value v (RGB; scalars use x)
-//   [8-11] the camera ray's hit (t, triangle, b1, b2): replays start from it instead of
-//   tracing the camera ray again (geometry and cameras do not change)
+// Streaming reservoir updates for parameter-space ReSTIR. A reservoir holds one path (the
+// layout, RES_* and RESERVOIR_WORDS, is generated from src/optim/estimator/restir.rs): the
+// camera sample that started it (pixel, camera, technique in RES_INFO), the camera ray's hit
+// (triangle and barycentrics), the incident direction (octahedral) and the radiance arriving
+// along it, with its value under the iteration's textures and adjoint, the weight sum (fresh
+// reservoirs) or unbiased contribution weight W (merged), and the confidence M.
 // Texel t owns reservoirs 2t (positive part of the target) and 2t + 1 (negative part).
 // Passes that offer candidates declare `fresh` (the reservoirs, as atomics) and `locks`.
 
@@ -19,6 +18,17 @@
 // A holder always releases in the same iteration, so the bound is never reached otherwise.
 const LOCK_BOUND: u32 = 4194304u;
 
+// A candidate path and its value for one texel.
+struct Candidate {
+    // Pixel | camera << INFO_CAMERA_SHIFT | technique << INFO_TECH_SHIFT (0 light, 1 BSDF).
+    info: u32,
+    value: vec3f,
+    hit: Hit,
+    // Incident direction, octahedral (oct_encode in shared/surface.wgsl).
+    dir: vec2f,
+    radiance: vec3f,
+}
+
 // Streaming update from many invocations at once. Design: a per-reservoir lock taken with
 // atomicCompareExchangeWeak, the critical section and the release inside the loop iteration
 // that took it (a lock that spins first and works after the loop deadlocks within a SIMD group
@@ -29,23 +39,25 @@ const LOCK_BOUND: u32 = 4194304u;
 // candidate replaces the sample with probability w / (Wsum_before + w), which makes the
 // selection exactly proportional to weight. Returns false if the bounded loop never got the
 // lock (the caller counts it).
-fn reservoir_offer(r: u32, w: f32, u: f32, sample: u32, seed: u32, info: u32, v: vec3f, hit: Hit) -> bool {
+fn reservoir_offer(r: u32, w: f32, u: f32, c: Candidate) -> bool {
     for (var k = 0u; k < LOCK_BOUND; k++) {
         if atomicCompareExchangeWeak(&locks[r], 0u, 1u).exchanged {
             let base = r * RESERVOIR_WORDS;
-            let wsum = bitcast<f32>(atomicLoad(&fresh[base + 3u])) + w;
-            atomicStore(&fresh[base + 3u], bitcast<u32>(wsum));
+            let wsum = bitcast<f32>(atomicLoad(&fresh[base + RES_W])) + w;
+            atomicStore(&fresh[base + RES_W], bitcast<u32>(wsum));
             if u * wsum < w {
-                atomicStore(&fresh[base], sample);
-                atomicStore(&fresh[base + 1u], seed);
-                atomicStore(&fresh[base + 2u], info);
-                atomicStore(&fresh[base + 5u], bitcast<u32>(v.x));
-                atomicStore(&fresh[base + 6u], bitcast<u32>(v.y));
-                atomicStore(&fresh[base + 7u], bitcast<u32>(v.z));
-                atomicStore(&fresh[base + 8u], bitcast<u32>(hit.t));
-                atomicStore(&fresh[base + 9u], hit.tri);
-                atomicStore(&fresh[base + 10u], bitcast<u32>(hit.b1));
-                atomicStore(&fresh[base + 11u], bitcast<u32>(hit.b2));
+                atomicStore(&fresh[base + RES_INFO], c.info);
+                atomicStore(&fresh[base + RES_VALUE], bitcast<u32>(c.value.x));
+                atomicStore(&fresh[base + RES_VALUE + 1u], bitcast<u32>(c.value.y));
+                atomicStore(&fresh[base + RES_VALUE + 2u], bitcast<u32>(c.value.z));
+                atomicStore(&fresh[base + RES_TRI], c.hit.tri);
+                atomicStore(&fresh[base + RES_BARY], bitcast<u32>(c.hit.b1));
+                atomicStore(&fresh[base + RES_BARY + 1u], bitcast<u32>(c.hit.b2));
+                atomicStore(&fresh[base + RES_DIR], bitcast<u32>(c.dir.x));
+                atomicStore(&fresh[base + RES_DIR + 1u], bitcast<u32>(c.dir.y));
+                atomicStore(&fresh[base + RES_RADIANCE], bitcast<u32>(c.radiance.x));
+                atomicStore(&fresh[base + RES_RADIANCE + 1u], bitcast<u32>(c.radiance.y));
+                atomicStore(&fresh[base + RES_RADIANCE + 2u], bitcast<u32>(c.radiance.z));
             }
             atomicStore(&locks[r], 0u);
             return true;

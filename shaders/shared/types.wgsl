@@ -109,10 +109,6 @@ struct ParamTex {
     _pad2: u32,
 }
 
-// Words per ReSTIR reservoir (see shared/reservoir.wgsl). Keep in sync with RESERVOIR_WORDS
-// in src/optim/restir.rs.
-const RESERVOIR_WORDS: u32 = 12u;
-
 struct Hit {
     t: f32,
     tri: u32,

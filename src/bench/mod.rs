@@ -1,9 +1,13 @@
 //! `psrestir bench`: the paper's measurements (DESIGN.md section 6) of the baseline and the
 //! ReSTIR estimator, one after the other on the same device, per scene:
 //!
-//! 1. equal-time gradient error: after `warmup` ReSTIR iterations, the relMSE of ReSTIR's
-//!    next gradient and of a baseline gradient given as many spp as fit in the time of one
-//!    ReSTIR iteration, both against a high-spp reference at that parameter state;
+//! 1. gradient error: after `warmup` ReSTIR iterations, the relMSE of ReSTIR's next gradient
+//!    and of baseline gradients at the same parameter state, at equal iterations (the task's
+//!    spp) and at equal time (as many spp as fit in the time of one ReSTIR iteration), against
+//!    a reference from a converged adjoint (a `reference_primal_spp` primal render) and
+//!    `reference_spp` gradient samples. Each error is measured twice: *total*, each estimator
+//!    with the adjoint of its own task-spp primal render (what a user gets), and
+//!    *estimator-only*, both under the converged adjoint (what the reservoirs do);
 //! 2. equal-time optimization: both estimators optimize from the same start for the same
 //!    wall-clock budget; image relMSE (a high-spp render against the target) and texture RMSE
 //!    against the ground truth, as curves over time and at the end;
@@ -15,14 +19,39 @@ pub mod report;
 
 use crate::gpu::Gpu;
 use crate::image_io::Image;
+use crate::optim::observed::rmse_observed;
 use crate::optim::run::{rmse, task_settings};
 use crate::optim::Problem;
-use crate::optim::{pass_seed, Method, Optimizer, PassTimes, RestirOptions, Settings};
+use crate::optim::{Method, Optimizer, PassTimes, RestirOptions, Settings};
 use crate::task::Task;
 use crate::{Error, Result};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+/// Which sampling settings the benchmark runs the scenes with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Protocol {
+    /// Each task's own settings (primal and gradient spp, texture filter).
+    #[default]
+    Default,
+    /// The paper's: a 32-spp primal render, 1 gradient spp, nearest filtering.
+    Paper,
+}
+
+impl Protocol {
+    /// `task` with the protocol's sampling settings.
+    pub fn apply(self, task: &Task) -> Task {
+        let mut t = task.clone();
+        if self == Protocol::Paper {
+            t.optimizer.primal_spp = 32;
+            t.optimizer.gradient_spp = 1;
+            t.optimizer.filter = crate::task::Filter::Nearest;
+        }
+        t
+    }
+}
 
 /// What to measure and where to write it.
 #[derive(Clone, Debug)]
@@ -38,6 +67,13 @@ pub struct BenchOptions {
     pub repeats: u32,
     /// Gradient samples per pixel of the reference gradient.
     pub reference_spp: u32,
+    /// Samples per pixel of the primal render of the converged adjoint (under which the
+    /// reference and the estimator-only errors are computed).
+    pub reference_primal_spp: u32,
+    /// Sampling settings of the scenes.
+    pub protocol: Protocol,
+    /// Measure the gradient error only (no equal-time optimization).
+    pub gradient_only: bool,
     /// Samples per pixel of the renders that measure image error.
     pub eval_spp: u32,
     /// Image-error evaluations along each optimization (start and end included).
@@ -58,8 +94,11 @@ impl Default for BenchOptions {
             warmup: 20,
             repeats: 3,
             reference_spp: 256,
+            reference_primal_spp: 256,
+            protocol: Protocol::Default,
+            gradient_only: false,
             eval_spp: 64,
-            curve_points: 5,
+            curve_points: 11,
             restir: RestirOptions::default(),
             out: PathBuf::from("out/bench"),
             progress: true,
@@ -78,6 +117,10 @@ pub struct CurvePoint {
     pub loss: f64,
     /// Texture RMSE against the ground truth.
     pub texture_rmse: f64,
+    /// Texture RMSE over the observed texels.
+    pub texture_rmse_observed: f64,
+    /// The learning-rate schedule's factor in this iteration.
+    pub learning_rate_factor: Option<f64>,
     /// Image relMSE of a high-spp render against the target, at evaluation points only.
     pub image_relmse: Option<f64>,
 }
@@ -97,16 +140,46 @@ pub struct SceneResult {
     pub cameras: usize,
     /// Optimized texels (all textures).
     pub texels: u32,
-    /// Gradient spp the baseline gets in the time of one ReSTIR iteration.
-    pub baseline_spp_equal_time: u32,
-    /// Gradient relMSE of the baseline at `baseline_spp_equal_time` (mean over seeds).
+    /// Primal and gradient spp of an iteration (after the protocol).
+    pub primal_spp: u32,
+    /// Gradient spp of an iteration.
+    pub gradient_spp: u32,
+    /// Gradient spp the baseline gets in the time of one ReSTIR iteration (fractional: the
+    /// errors at equal time are interpolated in 1/spp between the two whole spp around it).
+    pub baseline_spp_equal_time: f64,
+    /// Total gradient relMSE (each estimator with its own primal) of the baseline at equal
+    /// time (mean over seeds).
     pub gradient_relmse_baseline: f64,
-    /// Gradient relMSE of ReSTIR after `warmup` iterations (mean over seeds).
+    /// Total gradient relMSE of ReSTIR after `warmup` iterations (mean over seeds).
     pub gradient_relmse_restir: f64,
-    /// restir / baseline, equal time.
+    /// restir / baseline, total, equal time.
     pub gradient_relmse_ratio: f64,
-    /// Gradient relMSE of the baseline at the task's spp (equal iterations).
+    /// Total gradient relMSE of the baseline at the task's spp (equal iterations).
     pub gradient_relmse_baseline_equal_iterations: f64,
+    /// restir / baseline, total, equal iterations.
+    pub gradient_relmse_ratio_equal_iterations: f64,
+    /// Estimator-only gradient relMSE (converged adjoint) of the baseline at the task's spp.
+    pub gradient_relmse_estimator_only_baseline: f64,
+    /// Estimator-only gradient relMSE of ReSTIR (its next iteration under the converged
+    /// adjoint, from the same reservoirs).
+    pub gradient_relmse_estimator_only_restir: f64,
+    /// restir / baseline, estimator-only, equal iterations.
+    pub gradient_relmse_estimator_only_ratio: f64,
+    /// Estimator-only gradient relMSE of the baseline at equal time.
+    pub gradient_relmse_estimator_only_baseline_equal_time: f64,
+    /// restir / baseline, estimator-only, equal time.
+    pub gradient_relmse_estimator_only_ratio_equal_time: f64,
+    /// Mean wall-clock ms of a ReSTIR and a baseline iteration in the gradient phase (at the
+    /// task's spp, GPU work finished), and their ratio.
+    pub ms_per_iteration_ratio: f64,
+    /// The equal-time optimization (absent with `--gradient-only`).
+    #[serde(flatten)]
+    pub optimization: Option<OptimizationResult>,
+}
+
+/// The equal-time optimization of one scene.
+#[derive(Clone, Debug, Serialize)]
+pub struct OptimizationResult {
     /// Image relMSE at the initial textures.
     pub image_relmse_initial: f64,
     /// Image relMSE after the baseline's budget.
@@ -121,6 +194,21 @@ pub struct SceneResult {
     pub texture_rmse_baseline: f64,
     /// Texture RMSE after ReSTIR's budget.
     pub texture_rmse_restir: f64,
+    /// Texture RMSE over the observed texels (those a camera sample reaches; the others
+    /// keep their initial values) at the start.
+    pub texture_rmse_observed_initial: f64,
+    /// ... after the baseline's budget.
+    pub texture_rmse_observed_baseline: f64,
+    /// ... after ReSTIR's budget.
+    pub texture_rmse_observed_restir: f64,
+    /// ... of the baseline at a third of the budget.
+    pub texture_rmse_observed_third_baseline: f64,
+    /// ... of ReSTIR at a third of the budget.
+    pub texture_rmse_observed_third_restir: f64,
+    /// Fraction of the texels that are observed.
+    pub observed_fraction: f64,
+    /// The learning-rate schedule both estimators followed.
+    pub schedule: String,
     /// Mean wall-clock milliseconds per baseline iteration (GPU work finished).
     pub ms_per_iteration_baseline: f64,
     /// Mean wall-clock milliseconds per ReSTIR iteration.
@@ -161,6 +249,12 @@ pub struct BenchReport {
     pub repeats: u32,
     /// Gradient spp of the reference gradient.
     pub reference_spp: u32,
+    /// spp of the primal render of the converged adjoint.
+    pub reference_primal_spp: u32,
+    /// Sampling settings of the scenes.
+    pub protocol: Protocol,
+    /// ReSTIR's confidence convention for the fresh candidates.
+    pub confidence: String,
     /// spp of the image-error renders.
     pub eval_spp: u32,
     /// ReSTIR's confidence cap.
@@ -173,10 +267,12 @@ pub struct BenchReport {
 pub struct GradientSnapshot {
     /// The reference gradient.
     pub reference: Vec<f32>,
-    /// The baseline's gradient at equal time.
+    /// The baseline's gradient at the task's spp, under the converged adjoint.
     pub baseline: Vec<f32>,
-    /// ReSTIR's gradient.
+    /// ReSTIR's gradient under the converged adjoint.
     pub restir: Vec<f32>,
+    /// The baseline's spp.
+    pub baseline_spp: u32,
 }
 
 /// Final renders of the first camera: target, baseline and ReSTIR.
@@ -245,17 +341,7 @@ pub fn gradient_relmse(g: &[f32], reference: &[f64]) -> f64 {
     s / n.max(1) as f64
 }
 
-/// Image relMSE: mean over pixels and channels of (x - t)^2 / (t^2 + 1e-2).
-pub fn image_relmse(img: &Image, target: &Image) -> f64 {
-    let mut s = 0.0;
-    for (a, t) in img.rgb.iter().zip(&target.rgb) {
-        for c in 0..3 {
-            let (a, t) = (a[c] as f64, t[c] as f64);
-            s += (a - t).powi(2) / (t * t + 1e-2);
-        }
-    }
-    s / (3 * target.rgb.len()).max(1) as f64
-}
+pub use crate::optim::loss::image_relmse;
 
 /// Progress reporting: a bar over the phases of all scenes.
 struct Progress {
@@ -308,14 +394,29 @@ fn time_steps(opt: &mut Optimizer, n: u32) -> Result<f64> {
     Ok(1000.0 * t0.elapsed().as_secs_f64() / n.max(1) as f64)
 }
 
-/// Gradient error at equal time (phase 1). Returns the scene's partial result fields
-/// (baseline spp, relMSEs) and the gradients of the first seed for the images.
+/// Gradient error (phase 1): the scene's gradient fields and the gradients of the first seed
+/// for the images.
 struct GradientPhase {
-    baseline_spp_equal_time: u32,
-    relmse_baseline: f64,
-    relmse_restir: f64,
-    relmse_baseline_equal_iterations: f64,
+    baseline_spp_equal_time: f64,
+    total_baseline: f64,
+    total_restir: f64,
+    total_baseline_equal_iterations: f64,
+    only_baseline: f64,
+    only_restir: f64,
+    only_baseline_equal_time: f64,
+    ms_ratio: f64,
     snapshot: GradientSnapshot,
+}
+
+/// The baseline's error at `k` spp (fractional) from its errors at whole spp `s0` and
+/// `s0 + 1` around it, linear in 1/spp (Monte Carlo variance falls as 1/spp).
+fn interpolate_in_inverse_spp(k: f64, s0: u32, e0: f64, e1: f64) -> f64 {
+    let s0 = s0 as f64;
+    if k <= s0 {
+        return e0;
+    }
+    let a = (1.0 / s0 - 1.0 / k) / (1.0 / s0 - 1.0 / (s0 + 1.0));
+    e0 + a * (e1 - e0)
 }
 
 fn gradient_phase(
@@ -339,18 +440,24 @@ fn gradient_phase(
             &prep.targets,
         )
     };
+    let repeats = o.repeats.max(1);
+    let n = repeats as f64;
     let mut out = GradientPhase {
-        baseline_spp_equal_time: spp,
-        relmse_baseline: 0.0,
-        relmse_restir: 0.0,
-        relmse_baseline_equal_iterations: 0.0,
+        baseline_spp_equal_time: spp as f64,
+        total_baseline: 0.0,
+        total_restir: 0.0,
+        total_baseline_equal_iterations: 0.0,
+        only_baseline: 0.0,
+        only_restir: 0.0,
+        only_baseline_equal_time: 0.0,
+        ms_ratio: f64::NAN,
         snapshot: GradientSnapshot {
             reference: Vec::new(),
             baseline: Vec::new(),
             restir: Vec::new(),
+            baseline_spp: spp,
         },
     };
-    let repeats = o.repeats.max(1);
     let mut eq_spp = None;
     for rep in 0..repeats {
         progress.message(format!("gradient error, seed {}/{repeats}", rep + 1));
@@ -372,8 +479,7 @@ fn gradient_phase(
             None
         };
         let state = re.read_params()?;
-        let (g_restir, _) = re.estimate_gradient(re.iteration)?;
-        drop(re);
+        let kept = re.state()?;
 
         // The baseline's cost per gradient spp, measured once: iterations at spp and 4 spp.
         let k = match eq_spp {
@@ -393,59 +499,74 @@ fn gradient_phase(
                 let t4 = time_steps(&mut b4, 3)?;
                 drop(b4);
                 let per_spp = ((t4 - t1) / (3 * spp) as f64).max(1e-3);
-                let k = spp as f64 + ((ms_restir - t1) / per_spp).floor();
-                let k = (k.max(1.0) as u32).min(1024);
+                let k = (spp as f64 + (ms_restir - t1) / per_spp).clamp(1.0, 1024.0);
                 log::info!(
                     "{}: ReSTIR {ms_restir:.1} ms/it, baseline {t1:.1} ms/it at {spp} spp \
-                     (+{per_spp:.1} ms per spp): {k} spp at equal time",
+                     (+{per_spp:.1} ms per spp): {k:.2} spp at equal time",
                     task.path.display()
                 );
+                out.ms_ratio = ms_restir / t1;
                 eq_spp = Some(k);
                 k
             }
         };
+        let s0 = (k.floor() as u32).max(1);
 
-        // Reference: many baseline samples at the same state.
+        // The converged adjoint at the state, and the reference gradient under it.
+        progress.message(format!(
+            "gradient error, seed {}/{repeats}: reference",
+            rep + 1
+        ));
         let ref_spp = o.reference_spp.clamp(1, 64);
         let estimates = o.reference_spp.div_ceil(ref_spp).max(1);
+        let mut r = new(Method::Baseline, ref_spp, seed ^ 0x5eed)?;
+        r.write_params(&state)?;
+        let (converged, _) = r.converged_adjoint(o.reference_primal_spp, seed ^ 0xad)?;
         let mut reference = vec![0f64; state.len()];
-        {
-            let mut r = new(Method::Baseline, ref_spp, seed ^ 0x5eed)?;
-            r.write_params(&state)?;
-            for it in 0..estimates {
-                let (g, _) = r.estimate_gradient(it)?;
-                for (acc, v) in reference.iter_mut().zip(&g) {
-                    *acc += *v as f64 / estimates as f64;
-                }
+        for it in 0..estimates {
+            let g = r.estimate_gradient_with_adjoint(it, &converged)?;
+            for (acc, v) in reference.iter_mut().zip(&g) {
+                *acc += *v as f64 / estimates as f64;
             }
         }
-        let mut b = new(Method::Baseline, k, seed ^ 0xe9)?;
-        b.write_params(&state)?;
-        let (g_eq, _) = b.estimate_gradient(0)?;
-        drop(b);
-        let mut b = new(Method::Baseline, spp, seed ^ 0xea)?;
-        b.write_params(&state)?;
-        let (g_it, _) = b.estimate_gradient(0)?;
-        drop(b);
+        drop(r);
+        let relmse = |g: &[f32]| gradient_relmse(g, &reference);
 
-        let l1 = |g: &[f32]| g.iter().map(|v| v.abs() as f64).sum::<f64>();
-        log::debug!(
-            "sum |g|: reference {:.4e}, ReSTIR {:.4e}, baseline {k} spp {:.4e}, baseline {spp} spp {:.4e}",
-            reference.iter().map(|v| v.abs()).sum::<f64>(),
-            l1(&g_restir),
-            l1(&g_eq),
-            l1(&g_it)
-        );
-        let n = repeats as f64;
-        out.relmse_restir += gradient_relmse(&g_restir, &reference) / n;
-        out.relmse_baseline += gradient_relmse(&g_eq, &reference) / n;
-        out.relmse_baseline_equal_iterations += gradient_relmse(&g_it, &reference) / n;
+        // ReSTIR's next gradient: with its own primal render, then again from the same
+        // reservoirs under the converged adjoint.
+        let it = re.iteration;
+        let (g_restir_total, _) = re.estimate_gradient(it)?;
+        re.restore(&kept)?;
+        let g_restir_only = re.estimate_gradient_with_adjoint(it, &converged)?;
+        drop(re);
+
+        // The baseline at the task's spp and around the equal-time spp, both ways.
+        let baseline = |spp: u32, salt: u32| -> Result<(Vec<f32>, Vec<f32>)> {
+            let mut b = new(Method::Baseline, spp, seed ^ salt)?;
+            b.write_params(&state)?;
+            let (total, _) = b.estimate_gradient(0)?;
+            let only = b.estimate_gradient_with_adjoint(1, &converged)?;
+            Ok((total, only))
+        };
+        let (b_total, b_only) = baseline(spp, 0xea)?;
+        let (b0_total, b0_only) = baseline(s0, 0xe9)?;
+        let (b1_total, b1_only) = baseline(s0 + 1, 0xeb)?;
+
+        out.total_restir += relmse(&g_restir_total) / n;
+        out.only_restir += relmse(&g_restir_only) / n;
+        out.total_baseline_equal_iterations += relmse(&b_total) / n;
+        out.only_baseline += relmse(&b_only) / n;
+        out.total_baseline +=
+            interpolate_in_inverse_spp(k, s0, relmse(&b0_total), relmse(&b1_total)) / n;
+        out.only_baseline_equal_time +=
+            interpolate_in_inverse_spp(k, s0, relmse(&b0_only), relmse(&b1_only)) / n;
         out.baseline_spp_equal_time = k;
         if rep == 0 {
             out.snapshot = GradientSnapshot {
                 reference: reference.iter().map(|&v| v as f32).collect(),
-                baseline: g_eq,
-                restir: g_restir,
+                baseline: b_only,
+                restir: g_restir_only,
+                baseline_spp: spp,
             };
         }
         progress.done();
@@ -454,20 +575,14 @@ fn gradient_phase(
 }
 
 /// Image relMSE of the current textures, mean over the task's cameras, and the render of
-/// the first camera.
+/// the first camera (the same seed every time: differences are the textures', not the
+/// noise's).
 fn evaluate(opt: &Optimizer, prep: &Problem, task: &Task, spp: u32) -> Result<(f64, Image)> {
-    let mut sum = 0.0;
-    let mut first = None;
-    for (k, target) in prep.targets.iter().enumerate() {
-        // The same seed for every evaluation: differences are the textures', not the noise's.
-        let img = opt.render(k, spp, pass_seed(task.seed, u32::MAX - 2, k as u32, 3))?;
-        sum += image_relmse(&img, target);
-        if k == 0 {
-            first = Some(img);
-        }
+    let (e, mut images) = crate::optim::run::evaluate(opt, &prep.targets, spp, task.seed)?;
+    if images.is_empty() {
+        return Err(Error::Invalid("the task has no camera".into()));
     }
-    let first = first.ok_or_else(|| Error::Invalid("the task has no camera".into()))?;
-    Ok((sum / prep.targets.len() as f64, first))
+    Ok((e, images.swap_remove(0)))
 }
 
 /// One estimator's equal-time optimization (phase 2).
@@ -497,6 +612,12 @@ fn optimization_phase(
     )?;
     let truth = prep.reference.as_deref();
     let texture_rmse = |v: &[f32]| truth.map(|r| rmse(v, r)).unwrap_or(f64::NAN);
+    let observed = opt.observed_texels()?.to_vec();
+    let texture_rmse_observed = |v: &[f32]| {
+        truth
+            .map(|r| rmse_observed(&prep.set, v, r, &observed))
+            .unwrap_or(f64::NAN)
+    };
     let points = o.curve_points.max(2);
     let mut next_eval = 1u32;
     let mut curve = Vec::new();
@@ -525,6 +646,8 @@ fn optimization_phase(
         if seconds >= o.budget_s {
             break;
         }
+        // Both estimators follow the task's schedule over the same budget.
+        opt.set_progress(seconds / o.budget_s);
         let t0 = Instant::now();
         let stats = opt.step()?;
         seconds += t0.elapsed().as_secs_f64();
@@ -535,11 +658,18 @@ fn optimization_phase(
                 *n += 1;
             }
         }
+        let values = opt.read_params()?;
+        let factor = match (opt.last_learning_rates().first(), prep.set.textures.first()) {
+            (Some(&l), Some(t)) if t.learning_rate > 0.0 => Some(l as f64 / t.learning_rate as f64),
+            _ => None,
+        };
         curve.push(CurvePoint {
             iteration: opt.iteration,
             seconds,
             loss: stats.loss,
-            texture_rmse: texture_rmse(&opt.read_params()?),
+            texture_rmse: texture_rmse(&values),
+            texture_rmse_observed: texture_rmse_observed(&values),
+            learning_rate_factor: factor,
             image_relmse: None,
         });
     }
@@ -574,23 +704,25 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
             o.scale
         )));
     }
-    if o.eval_spp == 0 || o.reference_spp == 0 || o.eval_spp > 1 << 16 {
+    if o.eval_spp == 0
+        || o.reference_spp == 0
+        || o.reference_primal_spp == 0
+        || o.eval_spp > 1 << 16
+    {
         return Err(Error::Invalid(format!(
-            "bench: --eval-spp ({}) and --reference-spp ({}) must be at least 1 (eval at most \
-             65536)",
-            o.eval_spp, o.reference_spp
+            "bench: --eval-spp ({}), --reference-spp ({}) and --reference-primal-spp ({}) must be \
+             at least 1 (eval at most 65536)",
+            o.eval_spp, o.reference_spp, o.reference_primal_spp
         )));
     }
     // Load every task first, so that a bad one fails before hours of measuring.
     let mut loaded = Vec::new();
     for p in tasks {
-        loaded.push(scaled(&Task::load(p)?, o.scale));
+        loaded.push(o.protocol.apply(&scaled(&Task::load(p)?, o.scale)));
     }
     std::fs::create_dir_all(&o.out).map_err(|e| Error::file(&o.out, e.to_string()))?;
-    let progress = Progress::new(
-        o.progress,
-        loaded.len() as u64 * (o.repeats.max(1) as u64 + 3),
-    );
+    let per_scene = o.repeats.max(1) as u64 + if o.gradient_only { 1 } else { 3 };
+    let progress = Progress::new(o.progress, loaded.len() as u64 * per_scene);
     let mut report = BenchReport {
         version: env!("CARGO_PKG_VERSION").into(),
         adapter: gpu.describe(),
@@ -599,6 +731,9 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         warmup: o.warmup,
         repeats: o.repeats.max(1),
         reference_spp: o.reference_spp,
+        reference_primal_spp: o.reference_primal_spp,
+        protocol: o.protocol,
+        confidence: o.restir.confidence.name().into(),
         eval_spp: o.eval_spp,
         m_cap: o.restir.m_cap,
         scenes: Vec::new(),
@@ -614,49 +749,11 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         let prep = Problem::from_task(gpu, task, &dir, false)?;
         progress.done();
         let g = gradient_phase(gpu, task, &prep, o, &progress)?;
-        let init = Optimizer::new(
-            gpu,
-            &prep.scene,
-            prep.set.clone(),
-            settings(&prep, task, Method::Baseline, o),
-            &prep.targets,
-        )?;
-        let (image_initial, _) = evaluate(&init, &prep, task, o.eval_spp)?;
-        drop(init);
-        let texture_initial = prep
-            .reference
-            .as_deref()
-            .map(|r| rmse(&prep.set.values, r))
-            .unwrap_or(f64::NAN);
-        let start = CurvePoint {
-            iteration: 0,
-            seconds: 0.0,
-            loss: f64::NAN,
-            texture_rmse: texture_initial,
-            image_relmse: Some(image_initial),
-        };
-        let base = optimization_phase(gpu, task, &prep, o, Method::Baseline, &progress)?;
-        let re = optimization_phase(gpu, task, &prep, o, Method::Restir, &progress)?;
-        let last = |r: &OptimizationRun| -> (f64, f64) {
-            let t = r
-                .curve
-                .last()
-                .map(|p| p.texture_rmse)
-                .unwrap_or(texture_initial);
-            let i = r
-                .curve
-                .iter()
-                .rev()
-                .find_map(|p| p.image_relmse)
-                .unwrap_or(image_initial);
-            (t, i)
-        };
-        let (tb, ib) = last(&base);
-        let (tr, ir) = last(&re);
-        let with_start = |c: &[CurvePoint]| {
-            let mut v = vec![start.clone()];
-            v.extend_from_slice(c);
-            v
+        let (optimization, finals) = if o.gradient_only {
+            (None, None)
+        } else {
+            let (r, f) = optimization_phases(gpu, task, &prep, o, &progress)?;
+            (Some(r), Some(f))
         };
         let result = SceneResult {
             name: name.clone(),
@@ -665,46 +762,135 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
             height: task.height,
             cameras: prep.cameras.len(),
             texels: prep.set.textures.iter().map(|t| t.width * t.height).sum(),
+            primal_spp: task.optimizer.primal_spp,
+            gradient_spp: task.optimizer.gradient_spp,
             baseline_spp_equal_time: g.baseline_spp_equal_time,
-            gradient_relmse_baseline: g.relmse_baseline,
-            gradient_relmse_restir: g.relmse_restir,
-            gradient_relmse_ratio: g.relmse_restir / g.relmse_baseline,
-            gradient_relmse_baseline_equal_iterations: g.relmse_baseline_equal_iterations,
-            image_relmse_initial: image_initial,
-            image_relmse_baseline: ib,
-            image_relmse_restir: ir,
-            image_relmse_ratio: ir / ib,
-            texture_rmse_initial: texture_initial,
-            texture_rmse_baseline: tb,
-            texture_rmse_restir: tr,
-            ms_per_iteration_baseline: base.ms_per_iteration,
-            ms_per_iteration_restir: re.ms_per_iteration,
-            iterations_baseline: base.iterations,
-            iterations_restir: re.iterations,
-            passes_baseline: base.passes,
-            passes_restir: re.passes,
-            state_bytes_per_texel: re.state_bytes_per_texel,
-            state_bytes_per_texel_baseline: base.state_bytes_per_texel,
-            curve_baseline: with_start(&base.curve),
-            curve_restir: with_start(&re.curve),
+            gradient_relmse_baseline: g.total_baseline,
+            gradient_relmse_restir: g.total_restir,
+            gradient_relmse_ratio: g.total_restir / g.total_baseline,
+            gradient_relmse_baseline_equal_iterations: g.total_baseline_equal_iterations,
+            gradient_relmse_ratio_equal_iterations: g.total_restir
+                / g.total_baseline_equal_iterations,
+            gradient_relmse_estimator_only_baseline: g.only_baseline,
+            gradient_relmse_estimator_only_restir: g.only_restir,
+            gradient_relmse_estimator_only_ratio: g.only_restir / g.only_baseline,
+            gradient_relmse_estimator_only_baseline_equal_time: g.only_baseline_equal_time,
+            gradient_relmse_estimator_only_ratio_equal_time: g.only_restir
+                / g.only_baseline_equal_time,
+            ms_per_iteration_ratio: g.ms_ratio,
+            optimization,
         };
-        report::write_scene_files(
-            &dir,
-            &prep,
-            &result,
-            &g.snapshot,
-            &FinalImages {
-                target: prep.targets[0].clone(),
-                baseline: base.final_image,
-                restir: re.final_image,
-            },
-        )?;
+        report::write_scene_files(&dir, &prep, &result, &g.snapshot, finals.as_ref())?;
         report.scenes.push(result);
         // Written after every scene, so that an interrupted run keeps what it measured.
         report::write_report(&o.out, &report)?;
     }
     progress.finish();
     Ok(report)
+}
+
+/// The equal-time optimization of both estimators (phase 2) and the cost (phase 3).
+fn optimization_phases(
+    gpu: &Gpu,
+    task: &Task,
+    prep: &Problem,
+    o: &BenchOptions,
+    progress: &Progress,
+) -> Result<(OptimizationResult, FinalImages)> {
+    let init = Optimizer::new(
+        gpu,
+        &prep.scene,
+        prep.set.clone(),
+        settings(prep, task, Method::Baseline, o),
+        &prep.targets,
+    )?;
+    let (image_initial, _) = evaluate(&init, prep, task, o.eval_spp)?;
+    let texture_initial = prep
+        .reference
+        .as_deref()
+        .map(|r| rmse(&prep.set.values, r))
+        .unwrap_or(f64::NAN);
+    let observed = init.observed_texels()?.to_vec();
+    let texture_observed_initial = prep
+        .reference
+        .as_deref()
+        .map(|r| rmse_observed(&prep.set, &prep.set.values, r, &observed))
+        .unwrap_or(f64::NAN);
+    drop(init);
+    let start = CurvePoint {
+        iteration: 0,
+        seconds: 0.0,
+        loss: f64::NAN,
+        texture_rmse: texture_initial,
+        texture_rmse_observed: texture_observed_initial,
+        learning_rate_factor: None,
+        image_relmse: Some(image_initial),
+    };
+    let base = optimization_phase(gpu, task, prep, o, Method::Baseline, progress)?;
+    let re = optimization_phase(gpu, task, prep, o, Method::Restir, progress)?;
+    let last = |r: &OptimizationRun| -> (f64, f64, f64) {
+        let t = r
+            .curve
+            .last()
+            .map(|p| (p.texture_rmse, p.texture_rmse_observed))
+            .unwrap_or((texture_initial, texture_observed_initial));
+        let i = r
+            .curve
+            .iter()
+            .rev()
+            .find_map(|p| p.image_relmse)
+            .unwrap_or(image_initial);
+        (t.0, t.1, i)
+    };
+    // The observed-texel RMSE at a third of the budget (the last point before it).
+    let third = |r: &OptimizationRun| -> f64 {
+        r.curve
+            .iter()
+            .take_while(|p| p.seconds <= o.budget_s / 3.0)
+            .last()
+            .map(|p| p.texture_rmse_observed)
+            .unwrap_or(texture_observed_initial)
+    };
+    let (tb, tob, ib) = last(&base);
+    let (tr, tor, ir) = last(&re);
+    let with_start = |c: &[CurvePoint]| {
+        let mut v = vec![start.clone()];
+        v.extend_from_slice(c);
+        v
+    };
+    let result = OptimizationResult {
+        image_relmse_initial: image_initial,
+        image_relmse_baseline: ib,
+        image_relmse_restir: ir,
+        image_relmse_ratio: ir / ib,
+        texture_rmse_initial: texture_initial,
+        texture_rmse_baseline: tb,
+        texture_rmse_restir: tr,
+        texture_rmse_observed_initial: texture_observed_initial,
+        texture_rmse_observed_baseline: tob,
+        texture_rmse_observed_restir: tor,
+        texture_rmse_observed_third_baseline: third(&base),
+        texture_rmse_observed_third_restir: third(&re),
+        observed_fraction: observed.iter().filter(|&&b| b).count() as f64
+            / observed.len().max(1) as f64,
+        schedule: task.optimizer.schedule.describe(),
+        ms_per_iteration_baseline: base.ms_per_iteration,
+        ms_per_iteration_restir: re.ms_per_iteration,
+        iterations_baseline: base.iterations,
+        iterations_restir: re.iterations,
+        passes_baseline: base.passes,
+        passes_restir: re.passes,
+        state_bytes_per_texel: re.state_bytes_per_texel,
+        state_bytes_per_texel_baseline: base.state_bytes_per_texel,
+        curve_baseline: with_start(&base.curve),
+        curve_restir: with_start(&re.curve),
+    };
+    let finals = FinalImages {
+        target: prep.targets[0].clone(),
+        baseline: base.final_image,
+        restir: re.final_image,
+    };
+    Ok((result, finals))
 }
 
 /// The scene's name: its folder's name (the bundled scenes' folders are their names).

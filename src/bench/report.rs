@@ -1,8 +1,8 @@
 //! Files of `psrestir bench`: `bench.json`, `report.md`, and per scene the error-against-time
 //! plot, the gradients side by side and the final renders side by side.
 use super::{BenchReport, CurvePoint, FinalImages, GradientSnapshot, SceneResult};
-use crate::image_io::{write_atomic, write_atomic_with};
-use crate::optim::plot::{plot, text, Panel, Series};
+use crate::image_io::write_atomic;
+use crate::optim::plot::{captioned_row, plot, save_png, Panel, Series};
 use crate::optim::run::{false_color, gradient_scalars};
 use crate::optim::Problem;
 use crate::{Error, Result};
@@ -12,30 +12,6 @@ use std::path::Path;
 
 const BASELINE: [u8; 3] = [220, 110, 20];
 const RESTIR: [u8; 3] = [30, 90, 200];
-
-fn save_png(path: &Path, img: &RgbImage) -> Result<()> {
-    write_atomic_with(path, |tmp| {
-        img.save_with_format(tmp, image::ImageFormat::Png)
-            .map_err(std::io::Error::other)
-    })
-    .map_err(|e| Error::file(path, e.to_string()))
-}
-
-/// Tiles in a row, each under its caption, on white.
-fn captioned_row(tiles: &[(String, RgbImage)]) -> RgbImage {
-    let (gap, header) = (6u32, 14u32);
-    let col = |t: &(String, RgbImage)| t.1.width().max(8 * t.0.chars().count() as u32);
-    let w: u32 = tiles.iter().map(|t| col(t) + gap).sum::<u32>() + gap;
-    let h = tiles.iter().map(|t| t.1.height()).max().unwrap_or(0) + header + gap;
-    let mut out = RgbImage::from_pixel(w, h, Rgb([255, 255, 255]));
-    let mut x = gap;
-    for t in tiles {
-        text(&mut out, x as i64, 3, &t.0, [0, 0, 0]);
-        image::imageops::replace(&mut out, &t.1, x as i64, header as i64);
-        x += col(t) + gap;
-    }
-    out
-}
 
 /// Rows stacked vertically.
 fn stack(rows: &[RgbImage]) -> RgbImage {
@@ -74,14 +50,19 @@ fn gradient_tile(prep: &Problem, g: &[f32], i: usize, scale: f32) -> RgbImage {
     }
 }
 
-/// The per-scene files: `error_vs_time.png`, `gradients.png`, `final.png`.
+/// The per-scene files: `gradients.png`, and with an optimization `error_vs_time.png` and
+/// `final.png`.
 pub fn write_scene_files(
     dir: &Path,
     prep: &Problem,
     r: &SceneResult,
     g: &GradientSnapshot,
-    finals: &FinalImages,
+    finals: Option<&FinalImages>,
 ) -> Result<()> {
+    write_gradients(dir, prep, g)?;
+    let (Some(opt), Some(finals)) = (&r.optimization, finals) else {
+        return Ok(());
+    };
     let series =
         |name: &str, color, c: &[CurvePoint], f: &dyn Fn(&CurvePoint) -> Option<f64>| Series {
             name: name.into(),
@@ -91,25 +72,54 @@ pub fn write_scene_files(
                 .filter_map(|p| f(p).map(|y| (p.seconds, y)))
                 .collect(),
         };
-    let panel = |title: &str, f: &dyn Fn(&CurvePoint) -> Option<f64>| Panel {
+    let panel = |title: &str, y: &str, f: &dyn Fn(&CurvePoint) -> Option<f64>| Panel {
         title: title.into(),
+        y_label: y.into(),
+        log_y: true,
         series: vec![
-            series("baseline", BASELINE, &r.curve_baseline, f),
-            series("ReSTIR", RESTIR, &r.curve_restir, f),
+            series("baseline", BASELINE, &opt.curve_baseline, f),
+            series("ReSTIR", RESTIR, &opt.curve_restir, f),
         ],
+        secondary: None,
     };
+    let mut texture = panel(
+        &format!("{}: texture RMSE over observed texels", r.name),
+        "RMSE",
+        &|p| Some(p.texture_rmse_observed),
+    );
+    texture.secondary = Some((
+        "learning-rate factor".into(),
+        vec![series(
+            "schedule",
+            [120, 120, 120],
+            &opt.curve_restir,
+            &|p| p.learning_rate_factor,
+        )],
+    ));
     plot(
         &dir.join("error_vs_time.png"),
         "seconds of optimization",
         &[
-            panel(&format!("{}: texture RMSE", r.name), &|p| {
-                Some(p.texture_rmse)
+            texture,
+            panel("image relMSE (evaluation renders)", "relMSE", &|p| {
+                p.image_relmse
             }),
-            panel("image relMSE", &|p| p.image_relmse),
-            panel("loss", &|p| Some(p.loss)),
+            panel("loss", "loss", &|p| Some(p.loss)),
         ],
     )?;
+    save_png(
+        &dir.join("final.png"),
+        &captioned_row(&[
+            ("target".into(), srgb(&finals.target)),
+            ("baseline".into(), srgb(&finals.baseline)),
+            ("ReSTIR".into(), srgb(&finals.restir)),
+        ])?,
+    )
+}
 
+/// `gradients.png`: the reference and both estimators' gradients under the converged
+/// adjoint, side by side.
+fn write_gradients(dir: &Path, prep: &Problem, g: &GradientSnapshot) -> Result<()> {
     // Gradients: one row per texture, scaled by the reference's 99th percentile magnitude.
     let mut rows = Vec::new();
     for i in 0..prep.set.textures.len() {
@@ -131,21 +141,13 @@ pub fn write_scene_files(
                 gradient_tile(prep, &g.reference, i, scale),
             ),
             (
-                format!("baseline {} spp", r.baseline_spp_equal_time),
+                format!("baseline {} spp", g.baseline_spp),
                 gradient_tile(prep, &g.baseline, i, scale),
             ),
             ("ReSTIR".into(), gradient_tile(prep, &g.restir, i, scale)),
-        ]));
+        ])?);
     }
-    save_png(&dir.join("gradients.png"), &stack(&rows))?;
-    save_png(
-        &dir.join("final.png"),
-        &captioned_row(&[
-            ("target".into(), srgb(&finals.target)),
-            ("baseline".into(), srgb(&finals.baseline)),
-            ("ReSTIR".into(), srgb(&finals.restir)),
-        ]),
-    )
+    save_png(&dir.join("gradients.png"), &stack(&rows))
 }
 
 fn sci(v: f64) -> String {
@@ -164,35 +166,78 @@ fn ratio(v: f64) -> String {
     }
 }
 
-/// The results table (markdown), as in `report.md` and the README.
-pub fn table(r: &BenchReport) -> String {
+/// The gradient-error table (markdown), as in `report.md` and the README.
+pub fn gradient_table(r: &BenchReport) -> String {
     let mut s = String::new();
     s.push_str(
-        "| scene | gradient relMSE baseline | ReSTIR | ratio | baseline spp (equal time) | \
-         image relMSE baseline | ReSTIR | ratio | texture RMSE initial | baseline | ReSTIR | \
-         ms/it baseline | ReSTIR | iterations baseline | ReSTIR |\n",
+        "| scene | spp primal / gradient | ms/it ratio | baseline spp (equal time) | \
+         estimator-only, equal iterations: baseline | ReSTIR | ratio | equal time ratio | \
+         total, equal iterations: baseline | ReSTIR | ratio | equal time ratio |\n",
     );
-    s.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    s.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for x in &r.scenes {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | **{}** | {} | {} | {} | **{}** | {:.4} | {:.4} | {:.4} | {:.0} | {:.0} | {} | {} |",
+            "| {} | {} / {} | {} | {:.2} | {} | {} | **{}** | **{}** | {} | {} | **{}** | **{}** |",
             x.name,
-            sci(x.gradient_relmse_baseline),
-            sci(x.gradient_relmse_restir),
-            ratio(x.gradient_relmse_ratio),
+            x.primal_spp,
+            x.gradient_spp,
+            ratio(x.ms_per_iteration_ratio),
             x.baseline_spp_equal_time,
-            sci(x.image_relmse_baseline),
-            sci(x.image_relmse_restir),
-            ratio(x.image_relmse_ratio),
-            x.texture_rmse_initial,
-            x.texture_rmse_baseline,
-            x.texture_rmse_restir,
-            x.ms_per_iteration_baseline,
-            x.ms_per_iteration_restir,
-            x.iterations_baseline,
-            x.iterations_restir,
+            sci(x.gradient_relmse_estimator_only_baseline),
+            sci(x.gradient_relmse_estimator_only_restir),
+            ratio(x.gradient_relmse_estimator_only_ratio),
+            ratio(x.gradient_relmse_estimator_only_ratio_equal_time),
+            sci(x.gradient_relmse_baseline_equal_iterations),
+            sci(x.gradient_relmse_restir),
+            ratio(x.gradient_relmse_ratio_equal_iterations),
+            ratio(x.gradient_relmse_ratio),
         );
+    }
+    s
+}
+
+/// The equal-time optimization table (markdown).
+pub fn optimization_table(r: &BenchReport) -> String {
+    let mut s = String::new();
+    s.push_str(
+        "| scene | image relMSE initial | baseline | ReSTIR | ratio | texture RMSE (observed) \
+         initial | baseline | ReSTIR | at 1/3 baseline | ReSTIR | texture RMSE (all) baseline | \
+         ReSTIR | ms/it baseline | ReSTIR | iterations baseline | ReSTIR |\n",
+    );
+    s.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    for x in &r.scenes {
+        let Some(o) = &x.optimization else { continue };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | **{}** | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.0} | {:.0} | {} | {} |",
+            x.name,
+            sci(o.image_relmse_initial),
+            sci(o.image_relmse_baseline),
+            sci(o.image_relmse_restir),
+            ratio(o.image_relmse_ratio),
+            o.texture_rmse_observed_initial,
+            o.texture_rmse_observed_baseline,
+            o.texture_rmse_observed_restir,
+            o.texture_rmse_observed_third_baseline,
+            o.texture_rmse_observed_third_restir,
+            o.texture_rmse_baseline,
+            o.texture_rmse_restir,
+            o.ms_per_iteration_baseline,
+            o.ms_per_iteration_restir,
+            o.iterations_baseline,
+            o.iterations_restir,
+        );
+    }
+    s
+}
+
+/// Both tables, as `psrestir bench` prints them.
+pub fn table(r: &BenchReport) -> String {
+    let mut s = gradient_table(r);
+    if r.scenes.iter().any(|x| x.optimization.is_some()) {
+        s.push('\n');
+        s.push_str(&optimization_table(r));
     }
     s
 }
@@ -204,13 +249,14 @@ pub fn pass_table(r: &BenchReport) -> String {
          |---|---|---|---|---|---|---|---|\n",
     );
     for x in &r.scenes {
+        let Some(o) = &x.optimization else { continue };
         for (name, p, bytes) in [
             (
                 "baseline",
-                &x.passes_baseline,
-                x.state_bytes_per_texel_baseline,
+                &o.passes_baseline,
+                o.state_bytes_per_texel_baseline,
             ),
-            ("ReSTIR", &x.passes_restir, x.state_bytes_per_texel),
+            ("ReSTIR", &o.passes_restir, o.state_bytes_per_texel),
         ] {
             match p {
                 Some(p) => {
@@ -251,43 +297,53 @@ pub fn write_report(out: &Path, r: &BenchReport) -> Result<()> {
     let _ = writeln!(md, "# psrestir benchmark\n");
     let _ = writeln!(
         md,
-        "psrestir {} on `{}`; {} s of optimization per estimator and scene; size scale {}; \
-         gradient error after {} ReSTIR iterations, mean of {} seeds, against a {}-spp \
-         reference; image error from {}-spp renders; ReSTIR M cap {}.\n",
+        "psrestir {} on `{}`; protocol `{:?}`; size scale {}; gradient error after {} ReSTIR \
+         iterations, mean of {} seeds, against a reference of {} gradient spp under a {}-spp \
+         converged adjoint; ReSTIR M cap {}, fresh confidence `{}`; {} s of optimization per \
+         estimator and scene; image error from {}-spp renders.\n",
         r.version,
         r.adapter,
-        r.budget_s,
+        r.protocol,
         r.scale,
         r.warmup,
         r.repeats,
         r.reference_spp,
+        r.reference_primal_spp,
+        r.m_cap,
+        r.confidence,
+        r.budget_s,
         r.eval_spp,
-        r.m_cap
     );
-    md.push_str("## Equal time\n\n");
-    md.push_str(&table(r));
+    md.push_str("## Gradient error\n\n");
+    md.push_str(&gradient_table(r));
     md.push_str(
-        "\nRatios are ReSTIR / baseline (below 1: ReSTIR is better). The paper (RTX 2080 Ti, \
-         1400² images, 2048² textures) reports gradient relMSE 0.23–0.32× and final image \
-         relMSE 0.18–0.73× at equal time.\n\n",
+        "\nRatios are ReSTIR / baseline (below 1: ReSTIR is better). Estimator-only: both \
+         estimators under the converged adjoint; total: each with the adjoint of its own primal \
+         render. The paper (RTX 2080 Ti, 1400² images, 2048² textures) reports gradient relMSE \
+         0.23–0.32× and final image relMSE 0.18–0.73× at equal time.\n\n",
     );
-    md.push_str("## GPU time per pass (ms, timestamp queries) and state\n\n");
-    md.push_str(&pass_table(r));
+    if r.scenes.iter().any(|x| x.optimization.is_some()) {
+        md.push_str("## Equal-time optimization\n\n");
+        md.push_str(&optimization_table(r));
+        md.push_str("\n## GPU time per pass (ms, timestamp queries) and state\n\n");
+        md.push_str(&pass_table(r));
+    }
     md.push_str("\n## Per scene\n\n");
     for x in &r.scenes {
         let _ = writeln!(
             md,
-            "- **{}** ({}×{}, {} camera(s), {} texels; baseline equal-iteration gradient \
-             relMSE {}): `{}/error_vs_time.png`, `{}/gradients.png`, `{}/final.png`",
+            "- **{}** ({}×{}, {} camera(s), {} texels): `{}/gradients.png`{}",
             x.name,
             x.width,
             x.height,
             x.cameras,
             x.texels,
-            sci(x.gradient_relmse_baseline_equal_iterations),
             x.name,
-            x.name,
-            x.name
+            if x.optimization.is_some() {
+                format!(", `{0}/error_vs_time.png`, `{0}/final.png`", x.name)
+            } else {
+                String::new()
+            }
         );
     }
     write_atomic(&out.join("report.md"), md.as_bytes())

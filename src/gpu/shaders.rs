@@ -2,9 +2,20 @@
 //!
 //! Each pass is one file under `shaders/`, named after the pass. A line `#import shared/NAME`
 //! pastes `shaders/shared/NAME.wgsl` in place, once per composed module (later imports of the
-//! same file are dropped), so shared code stays in one place. The composed source is validated
-//! with naga by `cargo test` without any GPU.
+//! same file are dropped), so shared code stays in one place. A line `#import gen/NAME` pastes
+//! WGSL generated from Rust ([`GENERATED`]): constants that both sides use are defined once,
+//! in Rust. The composed source is validated with naga by `cargo test` without any GPU.
 use crate::{Error, Result};
+use std::borrow::Cow;
+
+/// A generator of WGSL source.
+pub type Generator = fn() -> String;
+
+/// WGSL written by Rust: (name under `gen/`, generator).
+pub const GENERATED: &[(&str, Generator)] = &[(
+    "gen/restir_layout",
+    crate::optim::estimator::restir::layout_wgsl,
+)];
 
 macro_rules! sources {
     ($($name:literal),* $(,)?) => {
@@ -27,6 +38,7 @@ pub const SOURCES: &[(&str, &str)] = sources!(
     "shared/integrator",
     "shared/reservoir",
     "shared/adjoint_pixel",
+    "shared/surface",
     "render",
     "trace_rays",
     "gradient",
@@ -36,7 +48,18 @@ pub const SOURCES: &[(&str, &str)] = sources!(
     "restir_candidates",
     "restir_merge",
     "texture_export",
+    "observed_texels",
 );
+
+/// WGSL `const` declarations of `u32` values, with a header naming the Rust file they come
+/// from.
+pub fn wgsl_constants(origin: &str, consts: &[(&str, u32)]) -> String {
+    let mut s = format!("// Generated from {origin}; edit the Rust side.\n");
+    for (name, v) in consts {
+        s.push_str(&format!("const {name}: u32 = {v}u;\n"));
+    }
+    s
+}
 
 /// The passes (top-level WGSL files with an entry point `main`).
 pub fn passes() -> impl Iterator<Item = &'static str> {
@@ -46,8 +69,14 @@ pub fn passes() -> impl Iterator<Item = &'static str> {
         .filter(|n| !n.starts_with("shared/"))
 }
 
-fn source(name: &str) -> Option<&'static str> {
-    SOURCES.iter().find(|(n, _)| *n == name).map(|(_, s)| *s)
+fn source(name: &str) -> Option<Cow<'static, str>> {
+    if let Some((_, s)) = SOURCES.iter().find(|(n, _)| *n == name) {
+        return Some(Cow::Borrowed(*s));
+    }
+    GENERATED
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, f)| Cow::Owned(f()))
 }
 
 /// The full WGSL of a pass with its imports pasted in.
@@ -71,7 +100,7 @@ fn include(name: &str, out: &mut String, seen: &mut Vec<String>, depth: u32) -> 
     seen.push(name.to_string());
     let src = source(name).ok_or_else(|| Error::Shader {
         name: name.into(),
-        msg: "no such WGSL file under shaders/".into(),
+        msg: "no such WGSL file under shaders/ (nor a generated gen/ module)".into(),
     })?;
     out.push_str(&format!("// ---- {name}.wgsl\n"));
     for line in src.lines() {

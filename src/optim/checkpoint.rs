@@ -3,12 +3,12 @@
 //! drawn at, the metrics so far; the random numbers are a pure function of seed and
 //! iteration, so the iteration is the RNG state). Written atomically: a temporary file, then a
 //! rename.
-use super::{OptimizerState, RestirSnapshot};
+use super::{OptimizerState, PreviousState, RestirSnapshot};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-const MAGIC: &[u8; 8] = b"PSRCKPT2";
+const MAGIC: &[u8; 8] = b"PSRCKPT3";
 
 /// One row of metrics.csv.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -17,10 +17,20 @@ pub struct MetricRow {
     pub iteration: u32,
     /// Optimization time so far (seconds, target rendering excluded).
     pub elapsed_s: f64,
-    /// Loss of the iteration's primal render.
-    pub loss: f64,
+    /// Loss of the iteration's primal render (None for the start, iteration 0).
+    pub loss: Option<f64>,
     /// RMSE of the textures against the ground truth (linear values), when known.
     pub texture_rmse: Option<f64>,
+    /// The same over the observed texels only.
+    #[serde(default)]
+    pub texture_rmse_observed: Option<f64>,
+    /// Image relMSE of an evaluation render against the target (mean over cameras), on the
+    /// iterations that have one.
+    #[serde(default)]
+    pub image_relmse: Option<f64>,
+    /// Learning rate of the first texture in this iteration's Adam step.
+    #[serde(default)]
+    pub learning_rate: Option<f64>,
 }
 
 /// Small fields, stored as a JSON header.
@@ -41,12 +51,14 @@ struct Stored {
     header: Header,
     iteration: u32,
     n_params: usize,
+    /// Floats of the previous adjoint images, when the previous state is saved (then the
+    /// previous textures, n_params floats, come first).
+    previous_adjoint_floats: Option<usize>,
     /// Words of ReSTIR reservoirs; absent for the baseline.
     reservoir_words: Option<usize>,
-    /// Floats of the previous adjoint images (ReSTIR only).
+    /// ReSTIR's merge count (the kept samples' confidence).
     #[serde(default)]
-    adjoint_floats: usize,
-    have_prev: bool,
+    restir_history: u32,
 }
 
 /// A whole checkpoint.
@@ -66,16 +78,16 @@ impl Checkpoint {
             header: self.header.clone(),
             iteration: st.iteration,
             n_params: st.params.len(),
+            previous_adjoint_floats: st.previous.as_ref().map(|p| p.adjoint.len()),
             reservoir_words: st.restir.as_ref().map(|r| r.reservoirs.len()),
-            adjoint_floats: st.restir.as_ref().map_or(0, |r| r.adjoint_prev.len()),
-            have_prev: st.restir.as_ref().is_some_and(|r| r.have_prev),
+            restir_history: st.restir.as_ref().map_or(0, |r| r.history),
         };
         if st.m1.len() != st.params.len()
             || st.m2.len() != st.params.len()
             || st
-                .restir
+                .previous
                 .as_ref()
-                .is_some_and(|r| r.params_prev.len() != st.params.len())
+                .is_some_and(|p| p.params.len() != st.params.len())
         {
             return Err(Error::file(path, "checkpoint arrays differ in length"));
         }
@@ -87,9 +99,11 @@ impl Checkpoint {
         for a in [&st.params, &st.m1, &st.m2] {
             out.extend_from_slice(bytemuck::cast_slice(a));
         }
+        if let Some(p) = &st.previous {
+            out.extend_from_slice(bytemuck::cast_slice(&p.params));
+            out.extend_from_slice(bytemuck::cast_slice(&p.adjoint));
+        }
         if let Some(r) = &st.restir {
-            out.extend_from_slice(bytemuck::cast_slice(&r.params_prev));
-            out.extend_from_slice(bytemuck::cast_slice(&r.adjoint_prev));
             out.extend_from_slice(bytemuck::cast_slice(&r.reservoirs));
         }
         crate::image_io::write_atomic(path, &out)
@@ -113,36 +127,46 @@ impl Checkpoint {
         let stored: Stored =
             serde_json::from_slice(&bytes[16..hend]).map_err(|e| bad(&e.to_string()))?;
         let n = stored.n_params;
-        let arrays = if stored.reservoir_words.is_some() {
-            4
-        } else {
-            3
-        };
-        let words = n
-            .checked_mul(arrays)
-            .and_then(|w| w.checked_add(stored.reservoir_words.unwrap_or(0)))
-            .and_then(|w| w.checked_add(stored.adjoint_floats));
+        // Sections of 4-byte words, in file order.
+        let mut sizes = vec![Some(n), Some(n), Some(n)];
+        if let Some(a) = stored.previous_adjoint_floats {
+            sizes.push(Some(n));
+            sizes.push(Some(a));
+        }
+        if let Some(r) = stored.reservoir_words {
+            sizes.push(Some(r));
+        }
+        let words = sizes
+            .iter()
+            .try_fold(0usize, |acc, s| s.and_then(|s| acc.checked_add(s)));
         if words.and_then(|w| w.checked_mul(4)) != Some(bytes.len() - hend) {
             return Err(bad("truncated data"));
         }
-        let data = &bytes[hend..];
-        let floats = |k: usize| -> Vec<f32> {
-            bytemuck::pod_collect_to_vec(&data[4 * n * k..4 * n * (k + 1)])
+        let mut data = &bytes[hend..];
+        let mut take = |count: usize| -> &[u8] {
+            let (a, b) = data.split_at(4 * count);
+            data = b;
+            a
         };
-        let adjoint_end = 16 * n + 4 * stored.adjoint_floats;
-        let restir = stored.reservoir_words.map(|_| RestirSnapshot {
-            params_prev: floats(3),
-            adjoint_prev: bytemuck::pod_collect_to_vec(&data[16 * n..adjoint_end]),
-            reservoirs: bytemuck::pod_collect_to_vec(&data[adjoint_end..]),
-            have_prev: stored.have_prev,
+        let params: Vec<f32> = bytemuck::pod_collect_to_vec(take(n));
+        let m1: Vec<f32> = bytemuck::pod_collect_to_vec(take(n));
+        let m2: Vec<f32> = bytemuck::pod_collect_to_vec(take(n));
+        let previous = stored.previous_adjoint_floats.map(|a| PreviousState {
+            params: bytemuck::pod_collect_to_vec(take(n)),
+            adjoint: bytemuck::pod_collect_to_vec(take(a)),
+        });
+        let restir = stored.reservoir_words.map(|r| RestirSnapshot {
+            reservoirs: bytemuck::pod_collect_to_vec(take(r)),
+            history: stored.restir_history,
         });
         Ok(Checkpoint {
             header: stored.header,
             state: OptimizerState {
                 iteration: stored.iteration,
-                params: floats(0),
-                m1: floats(1),
-                m2: floats(2),
+                params,
+                m1,
+                m2,
+                previous,
                 restir,
             },
         })
@@ -164,8 +188,11 @@ mod tests {
                 metrics: vec![MetricRow {
                     iteration: 1,
                     elapsed_s: 0.1,
-                    loss: 2.0,
+                    loss: Some(2.0),
                     texture_rmse: None,
+                    texture_rmse_observed: Some(0.5),
+                    image_relmse: Some(0.25),
+                    learning_rate: Some(0.01),
                 }],
             },
             state: OptimizerState {
@@ -173,17 +200,20 @@ mod tests {
                 params: vec![1.0, 2.0, 3.0],
                 m1: vec![0.1; 3],
                 m2: vec![0.2; 3],
+                previous: Some(PreviousState {
+                    params: vec![0.9, 1.9, 2.9],
+                    adjoint: vec![0.5; 8],
+                }),
                 restir: Some(RestirSnapshot {
                     reservoirs: (0..24).collect(),
-                    params_prev: vec![0.9, 1.9, 2.9],
-                    adjoint_prev: vec![0.5; 8],
-                    have_prev: true,
+                    history: 5,
                 }),
             },
         };
         // Without reservoirs (the baseline) as well.
         let mut base = c.clone();
         base.state.restir = None;
+        base.state.previous = None;
         base.save(&p).unwrap();
         assert_eq!(Checkpoint::load(&p).unwrap(), base);
         c.save(&p).unwrap();

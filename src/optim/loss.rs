@@ -75,3 +75,29 @@ mod tests {
         }
     }
 }
+
+/// `LossParams` in shaders/loss.wgsl (a test checks the layout).
+/// The fields are documented in the WGSL twin.
+#[allow(missing_docs)]
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct LossParams {
+    pub n_pixels: u32,
+    pub kind: u32,
+    pub norm: f32,
+    pub partial_offset: u32,
+    pub adjoint_offset: u32,
+    pub _pad: [u32; 3],
+}
+
+/// Image relMSE: mean over pixels and channels of (x - t)^2 / (t^2 + 1e-2).
+pub fn image_relmse(img: &crate::image_io::Image, target: &crate::image_io::Image) -> f64 {
+    let mut s = 0.0;
+    for (a, t) in img.rgb.iter().zip(&target.rgb) {
+        for c in 0..3 {
+            let (a, t) = (a[c] as f64, t[c] as f64);
+            s += (a - t).powi(2) / (t * t + REL_EPS as f64);
+        }
+    }
+    s / (3 * target.rgb.len()).max(1) as f64
+}

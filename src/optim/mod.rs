@@ -1,15 +1,18 @@
 //! Texture optimization on the GPU: primal render, loss and adjoint, a gradient estimator
-//! (the baseline pass, or ReSTIR's candidate and merge passes), and Adam, as one submission
-//! per iteration.
+//! ([`estimator`]: the baseline, or ReSTIR's candidate and merge passes), and Adam, as one
+//! submission per iteration.
 
 pub mod adam;
 pub mod checkpoint;
+pub mod estimator;
 pub mod export;
 pub mod loss;
+pub mod observed;
 pub mod plot;
 pub mod problem;
-pub mod restir;
 pub mod run;
+pub mod schedule;
+pub mod texture_export;
 
 use crate::gpu::{grid_2d, Binding, Gpu};
 use crate::image_io::Image;
@@ -19,8 +22,11 @@ use crate::render::{camera_info, encode_timed_pass, Renderer, Techniques, WORKGR
 use crate::scene::Scene;
 use crate::task::Loss;
 use crate::{Error, Result};
+pub use estimator::restir::{self, MergeDiagnostics};
+use estimator::Estimator;
+pub use estimator::{Confidence, Method, RestirOptions, RestirSnapshot};
 pub use problem::Problem;
-pub use restir::{Method, RestirOptions};
+pub use schedule::{Schedule, ScheduleKind};
 
 /// How each iteration samples.
 #[derive(Clone, Debug)]
@@ -43,6 +49,12 @@ pub struct Settings {
     pub method: Method,
     /// ReSTIR options (used when `method` is ReSTIR).
     pub restir: RestirOptions,
+    /// Learning-rate schedule: a factor of every texture's learning rate over the run (see
+    /// [`Optimizer::set_progress`]).
+    pub schedule: Schedule,
+    /// Masked (sparse) Adam: entries whose gradient is exactly zero in an iteration keep
+    /// their value and moments, as Mitsuba 3's `mask_updates`.
+    pub adam_mask: bool,
 }
 
 impl Settings {
@@ -59,6 +71,8 @@ impl Settings {
             seed: 1,
             method: Method::Restir,
             restir: RestirOptions::default(),
+            schedule: Schedule::constant(),
+            adam_mask: false,
         }
     }
 }
@@ -111,34 +125,38 @@ fn mix64(mut x: u64) -> u64 {
     x ^ (x >> 31)
 }
 
-/// Seed of pass `kind` (0 primal, 1 gradient, 2 target, 3 final render, 4 merge) of camera
-/// `camera` at iteration `iteration`: independent streams, so the adjoint never shares random
-/// numbers with the gradient samples.
+/// The kinds of pass that [`pass_seed`] gives independent random streams.
+pub struct Seeds;
+
+impl Seeds {
+    /// The primal render of an iteration.
+    pub const PRIMAL: u32 = 0;
+    /// The gradient (or ReSTIR candidate) pass.
+    pub const GRADIENT: u32 = 1;
+    /// Target renders.
+    pub const TARGET: u32 = 2;
+    /// Evaluation and final renders.
+    pub const EVAL: u32 = 3;
+    /// ReSTIR's merge.
+    pub const MERGE: u32 = 4;
+}
+
+/// Seed of pass `kind` ([`Seeds`]) of camera `camera` at iteration `iteration`: independent
+/// streams, so the adjoint never shares random numbers with the gradient samples.
 pub fn pass_seed(seed: u32, iteration: u32, camera: u32, kind: u32) -> u32 {
     let x =
         mix64(mix64(mix64(seed as u64) ^ iteration as u64) ^ ((camera as u64) << 8 | kind as u64));
     x as u32
 }
 
-struct CameraState {
-    render_uniform: wgpu::Buffer,
-    gradient_uniform: wgpu::Buffer,
-    candidate_uniform: wgpu::Buffer,
-    render_group: wgpu::BindGroup,
-    /// Per parity of the iteration (the adjoint and reservoir buffers alternate).
-    loss_groups: [wgpu::BindGroup; 2],
-    gradient_groups: [wgpu::BindGroup; 2],
-    candidate_groups: Option<[wgpu::BindGroup; 2]>,
-    render_params: GpuRenderParams,
-    gradient_params: GpuGradientParams,
-    candidate_params: GpuCandidateParams,
-}
-
-/// What one iteration reports.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct StepStats {
-    /// Loss of this iteration's primal render (before the update).
-    pub loss: f64,
+/// The kinds of pass that timestamp queries time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum PassKind {
+    Primal,
+    Loss,
+    Gradient,
+    Merge,
+    Adam,
 }
 
 /// GPU milliseconds of each kind of pass in the last iteration (from timestamp queries).
@@ -176,14 +194,95 @@ impl PassTimes {
             adam_ms: self.adam_ms / n,
         }
     }
+
+    /// All passes together.
+    pub fn total(&self) -> f64 {
+        self.primal_ms + self.loss_ms + self.gradient_ms + self.merge_ms + self.adam_ms
+    }
 }
 
-/// Timestamp queries: one begin/end pair per pass of an iteration.
-struct Timing {
-    queries: wgpu::QuerySet,
-    resolve: wgpu::Buffer,
-    /// Kind of pass k: 0 primal, 1 loss, 2 gradient or candidates, 3 adam, 4 merge.
-    kinds: Vec<u8>,
+/// Timestamp queries around the passes of one iteration, where the device has them: each
+/// pass asks for the next begin/end pair with [`PassTimer::next`], naming its kind.
+pub(crate) struct PassTimer {
+    queries: Option<(wgpu::QuerySet, wgpu::Buffer)>,
+    capacity: u32,
+    kinds: Vec<PassKind>,
+}
+
+impl PassTimer {
+    fn new(gpu: &Gpu, capacity: u32) -> PassTimer {
+        let queries = gpu.timestamps.then(|| {
+            let n = 2 * capacity;
+            (
+                gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+                    label: Some("pass timestamps"),
+                    ty: wgpu::QueryType::Timestamp,
+                    count: n,
+                }),
+                gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("pass timestamps resolve"),
+                    size: 8 * n as u64,
+                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                }),
+            )
+        });
+        PassTimer {
+            queries,
+            capacity,
+            kinds: Vec::new(),
+        }
+    }
+
+    fn begin(&mut self) {
+        self.kinds.clear();
+    }
+
+    /// The query pair of the next pass, of kind `kind` (None without timestamps).
+    pub(crate) fn next(&mut self, kind: PassKind) -> Option<(&wgpu::QuerySet, u32)> {
+        let (q, _) = self.queries.as_ref()?;
+        let k = self.kinds.len() as u32;
+        if k >= self.capacity {
+            return None;
+        }
+        self.kinds.push(kind);
+        Some((q, k))
+    }
+
+    fn resolve(&self, enc: &mut wgpu::CommandEncoder) {
+        if let Some((q, buf)) = &self.queries {
+            if !self.kinds.is_empty() {
+                enc.resolve_query_set(q, 0..2 * self.kinds.len() as u32, buf, 0);
+            }
+        }
+    }
+
+    fn read(&self, gpu: &Gpu) -> Result<Option<PassTimes>> {
+        let Some((_, buf)) = &self.queries else {
+            return Ok(None);
+        };
+        let ticks: Vec<u64> = gpu.read_pod(buf)?;
+        let period = gpu.queue.get_timestamp_period() as f64 * 1e-6;
+        let mut t = PassTimes::default();
+        for (k, kind) in self.kinds.iter().enumerate() {
+            let ms = ticks[2 * k + 1].saturating_sub(ticks[2 * k]) as f64 * period;
+            match kind {
+                PassKind::Primal => t.primal_ms += ms,
+                PassKind::Loss => t.loss_ms += ms,
+                PassKind::Gradient => t.gradient_ms += ms,
+                PassKind::Merge => t.merge_ms += ms,
+                PassKind::Adam => t.adam_ms += ms,
+            }
+        }
+        Ok(Some(t))
+    }
+}
+
+/// What one iteration reports.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct StepStats {
+    /// Loss of this iteration's primal render (before the update).
+    pub loss: f64,
 }
 
 /// Counters of dropped or lost values since the optimizer was created.
@@ -202,8 +301,18 @@ pub struct FaultCounts {
     pub dropped_pixels: u32,
     /// ReSTIR candidates whose reservoir lock was not taken within the bound.
     pub lost_offers: u32,
-    /// Non-finite ReSTIR replays dropped.
+    /// Non-finite values of stored ReSTIR paths dropped by the merge.
     pub dropped_replays: u32,
+}
+
+/// The textures and adjoint images of the last iteration, which the next one evaluates kept
+/// samples under (ReSTIR's merge).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PreviousState {
+    /// The textures at which the last iteration drew its samples.
+    pub params: Vec<f32>,
+    /// The last iteration's adjoint images (RGBA per pixel, cameras one after another).
+    pub adjoint: Vec<f32>,
 }
 
 /// The state of an optimizer between iterations, on the CPU (see [`Optimizer::state`]).
@@ -217,22 +326,10 @@ pub struct OptimizerState {
     pub m1: Vec<f32>,
     /// Adam second moments.
     pub m2: Vec<f32>,
-    /// The ReSTIR estimator's state; `None` for the baseline.
+    /// The last iteration's textures and adjoint, when the estimator uses them.
+    pub previous: Option<PreviousState>,
+    /// The ReSTIR estimator's reservoirs; `None` for the baseline.
     pub restir: Option<RestirSnapshot>,
-}
-
-/// The part of a ReSTIR optimizer's state that carries over to the next iteration.
-#[derive(Clone, Debug, PartialEq)]
-pub struct RestirSnapshot {
-    /// The reservoirs kept from the last iteration (two per texel, 12 words each).
-    pub reservoirs: Vec<u32>,
-    /// The textures at which the kept reservoirs were drawn.
-    pub params_prev: Vec<f32>,
-    /// The adjoint images (RGBA per pixel, cameras one after another) of the last iteration,
-    /// at which the kept samples' targets were evaluated.
-    pub adjoint_prev: Vec<f32>,
-    /// Whether the kept reservoirs are to be reused (false before the first iteration).
-    pub have_prev: bool,
 }
 
 /// The buffers an optimizer allocates besides the scene's, by label and size in bytes.
@@ -291,41 +388,24 @@ pub fn memory_plan(set: &ParamSet, settings: &Settings, n_cams: usize) -> Memory
     for k in 0..n_cams {
         buffers.push((format!("target {k}"), 16 * pixels));
     }
-    if settings.method == Method::Restir {
-        let res = n_texels * 2 * restir::RESERVOIR_WORDS * 4;
-        buffers.push(("reservoirs even".to_string(), res));
-        buffers.push(("reservoirs odd".to_string(), res));
-        buffers.push(("reservoir locks".to_string(), n_texels * 2 * 4));
-    }
+    buffers.extend(estimator::memory(settings.method, n_texels));
     MemoryPlan { buffers }
 }
 
-fn export_entry(binding: u32, ty: wgpu::BindingType) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty,
-        count: None,
-    }
+/// The primal render and loss of one camera.
+struct CameraPasses {
+    render_uniform: wgpu::Buffer,
+    render_params: GpuRenderParams,
+    render_group: wgpu::BindGroup,
+    /// Per parity of the iteration (the adjoint buffers alternate).
+    loss_groups: [wgpu::BindGroup; 2],
 }
 
-/// GPU state of the ReSTIR estimator.
-struct RestirState {
-    candidate_pipeline: wgpu::ComputePipeline,
-    merge_pipeline: wgpu::ComputePipeline,
-    /// Reservoirs: fresh then merged at iteration t in buffer t % 2, kept in the other.
-    reservoirs: [wgpu::Buffer; 2],
-    locks: wgpu::Buffer,
-    merge_uniform: wgpu::Buffer,
-    merge_params: GpuMergeParams,
-    merge_groups: [wgpu::BindGroup; 2],
-    merge_grid: (u32, u32),
-    /// [candidate stats, merge stats]
-    stats: [wgpu::Buffer; 2],
-    /// The adjoint buffers (shared with the loss pass): the merge reads the previous one.
-    adjoint: [wgpu::Buffer; 2],
-    /// Whether the kept reservoirs hold the previous iteration's samples.
-    have_prev: bool,
+/// Counters of the passes the optimizer runs itself.
+struct Stats {
+    primal: wgpu::Buffer,
+    adam: wgpu::Buffer,
+    loss: wgpu::Buffer,
 }
 
 /// The optimizer: a scene on the GPU with its optimized textures, targets, and the passes.
@@ -335,21 +415,31 @@ pub struct Optimizer {
     /// Layout and learning rates of the optimized textures (values as at creation).
     pub set: ParamSet,
     settings: Settings,
-    cams: Vec<CameraState>,
+    cams: Vec<CameraPasses>,
     grad: wgpu::Buffer,
+    /// Adjoint images of all cameras; iteration t writes buffer t % 2.
+    adjoint: [wgpu::Buffer; 2],
     moments: [wgpu::Buffer; 2],
-    stats: [wgpu::Buffer; 4],
+    stats: Stats,
     loss_partial: wgpu::Buffer,
     grid: (u32, u32),
+    loss_grid: (u32, u32),
     loss_pipeline: wgpu::ComputePipeline,
-    gradient_pipeline: wgpu::ComputePipeline,
     adam_pipeline: wgpu::ComputePipeline,
-    adam: Vec<(wgpu::Buffer, wgpu::BindGroup, GpuAdamParams)>,
+    adam: Vec<(wgpu::Buffer, wgpu::BindGroup, adam::AdamParams)>,
     accum: wgpu::Buffer,
-    timing: Option<Timing>,
-    restir: Option<RestirState>,
+    timer: PassTimer,
+    estimator: Box<dyn Estimator>,
+    /// Camera constants of the task's cameras at the task's image size.
+    camera_infos: Vec<GpuCameraInfo>,
     /// The texture_export pipeline, built on first use.
     export_pipeline: std::sync::OnceLock<wgpu::ComputePipeline>,
+    /// The observed-texel mask, computed on first use.
+    observed: std::sync::OnceLock<Vec<bool>>,
+    /// Fraction of the run done, for the learning-rate schedule.
+    progress: f64,
+    /// Learning rate of each texture in the last Adam step.
+    last_learning_rates: Vec<f32>,
     /// Iterations done (Adam steps taken).
     pub iteration: u32,
 }
@@ -371,9 +461,10 @@ impl Optimizer {
                 settings.cameras.len()
             )));
         }
-        if settings.method == Method::Restir && targets.len() > MAX_CAMERAS {
+        if settings.method == Method::Restir && targets.len() > restir::MAX_CAMERAS {
             return Err(Error::Invalid(format!(
-                "ReSTIR handles at most {MAX_CAMERAS} cameras, the task has {}",
+                "ReSTIR handles at most {} cameras, the task has {}",
+                restir::MAX_CAMERAS,
                 targets.len()
             )));
         }
@@ -392,14 +483,11 @@ impl Optimizer {
             "loss",
             &[Uniform, Storage, Storage, StorageRw, StorageRw, StorageRw],
         );
-        let gradient_layout = gpu.layout("gradient", &[Uniform, Storage, StorageRw, StorageRw]);
         let adam_layout = gpu.layout(
             "adam",
             &[Uniform, Storage, StorageRw, StorageRw, StorageRw, StorageRw],
         );
         let loss_pipeline = gpu.compute_pipeline("loss", &[&loss_layout])?;
-        let gradient_pipeline =
-            gpu.compute_pipeline("gradient", &[&renderer.scene.layout, &gradient_layout])?;
         let adam_pipeline = gpu.compute_pipeline("adam", &[&adam_layout])?;
 
         let n_pixels = w * h;
@@ -416,140 +504,48 @@ impl Optimizer {
             gpu.storage_zeroed("adam moment1", n_params * 4),
             gpu.storage_zeroed("adam moment2", n_params * 4),
         ];
-        let stats = [
-            gpu.storage_zeroed("primal stats", 16),
-            gpu.storage_zeroed("gradient stats", 16),
-            gpu.storage_zeroed("adam stats", 16),
-            gpu.storage_zeroed("loss stats", 16),
-        ];
+        let stats = Stats {
+            primal: gpu.storage_zeroed("primal stats", 16),
+            adam: gpu.storage_zeroed("adam stats", 16),
+            loss: gpu.storage_zeroed("loss stats", 16),
+        };
         let n_loss_groups = n_pixels.div_ceil(WORKGROUP);
         let loss_partial =
             gpu.storage_zeroed("loss partial sums", (n_loss_groups * n_cams) as u64 * 4);
         let grid = renderer.tile_grid(w, h);
-        let norm = 1.0 / (n_pixels as f32 * 3.0 * n_cams as f32);
         let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
+        let loss_grid = grid_2d(n_pixels, WORKGROUP, max_dim);
+        let norm = 1.0 / (n_pixels as f32 * 3.0 * n_cams as f32);
 
-        // ReSTIR buffers and pipelines.
-        let n_texels = renderer.scene.n_texels as u64;
-        let restir_parts = if settings.method == Method::Restir {
-            let candidate_layout = gpu.layout(
-                "restir_candidates",
-                &[Uniform, Storage, StorageRw, StorageRw, StorageRw],
-            );
-            let merge_layout = gpu.layout(
-                "restir_merge",
-                &[
-                    Uniform, Storage, Storage, Storage, StorageRw, StorageRw, StorageRw,
-                ],
-            );
-            let candidate_pipeline = gpu.compute_pipeline(
-                "restir_candidates",
-                &[&renderer.scene.layout, &candidate_layout],
-            )?;
-            let merge_pipeline =
-                gpu.compute_pipeline("restir_merge", &[&renderer.scene.layout, &merge_layout])?;
-            let res_size = n_texels * 2 * restir::RESERVOIR_WORDS * 4;
-            let reservoirs = [
-                gpu.storage_zeroed("reservoirs even", res_size),
-                gpu.storage_zeroed("reservoirs odd", res_size),
-            ];
-            let locks = gpu.storage_zeroed("reservoir locks", n_texels * 2 * 4);
-            let rstats = [
-                gpu.storage_zeroed("candidate stats", 16),
-                gpu.storage_zeroed("merge stats", 16),
-            ];
-            let merge_grid = grid_2d(n_texels as u32, WORKGROUP, max_dim);
-            let mut cameras = [GpuCameraInfo::default(); MAX_CAMERAS];
-            for (k, &cam) in settings.cameras.iter().enumerate() {
-                cameras[k] = camera_info(&scene.cameras[cam], w, h);
-            }
-            let merge_params = GpuMergeParams {
-                cameras,
-                n_texels: n_texels as u32,
-                n_pixels,
-                seed: 0,
-                flags: 0,
-                m_fresh: (2 * settings.gradient_spp * n_cams) as f32,
-                m_cap: settings.restir.m_cap,
-                inv_spp: 1.0 / settings.gradient_spp as f32,
-                n_textures: set.textures.len() as u32,
-                stride: merge_grid.0 * WORKGROUP,
-                _pad: [0; 3],
-            };
-            let merge_uniform = gpu.uniform("merge params", bytemuck::bytes_of(&merge_params));
-            let merge_groups = [0usize, 1].map(|p| {
-                gpu.bind_group(
-                    "restir_merge",
-                    &merge_layout,
-                    &[
-                        &merge_uniform,
-                        &adjoint[p],
-                        &adjoint[1 - p],
-                        &reservoirs[1 - p],
-                        &reservoirs[p],
-                        &grad,
-                        &rstats[1],
-                    ],
-                )
-            });
-            Some((
-                candidate_layout,
-                RestirState {
-                    candidate_pipeline,
-                    merge_pipeline,
-                    reservoirs,
-                    locks,
-                    merge_uniform,
-                    merge_params,
-                    merge_groups,
-                    merge_grid,
-                    stats: rstats,
-                    adjoint: adjoint.clone(),
-                    have_prev: false,
-                },
-            ))
-        } else {
-            None
-        };
+        let mut camera_infos = Vec::new();
+        for &cam in &settings.cameras {
+            let c = scene
+                .cameras
+                .get(cam)
+                .ok_or_else(|| Error::Invalid(format!("camera index {cam} out of range")))?;
+            camera_infos.push(camera_info(c, w, h));
+        }
+        let estimator = estimator::build(&estimator::Setup {
+            gpu,
+            scene: &renderer.scene,
+            set: &set,
+            settings: &settings,
+            cameras: &camera_infos,
+            adjoint: &adjoint,
+            grad: &grad,
+            grid,
+        })?;
 
         let mut cams = Vec::new();
-        for (k, (&cam, target)) in settings.cameras.iter().zip(targets).enumerate() {
-            let camera = camera_info(
-                scene
-                    .cameras
-                    .get(cam)
-                    .ok_or_else(|| Error::Invalid(format!("camera index {cam} out of range")))?,
-                w,
-                h,
-            );
+        for (k, (camera, target)) in camera_infos.iter().zip(targets).enumerate() {
             let render_params = GpuRenderParams {
-                camera,
+                camera: *camera,
                 spp: settings.primal_spp,
                 techniques: Techniques::Mis.bits(),
                 stride: grid.0 * WORKGROUP,
                 ..Default::default()
             };
-            let gradient_params = GpuGradientParams {
-                camera,
-                spp: settings.gradient_spp,
-                techniques: Techniques::Mis.bits(),
-                stride: grid.0 * WORKGROUP,
-                inv_spp: 1.0 / settings.gradient_spp as f32,
-                adjoint_offset: k as u32 * n_pixels,
-                ..Default::default()
-            };
-            let candidate_params = GpuCandidateParams {
-                camera,
-                seed: 0,
-                spp: settings.gradient_spp,
-                stride: grid.0 * WORKGROUP,
-                inv_spp: 1.0 / settings.gradient_spp as f32,
-                camera_index: k as u32,
-                adjoint_offset: k as u32 * n_pixels,
-                positivize: settings.restir.positivization as u32,
-                _pad: 0,
-            };
-            let loss_params = GpuLossParams {
+            let loss_params = loss::LossParams {
                 n_pixels,
                 kind: match settings.loss {
                     Loss::L2 => 0,
@@ -571,38 +567,15 @@ impl Optimizer {
                 &format!("primal params {k}"),
                 bytemuck::bytes_of(&render_params),
             );
-            let gradient_uniform = gpu.uniform(
-                &format!("gradient params {k}"),
-                bytemuck::bytes_of(&gradient_params),
-            );
-            let candidate_uniform = gpu.uniform(
-                &format!("candidate params {k}"),
-                bytemuck::bytes_of(&candidate_params),
-            );
             let loss_uniform = gpu.uniform(
                 &format!("loss params {k}"),
                 bytemuck::bytes_of(&loss_params),
             );
-            let candidate_groups = restir_parts.as_ref().map(|(layout, st)| {
-                [0usize, 1].map(|p| {
-                    gpu.bind_group(
-                        "restir_candidates",
-                        layout,
-                        &[
-                            &candidate_uniform,
-                            &adjoint[p],
-                            &st.reservoirs[p],
-                            &st.locks,
-                            &st.stats[0],
-                        ],
-                    )
-                })
-            });
-            cams.push(CameraState {
+            cams.push(CameraPasses {
                 render_group: gpu.bind_group(
                     "primal",
                     &renderer.render_layout,
-                    &[&render_uniform, &accum, &stats[0]],
+                    &[&render_uniform, &accum, &stats.primal],
                 ),
                 loss_groups: [0usize, 1].map(|p| {
                     gpu.bind_group(
@@ -614,30 +587,18 @@ impl Optimizer {
                             &target_buf,
                             &adjoint[p],
                             &loss_partial,
-                            &stats[3],
+                            &stats.loss,
                         ],
                     )
                 }),
-                gradient_groups: [0usize, 1].map(|p| {
-                    gpu.bind_group(
-                        "gradient",
-                        &gradient_layout,
-                        &[&gradient_uniform, &adjoint[p], &grad, &stats[1]],
-                    )
-                }),
-                candidate_groups,
                 render_uniform,
-                gradient_uniform,
-                candidate_uniform,
                 render_params,
-                gradient_params,
-                candidate_params,
             });
         }
         let mut adam = Vec::new();
         for t in &set.textures {
             let (lo, hi) = t.slot.range();
-            let p = GpuAdamParams {
+            let p = adam::AdamParams {
                 offset: t.offset,
                 count: t.len() as u32,
                 lr: t.learning_rate,
@@ -648,7 +609,8 @@ impl Optimizer {
                 bias2: 1.0,
                 lo,
                 hi,
-                _pad: [0; 2],
+                mask: settings.adam_mask as u32,
+                _pad: 0,
             };
             let u = gpu.uniform(&format!("adam params {}", t.name()), bytemuck::bytes_of(&p));
             let g = gpu.bind_group(
@@ -660,38 +622,14 @@ impl Optimizer {
                     &renderer.scene.params,
                     &moments[0],
                     &moments[1],
-                    &stats[2],
+                    &stats.adam,
                 ],
             );
             adam.push((u, g, p));
         }
-        // Timestamps: per camera primal, loss, gradient (or candidates); then the merge; then
-        // one Adam pass per texture.
-        let timing = gpu.timestamps.then(|| {
-            let mut kinds = Vec::new();
-            for _ in 0..cams.len() {
-                kinds.extend_from_slice(&[0, 1, 2]);
-            }
-            if restir_parts.is_some() {
-                kinds.push(4);
-            }
-            kinds.extend(std::iter::repeat_n(3, adam.len()));
-            let n = 2 * kinds.len() as u32;
-            Timing {
-                queries: gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
-                    label: Some("pass timestamps"),
-                    ty: wgpu::QueryType::Timestamp,
-                    count: n,
-                }),
-                resolve: gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("pass timestamps resolve"),
-                    size: 8 * n as u64,
-                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                    mapped_at_creation: false,
-                }),
-                kinds,
-            }
-        });
+        // Primal and loss per camera, the estimator's passes (at most two per camera), Adam
+        // per texture.
+        let timer = PassTimer::new(gpu, 4 * n_cams + 2 + set.textures.len() as u32);
         gpu.check("optimizer setup")?;
         Ok(Optimizer {
             gpu: gpu.clone(),
@@ -700,18 +638,23 @@ impl Optimizer {
             settings,
             cams,
             grad,
+            adjoint,
             moments,
             stats,
             loss_partial,
             grid,
+            loss_grid,
             loss_pipeline,
-            gradient_pipeline,
             adam_pipeline,
             adam,
             accum,
-            timing,
-            restir: restir_parts.map(|(_, st)| st),
+            timer,
+            estimator,
+            camera_infos,
             export_pipeline: std::sync::OnceLock::new(),
+            observed: std::sync::OnceLock::new(),
+            progress: 0.0,
+            last_learning_rates: Vec::new(),
             iteration: 0,
         })
     }
@@ -726,113 +669,50 @@ impl Optimizer {
         &self.settings
     }
 
-    /// Record primal, loss and gradient passes of every camera for iteration `iteration`
-    /// (for ReSTIR: candidates per camera, then the merge, then the copy of the textures that
-    /// the next merge will call previous). The gradient ends in `grad`.
-    fn encode_gradient(&mut self, enc: &mut wgpu::CommandEncoder, iteration: u32) {
+    /// Record the primal render and loss of every camera at `spp` samples per pixel into
+    /// `adjoint[iteration % 2]`, with the seeds of iteration `iteration` (in chunks of at most
+    /// `chunk` samples; each chunk after the first needs its own submission, see
+    /// [`Optimizer::converged_adjoint`]).
+    fn encode_primal(&mut self, enc: &mut wgpu::CommandEncoder, iteration: u32) {
         let parity = (iteration % 2) as usize;
-        let scene_group = &self.renderer.scene.bind_group;
-        let max_dim = self
-            .gpu
-            .device
-            .limits()
-            .max_compute_workgroups_per_dimension;
-        let loss_grid = grid_2d(
-            self.settings.width * self.settings.height,
-            WORKGROUP,
-            max_dim,
-        );
-        let q = self.timing.as_ref().map(|t| &t.queries);
-        match &self.restir {
-            None => enc.clear_buffer(&self.grad, 0, None),
-            Some(st) => {
-                enc.clear_buffer(&st.reservoirs[parity], 0, None);
-                enc.clear_buffer(&st.locks, 0, None);
-            }
-        }
         for (k, cam) in self.cams.iter_mut().enumerate() {
-            cam.render_params.seed = pass_seed(self.settings.seed, iteration, k as u32, 0);
-            let gseed = pass_seed(self.settings.seed, iteration, k as u32, 1);
-            cam.gradient_params.seed = gseed;
-            cam.candidate_params.seed = gseed;
+            cam.render_params.seed =
+                pass_seed(self.settings.seed, iteration, k as u32, Seeds::PRIMAL);
+            cam.render_params.sample_offset = 0;
+            cam.render_params.spp = self.settings.primal_spp;
             self.gpu.queue.write_buffer(
                 &cam.render_uniform,
                 0,
                 bytemuck::bytes_of(&cam.render_params),
             );
-            self.gpu.queue.write_buffer(
-                &cam.gradient_uniform,
-                0,
-                bytemuck::bytes_of(&cam.gradient_params),
-            );
-            self.gpu.queue.write_buffer(
-                &cam.candidate_uniform,
-                0,
-                bytemuck::bytes_of(&cam.candidate_params),
-            );
             enc.clear_buffer(&self.accum, 0, None);
-            let t = 3 * k as u32;
-            let groups = [scene_group, &cam.render_group];
+            let groups = [&self.renderer.scene.bind_group, &cam.render_group];
             let pipe = &self.renderer.render_pipeline;
-            encode_timed_pass(enc, "primal", pipe, &groups, self.grid, q.map(|q| (q, t)));
+            let t = self.timer.next(PassKind::Primal);
+            encode_timed_pass(enc, "primal", pipe, &groups, self.grid, t);
             let groups = [&cam.loss_groups[parity]];
-            let pipe = &self.loss_pipeline;
-            encode_timed_pass(enc, "loss", pipe, &groups, loss_grid, q.map(|q| (q, t + 1)));
-            match (&self.restir, &cam.candidate_groups) {
-                (Some(st), Some(cg)) => {
-                    let groups = [scene_group, &cg[parity]];
-                    let pipe = &st.candidate_pipeline;
-                    encode_timed_pass(
-                        enc,
-                        "restir_candidates",
-                        pipe,
-                        &groups,
-                        self.grid,
-                        q.map(|q| (q, t + 2)),
-                    );
-                }
-                _ => {
-                    let groups = [scene_group, &cam.gradient_groups[parity]];
-                    let pipe = &self.gradient_pipeline;
-                    encode_timed_pass(
-                        enc,
-                        "gradient",
-                        pipe,
-                        &groups,
-                        self.grid,
-                        q.map(|q| (q, t + 2)),
-                    );
-                }
-            }
+            let t = self.timer.next(PassKind::Loss);
+            encode_timed_pass(enc, "loss", &self.loss_pipeline, &groups, self.loss_grid, t);
         }
-        let merge_slot = 3 * self.cams.len() as u32;
-        if let Some(st) = &mut self.restir {
-            let o = &self.settings.restir;
-            st.merge_params.seed = pass_seed(self.settings.seed, iteration, 0, 4);
-            st.merge_params.flags =
-                (o.temporal as u32) | (o.positivization as u32) << 1 | (st.have_prev as u32) << 2;
-            self.gpu
-                .queue
-                .write_buffer(&st.merge_uniform, 0, bytemuck::bytes_of(&st.merge_params));
-            let groups = [scene_group, &st.merge_groups[parity]];
-            encode_timed_pass(
-                enc,
-                "restir_merge",
-                &st.merge_pipeline,
-                &groups,
-                st.merge_grid,
-                q.map(|q| (q, merge_slot)),
-            );
-            // The textures of this iteration become the previous ones of the next merge.
+    }
+
+    /// Record iteration `iteration` up to the gradient (in `grad`): the primal render and
+    /// loss of every camera (unless the adjoint was written already), the estimator's passes,
+    /// and the copy of the textures that the next iteration calls previous.
+    fn encode_gradient(&mut self, enc: &mut wgpu::CommandEncoder, iteration: u32, primal: bool) {
+        self.timer.begin();
+        if primal {
+            self.encode_primal(enc, iteration);
+        }
+        let frame = estimator::Frame {
+            iteration,
+            scene_group: &self.renderer.scene.bind_group,
+        };
+        self.estimator.encode(enc, &frame, &mut self.timer);
+        if self.estimator.uses_previous_state() {
             let params = &self.renderer.scene.params;
-            enc.copy_buffer_to_buffer(
-                params,
-                0,
-                &self.renderer.scene.params_prev,
-                0,
-                params.size(),
-            );
-            st.have_prev = o.temporal;
+            let prev = &self.renderer.scene.params_prev;
+            enc.copy_buffer_to_buffer(params, 0, prev, 0, params.size());
         }
     }
 
@@ -849,54 +729,55 @@ impl Optimizer {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("iteration"),
             });
-        self.encode_gradient(&mut enc, self.iteration);
+        self.encode_gradient(&mut enc, self.iteration, true);
         let t = self.iteration + 1;
         let max_dim = self
             .gpu
             .device
             .limits()
             .max_compute_workgroups_per_dimension;
-        let first = 3 * self.cams.len() as u32 + self.restir.is_some() as u32;
-        for (k, (u, g, p)) in self.adam.iter_mut().enumerate() {
+        let factor = self.settings.schedule.factor(self.iteration, self.progress);
+        self.last_learning_rates.clear();
+        for ((u, g, p), tex) in self.adam.iter_mut().zip(&self.set.textures) {
+            p.lr = tex.learning_rate * factor;
+            self.last_learning_rates.push(p.lr);
             p.bias1 = 1.0 - adam::BETA1.powi(t as i32);
             p.bias2 = 1.0 - adam::BETA2.powi(t as i32);
             self.gpu.queue.write_buffer(u, 0, bytemuck::bytes_of(p));
-            let timing = self
-                .timing
-                .as_ref()
-                .map(|tm| (&tm.queries, first + k as u32));
             let grid = grid_2d(p.count, WORKGROUP, max_dim);
+            let timing = self.timer.next(PassKind::Adam);
             encode_timed_pass(&mut enc, "adam", &self.adam_pipeline, &[g], grid, timing);
         }
-        if let Some(tm) = &self.timing {
-            enc.resolve_query_set(&tm.queries, 0..2 * tm.kinds.len() as u32, &tm.resolve, 0);
-        }
+        self.timer.resolve(&mut enc);
         self.gpu.queue.submit([enc.finish()]);
+        self.estimator.finish_iteration();
         self.iteration = t;
         let loss = self.read_loss()?;
         Ok(StepStats { loss })
     }
 
+    /// Tell the learning-rate schedule which fraction of the run is done (in [0, 1]; for a
+    /// run of N iterations, i / N before iteration i; for a time budget, the elapsed
+    /// fraction). [`Optimizer::run`] sets it from its [`Stop`]. Without a schedule it has no
+    /// effect.
+    pub fn set_progress(&mut self, fraction: f64) {
+        self.progress = if fraction.is_finite() {
+            fraction.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+    }
+
+    /// The learning rate of each texture in the last [`Optimizer::step`] (the schedule's
+    /// factor times the texture's rate); empty before the first.
+    pub fn last_learning_rates(&self) -> &[f32] {
+        &self.last_learning_rates
+    }
+
     /// GPU time per kind of pass in the last [`Optimizer::step`], when the adapter has
     /// timestamp queries.
     pub fn pass_times(&self) -> Result<Option<PassTimes>> {
-        let Some(tm) = &self.timing else {
-            return Ok(None);
-        };
-        let ticks: Vec<u64> = self.gpu.read_pod(&tm.resolve)?;
-        let period = self.gpu.queue.get_timestamp_period() as f64 * 1e-6;
-        let mut t = PassTimes::default();
-        for (k, kind) in tm.kinds.iter().enumerate() {
-            let ms = ticks[2 * k + 1].saturating_sub(ticks[2 * k]) as f64 * period;
-            match kind {
-                0 => t.primal_ms += ms,
-                1 => t.loss_ms += ms,
-                2 => t.gradient_ms += ms,
-                4 => t.merge_ms += ms,
-                _ => t.adam_ms += ms,
-            }
-        }
-        Ok(Some(t))
+        self.timer.read(&self.gpu)
     }
 
     /// One gradient estimate at the current textures, as iteration `iteration` would draw it,
@@ -909,12 +790,95 @@ impl Optimizer {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("gradient estimate"),
             });
-        self.encode_gradient(&mut enc, iteration);
+        self.encode_gradient(&mut enc, iteration, true);
         self.gpu.queue.submit([enc.finish()]);
+        self.estimator.finish_iteration();
         let loss = self.read_loss()?;
-        let mut g: Vec<f32> = self.gpu.read_pod(&self.grad)?;
-        g.truncate(self.set.values.len());
-        Ok((g, loss))
+        Ok((self.read_gradient()?, loss))
+    }
+
+    /// [`Optimizer::estimate_gradient`] with a given adjoint (RGBA per pixel, the cameras one
+    /// after another, as [`Optimizer::converged_adjoint`] returns it) instead of the one of
+    /// the iteration's own primal render: the gradient estimator alone, without the noise of
+    /// the adjoint. Returns the gradient.
+    pub fn estimate_gradient_with_adjoint(
+        &mut self,
+        iteration: u32,
+        adjoint: &[f32],
+    ) -> Result<Vec<f32>> {
+        let buf = &self.adjoint[(iteration % 2) as usize];
+        if adjoint.len() as u64 * 4 != buf.size() {
+            return Err(Error::Invalid(format!(
+                "the adjoint has {} floats, the optimizer's images need {}",
+                adjoint.len(),
+                buf.size() / 4
+            )));
+        }
+        self.gpu
+            .queue
+            .write_buffer(buf, 0, bytemuck::cast_slice(adjoint));
+        let mut enc = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("gradient estimate (given adjoint)"),
+            });
+        self.encode_gradient(&mut enc, iteration, false);
+        self.gpu.queue.submit([enc.finish()]);
+        self.estimator.finish_iteration();
+        self.read_gradient()
+    }
+
+    /// The adjoint of the loss at the current textures from a primal render of `spp` samples
+    /// per pixel (a converged one for `spp` in the hundreds), and that render's loss. It is
+    /// computed in the adjoint buffer that the next iteration overwrites, so the optimizer's
+    /// state (a ReSTIR optimizer's previous adjoint included) is unchanged. `seed` picks the
+    /// random numbers.
+    pub fn converged_adjoint(&mut self, spp: u32, seed: u32) -> Result<(Vec<f32>, f64)> {
+        if spp == 0 {
+            return Err(Error::Invalid(
+                "converged_adjoint: spp must be at least 1".into(),
+            ));
+        }
+        let parity = (self.iteration % 2) as usize;
+        let n_pixels = self.settings.width * self.settings.height;
+        let chunk = ((1u32 << 20) / n_pixels).clamp(1, 64);
+        for k in 0..self.cams.len() {
+            let mut done = 0;
+            while done < spp {
+                let cam = &mut self.cams[k];
+                cam.render_params.seed = pass_seed(seed, u32::MAX - 3, k as u32, Seeds::PRIMAL);
+                cam.render_params.sample_offset = done;
+                cam.render_params.spp = chunk.min(spp - done);
+                self.gpu.queue.write_buffer(
+                    &cam.render_uniform,
+                    0,
+                    bytemuck::bytes_of(&cam.render_params),
+                );
+                let mut enc =
+                    self.gpu
+                        .device
+                        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                            label: Some("converged primal"),
+                        });
+                if done == 0 {
+                    enc.clear_buffer(&self.accum, 0, None);
+                }
+                let groups = [&self.renderer.scene.bind_group, &cam.render_group];
+                let pipe = &self.renderer.render_pipeline;
+                encode_timed_pass(&mut enc, "primal", pipe, &groups, self.grid, None);
+                done += cam.render_params.spp;
+                if done >= spp {
+                    let groups = [&cam.loss_groups[parity]];
+                    let pipe = &self.loss_pipeline;
+                    encode_timed_pass(&mut enc, "loss", pipe, &groups, self.loss_grid, None);
+                }
+                self.gpu.queue.submit([enc.finish()]);
+                self.gpu.wait("converged primal")?;
+            }
+        }
+        let adjoint = self.gpu.read_pod(&self.adjoint[parity])?;
+        Ok((adjoint, self.read_loss()?))
     }
 
     /// The gradient of the last iteration or estimate, laid out like the parameters.
@@ -992,7 +956,9 @@ impl Optimizer {
 
     /// Run iterations until `stop`, calling `on_iteration` after each; the callback returns
     /// [`ControlFlow::Break`](std::ops::ControlFlow::Break) to stop early. Returns the
-    /// progress after the last iteration run (`None` if none ran).
+    /// progress after the last iteration run (`None` if none ran). The learning-rate
+    /// schedule runs over this call: its progress is the larger of the fractions of
+    /// `stop`'s iterations and time budget done.
     pub fn run(
         &mut self,
         stop: Stop,
@@ -1012,6 +978,11 @@ impl Optimizer {
             {
                 break;
             }
+            let by_iterations = stop.iterations.map_or(0.0, |n| done as f64 / n as f64);
+            let by_time = stop.time_budget.map_or(0.0, |b| {
+                start.elapsed().as_secs_f64() / b.as_secs_f64().max(1e-9)
+            });
+            self.set_progress(by_iterations.max(by_time));
             let stats = self.step()?;
             done += 1;
             let p = Progress {
@@ -1049,137 +1020,29 @@ impl Optimizer {
         Ok(all[t.offset as usize..t.offset as usize + t.len()].to_vec())
     }
 
-    /// Texture `i` (index into `set.textures`) as a new `Rgba32Float` GPU texture of its size
-    /// that the application can bind: RGB for base color, the value in R, G and B for
-    /// roughness and metallic, alpha 1. Usage: `TEXTURE_BINDING | STORAGE_BINDING |
-    /// COPY_SRC`. The copy is made on the GPU when this is called.
-    pub fn create_texture(&self, i: usize) -> Result<wgpu::Texture> {
-        let t = self.set.textures.get(i).ok_or_else(|| {
-            Error::Invalid(format!(
-                "texture {i} does not exist ({} optimized)",
-                self.set.textures.len()
-            ))
-        })?;
-        let device = &self.gpu.device;
-        let label = format!("texture_export {}", t.name());
-        let texture = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(&label),
-            size: wgpu::Extent3d {
-                width: t.width,
-                height: t.height,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Rgba32Float,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING
-                | wgpu::TextureUsages::STORAGE_BINDING
-                | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        });
-        let pipeline = match self.export_pipeline.get() {
-            Some(p) => p,
-            None => {
-                let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                    label: Some("texture_export"),
-                    entries: &[
-                        export_entry(
-                            0,
-                            wgpu::BindingType::Buffer {
-                                ty: wgpu::BufferBindingType::Uniform,
-                                has_dynamic_offset: false,
-                                min_binding_size: None,
-                            },
-                        ),
-                        export_entry(
-                            1,
-                            wgpu::BindingType::Buffer {
-                                ty: wgpu::BufferBindingType::Storage { read_only: true },
-                                has_dynamic_offset: false,
-                                min_binding_size: None,
-                            },
-                        ),
-                        export_entry(
-                            2,
-                            wgpu::BindingType::StorageTexture {
-                                access: wgpu::StorageTextureAccess::WriteOnly,
-                                format: wgpu::TextureFormat::Rgba32Float,
-                                view_dimension: wgpu::TextureViewDimension::D2,
-                            },
-                        ),
-                    ],
-                });
-                let p = self.gpu.compute_pipeline("texture_export", &[&layout])?;
-                self.export_pipeline.get_or_init(|| p)
-            }
-        };
-        let params = GpuExportParams {
-            offset: t.offset,
-            width: t.width,
-            height: t.height,
-            channels: t.channels(),
-        };
-        let uniform = self
-            .gpu
-            .uniform("texture_export params", bytemuck::bytes_of(&params));
-        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("texture_export"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: uniform.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: self.renderer.scene.params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(&view),
-                },
-            ],
-        });
-        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("texture_export"),
-        });
-        let max_dim = device.limits().max_compute_workgroups_per_dimension;
-        let grid = grid_2d(t.width * t.height, WORKGROUP, max_dim);
-        crate::render::encode_pass(&mut enc, "texture_export", pipeline, &[&group], grid);
-        self.gpu.queue.submit([enc.finish()]);
-        self.gpu.check("texture_export")?;
-        Ok(texture)
-    }
-
     /// Everything a later run needs to continue exactly where this one stands: iteration,
-    /// textures, Adam moments and, for ReSTIR, the kept reservoirs with the textures they were
-    /// drawn at. Restore it with [`Optimizer::restore`].
+    /// textures, Adam moments and, for ReSTIR, the kept reservoirs with the textures and
+    /// adjoint they were drawn at. Restore it with [`Optimizer::restore`].
     pub fn state(&self) -> Result<OptimizerState> {
         let [m1, m2] = self.read_moments()?;
-        let restir = match &self.restir {
-            None => None,
-            Some(st) => {
-                let last = (self.iteration as usize + 1) % 2;
-                let kept = &st.reservoirs[last];
-                let mut params_prev: Vec<f32> =
-                    self.gpu.read_pod(&self.renderer.scene.params_prev)?;
-                params_prev.truncate(self.set.values.len());
-                Some(RestirSnapshot {
-                    reservoirs: self.gpu.read_pod(kept)?,
-                    adjoint_prev: self.gpu.read_pod(&st.adjoint[last])?,
-                    params_prev,
-                    have_prev: st.have_prev,
-                })
-            }
+        let previous = if self.estimator.uses_previous_state() {
+            let last = (self.iteration as usize + 1) % 2;
+            let mut params: Vec<f32> = self.gpu.read_pod(&self.renderer.scene.params_prev)?;
+            params.truncate(self.set.values.len());
+            Some(PreviousState {
+                params,
+                adjoint: self.gpu.read_pod(&self.adjoint[last])?,
+            })
+        } else {
+            None
         };
         Ok(OptimizerState {
             iteration: self.iteration,
             params: self.read_params()?,
             m1,
             m2,
-            restir,
+            previous,
+            restir: self.estimator.snapshot(&self.gpu, self.iteration)?,
         })
     }
 
@@ -1189,30 +1052,28 @@ impl Optimizer {
     pub fn restore(&mut self, state: &OptimizerState) -> Result<()> {
         self.write_params(&state.params)?;
         self.write_moments(&[state.m1.clone(), state.m2.clone()])?;
-        if let Some(st) = &mut self.restir {
-            let last = (state.iteration as usize + 1) % 2;
-            let kept = &st.reservoirs[last];
-            match &state.restir {
-                Some(r) => {
-                    if r.reservoirs.len() as u64 * 4 != kept.size()
-                        || r.adjoint_prev.len() as u64 * 4 != st.adjoint[last].size()
-                        || r.params_prev.len() != self.set.values.len()
-                    {
-                        return Err(Error::Invalid(
-                            "the saved ReSTIR state does not match this optimizer's textures and images".into(),
-                        ));
-                    }
-                    let q = &self.gpu.queue;
-                    q.write_buffer(kept, 0, bytemuck::cast_slice(&r.reservoirs));
-                    let adjoint = &st.adjoint[last];
-                    q.write_buffer(adjoint, 0, bytemuck::cast_slice(&r.adjoint_prev));
-                    let prev = &self.renderer.scene.params_prev;
-                    q.write_buffer(prev, 0, bytemuck::cast_slice(&r.params_prev));
-                    st.have_prev = r.have_prev && self.settings.restir.temporal;
+        let last = (state.iteration as usize + 1) % 2;
+        let mut snapshot = state.restir.as_ref();
+        match &state.previous {
+            Some(p) => {
+                if p.adjoint.len() as u64 * 4 != self.adjoint[last].size()
+                    || p.params.len() != self.set.values.len()
+                {
+                    return Err(Error::Invalid(
+                        "the saved state does not match this optimizer's textures and images"
+                            .into(),
+                    ));
                 }
-                None => st.have_prev = false,
+                let q = &self.gpu.queue;
+                q.write_buffer(&self.adjoint[last], 0, bytemuck::cast_slice(&p.adjoint));
+                let prev = &self.renderer.scene.params_prev;
+                q.write_buffer(prev, 0, bytemuck::cast_slice(&p.params));
             }
+            // Kept samples cannot be reused without the state they were drawn at.
+            None => snapshot = None,
         }
+        self.estimator
+            .restore(&self.gpu, snapshot, state.iteration)?;
         self.iteration = state.iteration;
         self.gpu.check("restore optimizer state")
     }
@@ -1222,38 +1083,32 @@ impl Optimizer {
     /// that scale with the image (targets, adjoints) are not counted.
     pub fn state_bytes_per_texel(&self) -> f64 {
         let scene = &self.renderer.scene;
-        let mut bytes = scene.params.size()
+        let bytes = scene.params.size()
             + scene.params_prev.size()
             + self.grad.size()
-            + self.moments.iter().map(|b| b.size()).sum::<u64>();
-        if let Some(r) = &self.restir {
-            bytes += r.reservoirs.iter().map(|b| b.size()).sum::<u64>() + r.locks.size();
-        }
+            + self.moments.iter().map(|b| b.size()).sum::<u64>()
+            + self.estimator.state_bytes();
         bytes as f64 / scene.n_texels.max(1) as f64
     }
 
     /// Dropped and lost values so far.
     pub fn faults(&self) -> Result<FaultCounts> {
-        let p: Vec<u32> = self.gpu.read_pod(&self.stats[0])?;
-        let g: Vec<u32> = self.gpu.read_pod(&self.stats[1])?;
-        let a: Vec<u32> = self.gpu.read_pod(&self.stats[2])?;
-        let l: Vec<u32> = self.gpu.read_pod(&self.stats[3])?;
+        let p: Vec<u32> = self.gpu.read_pod(&self.stats.primal)?;
+        let a: Vec<u32> = self.gpu.read_pod(&self.stats.adam)?;
+        let l: Vec<u32> = self.gpu.read_pod(&self.stats.loss)?;
         let mut f = FaultCounts {
-            lost_updates: g[1],
-            dropped_gradient: g[2],
             skipped_adam: a[0],
             dropped_primal: p[3],
             dropped_pixels: l[0],
             ..Default::default()
         };
-        if let Some(st) = &self.restir {
-            let c: Vec<u32> = self.gpu.read_pod(&st.stats[0])?;
-            let m: Vec<u32> = self.gpu.read_pod(&st.stats[1])?;
-            f.lost_offers = c[1];
-            f.dropped_gradient += c[2];
-            f.dropped_replays = m[1];
-        }
+        self.estimator.faults(&self.gpu, &mut f)?;
         Ok(f)
+    }
+
+    /// What ReSTIR's merge pass counted (None for the baseline).
+    pub fn merge_diagnostics(&self) -> Result<Option<MergeDiagnostics>> {
+        self.estimator.restir_diagnostics(&self.gpu)
     }
 
     /// Render camera `k` of the task (index into `settings.cameras`) at the current textures.

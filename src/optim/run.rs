@@ -46,6 +46,10 @@ pub struct RunSummary {
     pub initial_rmse: Option<f64>,
     /// Texture RMSE at the end.
     pub final_rmse: Option<f64>,
+    /// Texture RMSE of the initial textures over the observed texels.
+    pub initial_rmse_observed: Option<f64>,
+    /// Texture RMSE at the end over the observed texels.
+    pub final_rmse_observed: Option<f64>,
     /// Milliseconds per iteration in this session.
     pub ms_per_iteration: f64,
     /// The output folder.
@@ -75,7 +79,32 @@ pub fn task_settings(
         seed: task.seed,
         method,
         restir,
+        schedule: task.optimizer.schedule.clone(),
+        adam_mask: task.optimizer.adam_mask,
     }
+}
+
+/// Image relMSE of an `spp`-sample render of every camera of `opt` against its target
+/// (mean over cameras), with the same seed at every call, so that differences between calls
+/// are the textures', not the noise's; and the renders.
+pub fn evaluate(
+    opt: &Optimizer,
+    targets: &[Image],
+    spp: u32,
+    seed: u32,
+) -> Result<(f64, Vec<Image>)> {
+    let mut sum = 0.0;
+    let mut images = Vec::new();
+    for (k, target) in targets.iter().enumerate() {
+        let img = opt.render(
+            k,
+            spp,
+            super::pass_seed(seed, u32::MAX - 2, k as u32, super::Seeds::EVAL),
+        )?;
+        sum += super::loss::image_relmse(&img, target);
+        images.push(img);
+    }
+    Ok((sum / targets.len().max(1) as f64, images))
 }
 
 /// Root-mean-square difference.
@@ -92,18 +121,29 @@ fn layout_string(set: &ParamSet) -> String {
         .join(",")
 }
 
-/// Write metrics.csv atomically.
+/// The columns of metrics.csv.
+pub const METRICS_HEADER: &str =
+    "iteration,elapsed_s,loss,texture_rmse,texture_rmse_observed,image_relmse,learning_rate";
+
+/// Write metrics.csv atomically. Empty fields: not measured at that iteration (texture
+/// errors without a ground truth, image error between evaluations, the loss of the start).
 pub fn write_metrics(path: &Path, rows: &[MetricRow]) -> Result<()> {
-    let mut s = String::from("iteration,elapsed_s,loss,texture_rmse\n");
+    let opt = |v: Option<f64>| {
+        v.filter(|v| v.is_finite())
+            .map(|v| format!("{v:.6e}"))
+            .unwrap_or_default()
+    };
+    let mut s = format!("{METRICS_HEADER}\n");
     for r in rows {
         s.push_str(&format!(
-            "{},{:.4},{:.6e},{}\n",
+            "{},{:.4},{},{},{},{},{}\n",
             r.iteration,
             r.elapsed_s,
-            r.loss,
-            r.texture_rmse
-                .map(|v| format!("{v:.6e}"))
-                .unwrap_or_default()
+            opt(r.loss),
+            opt(r.texture_rmse),
+            opt(r.texture_rmse_observed),
+            opt(r.image_relmse),
+            opt(r.learning_rate),
         ));
     }
     image_io::write_atomic(path, s.as_bytes())
@@ -252,9 +292,55 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         None
     };
     let rmse_every = (prep.set.values.len() / (1 << 20)).max(1) as u32;
+    let observed = opt.observed_texels()?.to_vec();
+    let (n_observed, n_texels) = super::observed::observed_count(&observed);
+    log::info!(
+        "{n_observed} of {n_texels} texels are observed by the cameras ({:.1}%); the others get \
+         no gradient and keep their initial values (observed_*.png)",
+        100.0 * n_observed as f64 / n_texels.max(1) as f64
+    );
+    save_observed(&out, &prep.set, &observed)?;
+    let texture_errors = |values: &[f32]| -> (Option<f64>, Option<f64>) {
+        match &prep.reference {
+            Some(r) => (
+                Some(rmse(values, r)),
+                Some(super::observed::rmse_observed(
+                    &prep.set, values, r, &observed,
+                )),
+            ),
+            None => (None, None),
+        }
+    };
+    let eval_every = task.optimizer.eval_every;
+    let eval_spp = task.optimizer.eval_spp;
+    let eval = |opt: &Optimizer| -> Result<f64> {
+        Ok(evaluate(opt, &prep.targets, eval_spp, task.seed)?.0)
+    };
     let session_start = Instant::now();
+    // Seconds of this session spent on evaluation renders (not counted as optimization).
+    let mut excluded = 0.0;
     let start_iter = opt.iteration;
-    let mut last_loss = rows.last().map(|r| r.loss).unwrap_or(f64::NAN);
+    if rows.is_empty() {
+        // The start: texture and image errors of the initial textures.
+        let t0 = Instant::now();
+        let (texture_rmse, texture_rmse_observed) = texture_errors(&prep.set.values);
+        let image_relmse = if eval_every > 0 {
+            Some(eval(&opt)?)
+        } else {
+            None
+        };
+        excluded += t0.elapsed().as_secs_f64();
+        rows.push(MetricRow {
+            iteration: 0,
+            elapsed_s: 0.0,
+            loss: None,
+            texture_rmse,
+            texture_rmse_observed,
+            image_relmse,
+            learning_rate: None,
+        });
+    }
+    let mut last_loss = rows.last().and_then(|r| r.loss).unwrap_or(f64::NAN);
     let ckpt_every = task.optimizer.checkpoint_every;
     let mut pass_sum: Option<PassTimes> = None;
     let mut timed = 0u32;
@@ -263,10 +349,12 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
             .as_ref()
             .is_some_and(|f| f.load(std::sync::atomic::Ordering::SeqCst))
     };
+    let elapsed_now =
+        |excluded: f64| elapsed_before + session_start.elapsed().as_secs_f64() - excluded;
     // Only an interrupt that stops the loop early counts (one during the final writes does not).
     let mut was_interrupted = false;
     loop {
-        let elapsed = elapsed_before + session_start.elapsed().as_secs_f64();
+        let elapsed = elapsed_now(excluded);
         if max_iter.is_some_and(|n| opt.iteration >= n) || budget.is_some_and(|b| elapsed >= b) {
             break;
         }
@@ -274,6 +362,9 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
             was_interrupted = true;
             break;
         }
+        let by_iterations = max_iter.map_or(0.0, |n| opt.iteration as f64 / n.max(1) as f64);
+        let by_time = budget.map_or(0.0, |b| elapsed / b);
+        opt.set_progress(by_iterations.max(by_time));
         let stats = opt.step()?;
         last_loss = stats.loss;
         // Timestamps are read back on every 8th iteration only: one readback less per
@@ -287,16 +378,27 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
             timed += 1;
             pass_sum.get_or_insert_with(PassTimes::default).add(&t);
         }
-        let elapsed = elapsed_before + session_start.elapsed().as_secs_f64();
-        let texture_rmse = match &prep.reference {
-            Some(r) if opt.iteration % rmse_every == 0 => Some(rmse(&opt.read_params()?, r)),
-            _ => None,
+        let elapsed = elapsed_now(excluded);
+        let t0 = Instant::now();
+        let (texture_rmse, texture_rmse_observed) = if opt.iteration % rmse_every == 0 {
+            texture_errors(&opt.read_params()?)
+        } else {
+            (None, None)
         };
+        let image_relmse = if eval_every > 0 && opt.iteration % eval_every == 0 {
+            Some(eval(&opt)?)
+        } else {
+            None
+        };
+        excluded += t0.elapsed().as_secs_f64();
         rows.push(MetricRow {
             iteration: opt.iteration,
             elapsed_s: elapsed,
-            loss: stats.loss,
+            loss: Some(stats.loss),
             texture_rmse,
+            texture_rmse_observed,
+            image_relmse,
+            learning_rate: opt.last_learning_rates().first().map(|&l| l as f64),
         });
         if let Some(b) = &bar {
             b.set_position(if max_iter.is_some() {
@@ -304,10 +406,14 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
             } else {
                 elapsed as u64
             });
-            b.set_message(match texture_rmse {
-                Some(r) => format!("loss {:.3e} texture RMSE {r:.4}", stats.loss),
-                None => format!("loss {:.3e}", stats.loss),
-            });
+            let mut msg = format!("loss {:.3e}", stats.loss);
+            if let Some(r) = texture_rmse_observed {
+                msg.push_str(&format!(" texture RMSE {r:.4}"));
+            }
+            if let Some(e) = rows.iter().rev().find_map(|r| r.image_relmse) {
+                msg.push_str(&format!(" image relMSE {e:.3e}"));
+            }
+            b.set_message(msg);
         }
         if ckpt_every > 0 && opt.iteration % ckpt_every == 0 {
             save_checkpoint(&opt, &rows, elapsed)?;
@@ -316,12 +422,29 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
-    let session_s = session_start.elapsed().as_secs_f64();
+    // The end gets an evaluation and texture errors if its iteration had none.
+    if let Some(last) = rows.last_mut() {
+        if eval_every > 0 && last.image_relmse.is_none() {
+            last.image_relmse = Some(eval(&opt)?);
+        }
+        if last.texture_rmse.is_none() {
+            (last.texture_rmse, last.texture_rmse_observed) = texture_errors(&opt.read_params()?);
+        }
+    }
+    let session_s = session_start.elapsed().as_secs_f64() - excluded;
     let elapsed = elapsed_before + session_s;
     let done = opt.iteration - start_iter;
     save_checkpoint(&opt, &rows, elapsed)?;
     let values = opt.read_params()?;
     let final_rmse = prep.reference.as_ref().map(|r| rmse(&values, r));
+    let final_rmse_observed = prep
+        .reference
+        .as_ref()
+        .map(|r| super::observed::rmse_observed(&prep.set, &values, r, &observed));
+    let initial_rmse_observed = prep
+        .reference
+        .as_ref()
+        .map(|r| super::observed::rmse_observed(&prep.set, &prep.set.values, r, &observed));
     write_outputs(&out, task, &prep, &opt, &values, &rows)?;
     let faults = opt.faults()?;
     if faults != FaultCounts::default() {
@@ -333,6 +456,8 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         final_loss: last_loss,
         initial_rmse,
         final_rmse,
+        initial_rmse_observed,
+        final_rmse_observed,
         ms_per_iteration: if done > 0 {
             1000.0 * session_s / done as f64
         } else {
@@ -357,35 +482,12 @@ fn write_outputs(
 ) -> Result<()> {
     save_textures(out, &prep.set, values)?;
     write_metrics(&out.join("metrics.csv"), rows)?;
-    let series = |f: &dyn Fn(&MetricRow) -> Option<f64>| -> Vec<(f64, f64)> {
-        rows.iter()
-            .filter_map(|r| f(r).map(|y| (r.elapsed_s, y)))
-            .collect()
-    };
-    let mut panels = vec![super::plot::Panel {
-        title: format!("loss ({:?})", task.optimizer.loss).to_lowercase(),
-        series: vec![super::plot::Series {
-            name: "loss".into(),
-            color: [30, 90, 200],
-            points: series(&|r| Some(r.loss)),
-        }],
-    }];
-    if prep.reference.is_some() {
-        panels.push(super::plot::Panel {
-            title: "texture RMSE vs ground truth".into(),
-            series: vec![super::plot::Series {
-                name: "RMSE".into(),
-                color: [200, 50, 40],
-                points: series(&|r| r.texture_rmse),
-            }],
-        });
-    }
-    super::plot::plot(&out.join("plot.png"), "seconds", &panels)?;
+    plot_metrics(&out.join("plot.png"), task, rows, prep.reference.is_some())?;
     for (k, &cam) in prep.cameras.iter().enumerate() {
         let img = opt.render(
             k,
             task.target.spp.min(64),
-            super::pass_seed(task.seed, u32::MAX - 1, k as u32, 3),
+            super::pass_seed(task.seed, u32::MAX - 1, k as u32, super::Seeds::EVAL),
         )?;
         img.save(&out.join(format!("final_{}.exr", camera_file_name(&prep.scene, cam))))?;
         image_io::side_by_side(&img, &prep.targets[k]).save(&out.join(format!(
@@ -400,6 +502,77 @@ fn write_outputs(
         &prep.set,
         values,
     )
+}
+
+/// `plot.png`: the loss and the evaluation renders' image relMSE against time (log scale,
+/// with the learning-rate schedule on the right axis), and the texture RMSE (all and
+/// observed texels) when the ground truth is known.
+pub fn plot_metrics(path: &Path, task: &Task, rows: &[MetricRow], truth: bool) -> Result<()> {
+    use super::plot::{Panel, Series};
+    let series = |name: &str, color, f: &dyn Fn(&MetricRow) -> Option<f64>| Series {
+        name: name.into(),
+        color,
+        points: rows
+            .iter()
+            .filter_map(|r| f(r).map(|y| (r.elapsed_s, y)))
+            .collect(),
+    };
+    let mut panels = vec![Panel {
+        title: format!(
+            "loss ({}) and image relMSE of {}-spp evaluation renders",
+            format!("{:?}", task.optimizer.loss).to_lowercase(),
+            task.optimizer.eval_spp
+        ),
+        y_label: "error".into(),
+        log_y: true,
+        series: vec![
+            series("loss", [30, 90, 200], &|r| r.loss),
+            series("image relMSE", [20, 150, 60], &|r| r.image_relmse),
+        ],
+        secondary: Some((
+            "learning rate".into(),
+            vec![series("learning rate", [140, 140, 140], &|r| {
+                r.learning_rate
+            })],
+        )),
+    }];
+    if truth {
+        panels.push(Panel {
+            title: "texture RMSE against the ground truth".into(),
+            y_label: "RMSE".into(),
+            log_y: true,
+            series: vec![
+                series("observed texels", [200, 50, 40], &|r| {
+                    r.texture_rmse_observed
+                }),
+                series("all texels", [230, 150, 60], &|r| r.texture_rmse),
+            ],
+            secondary: None,
+        });
+    }
+    super::plot::plot(path, "seconds of optimization", &panels)
+}
+
+/// `observed_TEXTURE.png` per texture: white where a camera sample reaches the texel, black
+/// where none does (those texels keep their initial values).
+pub fn save_observed(dir: &Path, set: &ParamSet, observed: &[bool]) -> Result<()> {
+    let mut first = 0usize;
+    for t in &set.textures {
+        let n = (t.width * t.height) as usize;
+        let px: Vec<u8> = observed[first..first + n]
+            .iter()
+            .map(|&o| if o { 255 } else { 0 })
+            .collect();
+        first += n;
+        let img = image::GrayImage::from_raw(t.width, t.height, px)
+            .ok_or_else(|| Error::Invalid("observed mask size".into()))?;
+        let path = dir.join(format!("observed_{}.png", t.name()));
+        image_io::write_atomic_with(&path, |tmp| {
+            img.save_with_format(tmp, image::ImageFormat::Png)
+                .map_err(std::io::Error::other)
+        })?;
+    }
+    Ok(())
 }
 
 /// One gradient estimate at the task's initial textures, written to `dir` per texture as

@@ -139,95 +139,6 @@ pub struct GpuParamTex {
     pub _pad: [u32; 2],
 }
 
-/// `GradientParams` in gradient.wgsl.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct GpuGradientParams {
-    pub camera: GpuCameraInfo,
-    pub seed: u32,
-    pub sample_offset: u32,
-    pub spp: u32,
-    pub techniques: u32,
-    pub stride: u32,
-    pub inv_spp: f32,
-    pub adjoint_offset: u32,
-    pub _pad: u32,
-}
-
-/// `LossParams` in loss.wgsl.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct GpuLossParams {
-    pub n_pixels: u32,
-    pub kind: u32,
-    pub norm: f32,
-    pub partial_offset: u32,
-    pub adjoint_offset: u32,
-    pub _pad: [u32; 3],
-}
-
-/// `CandidateParams` in restir_candidates.wgsl.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct GpuCandidateParams {
-    pub camera: GpuCameraInfo,
-    pub seed: u32,
-    pub spp: u32,
-    pub stride: u32,
-    pub inv_spp: f32,
-    pub camera_index: u32,
-    pub adjoint_offset: u32,
-    pub positivize: u32,
-    pub _pad: u32,
-}
-
-/// Cameras a ReSTIR merge can replay from (`MAX_CAMERAS` in restir_merge.wgsl).
-pub const MAX_CAMERAS: usize = 8;
-
-/// `MergeParams` in restir_merge.wgsl.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct GpuMergeParams {
-    pub cameras: [GpuCameraInfo; MAX_CAMERAS],
-    pub n_texels: u32,
-    pub n_pixels: u32,
-    pub seed: u32,
-    pub flags: u32,
-    pub m_fresh: f32,
-    pub m_cap: f32,
-    pub inv_spp: f32,
-    pub n_textures: u32,
-    pub stride: u32,
-    pub _pad: [u32; 3],
-}
-
-/// `AdamParams` in adam.wgsl.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct GpuAdamParams {
-    pub offset: u32,
-    pub count: u32,
-    pub lr: f32,
-    pub beta1: f32,
-    pub beta2: f32,
-    pub eps: f32,
-    pub bias1: f32,
-    pub bias2: f32,
-    pub lo: f32,
-    pub hi: f32,
-    pub _pad: [u32; 2],
-}
-
-/// `ExportParams` in texture_export.wgsl.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct GpuExportParams {
-    pub offset: u32,
-    pub width: u32,
-    pub height: u32,
-    pub channels: u32,
-}
-
 /// `TraceParams` in trace_rays.wgsl.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
@@ -270,19 +181,40 @@ mod tests {
             ("render", "ParamTex", size_of::<GpuParamTex>()),
             ("render", "BvhNode", size_of::<crate::scene::bvh::BvhNode>()),
             ("trace_rays", "TraceParams", size_of::<GpuTraceParams>()),
-            ("gradient", "GradientParams", size_of::<GpuGradientParams>()),
-            ("loss", "LossParams", size_of::<GpuLossParams>()),
-            ("adam", "AdamParams", size_of::<GpuAdamParams>()),
+            (
+                "gradient",
+                "GradientParams",
+                size_of::<crate::optim::estimator::baseline::GradientParams>(),
+            ),
+            (
+                "loss",
+                "LossParams",
+                size_of::<crate::optim::loss::LossParams>(),
+            ),
+            (
+                "adam",
+                "AdamParams",
+                size_of::<crate::optim::adam::AdamParams>(),
+            ),
             (
                 "restir_candidates",
                 "CandidateParams",
-                size_of::<GpuCandidateParams>(),
+                size_of::<crate::optim::restir::CandidateParams>(),
             ),
-            ("restir_merge", "MergeParams", size_of::<GpuMergeParams>()),
+            (
+                "restir_merge",
+                "MergeParams",
+                size_of::<crate::optim::restir::MergeParams>(),
+            ),
+            (
+                "observed_texels",
+                "ObservedParams",
+                size_of::<crate::optim::observed::ObservedParams>(),
+            ),
             (
                 "texture_export",
                 "ExportParams",
-                size_of::<GpuExportParams>(),
+                size_of::<crate::optim::texture_export::ExportParams>(),
             ),
         ] {
             assert_eq!(size, wgsl_size(pass, name), "{name}");

@@ -1,0 +1,145 @@
+// A surface point as the shading code sees it, rebuilt from a triangle and barycentrics
+// alone. Tracing (shared/bvh) is not imported here: ReSTIR's merge evaluates stored paths with
+// these functions and must not be able to trace a ray.
+#import shared/lights
+#import shared/brdf
+#import shared/params
+
+struct Surface {
+    p: vec3f,
+    ng: vec3f,
+    frame: mat3x3f,
+    wo: vec3f,
+    uv: vec2f,
+    material: u32,
+    front: bool,
+    valid: bool,
+}
+
+// Geometry at the point (hit.b1, hit.b2) of triangle hit.tri seen from o, normals turned
+// towards the viewer for double-sided materials. The point is interpolated from the
+// triangle's vertices (not o + t d), so that the same (o, triangle, barycentrics) always give
+// the same surface: a path stored by ReSTIR is evaluated exactly as it was drawn.
+// valid is false for the back of a single-sided surface (it shades black).
+fn surface_at(o: vec3f, hit: Hit) -> Surface {
+    let tri = hit.tri;
+    let s = tri_shading[tri];
+    let b0 = 1.0 - hit.b1 - hit.b2;
+    let p0 = tri_vertex(tri, 0u);
+    let p1 = tri_vertex(tri, 1u);
+    let p2 = tri_vertex(tri, 2u);
+    let p = b0 * p0 + hit.b1 * p1 + hit.b2 * p2;
+    let to = p - o;
+    let len_to = length(to);
+    let d = select(vec3f(0.0, 0.0, -1.0), to / len_to, len_to > 0.0);
+    var ng = normalize(cross(p1 - p0, p2 - p0));
+    var ns = b0 * s.n0.xyz + hit.b1 * s.n1.xyz + hit.b2 * s.n2.xyz;
+    let front = dot(ng, d) < 0.0;
+    let m = materials[s.material];
+    var out: Surface;
+    out.p = p;
+    out.uv = b0 * s.uv01.xy + hit.b1 * s.uv01.zw + hit.b2 * s.uv2;
+    out.material = s.material;
+    out.front = front;
+    out.wo = -d;
+    out.valid = front || m.double_sided != 0u;
+    if !front {
+        ng = -ng;
+        ns = -ns;
+    }
+    let len = length(ns);
+    if len <= 0.0 || dot(ns / len, out.wo) <= 1e-6 {
+        ns = ng;
+    } else {
+        ns = ns / len;
+    }
+    out.ng = ng;
+    out.frame = onb(ns);
+    return out;
+}
+
+fn surface_material(sf: Surface) -> SurfaceMaterial {
+    let m = materials[sf.material];
+    let bc = sample_texture(m.base_color_tex, transform_uv(m, 0u, sf.uv));
+    let mr = sample_texture(m.mr_tex, transform_uv(m, 1u, sf.uv));
+    var out = SurfaceMaterial(m.base_color.rgb * bc.rgb, clamp(m.metallic * mr.b, 0.0, 1.0), clamp(m.roughness * mr.g, 0.0, 1.0));
+    // Optimized textures replace the material's inputs (UV0, repeat wrap).
+    if m.param_base_color != NONE {
+        let p = param_textures[m.param_base_color];
+        out.base_color = param_value(p, param_footprint(p, sf.uv));
+    }
+    if m.param_metallic != NONE {
+        let p = param_textures[m.param_metallic];
+        out.metallic = param_value(p, param_footprint(p, sf.uv)).x;
+    }
+    if m.param_roughness != NONE {
+        let p = param_textures[m.param_roughness];
+        out.roughness = param_value(p, param_footprint(p, sf.uv)).x;
+    }
+    return out;
+}
+
+// Origin pushed off the surface along the geometric normal, on the side of direction d.
+fn offset_origin(sf: Surface, d: vec3f) -> vec3f {
+    let scale = 1e-4 * (1.0 + max(max(abs(sf.p.x), abs(sf.p.y)), abs(sf.p.z)));
+    return sf.p + sf.ng * select(-scale, scale, dot(sf.ng, d) >= 0.0);
+}
+
+// Unit direction <-> two floats (octahedral map). ReSTIR stores incident directions this way;
+// decode(encode(d)) differs from d by about 1e-7, and the candidate pass evaluates every
+// sample at the decoded direction, so a stored path is re-evaluated exactly.
+fn oct_encode(d: vec3f) -> vec2f {
+    let n = d / (abs(d.x) + abs(d.y) + abs(d.z));
+    if n.z >= 0.0 {
+        return n.xy;
+    }
+    let s = select(vec2f(-1.0), vec2f(1.0), n.xy >= vec2f(0.0));
+    return (vec2f(1.0) - abs(n.yx)) * s;
+}
+
+fn oct_decode(e: vec2f) -> vec3f {
+    var v = vec3f(e, 1.0 - abs(e.x) - abs(e.y));
+    if v.z < 0.0 {
+        let s = select(vec2f(-1.0), vec2f(1.0), v.xy >= vec2f(0.0));
+        v = vec3f((vec2f(1.0) - abs(v.yx)) * s, v.z);
+    }
+    return normalize(v);
+}
+
+// The value of a path's contribution to texel `local` of optimized texture `ti`, as
+// adjoint x d(f)/d(texel) with f = BRDF x cos x L_i (per channel for base color, x for
+// scalars): the path-space integrand of the gradient, before any sampling density. Zero when
+// the path's surface does not use the texture or its filter does not reach the texel. Uses
+// the textures that use_prev_params selects.
+fn path_value(o: vec3f, hit: Hit, wi: vec3f, li: vec3f, adj: vec3f, ti: u32, local: u32) -> vec3f {
+    if hit.tri >= arrayLength(&tri_shading) || all(adj == vec3f(0.0)) {
+        return vec3f(0.0);
+    }
+    let sf = surface_at(o, hit);
+    if !sf.valid {
+        return vec3f(0.0);
+    }
+    let m = materials[sf.material];
+    var slot = NONE;
+    for (var s = 0u; s < 3u; s++) {
+        if material_param(m, s) == ti {
+            slot = s;
+        }
+    }
+    if slot == NONE {
+        return vec3f(0.0);
+    }
+    let fp = footprint_merged(param_footprint(param_textures[ti], sf.uv));
+    var wf = 0.0;
+    for (var k = 0u; k < 4u; k++) {
+        if fp.texel[k] == local {
+            wf += fp.weight[k];
+        }
+    }
+    if wf == 0.0 {
+        return vec3f(0.0);
+    }
+    let mat = surface_material(sf);
+    let bg = brdf_eval_cos_grad(mat, to_local(sf.frame, sf.wo), to_local(sf.frame, wi));
+    return wf * slot_derivative(slot, bg, li, adj);
+}

@@ -1,0 +1,582 @@
+//! The parameter-space ReSTIR estimator (shaders/restir_candidates.wgsl,
+//! shaders/restir_merge.wgsl, shaders/shared/reservoir.wgsl).
+//!
+//! Every optimized texel keeps two reservoirs, one over the positive and one over the negative
+//! part of its target q = luminance(v) (v for scalar textures), where v is a path's value for
+//! the texel: adjoint x d(BRDF cos L_i)/d(texel). A reservoir stores a *path* (pixel and camera,
+//! the camera ray's hit, the incident direction and radiance), not the random numbers that made
+//! it: geometry, cameras and lights never change during a texture optimization, so a stored
+//! path stays valid and its value under other textures and another adjoint is one BRDF
+//! evaluation. Each iteration:
+//!
+//! 1. the candidate pass offers every camera sample's light- and BSDF-sampled paths to the
+//!    reservoirs of the texels they touch (streaming RIS, weight |q| x MIS weight / density);
+//! 2. the merge pass combines, per texel and sign, the fresh reservoir with both reservoirs
+//!    kept from the last iteration by generalized RIS (balance heuristic with confidences,
+//!    identity shift in path space, sign routing), writes the merged reservoirs and the
+//!    gradient sum over signs of v(y) W. It traces no ray.
+use super::{Estimator, Frame, Setup};
+use crate::gpu::{grid_2d, Binding, Gpu};
+use crate::optim::{pass_seed, FaultCounts, PassKind, PassTimer, Seeds};
+use crate::render::encode_timed_pass;
+use crate::render::layout::GpuCameraInfo;
+use crate::render::WORKGROUP;
+use crate::{Error, Result};
+use bytemuck::{Pod, Zeroable};
+
+/// Word offsets within a reservoir, and the packing of its info word. The WGSL constants
+/// (`RES_*`, `INFO_*`, `RESERVOIR_WORDS` in `gen/restir_layout`) are generated from these.
+pub mod reservoir {
+    /// Pixel | camera << CAMERA_SHIFT | technique << TECH_SHIFT.
+    pub const INFO: u32 = 0;
+    /// Weight sum (fresh reservoirs) or unbiased contribution weight W (merged), f32.
+    pub const W: u32 = 1;
+    /// The path's value v (RGB, x for scalars) under the state the reservoir was formed at.
+    pub const VALUE: u32 = 2;
+    /// Triangle of the camera ray's hit (GPU order).
+    pub const TRI: u32 = 5;
+    /// Barycentrics b1, b2 of the hit, f32.
+    pub const BARY: u32 = 6;
+    /// Incident direction, octahedral, two f32.
+    pub const DIR: u32 = 8;
+    /// Incident radiance, RGB f32.
+    pub const RADIANCE: u32 = 10;
+    /// Words per reservoir.
+    pub const WORDS: u32 = 13;
+    /// Bits of the pixel index (images up to 8192 x 8192 = 2^26 pixels).
+    pub const CAMERA_SHIFT: u32 = 26;
+    /// Camera index mask after the shift.
+    pub const CAMERA_MASK: u32 = 7;
+    /// Pixel index mask.
+    pub const PIXEL_MASK: u32 = (1 << CAMERA_SHIFT) - 1;
+    /// The technique bit: 0 light sampling, 1 BSDF sampling.
+    pub const TECH_SHIFT: u32 = 29;
+}
+
+/// Cameras a ReSTIR optimizer can use (the camera index has three bits in a reservoir).
+pub const MAX_CAMERAS: usize = reservoir::CAMERA_MASK as usize + 1;
+
+/// Bytes of ReSTIR state per texel: two reservoirs (positive and negative) in each of two
+/// buffers (kept and fresh/merged), and a lock word per reservoir.
+pub const STATE_BYTES_PER_TEXEL: u64 = 2 * 2 * reservoir::WORDS as u64 * 4 + 2 * 4;
+
+/// Merge flags (`MERGE_FLAG_*`).
+const FLAG_TEMPORAL: u32 = 1;
+const FLAG_POSITIVIZE: u32 = 2;
+const FLAG_HAVE_PREV: u32 = 4;
+const FLAG_VERIFY: u32 = 8;
+
+/// Counter slots of the merge pass (`MERGE_STAT_*`).
+const MERGE_STAT_EVALUATIONS: usize = 0;
+const MERGE_STAT_DROPPED: usize = 1;
+const MERGE_STAT_VERIFIED: usize = 2;
+const MERGE_STAT_VERIFY_MAX_ERROR: usize = 3;
+
+/// Counter slots of the candidate pass (`CANDIDATE_STAT_*`).
+const CANDIDATE_STAT_OFFERED: usize = 0;
+const CANDIDATE_STAT_LOST: usize = 1;
+const CANDIDATE_STAT_DROPPED: usize = 2;
+
+/// The WGSL of `gen/restir_layout`: the reservoir layout, flags and counter slots above.
+pub fn layout_wgsl() -> String {
+    use reservoir::*;
+    let consts: &[(&str, u32)] = &[
+        ("RESERVOIR_WORDS", WORDS),
+        ("RES_INFO", INFO),
+        ("RES_W", W),
+        ("RES_VALUE", VALUE),
+        ("RES_TRI", TRI),
+        ("RES_BARY", BARY),
+        ("RES_DIR", DIR),
+        ("RES_RADIANCE", RADIANCE),
+        ("INFO_CAMERA_SHIFT", CAMERA_SHIFT),
+        ("INFO_CAMERA_MASK", CAMERA_MASK),
+        ("INFO_PIXEL_MASK", PIXEL_MASK),
+        ("INFO_TECH_SHIFT", TECH_SHIFT),
+        ("MAX_CAMERAS", MAX_CAMERAS as u32),
+        ("MERGE_FLAG_TEMPORAL", FLAG_TEMPORAL),
+        ("MERGE_FLAG_POSITIVIZE", FLAG_POSITIVIZE),
+        ("MERGE_FLAG_HAVE_PREV", FLAG_HAVE_PREV),
+        ("MERGE_FLAG_VERIFY", FLAG_VERIFY),
+        ("MERGE_STAT_EVALUATIONS", MERGE_STAT_EVALUATIONS as u32),
+        ("MERGE_STAT_DROPPED", MERGE_STAT_DROPPED as u32),
+        ("MERGE_STAT_VERIFIED", MERGE_STAT_VERIFIED as u32),
+        (
+            "MERGE_STAT_VERIFY_MAX_ERROR",
+            MERGE_STAT_VERIFY_MAX_ERROR as u32,
+        ),
+        ("CANDIDATE_STAT_OFFERED", CANDIDATE_STAT_OFFERED as u32),
+        ("CANDIDATE_STAT_LOST", CANDIDATE_STAT_LOST as u32),
+        ("CANDIDATE_STAT_DROPPED", CANDIDATE_STAT_DROPPED as u32),
+    ];
+    crate::gpu::shaders::wgsl_constants("src/optim/estimator/restir.rs", consts)
+}
+
+/// Confidence of the fresh candidates in the merge (the kept sample's is min(M, M-cap)).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Confidence {
+    /// Gradient samples per pixel (the reference code's M_c = spp; the pixel count cancels).
+    #[default]
+    Samples,
+    /// Candidates per pixel and texel: 2 techniques x gradient spp x cameras.
+    Candidates,
+}
+
+impl Confidence {
+    /// The name used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Confidence::Samples => "samples",
+            Confidence::Candidates => "candidates",
+        }
+    }
+}
+
+/// How the ReSTIR estimator reuses samples.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RestirOptions {
+    /// Cap on the confidence of the kept samples (the knob between reuse and staleness): they
+    /// weigh min(M_c x merges so far, m_cap) against the fresh candidates' M_c.
+    pub m_cap: f32,
+    /// Confidence of the fresh candidates.
+    pub confidence: Confidence,
+    /// Temporal reuse across iterations; without it, resampling within the iteration only.
+    pub temporal: bool,
+    /// Two reservoirs per texel (positive and negative part of the target); without it, one
+    /// over |target|.
+    pub positivization: bool,
+    /// Self-check of the stored paths: the merge also evaluates every kept path under the
+    /// state it was drawn at and records the largest relative difference from its stored
+    /// value ([`MergeDiagnostics`]). Costs one more BRDF evaluation per kept sample.
+    pub verify_paths: bool,
+}
+
+impl Default for RestirOptions {
+    fn default() -> Self {
+        RestirOptions {
+            m_cap: 16.0,
+            confidence: Confidence::default(),
+            temporal: true,
+            positivization: true,
+            verify_paths: false,
+        }
+    }
+}
+
+/// `CandidateParams` in shaders/restir_candidates.wgsl (a test checks the layout).
+/// The fields are documented in the WGSL twin.
+#[allow(missing_docs)]
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct CandidateParams {
+    pub camera: GpuCameraInfo,
+    pub seed: u32,
+    pub spp: u32,
+    pub stride: u32,
+    pub inv_spp: f32,
+    pub camera_index: u32,
+    pub adjoint_offset: u32,
+    pub positivize: u32,
+    pub _pad: u32,
+}
+
+/// `MergeParams` in shaders/restir_merge.wgsl (a test checks the layout).
+/// The fields are documented in the WGSL twin.
+#[allow(missing_docs)]
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct MergeParams {
+    pub cameras: [GpuCameraInfo; MAX_CAMERAS],
+    pub n_texels: u32,
+    pub n_pixels: u32,
+    pub seed: u32,
+    pub flags: u32,
+    pub m_fresh: f32,
+    pub m_kept: f32,
+    pub inv_spp: f32,
+    pub n_textures: u32,
+    pub stride: u32,
+    pub _pad: [u32; 3],
+}
+
+/// The part of a ReSTIR optimizer's state that carries over to the next iteration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RestirSnapshot {
+    /// The reservoirs kept from the last iteration (two per texel,
+    /// [`reservoir::WORDS`] words each).
+    pub reservoirs: Vec<u32>,
+    /// Merges whose samples the kept reservoirs can hold (0 before the first iteration or
+    /// without temporal reuse); it sets the kept samples' confidence.
+    pub history: u32,
+}
+
+/// What the merge pass counted since the optimizer was created.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct MergeDiagnostics {
+    /// BRDF evaluations of stored paths (the merge's whole work; it traces no ray).
+    pub evaluations: u64,
+    /// Kept paths checked with [`RestirOptions::verify_paths`].
+    pub verified: u64,
+    /// Largest relative difference between a kept path's stored value and its evaluation
+    /// under the state it was drawn at.
+    pub max_relative_error: f32,
+}
+
+/// The buffers ReSTIR allocates for `n_texels` texels, by label and size in bytes.
+pub(crate) fn memory(n_texels: u64) -> Vec<(String, u64)> {
+    let res = n_texels * 2 * reservoir::WORDS as u64 * 4;
+    vec![
+        ("reservoirs even".to_string(), res),
+        ("reservoirs odd".to_string(), res),
+        ("reservoir locks".to_string(), n_texels * 2 * 4),
+    ]
+}
+
+struct Camera {
+    uniform: wgpu::Buffer,
+    params: CandidateParams,
+    /// Per parity of the iteration (adjoints and reservoirs alternate).
+    groups: [wgpu::BindGroup; 2],
+}
+
+/// The ReSTIR estimator's passes and buffers.
+pub(crate) struct Restir {
+    candidate_pipeline: wgpu::ComputePipeline,
+    merge_pipeline: wgpu::ComputePipeline,
+    cameras: Vec<Camera>,
+    /// Reservoirs: fresh then merged at iteration t in buffer t % 2, kept in the other.
+    reservoirs: [wgpu::Buffer; 2],
+    locks: wgpu::Buffer,
+    merge_uniform: wgpu::Buffer,
+    merge_params: MergeParams,
+    merge_groups: [wgpu::BindGroup; 2],
+    merge_grid: (u32, u32),
+    candidate_stats: wgpu::Buffer,
+    merge_stats: wgpu::Buffer,
+    grid: (u32, u32),
+    options: RestirOptions,
+    seed: u32,
+    /// Merges whose samples the kept reservoirs can hold (0: nothing to reuse).
+    history: u32,
+    queue: wgpu::Queue,
+}
+
+impl Restir {
+    pub(crate) fn new(s: &Setup) -> Result<Restir> {
+        use Binding::*;
+        let gpu = s.gpu;
+        let o = s.settings.restir;
+        let n_cams = s.cameras.len();
+        if n_cams > MAX_CAMERAS {
+            return Err(Error::Invalid(format!(
+                "ReSTIR handles at most {MAX_CAMERAS} cameras, the task has {n_cams}"
+            )));
+        }
+        let n_pixels = s.settings.width * s.settings.height;
+        if u64::from(n_pixels) > u64::from(reservoir::PIXEL_MASK) + 1 {
+            return Err(Error::Invalid(format!(
+                "ReSTIR handles images of at most 2^{} pixels, the task has {n_pixels}",
+                reservoir::CAMERA_SHIFT
+            )));
+        }
+        let candidate_layout = gpu.layout(
+            "restir_candidates",
+            &[Uniform, Storage, StorageRw, StorageRw, StorageRw],
+        );
+        let merge_layout = gpu.layout(
+            "restir_merge",
+            &[
+                Uniform, Storage, Storage, Storage, StorageRw, StorageRw, StorageRw,
+            ],
+        );
+        let candidate_pipeline =
+            gpu.compute_pipeline("restir_candidates", &[&s.scene.layout, &candidate_layout])?;
+        let merge_pipeline =
+            gpu.compute_pipeline("restir_merge", &[&s.scene.layout, &merge_layout])?;
+        let n_texels = s.scene.n_texels as u64;
+        let sizes = memory(n_texels);
+        let reservoirs = [
+            gpu.storage_zeroed(&sizes[0].0, sizes[0].1),
+            gpu.storage_zeroed(&sizes[1].0, sizes[1].1),
+        ];
+        let locks = gpu.storage_zeroed(&sizes[2].0, sizes[2].1);
+        let candidate_stats = gpu.storage_zeroed("candidate stats", 16);
+        let merge_stats = gpu.storage_zeroed("merge stats", 16);
+        let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
+        let merge_grid = grid_2d(n_texels as u32, WORKGROUP, max_dim);
+        let mut cameras = [GpuCameraInfo::default(); MAX_CAMERAS];
+        cameras[..n_cams].copy_from_slice(s.cameras);
+        let spp = s.settings.gradient_spp;
+        let merge_params = MergeParams {
+            cameras,
+            n_texels: n_texels as u32,
+            n_pixels,
+            seed: 0,
+            flags: 0,
+            m_fresh: match o.confidence {
+                Confidence::Samples => spp as f32,
+                Confidence::Candidates => (2 * spp * n_cams as u32) as f32,
+            },
+            m_kept: 0.0,
+            inv_spp: 1.0 / spp as f32,
+            n_textures: s.set.textures.len() as u32,
+            stride: merge_grid.0 * WORKGROUP,
+            _pad: [0; 3],
+        };
+        let merge_uniform = gpu.uniform("merge params", bytemuck::bytes_of(&merge_params));
+        let merge_groups = [0usize, 1].map(|p| {
+            gpu.bind_group(
+                "restir_merge",
+                &merge_layout,
+                &[
+                    &merge_uniform,
+                    &s.adjoint[p],
+                    &s.adjoint[1 - p],
+                    &reservoirs[1 - p],
+                    &reservoirs[p],
+                    s.grad,
+                    &merge_stats,
+                ],
+            )
+        });
+        let cams = s
+            .cameras
+            .iter()
+            .enumerate()
+            .map(|(k, &camera)| {
+                let params = CandidateParams {
+                    camera,
+                    seed: 0,
+                    spp,
+                    stride: s.grid.0 * WORKGROUP,
+                    inv_spp: 1.0 / spp as f32,
+                    camera_index: k as u32,
+                    adjoint_offset: k as u32 * n_pixels,
+                    positivize: o.positivization as u32,
+                    _pad: 0,
+                };
+                let uniform = gpu.uniform(
+                    &format!("candidate params {k}"),
+                    bytemuck::bytes_of(&params),
+                );
+                let groups = [0usize, 1].map(|p| {
+                    gpu.bind_group(
+                        "restir_candidates",
+                        &candidate_layout,
+                        &[
+                            &uniform,
+                            &s.adjoint[p],
+                            &reservoirs[p],
+                            &locks,
+                            &candidate_stats,
+                        ],
+                    )
+                });
+                Camera {
+                    uniform,
+                    params,
+                    groups,
+                }
+            })
+            .collect();
+        Ok(Restir {
+            candidate_pipeline,
+            merge_pipeline,
+            cameras: cams,
+            reservoirs,
+            locks,
+            merge_uniform,
+            merge_params,
+            merge_groups,
+            merge_grid,
+            candidate_stats,
+            merge_stats,
+            grid: s.grid,
+            options: o,
+            seed: s.settings.seed,
+            history: 0,
+            queue: gpu.queue.clone(),
+        })
+    }
+
+    /// What the merge pass counted so far.
+    pub(crate) fn diagnostics(&self, gpu: &Gpu) -> Result<MergeDiagnostics> {
+        let m: Vec<u32> = gpu.read_pod(&self.merge_stats)?;
+        Ok(MergeDiagnostics {
+            evaluations: m[MERGE_STAT_EVALUATIONS] as u64,
+            verified: m[MERGE_STAT_VERIFIED] as u64,
+            max_relative_error: f32::from_bits(m[MERGE_STAT_VERIFY_MAX_ERROR]),
+        })
+    }
+}
+
+impl Estimator for Restir {
+    fn encode(&mut self, enc: &mut wgpu::CommandEncoder, frame: &Frame, timer: &mut PassTimer) {
+        let parity = frame.parity();
+        enc.clear_buffer(&self.reservoirs[parity], 0, None);
+        enc.clear_buffer(&self.locks, 0, None);
+        for (k, cam) in self.cameras.iter_mut().enumerate() {
+            cam.params.seed = pass_seed(self.seed, frame.iteration, k as u32, Seeds::GRADIENT);
+            self.queue
+                .write_buffer(&cam.uniform, 0, bytemuck::bytes_of(&cam.params));
+            encode_timed_pass(
+                enc,
+                "restir_candidates",
+                &self.candidate_pipeline,
+                &[frame.scene_group, &cam.groups[parity]],
+                self.grid,
+                timer.next(PassKind::Gradient),
+            );
+        }
+        let o = &self.options;
+        self.merge_params.seed = pass_seed(self.seed, frame.iteration, 0, Seeds::MERGE);
+        let have_prev = self.history > 0;
+        self.merge_params.flags = if o.temporal { FLAG_TEMPORAL } else { 0 }
+            | if o.positivization { FLAG_POSITIVIZE } else { 0 }
+            | if have_prev { FLAG_HAVE_PREV } else { 0 }
+            | if o.verify_paths { FLAG_VERIFY } else { 0 };
+        // Every kept reservoir has absorbed the fresh candidates of `history` iterations.
+        self.merge_params.m_kept = (self.merge_params.m_fresh * self.history as f32).min(o.m_cap);
+        self.queue.write_buffer(
+            &self.merge_uniform,
+            0,
+            bytemuck::bytes_of(&self.merge_params),
+        );
+        encode_timed_pass(
+            enc,
+            "restir_merge",
+            &self.merge_pipeline,
+            &[frame.scene_group, &self.merge_groups[parity]],
+            self.merge_grid,
+            timer.next(PassKind::Merge),
+        );
+    }
+
+    fn finish_iteration(&mut self) {
+        self.history = if self.options.temporal {
+            self.history.saturating_add(1)
+        } else {
+            0
+        };
+    }
+
+    fn uses_previous_state(&self) -> bool {
+        self.options.temporal
+    }
+
+    fn faults(&self, gpu: &Gpu, f: &mut FaultCounts) -> Result<()> {
+        let c: Vec<u32> = gpu.read_pod(&self.candidate_stats)?;
+        let m: Vec<u32> = gpu.read_pod(&self.merge_stats)?;
+        f.lost_offers += c[CANDIDATE_STAT_LOST];
+        f.dropped_gradient += c[CANDIDATE_STAT_DROPPED];
+        f.dropped_replays += m[MERGE_STAT_DROPPED];
+        Ok(())
+    }
+
+    fn snapshot(&self, gpu: &Gpu, iteration: u32) -> Result<Option<RestirSnapshot>> {
+        // Iteration `iteration - 1` merged into buffer (iteration - 1) % 2.
+        let last = (iteration as usize + 1) % 2;
+        Ok(Some(RestirSnapshot {
+            reservoirs: gpu.read_pod(&self.reservoirs[last])?,
+            history: self.history,
+        }))
+    }
+
+    fn restore(
+        &mut self,
+        gpu: &Gpu,
+        snapshot: Option<&RestirSnapshot>,
+        iteration: u32,
+    ) -> Result<()> {
+        let last = (iteration as usize + 1) % 2;
+        match snapshot {
+            Some(r) => {
+                let kept = &self.reservoirs[last];
+                if r.reservoirs.len() as u64 * 4 != kept.size() {
+                    return Err(Error::Invalid(
+                        "the saved ReSTIR state does not match this optimizer's textures".into(),
+                    ));
+                }
+                gpu.queue
+                    .write_buffer(kept, 0, bytemuck::cast_slice(&r.reservoirs));
+                self.history = if self.options.temporal { r.history } else { 0 };
+            }
+            None => self.history = 0,
+        }
+        Ok(())
+    }
+
+    fn state_bytes(&self) -> u64 {
+        self.reservoirs.iter().map(|b| b.size()).sum::<u64>() + self.locks.size()
+    }
+
+    fn restir_diagnostics(&self, gpu: &Gpu) -> Result<Option<MergeDiagnostics>> {
+        self.diagnostics(gpu).map(Some)
+    }
+}
+
+/// Run the streaming reservoir update of shaders/shared/reservoir.wgsl on the GPU for a test:
+/// `reservoirs` reservoirs each receive every candidate k (weight `weights[k]`) `copies`
+/// times, from concurrent invocations. Returns the index of the candidate each reservoir
+/// selected (u32::MAX for none) and the number of offers that never got the lock.
+pub fn selection_trial(
+    gpu: &Gpu,
+    weights: &[f32],
+    copies: u32,
+    reservoirs: u32,
+    seed: u32,
+) -> Result<(Vec<u32>, u32)> {
+    use Binding::*;
+    let words = reservoir::WORDS as usize;
+    let n_candidates = weights.len() as u32;
+    let n_invocations = n_candidates * copies * reservoirs;
+    let params: [u32; 4] = [n_candidates, copies, n_invocations, seed];
+    let layout = gpu.layout(
+        "reservoir_test",
+        &[Uniform, Storage, StorageRw, StorageRw, StorageRw],
+    );
+    let pipeline = gpu.compute_pipeline("reservoir_test", &[&layout])?;
+    let uniform = gpu.uniform("reservoir_test params", bytemuck::cast_slice(&params));
+    let w = gpu.storage(
+        "reservoir_test weights",
+        bytemuck::cast_slice(weights),
+        wgpu::BufferUsages::empty(),
+    );
+    // Empty reservoirs select nothing: info words hold u32::MAX.
+    let mut init = vec![0u32; reservoirs as usize * words];
+    for r in 0..reservoirs as usize {
+        init[r * words + reservoir::INFO as usize] = u32::MAX;
+    }
+    let res = gpu.storage(
+        "reservoir_test reservoirs",
+        bytemuck::cast_slice(&init),
+        wgpu::BufferUsages::COPY_SRC,
+    );
+    let locks = gpu.storage_zeroed("reservoir_test locks", reservoirs as u64 * 4);
+    let failures = gpu.storage_zeroed("reservoir_test failures", 16);
+    let group = gpu.bind_group(
+        "reservoir_test",
+        &layout,
+        &[&uniform, &w, &res, &locks, &failures],
+    );
+    let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
+    let grid = grid_2d(n_invocations, WORKGROUP, max_dim);
+    if grid.1 > 1 {
+        return Err(Error::Invalid(
+            "selection_trial: too many invocations".into(),
+        ));
+    }
+    let mut enc = gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("reservoir_test"),
+        });
+    crate::render::encode_pass(&mut enc, "reservoir_test", &pipeline, &[&group], grid);
+    gpu.queue.submit([enc.finish()]);
+    let out: Vec<u32> = gpu.read_pod(&res)?;
+    let fails: Vec<u32> = gpu.read_pod(&failures)?;
+    let selected = (0..reservoirs as usize)
+        .map(|r| out[r * words + reservoir::INFO as usize])
+        .collect();
+    Ok((selected, fails[0]))
+}

@@ -1,0 +1,103 @@
+//! Observed texels (shaders/observed_texels.wgsl): which texels of the optimized textures a
+//! camera sample of the task can reach, computed once per optimizer. The others get no
+//! gradient, keep their initial values, and are not determined by the images, so texture
+//! errors are reported over the observed ones as well ([`rmse_observed`]).
+use super::Optimizer;
+use crate::gpu::Binding;
+use crate::render::layout::GpuCameraInfo;
+use crate::render::params::ParamSet;
+use crate::render::WORKGROUP;
+use crate::Result;
+use bytemuck::{Pod, Zeroable};
+
+/// `ObservedParams` in shaders/observed_texels.wgsl (a test checks the layout).
+/// The fields are documented in the WGSL twin.
+#[allow(missing_docs)]
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct ObservedParams {
+    pub camera: GpuCameraInfo,
+    pub strata: u32,
+    pub stride: u32,
+    pub _pad: [u32; 2],
+}
+
+/// Rays per pixel side: 4 x 4 positions spread over each pixel.
+pub const STRATA: u32 = 4;
+
+impl Optimizer {
+    /// For every texel of the optimized textures (in the order of `set.textures`, row-major
+    /// within each), whether some camera sample of the task reaches it with a non-zero filter
+    /// weight: 4 x 4 rays per pixel and camera, computed on the GPU at the first call.
+    pub fn observed_texels(&self) -> Result<&[bool]> {
+        if let Some(m) = self.observed.get() {
+            return Ok(m);
+        }
+        let gpu = &self.gpu;
+        let layout = gpu.layout("observed_texels", &[Binding::Uniform, Binding::StorageRw]);
+        let scene = &self.renderer().scene;
+        let pipeline = gpu.compute_pipeline("observed_texels", &[&scene.layout, &layout])?;
+        let n_texels = scene.n_texels as u64;
+        let mask = gpu.storage_zeroed("observed texels", n_texels * 4);
+        for (k, camera) in self.camera_infos.iter().enumerate() {
+            let params = ObservedParams {
+                camera: *camera,
+                strata: STRATA,
+                stride: self.grid.0 * WORKGROUP,
+                _pad: [0; 2],
+            };
+            let uniform = gpu.uniform(
+                &format!("observed_texels params {k}"),
+                bytemuck::bytes_of(&params),
+            );
+            let group = gpu.bind_group("observed_texels", &layout, &[&uniform, &mask]);
+            let mut enc = gpu
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("observed_texels"),
+                });
+            crate::render::encode_pass(
+                &mut enc,
+                "observed_texels",
+                &pipeline,
+                &[&scene.bind_group, &group],
+                self.grid,
+            );
+            gpu.queue.submit([enc.finish()]);
+        }
+        let words: Vec<u32> = gpu.read_pod(&mask)?;
+        gpu.check("observed_texels")?;
+        let m = words[..n_texels as usize].iter().map(|&w| w != 0).collect();
+        Ok(self.observed.get_or_init(|| m))
+    }
+}
+
+/// RMSE of `values` against `truth` (laid out like `set.values`) over the channels of the
+/// texels marked in `observed` (one flag per texel, as [`Optimizer::observed_texels`]);
+/// NaN when none is observed.
+pub fn rmse_observed(set: &ParamSet, values: &[f32], truth: &[f32], observed: &[bool]) -> f64 {
+    let (mut s, mut n) = (0.0, 0usize);
+    let mut texel = 0usize;
+    for t in &set.textures {
+        let ch = t.channels() as usize;
+        for local in 0..(t.width * t.height) as usize {
+            if observed.get(texel + local).copied().unwrap_or(false) {
+                let base = t.offset as usize + local * ch;
+                for c in base..base + ch {
+                    s += ((values[c] - truth[c]) as f64).powi(2);
+                    n += 1;
+                }
+            }
+        }
+        texel += (t.width * t.height) as usize;
+    }
+    if n == 0 {
+        return f64::NAN;
+    }
+    (s / n as f64).sqrt()
+}
+
+/// The number of observed texels and of all texels.
+pub fn observed_count(observed: &[bool]) -> (usize, usize) {
+    (observed.iter().filter(|&&o| o).count(), observed.len())
+}
