@@ -44,6 +44,7 @@ pub fn run(scene_path: &Path, out: &Path, iterations: u32) -> psrestir::Result<O
         .expect("rendered from a truth scene");
     let settings = Settings {
         primal_spp: 2,
+        primal: Default::default(),
         gradient_spp: 2,
         ..Settings::new(64, 64, vec![main])
     };

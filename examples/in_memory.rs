@@ -122,6 +122,7 @@ pub fn run(iterations: u32) -> psrestir::Result<(f64, f64)> {
         .expect("rendered from a truth scene");
     let settings = Settings {
         primal_spp: 2,
+        primal: Default::default(),
         gradient_spp: 2,
         ..Settings::new(64, 64, vec![0])
     };

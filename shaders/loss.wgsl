@@ -1,57 +1,70 @@
 // Image loss and its adjoint dL/dI for one camera, from the primal render's accumulated
-// samples. The total loss is the mean over all cameras, pixels and channels; partial sums per
-// workgroup go to loss_partial[camera_slot * n_groups + group].
+// samples. The compared image is exposure x render; each pixel's terms are weighted by the
+// target's mask (its w; 0 leaves the pixel out of the loss and the gradient). The total loss
+// is the mean over all cameras' masked pixels and channels; partial sums per workgroup go to
+// loss_partial[partial_offset + group], and those of dL/d(exposure) to exposure_partial.
 #import shared/types
 
-// Keep in sync with GpuLossParams in src/render/layout.rs.
+// Mirrored by LossParams in src/optim/loss.rs.
 struct LossParams {
     n_pixels: u32,
     // 0: L2, 1: relMSE.
     kind: u32,
-    // 1 / (pixels x channels x cameras).
+    // 1 / (3 x the mask's sum over all cameras' pixels).
     norm: f32,
     partial_offset: u32,
     // Where this camera's pixels start in adjoint[].
     adjoint_offset: u32,
+    // The factor the render is multiplied by before the comparison.
+    exposure: f32,
     _pad0: u32,
     _pad1: u32,
-    _pad2: u32,
 }
 
 const REL_EPS: f32 = 0.01;
 
 @group(0) @binding(0) var<uniform> lp: LossParams;
 @group(0) @binding(1) var<storage, read> accum: array<vec4f>;
+// rgb, and the pixel's mask weight in w.
 @group(0) @binding(2) var<storage, read> target_image: array<vec4f>;
 @group(0) @binding(3) var<storage, read_write> adjoint: array<vec4f>;
 @group(0) @binding(4) var<storage, read_write> loss_partial: array<f32>;
 // [0] pixels whose loss or adjoint was not finite (left out of both).
 @group(0) @binding(5) var<storage, read_write> loss_stats: array<atomic<u32>, 4>;
+@group(0) @binding(6) var<storage, read_write> exposure_partial: array<f32>;
 
-var<workgroup> partial: array<f32, 64>;
+var<workgroup> partial: array<vec2f, 64>;
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(local_invocation_index) li: u32, @builtin(workgroup_id) wg: vec3u) {
     let i = gid.x;
-    var l = 0.0;
+    var l = vec2f(0.0);
     if i < lp.n_pixels {
         let a = accum[i];
-        let img = a.xyz / max(a.w, 1.0);
-        let g = target_image[i].xyz;
+        let rendered = a.xyz / max(a.w, 1.0);
+        let img = lp.exposure * rendered;
+        let t = target_image[i];
+        let g = t.xyz;
+        let mask = t.w;
         let diff = img - g;
         var w = vec3f(1.0);
         if lp.kind == 1u {
             w = 1.0 / (g * g + vec3f(REL_EPS));
         }
-        var adj = 2.0 * diff * w * lp.norm;
-        var term = dot(diff * diff, w) * lp.norm;
-        if !(all(abs(adj) < vec3f(3.0e38)) && abs(term) < 3.0e38) {
+        // dL / d(exposure x render), then by the chain rule the adjoint of the render and the
+        // derivative with respect to the exposure.
+        let d_img = 2.0 * diff * w * lp.norm * mask;
+        var adj = d_img * lp.exposure;
+        var term = dot(diff * diff, w) * lp.norm * mask;
+        var d_exposure = dot(d_img, rendered);
+        if !(all(abs(adj) < vec3f(3.0e38)) && abs(term) < 3.0e38 && abs(d_exposure) < 3.0e38) {
             adj = vec3f(0.0);
             term = 0.0;
+            d_exposure = 0.0;
             atomicAdd(&loss_stats[0], 1u);
         }
         adjoint[lp.adjoint_offset + i] = vec4f(adj, 0.0);
-        l = term;
+        l = vec2f(term, d_exposure);
     }
     partial[li] = l;
     workgroupBarrier();
@@ -62,6 +75,7 @@ fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(local_invocation_ind
         workgroupBarrier();
     }
     if li == 0u {
-        loss_partial[lp.partial_offset + wg.x] = partial[0];
+        loss_partial[lp.partial_offset + wg.x] = partial[0].x;
+        exposure_partial[lp.partial_offset + wg.x] = partial[0].y;
     }
 }

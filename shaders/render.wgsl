@@ -1,10 +1,14 @@
 // Primal render: one invocation per pixel, `spp` jittered camera samples each (box filter),
 // direct illumination with MIS, accumulated into accum (rgb sum, sample count in w).
+// With two_states set, every sample is also evaluated under the previous iteration's
+// textures (the same path: the same hit, light sample, BSDF direction and MIS weights, the
+// BRDF of the other textures; no extra ray) and accumulated into accum_prev: the correlated
+// render that the control-variate primal (primal_cv.wgsl) needs.
 #import shared/rng
 #import shared/camera
 #import shared/integrator
 
-// Keep in sync with RenderParams in src/render/layout.rs.
+// Mirrored by GpuRenderParams in src/render/layout.rs.
 struct RenderParams {
     camera: CameraInfo,
     seed: u32,
@@ -12,7 +16,7 @@ struct RenderParams {
     spp: u32,
     techniques: u32,
     stride: u32,
-    _pad0: u32,
+    two_states: u32,
     _pad1: u32,
     _pad2: u32,
 }
@@ -21,6 +25,8 @@ struct RenderParams {
 @group(1) @binding(1) var<storage, read_write> accum: array<vec4f>;
 // [0] camera rays, [1] shadow rays, [2] BSDF rays, [3] dropped non-finite samples.
 @group(1) @binding(2) var<storage, read_write> stats: array<atomic<u32>, 4>;
+// The same samples under the previous textures (rgb sum), when two_states is set.
+@group(1) @binding(3) var<storage, read_write> accum_prev: array<vec4f>;
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {
@@ -36,19 +42,24 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     techniques = rp.techniques;
     let xy = vec2f(f32(px), f32(py));
     var sum = vec3f(0.0);
+    var sum_prev = vec3f(0.0);
     var dropped = 0u;
     for (var s = 0u; s < rp.spp; s++) {
-        // The camera-sample index identifies this sample for replay.
+        // The camera-sample index identifies this sample.
         rng_init(rp.seed, (rp.sample_offset + s) * n_pixels + pixel, 0u);
         let d = camera_direction(rp.camera, xy + rand2());
-        let l = direct_radiance(rp.camera.origin, d);
-        if all(l == l) && all(abs(l) < vec3f(3.0e38)) {
-            sum += l;
+        let l = direct_radiance_states(rp.camera.origin, d, rp.two_states != 0u);
+        if all(l[0] == l[0]) && all(abs(l[0]) < vec3f(3.0e38)) && all(l[1] == l[1]) && all(abs(l[1]) < vec3f(3.0e38)) {
+            sum += l[0];
+            sum_prev += l[1];
         } else {
             dropped += 1u;
         }
     }
     accum[pixel] += vec4f(sum, f32(rp.spp));
+    if rp.two_states != 0u {
+        accum_prev[pixel] += vec4f(sum_prev, f32(rp.spp));
+    }
     atomicAdd(&stats[0], rp.spp);
     atomicAdd(&stats[1], shadow_rays);
     atomicAdd(&stats[2], bsdf_rays);

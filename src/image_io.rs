@@ -157,15 +157,27 @@ impl Image {
 /// Load an image as linear RGB: OpenEXR and Radiance HDR as they are, PNG and JPEG decoded
 /// from sRGB.
 pub fn load_linear(path: &Path) -> Result<Image> {
+    Ok(load_linear_alpha(path)?.0)
+}
+
+/// [`load_linear`] with the image's alpha channel in [0, 1], when it has one below 1
+/// anywhere (PNG with alpha, EXR with an `A` channel); None otherwise.
+pub fn load_linear_alpha(path: &Path) -> Result<(Image, Option<Vec<f32>>)> {
     let ext = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
-    let (width, height, rgb) = match ext.as_str() {
-        "exr" => crate::scene::images::decode_exr(path)?,
+    let (width, height, rgb, alpha) = match ext.as_str() {
+        "exr" => {
+            let (w, h, px) = crate::scene::images::decode_exr_rgba(path)?;
+            let rgb = px.iter().map(|p| [p[0], p[1], p[2]]).collect();
+            let a: Vec<f32> = px.iter().map(|p| p[3]).collect();
+            (w, h, rgb, a)
+        }
         "hdr" => {
             let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
-            crate::scene::images::decode_hdr(&bytes, path)?
+            let (w, h, rgb) = crate::scene::images::decode_hdr(&bytes, path)?;
+            (w, h, rgb, Vec::new())
         }
         "png" | "jpg" | "jpeg" => {
             let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
@@ -179,14 +191,40 @@ pub fn load_linear(path: &Path) -> Result<Image> {
                 .iter()
                 .map(|p| [0, 1, 2].map(|c| srgb_to_linear(p[c] as f32 / 255.0)))
                 .collect();
-            (img.width, img.height, rgb)
+            let a = img.rgba.iter().map(|p| p[3] as f32 / 255.0).collect();
+            (img.width, img.height, rgb, a)
         }
         _ => return Err(Error::file(path, "images must be .exr, .hdr, .png or .jpg")),
     };
     if rgb.iter().flatten().any(|v| !v.is_finite()) {
         return Err(Error::file(path, "image has non-finite pixels"));
     }
-    Ok(Image { width, height, rgb })
+    let alpha = alpha.iter().any(|a| *a < 1.0).then(|| {
+        alpha
+            .iter()
+            .map(|a| {
+                if a.is_finite() {
+                    a.clamp(0.0, 1.0)
+                } else {
+                    0.0
+                }
+            })
+            .collect()
+    });
+    Ok((Image { width, height, rgb }, alpha))
+}
+
+/// A mask image: its alpha where it has one below 1, else its gray value (mean of RGB),
+/// clamped to [0, 1].
+pub fn load_mask(path: &Path) -> Result<(u32, u32, Vec<f32>)> {
+    let (img, alpha) = load_linear_alpha(path)?;
+    let m = alpha.unwrap_or_else(|| {
+        img.rgb
+            .iter()
+            .map(|p| ((p[0] + p[1] + p[2]) / 3.0).clamp(0.0, 1.0))
+            .collect()
+    });
+    Ok((img.width, img.height, m))
 }
 
 /// Two images side by side (left, right), same height.

@@ -59,6 +59,23 @@ enum ConfidenceArg {
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
+enum PrimalArg {
+    /// An independent render at the primal spp.
+    Independent,
+    /// The recursive control variate: the render carried over from the last iteration.
+    ControlVariate,
+}
+
+impl PrimalArg {
+    fn mode(self) -> optim::PrimalMode {
+        match self {
+            PrimalArg::Independent => optim::PrimalMode::Independent,
+            PrimalArg::ControlVariate => optim::PrimalMode::ControlVariate,
+        }
+    }
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
 enum ProtocolArg {
     /// Each task's own sampling settings.
     Default,
@@ -162,6 +179,9 @@ enum Command {
         /// Continue from the checkpoint in the output folder.
         #[arg(long)]
         resume: bool,
+        /// Primal estimator (overrides the task).
+        #[arg(long, value_enum)]
+        primal: Option<PrimalArg>,
     },
     /// Write one gradient estimate at the task's initial textures, as images in texel space.
     Gradient {
@@ -214,6 +234,9 @@ enum Command {
         /// Measure the gradient error only (skip the equal-time optimization).
         #[arg(long)]
         gradient_only: bool,
+        /// Primal estimator of every run (default: each task's own).
+        #[arg(long, value_enum)]
+        primal: Option<PrimalArg>,
         /// Samples per pixel of the renders that measure image error.
         #[arg(long, default_value_t = 64)]
         eval_spp: u32,
@@ -359,9 +382,13 @@ fn run(cli: Cli) -> Result<()> {
             time_budget,
             out,
             resume,
+            primal,
         } => {
             let path = task.unwrap_or_else(|| PathBuf::from(DEFAULT_TASK));
-            let task = Task::load(&path)?;
+            let mut task = Task::load(&path)?;
+            if let Some(p) = primal {
+                task.optimizer.primal = p.mode();
+            }
             if let Some(b) = time_budget {
                 if !(b.is_finite() && b > 0.0) {
                     bail!("--time-budget must be a positive number of seconds");
@@ -498,6 +525,7 @@ fn run(cli: Cli) -> Result<()> {
             reference_primal_spp,
             protocol,
             gradient_only,
+            primal,
             eval_spp,
             restir,
         } => {
@@ -525,6 +553,7 @@ fn run(cli: Cli) -> Result<()> {
                     ProtocolArg::Paper => psrestir::bench::Protocol::Paper,
                 },
                 gradient_only,
+                primal: primal.map(PrimalArg::mode),
                 eval_spp,
                 restir: restir.resolve()?,
                 out: out.clone(),

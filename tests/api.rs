@@ -93,6 +93,7 @@ fn problem(gpu: &Gpu, colors: [[u8; 3]; 2]) -> Problem {
 fn settings(method: Method) -> Settings {
     Settings {
         primal_spp: 2,
+        primal: Default::default(),
         gradient_spp: 2,
         method,
         ..Settings::new(32, 32, vec![0])

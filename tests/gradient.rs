@@ -1,11 +1,12 @@
 //! The baseline gradient is unbiased: its mean over many independent estimates equals the
 //! central finite difference of the loss, per texel, for base color, roughness and metallic,
-//! with nearest and bilinear filters, on a small scene with hard and soft shadows.
+//! with nearest and bilinear filters, on a small scene with hard and soft shadows; also with
+//! the control-variate primal (whose adjoint carries earlier iterations' samples).
 mod common;
 
 use common::*;
 use psrestir::image_io::Image;
-use psrestir::optim::{loss, Optimizer, Settings};
+use psrestir::optim::{loss, Optimizer, PrimalMode, Settings};
 use psrestir::render::params::ParamSet;
 use psrestir::task::{Filter, Init, Loss, Slot, TextureSpec};
 
@@ -22,6 +23,16 @@ fn spec(slot: Slot, init: Init) -> TextureSpec {
 }
 
 fn check_gradient(slot: Slot, filter: Filter, values: &[f32], target_values: &[f32]) {
+    check_gradient_with(slot, filter, values, target_values, PrimalMode::Independent)
+}
+
+fn check_gradient_with(
+    slot: Slot,
+    filter: Filter,
+    values: &[f32],
+    target_values: &[f32],
+    primal: PrimalMode,
+) {
     let Some(gpu) = gpu() else { return };
     let scene = shadow_scene();
     let init = Init::Vector(vec![0.5; slot.channels() as usize]);
@@ -37,6 +48,7 @@ fn check_gradient(slot: Slot, filter: Filter, values: &[f32], target_values: &[f
         height: W,
         cameras: vec![0],
         primal_spp: 16,
+        primal,
         gradient_spp: 16,
         loss: Loss::L2,
         seed: 7,
@@ -44,6 +56,7 @@ fn check_gradient(slot: Slot, filter: Filter, values: &[f32], target_values: &[f
         restir: Default::default(),
         schedule: Default::default(),
         adam_mask: false,
+        exposure_learning_rate: None,
     };
     // Target: the scene with other texel values, rendered with many samples.
     let blank = Image::new(W, W);
@@ -188,5 +201,29 @@ fn metallic_gradient_matches_finite_differences_bilinear() {
         Filter::Bilinear,
         &[0.2, 0.5, 0.7, 0.4],
         &[0.9, 0.1, 0.3, 0.6],
+    );
+}
+
+#[test]
+fn base_color_gradient_with_the_control_variate_matches_finite_differences() {
+    let v = [0.5, 0.4, 0.3, 0.6, 0.5, 0.2, 0.3, 0.3, 0.3, 0.7, 0.6, 0.5];
+    let t = [0.8, 0.2, 0.1, 0.3, 0.6, 0.4, 0.5, 0.5, 0.5, 0.2, 0.3, 0.9];
+    check_gradient_with(
+        Slot::BaseColor,
+        Filter::Bilinear,
+        &v,
+        &t,
+        PrimalMode::ControlVariate,
+    );
+}
+
+#[test]
+fn roughness_gradient_with_the_control_variate_matches_finite_differences() {
+    check_gradient_with(
+        Slot::Roughness,
+        Filter::Nearest,
+        &[0.3, 0.5, 0.7, 0.4],
+        &[0.8, 0.2, 0.4, 0.9],
+        PrimalMode::ControlVariate,
     );
 }

@@ -1,11 +1,12 @@
-//! Adam on the GPU equals the Rust reference, and an optimization from a constant texture
-//! recovers a known texture.
+//! Adam on the GPU equals the Rust reference (with a learning-rate schedule and with masked
+//! updates too), the observed-texel mask equals the texels that the camera's pixels reach, and
+//! an optimization from a constant texture recovers a known texture.
 mod common;
 
 use common::*;
 use glam::Vec3;
 use psrestir::image_io::Image;
-use psrestir::optim::{adam, run::rmse, Optimizer, Settings};
+use psrestir::optim::{adam, run::rmse, Optimizer, Schedule, ScheduleKind, Settings};
 use psrestir::render::params::ParamSet;
 use psrestir::scene::{Material, PunctualKind, PunctualLight, Scene};
 use psrestir::task::{Filter, Init, Loss, Slot, TextureSpec};
@@ -48,6 +49,19 @@ fn setup(
     res: u32,
     truth: &[f32],
 ) -> (Optimizer, Vec<f32>) {
+    setup_with(gpu, slot, lr, res, truth, Filter::Bilinear, |_| {})
+}
+
+/// `setup` with a texture filter and a change of the settings.
+fn setup_with(
+    gpu: &psrestir::gpu::Gpu,
+    slot: Slot,
+    lr: f32,
+    res: u32,
+    truth: &[f32],
+    filter: Filter,
+    change: impl Fn(&mut Settings),
+) -> (Optimizer, Vec<f32>) {
     let scene = plane();
     let spec = TextureSpec {
         material: "plane".into(),
@@ -56,18 +70,13 @@ fn setup(
         init: Init::Scalar(0.5),
         learning_rate: lr,
     };
-    let set = ParamSet::from_specs(
-        &scene,
-        &[spec],
-        Filter::Bilinear,
-        std::path::Path::new("test"),
-    )
-    .unwrap();
-    let settings = Settings {
+    let set = ParamSet::from_specs(&scene, &[spec], filter, std::path::Path::new("test")).unwrap();
+    let mut settings = Settings {
         width: 48,
         height: 48,
         cameras: vec![0],
         primal_spp: 4,
+        primal: Default::default(),
         gradient_spp: 4,
         loss: Loss::L2,
         seed: 3,
@@ -75,7 +84,9 @@ fn setup(
         restir: Default::default(),
         schedule: Default::default(),
         adam_mask: false,
+        exposure_learning_rate: None,
     };
+    change(&mut settings);
     let init = set.values.clone();
     let opt = Optimizer::new(
         gpu,
@@ -135,6 +146,141 @@ fn adam_steps_on_the_gpu_equal_the_rust_reference() {
         p = gpu_p;
         m = gm;
         v = gv;
+    }
+}
+
+#[test]
+fn scheduled_masked_adam_steps_equal_the_rust_reference() {
+    let Some(gpu) = gpu() else { return };
+    // 64x64 texels, nearest, 1 gradient spp on 48x48 pixels: in each step most texels get
+    // no sample, so their gradient is exactly zero and the mask decides what happens to them.
+    let res = 64;
+    let truth: Vec<f32> = (0..res * res)
+        .map(|i| 0.2 + 0.6 * ((i * 7) % 11) as f32 / 11.0)
+        .collect();
+    let schedule = Schedule {
+        kind: ScheduleKind::Cosine,
+        final_factor: 0.1,
+        warmup: 2,
+        ..Schedule::constant()
+    };
+    let lr = 0.05;
+    let steps = 8u32;
+    let (mut opt, init) = setup_with(
+        &gpu,
+        Slot::Roughness,
+        lr,
+        res,
+        &truth,
+        Filter::Nearest,
+        |s| {
+            s.schedule = schedule.clone();
+            s.adam_mask = true;
+            s.gradient_spp = 1;
+        },
+    );
+    let n = init.len();
+    let (mut p, mut m, mut v) = (init.clone(), vec![0.0; n], vec![0.0; n]);
+    let (lo, hi) = Slot::Roughness.range();
+    let mut masked_with_history = 0;
+    for t in 1..=steps {
+        let progress = (t - 1) as f64 / steps as f64;
+        opt.set_progress(progress);
+        opt.step().unwrap();
+        let want_lr = lr * schedule.factor(t - 1, progress);
+        assert_eq!(opt.last_learning_rates(), &[want_lr], "step {t}");
+        let g = opt.read_gradient().unwrap();
+        let (p0, m0, v0) = (p.clone(), m.clone(), v.clone());
+        adam::step_masked(&mut p, &mut m, &mut v, &g, want_lr, t, lo, hi, true);
+        let gpu_p = opt.read_params().unwrap();
+        let [gm, gv] = opt.read_moments().unwrap();
+        for i in 0..n {
+            if g[i] == 0.0 {
+                // Masked: value and moments are left exactly as they were.
+                assert_eq!(
+                    (gpu_p[i], gm[i], gv[i]),
+                    (p0[i], m0[i], v0[i]),
+                    "step {t}, entry {i}"
+                );
+                masked_with_history += (m0[i] != 0.0) as u32;
+                continue;
+            }
+            assert!(
+                (gm[i] - m[i]).abs() <= 1e-6 * m[i].abs() + 1e-20,
+                "step {t}, m[{i}]"
+            );
+            assert!(
+                (gv[i] - v[i]).abs() <= 1e-6 * v[i].abs() + 1e-30,
+                "step {t}, v[{i}]"
+            );
+            assert!(
+                (gpu_p[i] - p[i]).abs() <= 1e-6,
+                "step {t}, param {i}: {} vs {} (lr {want_lr})",
+                gpu_p[i],
+                p[i]
+            );
+        }
+        p = gpu_p;
+        m = gm;
+        v = gv;
+    }
+    // The mask was exercised: entries with moments from earlier steps got a zero gradient.
+    assert!(
+        masked_with_history > 100,
+        "only {masked_with_history} masked entries had history"
+    );
+}
+
+#[test]
+fn the_observed_mask_is_what_the_camera_sees() {
+    let Some(gpu) = gpu() else { return };
+    // The plane y = 0 spans x, z in [-1, 1] with u = (x + 1) / 2, v = (1 - z) / 2. A camera
+    // straight above it at height h sees x, z in [-a, a] with a = h tan(fov / 2). With 16
+    // texels per side, a = 0.59375 puts the visible edges at u = 3.25 / 16 and 12.75 / 16:
+    // a quarter texel inside texels, so no texel is reached by a mere sliver of the view.
+    let a = 0.59375f32;
+    let fov = 0.9f32;
+    let h = a / (0.5 * fov).tan();
+    let mut scene = plane();
+    scene.cameras[0] = look_at(Vec3::new(0.0, h, 0.0), Vec3::ZERO, Vec3::NEG_Z, fov);
+    let res = 16u32;
+    for filter in [Filter::Nearest, Filter::Bilinear] {
+        let spec = TextureSpec {
+            material: "plane".into(),
+            slot: Slot::Roughness,
+            resolution: [res, res],
+            init: Init::Scalar(0.5),
+            learning_rate: 0.01,
+        };
+        let set =
+            ParamSet::from_specs(&scene, &[spec], filter, std::path::Path::new("test")).unwrap();
+        let settings = Settings::new(64, 64, vec![0]);
+        let opt = Optimizer::new(&gpu, &scene, set, settings, &[Image::new(64, 64)]).unwrap();
+        let mask = opt.observed_texels().unwrap();
+        // The visible texel interval along each axis, in texel units.
+        let (lo, hi) = (8.0 * (1.0 - a), 8.0 * (1.0 + a));
+        let reached = |i: u32| -> bool {
+            let i = i as f32;
+            match filter {
+                // Texel i covers [i, i + 1).
+                Filter::Nearest => i + 1.0 > lo && i < hi,
+                // Texel i has a non-zero bilinear weight on (i - 0.5, i + 1.5).
+                Filter::Bilinear => i + 1.5 > lo && i - 0.5 < hi,
+            }
+        };
+        let mut expected = 0;
+        for y in 0..res {
+            for x in 0..res {
+                let want = reached(x) && reached(y);
+                expected += want as u32;
+                assert_eq!(
+                    mask[(y * res + x) as usize],
+                    want,
+                    "{filter:?} texel ({x}, {y})"
+                );
+            }
+        }
+        assert_eq!(expected, if filter == Filter::Nearest { 100 } else { 144 });
     }
 }
 

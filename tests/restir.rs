@@ -89,6 +89,7 @@ fn optimizer_for(
         height: W,
         cameras: vec![0],
         primal_spp: 8,
+        primal: Default::default(),
         gradient_spp: 2,
         loss: Loss::L2,
         seed: 11,
@@ -96,6 +97,7 @@ fn optimizer_for(
         restir,
         schedule: Default::default(),
         adam_mask: false,
+        exposure_learning_rate: None,
     };
     let base = Settings {
         method: Method::Baseline,
@@ -144,6 +146,7 @@ fn without_reuse_restir_equals_the_baseline_for_scalar_textures() {
             height: W,
             cameras: vec![0],
             primal_spp: 8,
+            primal: Default::default(),
             gradient_spp: 2,
             loss: Loss::L2,
             seed: 11,
@@ -151,6 +154,7 @@ fn without_reuse_restir_equals_the_baseline_for_scalar_textures() {
             restir: opts,
             schedule: Default::default(),
             adam_mask: false,
+            exposure_learning_rate: None,
         };
         let opt = Optimizer::new(
             &gpu,
@@ -449,6 +453,7 @@ fn gradients_follow_a_sign_change() {
             height: W,
             cameras: vec![0],
             primal_spp: 8,
+            primal: Default::default(),
             gradient_spp: 2,
             loss: Loss::L2,
             seed: 5,
@@ -456,6 +461,7 @@ fn gradients_follow_a_sign_change() {
             restir: RestirOptions::default(),
             schedule: Default::default(),
             adam_mask: false,
+            exposure_learning_rate: None,
         };
         let opt = Optimizer::new(
             &gpu,

@@ -2,19 +2,25 @@
 
 struct CameraInfo {
     origin: vec3f,
-    tan_half_fov_y: f32,
+    // Focal lengths in pixels (of this image size).
+    fx: f32,
     right: vec3f,
-    aspect: f32,
+    fy: f32,
     up: vec3f,
     width: u32,
     forward: vec3f,
     height: u32,
+    // Principal point in pixels (x right, y down; the image center is (width, height) / 2).
+    cx: f32,
+    cy: f32,
+    _pad0: u32,
+    _pad1: u32,
 }
 
 // Direction through the continuous pixel position px (x right, y down, in pixels).
 fn camera_direction(cam: CameraInfo, px: vec2f) -> vec3f {
-    let sx = (2.0 * px.x / f32(cam.width) - 1.0) * cam.tan_half_fov_y * cam.aspect;
-    let sy = (1.0 - 2.0 * px.y / f32(cam.height)) * cam.tan_half_fov_y;
+    let sx = (px.x - cam.cx) / cam.fx;
+    let sy = (cam.cy - px.y) / cam.fy;
     return normalize(cam.forward + sx * cam.right + sy * cam.up);
 }
 

@@ -137,22 +137,31 @@ fn contribution(mat: SurfaceMaterial, sf: Surface, s: DirectSample) -> vec3f {
     return brdf_eval_cos(mat, wo, to_local(sf.frame, s.wi)) * s.radiance * s.scale;
 }
 
-// Radiance along a camera ray (origin o, unit direction d) with direct illumination only.
-fn direct_radiance(o: vec3f, d: vec3f) -> vec3f {
+// Radiance along a camera ray (origin o, unit direction d) with direct illumination only:
+// [0] under the current textures and, when `both`, [1] the same path (same hit, samples and
+// MIS weights) under the previous iteration's textures (otherwise [1] = [0]).
+fn direct_radiance_states(o: vec3f, d: vec3f, both: bool) -> array<vec3f, 2> {
     let hit = trace_closest(o, d, 3.0e38);
     if hit.tri == NONE {
-        return env_radiance(d);
+        let e = env_radiance(d);
+        return array<vec3f, 2>(e, e);
     }
     let sf = surface_at(o, hit);
     if !sf.valid {
-        return vec3f(0.0);
+        return array<vec3f, 2>(vec3f(0.0), vec3f(0.0));
     }
-    var l = emitted(hit.tri, hit.b1, hit.b2, sf.front);
+    let e = emitted(hit.tri, hit.b1, hit.b2, sf.front);
     let mat = surface_material(sf);
     let s = sample_direct(sf, mat);
-    l += contribution(mat, sf, s.nee);
-    l += contribution(mat, sf, s.bsdf);
-    return l;
+    let l = e + contribution(mat, sf, s.nee) + contribution(mat, sf, s.bsdf);
+    if !both {
+        return array<vec3f, 2>(l, l);
+    }
+    use_prev_params = true;
+    let mat_prev = surface_material(sf);
+    use_prev_params = false;
+    let l_prev = e + contribution(mat_prev, sf, s.nee) + contribution(mat_prev, sf, s.bsdf);
+    return array<vec3f, 2>(l, l_prev);
 }
 
 // A camera sample as the gradient passes see it: the surface it hits and its two direct

@@ -74,6 +74,8 @@ pub struct BenchOptions {
     pub protocol: Protocol,
     /// Measure the gradient error only (no equal-time optimization).
     pub gradient_only: bool,
+    /// The primal estimator of every run (None: each task's own).
+    pub primal: Option<crate::optim::PrimalMode>,
     /// Samples per pixel of the renders that measure image error.
     pub eval_spp: u32,
     /// Image-error evaluations along each optimization (start and end included).
@@ -97,6 +99,7 @@ impl Default for BenchOptions {
             reference_primal_spp: 256,
             protocol: Protocol::Default,
             gradient_only: false,
+            primal: None,
             eval_spp: 64,
             curve_points: 11,
             restir: RestirOptions::default(),
@@ -172,6 +175,20 @@ pub struct SceneResult {
     /// Mean wall-clock ms of a ReSTIR and a baseline iteration in the gradient phase (at the
     /// task's spp, GPU work finished), and their ratio.
     pub ms_per_iteration_ratio: f64,
+    /// The primal estimator of the gradient and optimization phases.
+    pub primal: String,
+    /// relMSE of an independent primal render (the task's primal spp) against a converged
+    /// render, at the state after `warmup` iterations (mean over seeds and cameras).
+    pub primal_relmse_independent: f64,
+    /// relMSE of the control-variate primal image at the same state.
+    pub primal_relmse_control_variate: f64,
+    /// control variate / independent.
+    pub primal_relmse_ratio: f64,
+    /// GPU ms of the primal passes per iteration: independent, control variate (render with
+    /// both states plus the combination pass), when timestamps exist.
+    pub primal_ms_independent: Option<f64>,
+    /// See `primal_ms_independent`.
+    pub primal_ms_control_variate: Option<f64>,
     /// The equal-time optimization (absent with `--gradient-only`).
     #[serde(flatten)]
     pub optimization: Option<OptimizationResult>,
@@ -381,7 +398,107 @@ impl Progress {
 }
 
 fn settings(prep: &Problem, task: &Task, method: Method, o: &BenchOptions) -> Settings {
-    task_settings(task, &prep.cameras, method, o.restir)
+    let mut s = task_settings(task, &prep.cameras, method, o.restir);
+    if let Some(p) = o.primal {
+        s.primal = p;
+    }
+    s
+}
+
+/// The primal estimators' image error and cost (issue: recursive control variates): per
+/// seed, an optimizer with each primal mode runs `warmup` iterations, then one more estimate
+/// with the textures held; its primal image is compared with a converged render of the same
+/// textures.
+struct PrimalPhase {
+    relmse_independent: f64,
+    relmse_control_variate: f64,
+    ms_independent: Option<f64>,
+    ms_control_variate: Option<f64>,
+}
+
+fn primal_phase(
+    gpu: &Gpu,
+    task: &Task,
+    prep: &Problem,
+    o: &BenchOptions,
+    progress: &Progress,
+) -> Result<PrimalPhase> {
+    use crate::optim::PrimalMode;
+    let repeats = o.repeats.max(1);
+    let mut out = PrimalPhase {
+        relmse_independent: 0.0,
+        relmse_control_variate: 0.0,
+        ms_independent: None,
+        ms_control_variate: None,
+    };
+    let n = (repeats as usize * prep.targets.len()) as f64;
+    for rep in 0..repeats {
+        progress.message(format!("primal error, seed {}/{repeats}", rep + 1));
+        let seed = task.seed.wrapping_add(2000 * (rep + 1));
+        for mode in [PrimalMode::Independent, PrimalMode::ControlVariate] {
+            let mut opt = Optimizer::new(
+                gpu,
+                &prep.scene,
+                prep.set.clone(),
+                Settings {
+                    seed,
+                    primal: mode,
+                    ..settings(prep, task, Method::Baseline, o)
+                },
+                &prep.targets,
+            )?;
+            let mut times = PassTimes::default();
+            let mut timed = 0;
+            for i in 0..o.warmup {
+                opt.step()?;
+                if i >= o.warmup / 2 {
+                    if let Some(t) = opt.pass_times()? {
+                        times.add(&t);
+                        timed += 1;
+                    }
+                }
+            }
+            // One more estimate at fixed textures: its primal image is at `read_params`.
+            opt.estimate_gradient(opt.iteration)?;
+            let ms = (timed > 0).then(|| times.primal_ms / timed as f64);
+            for k in 0..prep.targets.len() {
+                let converged = opt.render(
+                    k,
+                    o.reference_primal_spp,
+                    crate::optim::pass_seed(
+                        seed,
+                        u32::MAX - 5,
+                        k as u32,
+                        crate::optim::Seeds::EVAL,
+                    ),
+                )?;
+                let img = match opt.control_variate_image(k)? {
+                    Some(img) => img,
+                    None => opt.render(
+                        k,
+                        task.optimizer.primal_spp,
+                        crate::optim::pass_seed(
+                            seed,
+                            u32::MAX - 6,
+                            k as u32,
+                            crate::optim::Seeds::PRIMAL,
+                        ),
+                    )?,
+                };
+                let e = image_relmse(&img, &converged) / n;
+                match mode {
+                    PrimalMode::Independent => out.relmse_independent += e,
+                    PrimalMode::ControlVariate => out.relmse_control_variate += e,
+                }
+            }
+            match mode {
+                PrimalMode::Independent => out.ms_independent = ms,
+                PrimalMode::ControlVariate => out.ms_control_variate = ms,
+            }
+        }
+    }
+    progress.done();
+    Ok(out)
 }
 
 /// Mean milliseconds of `n` steps after one untimed step.
@@ -721,7 +838,7 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         loaded.push(o.protocol.apply(&scaled(&Task::load(p)?, o.scale)));
     }
     std::fs::create_dir_all(&o.out).map_err(|e| Error::file(&o.out, e.to_string()))?;
-    let per_scene = o.repeats.max(1) as u64 + if o.gradient_only { 1 } else { 3 };
+    let per_scene = o.repeats.max(1) as u64 + if o.gradient_only { 2 } else { 4 };
     let progress = Progress::new(o.progress, loaded.len() as u64 * per_scene);
     let mut report = BenchReport {
         version: env!("CARGO_PKG_VERSION").into(),
@@ -748,6 +865,7 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         progress.message(format!("{name}: rendering targets"));
         let prep = Problem::from_task(gpu, task, &dir, false)?;
         progress.done();
+        let pp = primal_phase(gpu, task, &prep, o, &progress)?;
         let g = gradient_phase(gpu, task, &prep, o, &progress)?;
         let (optimization, finals) = if o.gradient_only {
             (None, None)
@@ -778,6 +896,15 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
             gradient_relmse_estimator_only_ratio_equal_time: g.only_restir
                 / g.only_baseline_equal_time,
             ms_per_iteration_ratio: g.ms_ratio,
+            primal: settings(&prep, task, Method::Restir, o)
+                .primal
+                .name()
+                .into(),
+            primal_relmse_independent: pp.relmse_independent,
+            primal_relmse_control_variate: pp.relmse_control_variate,
+            primal_relmse_ratio: pp.relmse_control_variate / pp.relmse_independent,
+            primal_ms_independent: pp.ms_independent,
+            primal_ms_control_variate: pp.ms_control_variate,
             optimization,
         };
         report::write_scene_files(&dir, &prep, &result, &g.snapshot, finals.as_ref())?;

@@ -197,6 +197,34 @@ pub fn gradient_table(r: &BenchReport) -> String {
     s
 }
 
+/// The primal estimators' table (markdown): image error of the primal at the state after the
+/// warm-up, and its GPU cost.
+pub fn primal_table(r: &BenchReport) -> String {
+    let mut s = String::from(
+        "| scene | primal relMSE independent | control variate | ratio | primal GPU ms independent \
+         | control variate | cost ratio |\n|---|---|---|---|---|---|---|\n",
+    );
+    for x in &r.scenes {
+        let ms = |v: Option<f64>| v.map(|v| format!("{v:.1}")).unwrap_or_else(|| "–".into());
+        let cost = match (x.primal_ms_independent, x.primal_ms_control_variate) {
+            (Some(a), Some(b)) => ratio(b / a),
+            _ => "–".into(),
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | **{}** | {} | {} | {} |",
+            x.name,
+            sci(x.primal_relmse_independent),
+            sci(x.primal_relmse_control_variate),
+            ratio(x.primal_relmse_ratio),
+            ms(x.primal_ms_independent),
+            ms(x.primal_ms_control_variate),
+            cost
+        );
+    }
+    s
+}
+
 /// The equal-time optimization table (markdown).
 pub fn optimization_table(r: &BenchReport) -> String {
     let mut s = String::new();
@@ -234,7 +262,9 @@ pub fn optimization_table(r: &BenchReport) -> String {
 
 /// Both tables, as `psrestir bench` prints them.
 pub fn table(r: &BenchReport) -> String {
-    let mut s = gradient_table(r);
+    let mut s = primal_table(r);
+    s.push('\n');
+    s.push_str(&gradient_table(r));
     if r.scenes.iter().any(|x| x.optimization.is_some()) {
         s.push('\n');
         s.push_str(&optimization_table(r));
@@ -313,6 +343,12 @@ pub fn write_report(out: &Path, r: &BenchReport) -> Result<()> {
         r.confidence,
         r.budget_s,
         r.eval_spp,
+    );
+    md.push_str("## Primal image error\n\n");
+    md.push_str(&primal_table(r));
+    md.push_str(
+        "\nThe primal image after the warm-up against a converged render of the same textures; \
+         the control variate carries the last image forward (primal_cv.wgsl).\n\n",
     );
     md.push_str("## Gradient error\n\n");
     md.push_str(&gradient_table(r));

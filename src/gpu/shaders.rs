@@ -49,6 +49,7 @@ pub const SOURCES: &[(&str, &str)] = sources!(
     "restir_merge",
     "texture_export",
     "observed_texels",
+    "primal_cv",
 );
 
 /// WGSL `const` declarations of `u32` values, with a header naming the Rust file they come

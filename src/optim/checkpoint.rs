@@ -3,7 +3,7 @@
 //! drawn at, the metrics so far; the random numbers are a pure function of seed and
 //! iteration, so the iteration is the RNG state). Written atomically: a temporary file, then a
 //! rename.
-use super::{OptimizerState, PreviousState, RestirSnapshot};
+use super::{ControlVariateSnapshot, ExposureState, OptimizerState, PreviousState, RestirSnapshot};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -59,6 +59,15 @@ struct Stored {
     /// ReSTIR's merge count (the kept samples' confidence).
     #[serde(default)]
     restir_history: u32,
+    /// Floats of the control variate's state; absent for the independent primal.
+    #[serde(default)]
+    control_variate_floats: Option<usize>,
+    /// Iterations the control variate has run.
+    #[serde(default)]
+    control_variate_iterations: u32,
+    /// Per-camera exposures and their optimizer state.
+    #[serde(default)]
+    exposure: ExposureState,
 }
 
 /// A whole checkpoint.
@@ -81,6 +90,9 @@ impl Checkpoint {
             previous_adjoint_floats: st.previous.as_ref().map(|p| p.adjoint.len()),
             reservoir_words: st.restir.as_ref().map(|r| r.reservoirs.len()),
             restir_history: st.restir.as_ref().map_or(0, |r| r.history),
+            control_variate_floats: st.control_variate.as_ref().map(|c| c.state.len()),
+            control_variate_iterations: st.control_variate.as_ref().map_or(0, |c| c.iterations),
+            exposure: st.exposure.clone(),
         };
         if st.m1.len() != st.params.len()
             || st.m2.len() != st.params.len()
@@ -105,6 +117,9 @@ impl Checkpoint {
         }
         if let Some(r) = &st.restir {
             out.extend_from_slice(bytemuck::cast_slice(&r.reservoirs));
+        }
+        if let Some(c) = &st.control_variate {
+            out.extend_from_slice(bytemuck::cast_slice(&c.state));
         }
         crate::image_io::write_atomic(path, &out)
     }
@@ -136,6 +151,9 @@ impl Checkpoint {
         if let Some(r) = stored.reservoir_words {
             sizes.push(Some(r));
         }
+        if let Some(c) = stored.control_variate_floats {
+            sizes.push(Some(c));
+        }
         let words = sizes
             .iter()
             .try_fold(0usize, |acc, s| s.and_then(|s| acc.checked_add(s)));
@@ -159,6 +177,12 @@ impl Checkpoint {
             reservoirs: bytemuck::pod_collect_to_vec(take(r)),
             history: stored.restir_history,
         });
+        let control_variate = stored
+            .control_variate_floats
+            .map(|c| ControlVariateSnapshot {
+                state: bytemuck::pod_collect_to_vec(take(c)),
+                iterations: stored.control_variate_iterations,
+            });
         Ok(Checkpoint {
             header: stored.header,
             state: OptimizerState {
@@ -168,6 +192,8 @@ impl Checkpoint {
                 m2,
                 previous,
                 restir,
+                control_variate,
+                exposure: stored.exposure,
             },
         })
     }
@@ -208,12 +234,23 @@ mod tests {
                     reservoirs: (0..24).collect(),
                     history: 5,
                 }),
+                control_variate: Some(ControlVariateSnapshot {
+                    state: vec![0.25; 32],
+                    iterations: 9,
+                }),
+                exposure: ExposureState {
+                    values: vec![1.5],
+                    m1: vec![0.1],
+                    m2: vec![0.01],
+                    steps: 3,
+                },
             },
         };
         // Without reservoirs (the baseline) as well.
         let mut base = c.clone();
         base.state.restir = None;
         base.state.previous = None;
+        base.state.control_variate = None;
         base.save(&p).unwrap();
         assert_eq!(Checkpoint::load(&p).unwrap(), base);
         c.save(&p).unwrap();

@@ -87,7 +87,8 @@ pub struct LossParams {
     pub norm: f32,
     pub partial_offset: u32,
     pub adjoint_offset: u32,
-    pub _pad: [u32; 3],
+    pub exposure: f32,
+    pub _pad: [u32; 2],
 }
 
 /// Image relMSE: mean over pixels and channels of (x - t)^2 / (t^2 + 1e-2).

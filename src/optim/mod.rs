@@ -9,6 +9,7 @@ pub mod export;
 pub mod loss;
 pub mod observed;
 pub mod plot;
+pub mod primal;
 pub mod problem;
 pub mod run;
 pub mod schedule;
@@ -25,6 +26,7 @@ use crate::{Error, Result};
 pub use estimator::restir::{self, MergeDiagnostics};
 use estimator::Estimator;
 pub use estimator::{Confidence, Method, RestirOptions, RestirSnapshot};
+pub use primal::{ControlVariateSnapshot, PrimalMode};
 pub use problem::Problem;
 pub use schedule::{Schedule, ScheduleKind};
 
@@ -39,6 +41,9 @@ pub struct Settings {
     pub cameras: Vec<usize>,
     /// Samples per pixel of the primal render.
     pub primal_spp: u32,
+    /// How the primal image is estimated: independently, or with the recursive control
+    /// variate.
+    pub primal: PrimalMode,
     /// Samples per pixel of the gradient pass.
     pub gradient_spp: u32,
     /// Image loss.
@@ -55,6 +60,9 @@ pub struct Settings {
     /// Masked (sparse) Adam: entries whose gradient is exactly zero in an iteration keep
     /// their value and moments, as Mitsuba 3's `mask_updates`.
     pub adam_mask: bool,
+    /// Optimize the per-camera exposures (see [`Optimizer::set_exposure`]) with Adam on
+    /// their logarithms, at this learning rate; None: exposures stay fixed.
+    pub exposure_learning_rate: Option<f32>,
 }
 
 impl Settings {
@@ -66,6 +74,7 @@ impl Settings {
             height,
             cameras,
             primal_spp: 4,
+            primal: PrimalMode::Independent,
             gradient_spp: 1,
             loss: Loss::L2,
             seed: 1,
@@ -73,6 +82,7 @@ impl Settings {
             restir: RestirOptions::default(),
             schedule: Schedule::constant(),
             adam_mask: false,
+            exposure_learning_rate: None,
         }
     }
 }
@@ -326,10 +336,28 @@ pub struct OptimizerState {
     pub m1: Vec<f32>,
     /// Adam second moments.
     pub m2: Vec<f32>,
-    /// The last iteration's textures and adjoint, when the estimator uses them.
+    /// The last iteration's textures and adjoint, when the estimator or the primal uses
+    /// them.
     pub previous: Option<PreviousState>,
     /// The ReSTIR estimator's reservoirs; `None` for the baseline.
     pub restir: Option<RestirSnapshot>,
+    /// The control-variate primal's state; `None` for the independent primal.
+    pub control_variate: Option<ControlVariateSnapshot>,
+    /// Per-camera exposures and, when they are optimized, their Adam moments.
+    pub exposure: ExposureState,
+}
+
+/// Per-camera exposures and the Adam moments of their logarithms.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ExposureState {
+    /// The factor each camera's render is multiplied by.
+    pub values: Vec<f32>,
+    /// Adam first moments (of the logarithms).
+    pub m1: Vec<f32>,
+    /// Adam second moments.
+    pub m2: Vec<f32>,
+    /// Adam steps taken.
+    pub steps: u32,
 }
 
 /// The buffers an optimizer allocates besides the scene's, by label and size in bytes.
@@ -382,6 +410,7 @@ pub fn memory_plan(set: &ParamSet, settings: &Settings, n_cams: usize) -> Memory
         ("adam moment1".to_string(), 4 * n_params),
         ("adam moment2".to_string(), 4 * n_params),
         ("primal accum".to_string(), 16 * pixels),
+        ("primal accum_prev".to_string(), 16 * pixels),
         ("adjoint even".to_string(), 16 * pixels * n_cams as u64),
         ("adjoint odd".to_string(), 16 * pixels * n_cams as u64),
     ];
@@ -389,6 +418,9 @@ pub fn memory_plan(set: &ParamSet, settings: &Settings, n_cams: usize) -> Memory
         buffers.push((format!("target {k}"), 16 * pixels));
     }
     buffers.extend(estimator::memory(settings.method, n_texels));
+    if settings.primal == PrimalMode::ControlVariate {
+        buffers.extend(primal::memory(pixels, n_cams as u64));
+    }
     MemoryPlan { buffers }
 }
 
@@ -397,6 +429,9 @@ struct CameraPasses {
     render_uniform: wgpu::Buffer,
     render_params: GpuRenderParams,
     render_group: wgpu::BindGroup,
+    loss_uniform: wgpu::Buffer,
+    loss_params: loss::LossParams,
+    target_buf: wgpu::Buffer,
     /// Per parity of the iteration (the adjoint buffers alternate).
     loss_groups: [wgpu::BindGroup; 2],
 }
@@ -422,12 +457,24 @@ pub struct Optimizer {
     moments: [wgpu::Buffer; 2],
     stats: Stats,
     loss_partial: wgpu::Buffer,
+    /// Partial sums of dL/d(exposure) per workgroup and camera.
+    exposure_partial: wgpu::Buffer,
+    /// The targets (CPU copies, for re-uploading them with masks).
+    targets: Vec<Image>,
+    /// Exposures and their optimizer state.
+    exposure: ExposureState,
+    /// Workgroups of one camera's loss pass.
+    n_loss_groups: u32,
     grid: (u32, u32),
     loss_grid: (u32, u32),
     loss_pipeline: wgpu::ComputePipeline,
     adam_pipeline: wgpu::ComputePipeline,
     adam: Vec<(wgpu::Buffer, wgpu::BindGroup, adam::AdamParams)>,
     accum: wgpu::Buffer,
+    /// The primal samples under the previous textures (control variate).
+    accum_prev: wgpu::Buffer,
+    /// The control-variate primal, when `settings.primal` asks for it.
+    control_variate: Option<primal::ControlVariate>,
     timer: PassTimer,
     estimator: Box<dyn Estimator>,
     /// Camera constants of the task's cameras at the task's image size.
@@ -481,7 +528,9 @@ impl Optimizer {
         use Binding::*;
         let loss_layout = gpu.layout(
             "loss",
-            &[Uniform, Storage, Storage, StorageRw, StorageRw, StorageRw],
+            &[
+                Uniform, Storage, Storage, StorageRw, StorageRw, StorageRw, StorageRw,
+            ],
         );
         let adam_layout = gpu.layout(
             "adam",
@@ -493,7 +542,21 @@ impl Optimizer {
         let n_pixels = w * h;
         let n_cams = targets.len() as u32;
         let n_params = set.values.len() as u64;
+        if settings.primal == PrimalMode::ControlVariate && settings.primal_spp == 0 {
+            return Err(Error::Invalid("primal_spp must be at least 1".into()));
+        }
         let accum = gpu.storage_zeroed("primal accum", n_pixels as u64 * 16);
+        let accum_prev = gpu.storage_zeroed("primal accum_prev", n_pixels as u64 * 16);
+        let control_variate = match settings.primal {
+            PrimalMode::ControlVariate => Some(primal::ControlVariate::new(
+                gpu,
+                (w, h),
+                targets.len(),
+                &accum,
+                &accum_prev,
+            )?),
+            PrimalMode::Independent => None,
+        };
         let adjoint_size = (n_pixels * n_cams) as u64 * 16;
         let adjoint = [
             gpu.storage_zeroed("adjoint even", adjoint_size),
@@ -512,6 +575,8 @@ impl Optimizer {
         let n_loss_groups = n_pixels.div_ceil(WORKGROUP);
         let loss_partial =
             gpu.storage_zeroed("loss partial sums", (n_loss_groups * n_cams) as u64 * 4);
+        let exposure_partial =
+            gpu.storage_zeroed("exposure partial sums", (n_loss_groups * n_cams) as u64 * 4);
         let grid = renderer.tile_grid(w, h);
         let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
         let loss_grid = grid_2d(n_pixels, WORKGROUP, max_dim);
@@ -543,6 +608,7 @@ impl Optimizer {
                 spp: settings.primal_spp,
                 techniques: Techniques::Mis.bits(),
                 stride: grid.0 * WORKGROUP,
+                two_states: control_variate.is_some() as u32,
                 ..Default::default()
             };
             let loss_params = loss::LossParams {
@@ -554,10 +620,12 @@ impl Optimizer {
                 norm,
                 partial_offset: k as u32 * n_loss_groups,
                 adjoint_offset: k as u32 * n_pixels,
-                _pad: [0; 3],
+                exposure: 1.0,
+                _pad: [0; 2],
             };
+            // Mask weight 1 everywhere until set_masks.
             let target_data: Vec<[f32; 4]> =
-                target.rgb.iter().map(|p| [p[0], p[1], p[2], 0.0]).collect();
+                target.rgb.iter().map(|p| [p[0], p[1], p[2], 1.0]).collect();
             let target_buf = gpu.storage(
                 &format!("target {k}"),
                 bytemuck::cast_slice(&target_data),
@@ -575,7 +643,7 @@ impl Optimizer {
                 render_group: gpu.bind_group(
                     "primal",
                     &renderer.render_layout,
-                    &[&render_uniform, &accum, &stats.primal],
+                    &[&render_uniform, &accum, &stats.primal, &accum_prev],
                 ),
                 loss_groups: [0usize, 1].map(|p| {
                     gpu.bind_group(
@@ -588,11 +656,15 @@ impl Optimizer {
                             &adjoint[p],
                             &loss_partial,
                             &stats.loss,
+                            &exposure_partial,
                         ],
                     )
                 }),
                 render_uniform,
                 render_params,
+                loss_uniform,
+                loss_params,
+                target_buf,
             });
         }
         let mut adam = Vec::new();
@@ -627,9 +699,9 @@ impl Optimizer {
             );
             adam.push((u, g, p));
         }
-        // Primal and loss per camera, the estimator's passes (at most two per camera), Adam
-        // per texture.
-        let timer = PassTimer::new(gpu, 4 * n_cams + 2 + set.textures.len() as u32);
+        // Primal, control variate and loss per camera, the estimator's passes (at most two
+        // per camera), Adam per texture.
+        let timer = PassTimer::new(gpu, 6 * n_cams + 2 + set.textures.len() as u32);
         gpu.check("optimizer setup")?;
         Ok(Optimizer {
             gpu: gpu.clone(),
@@ -642,12 +714,23 @@ impl Optimizer {
             moments,
             stats,
             loss_partial,
+            exposure_partial,
+            targets: targets.to_vec(),
+            exposure: ExposureState {
+                values: vec![1.0; targets.len()],
+                m1: vec![0.0; targets.len()],
+                m2: vec![0.0; targets.len()],
+                steps: 0,
+            },
+            n_loss_groups,
             grid,
             loss_grid,
             loss_pipeline,
             adam_pipeline,
             adam,
             accum,
+            accum_prev,
+            control_variate,
             timer,
             estimator,
             camera_infos,
@@ -680,16 +763,23 @@ impl Optimizer {
                 pass_seed(self.settings.seed, iteration, k as u32, Seeds::PRIMAL);
             cam.render_params.sample_offset = 0;
             cam.render_params.spp = self.settings.primal_spp;
+            cam.render_params.two_states = self.control_variate.is_some() as u32;
             self.gpu.queue.write_buffer(
                 &cam.render_uniform,
                 0,
                 bytemuck::bytes_of(&cam.render_params),
             );
             enc.clear_buffer(&self.accum, 0, None);
+            if self.control_variate.is_some() {
+                enc.clear_buffer(&self.accum_prev, 0, None);
+            }
             let groups = [&self.renderer.scene.bind_group, &cam.render_group];
             let pipe = &self.renderer.render_pipeline;
             let t = self.timer.next(PassKind::Primal);
             encode_timed_pass(enc, "primal", pipe, &groups, self.grid, t);
+            if let Some(cv) = &mut self.control_variate {
+                cv.encode(enc, k, &mut self.timer);
+            }
             let groups = [&cam.loss_groups[parity]];
             let t = self.timer.next(PassKind::Loss);
             encode_timed_pass(enc, "loss", &self.loss_pipeline, &groups, self.loss_grid, t);
@@ -709,16 +799,139 @@ impl Optimizer {
             scene_group: &self.renderer.scene.bind_group,
         };
         self.estimator.encode(enc, &frame, &mut self.timer);
-        if self.estimator.uses_previous_state() {
+        if self.uses_previous_state() {
             let params = &self.renderer.scene.params;
             let prev = &self.renderer.scene.params_prev;
             enc.copy_buffer_to_buffer(params, 0, prev, 0, params.size());
         }
     }
 
+    /// Whether the next iteration needs this one's textures (ReSTIR's merge, the control
+    /// variate).
+    fn uses_previous_state(&self) -> bool {
+        self.estimator.uses_previous_state() || self.control_variate.is_some()
+    }
+
+    /// Bookkeeping once an iteration's work is submitted.
+    fn finish_iteration(&mut self, primal: bool) {
+        self.estimator.finish_iteration();
+        if primal {
+            if let Some(cv) = &mut self.control_variate {
+                cv.finish_iteration();
+            }
+        }
+    }
+
     fn read_loss(&self) -> Result<f64> {
         let partial: Vec<f32> = self.gpu.read_pod(&self.loss_partial)?;
         Ok(partial.iter().map(|&v| v as f64).sum())
+    }
+
+    /// Weigh each camera's pixels by a mask (one value per pixel in [0, 1]; None: all 1):
+    /// masked-out pixels add neither loss nor gradient. The loss is the mean over the
+    /// masked pixels.
+    pub fn set_masks(&mut self, masks: &[Option<Vec<f32>>]) -> Result<()> {
+        let n_pixels = (self.settings.width * self.settings.height) as usize;
+        if masks.len() != self.cams.len() {
+            return Err(Error::Invalid(format!(
+                "{} masks for {} cameras",
+                masks.len(),
+                self.cams.len()
+            )));
+        }
+        let mut total = 0f64;
+        for (k, m) in masks.iter().enumerate() {
+            let data: Vec<[f32; 4]> = match m {
+                Some(m) => {
+                    if m.len() != n_pixels || m.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+                        return Err(Error::Invalid(format!(
+                            "the mask of camera {k} needs {n_pixels} finite weights >= 0"
+                        )));
+                    }
+                    self.targets[k]
+                        .rgb
+                        .iter()
+                        .zip(m)
+                        .map(|(p, &w)| [p[0], p[1], p[2], w])
+                        .collect()
+                }
+                None => self.targets[k]
+                    .rgb
+                    .iter()
+                    .map(|p| [p[0], p[1], p[2], 1.0])
+                    .collect(),
+            };
+            total += data.iter().map(|p| p[3] as f64).sum::<f64>();
+            self.gpu
+                .queue
+                .write_buffer(&self.cams[k].target_buf, 0, bytemuck::cast_slice(&data));
+        }
+        if !(total > 0.0) {
+            return Err(Error::Invalid("the masks leave no pixel to compare".into()));
+        }
+        let norm = (1.0 / (3.0 * total)) as f32;
+        for cam in &mut self.cams {
+            cam.loss_params.norm = norm;
+            self.gpu
+                .queue
+                .write_buffer(&cam.loss_uniform, 0, bytemuck::bytes_of(&cam.loss_params));
+        }
+        self.gpu.check("set masks")
+    }
+
+    /// Set the factor each camera's render is multiplied by before it is compared with its
+    /// target (photos have their own exposure). With `Settings::exposure_learning_rate` the
+    /// optimizer goes on from these values.
+    pub fn set_exposure(&mut self, values: &[f32]) -> Result<()> {
+        if values.len() != self.cams.len() || values.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+            return Err(Error::Invalid(format!(
+                "{} exposures for {} cameras (each positive)",
+                values.len(),
+                self.cams.len()
+            )));
+        }
+        self.exposure.values = values.to_vec();
+        self.upload_exposure();
+        self.gpu.check("set exposure")
+    }
+
+    /// The current per-camera exposures.
+    pub fn exposure(&self) -> &[f32] {
+        &self.exposure.values
+    }
+
+    fn upload_exposure(&mut self) {
+        for (cam, &e) in self.cams.iter_mut().zip(&self.exposure.values) {
+            cam.loss_params.exposure = e;
+            self.gpu
+                .queue
+                .write_buffer(&cam.loss_uniform, 0, bytemuck::bytes_of(&cam.loss_params));
+        }
+    }
+
+    /// One Adam step of the exposures' logarithms from this iteration's dL/d(exposure).
+    fn step_exposure(&mut self, lr: f32) -> Result<()> {
+        let partial: Vec<f32> = self.gpu.read_pod(&self.exposure_partial)?;
+        let n = self.n_loss_groups as usize;
+        let e = &mut self.exposure;
+        e.steps += 1;
+        let t = e.steps as i32;
+        for k in 0..e.values.len() {
+            let d: f64 = partial[k * n..(k + 1) * n].iter().map(|&v| v as f64).sum();
+            // d/d(log e) = e d/de.
+            let g = (d * e.values[k] as f64) as f32;
+            if !g.is_finite() {
+                continue;
+            }
+            e.m1[k] = adam::BETA1 * e.m1[k] + (1.0 - adam::BETA1) * g;
+            e.m2[k] = adam::BETA2 * e.m2[k] + (1.0 - adam::BETA2) * g * g;
+            let m = e.m1[k] / (1.0 - adam::BETA1.powi(t));
+            let v = e.m2[k] / (1.0 - adam::BETA2.powi(t));
+            let log_e = e.values[k].ln() - lr * m / (v.sqrt() + adam::EPS);
+            e.values[k] = log_e.clamp(-20.0, 20.0).exp();
+        }
+        self.upload_exposure();
+        Ok(())
     }
 
     /// One iteration: render, loss, gradient, Adam. Returns the loss of the render.
@@ -750,9 +963,12 @@ impl Optimizer {
         }
         self.timer.resolve(&mut enc);
         self.gpu.queue.submit([enc.finish()]);
-        self.estimator.finish_iteration();
+        self.finish_iteration(true);
         self.iteration = t;
         let loss = self.read_loss()?;
+        if let Some(lr) = self.settings.exposure_learning_rate {
+            self.step_exposure(lr * factor)?;
+        }
         Ok(StepStats { loss })
     }
 
@@ -792,7 +1008,7 @@ impl Optimizer {
             });
         self.encode_gradient(&mut enc, iteration, true);
         self.gpu.queue.submit([enc.finish()]);
-        self.estimator.finish_iteration();
+        self.finish_iteration(true);
         let loss = self.read_loss()?;
         Ok((self.read_gradient()?, loss))
     }
@@ -825,7 +1041,7 @@ impl Optimizer {
             });
         self.encode_gradient(&mut enc, iteration, false);
         self.gpu.queue.submit([enc.finish()]);
-        self.estimator.finish_iteration();
+        self.finish_iteration(false);
         self.read_gradient()
     }
 
@@ -850,6 +1066,7 @@ impl Optimizer {
                 cam.render_params.seed = pass_seed(seed, u32::MAX - 3, k as u32, Seeds::PRIMAL);
                 cam.render_params.sample_offset = done;
                 cam.render_params.spp = chunk.min(spp - done);
+                cam.render_params.two_states = 0;
                 self.gpu.queue.write_buffer(
                     &cam.render_uniform,
                     0,
@@ -945,13 +1162,20 @@ impl Optimizer {
             cameras: problem.cameras.clone(),
             ..settings
         };
-        Optimizer::new(
+        let mut opt = Optimizer::new(
             gpu,
             &problem.scene,
             problem.set.clone(),
             settings,
             &problem.targets,
-        )
+        )?;
+        if problem.masks.iter().any(Option::is_some) {
+            opt.set_masks(&problem.masks)?;
+        }
+        if problem.exposure.iter().any(|&e| e != 1.0) {
+            opt.set_exposure(&problem.exposure)?;
+        }
+        Ok(opt)
     }
 
     /// Run iterations until `stop`, calling `on_iteration` after each; the callback returns
@@ -1025,7 +1249,7 @@ impl Optimizer {
     /// adjoint they were drawn at. Restore it with [`Optimizer::restore`].
     pub fn state(&self) -> Result<OptimizerState> {
         let [m1, m2] = self.read_moments()?;
-        let previous = if self.estimator.uses_previous_state() {
+        let previous = if self.uses_previous_state() {
             let last = (self.iteration as usize + 1) % 2;
             let mut params: Vec<f32> = self.gpu.read_pod(&self.renderer.scene.params_prev)?;
             params.truncate(self.set.values.len());
@@ -1043,6 +1267,11 @@ impl Optimizer {
             m2,
             previous,
             restir: self.estimator.snapshot(&self.gpu, self.iteration)?,
+            control_variate: match &self.control_variate {
+                Some(cv) => Some(cv.snapshot(&self.gpu)?),
+                None => None,
+            },
+            exposure: self.exposure.clone(),
         })
     }
 
@@ -1054,6 +1283,7 @@ impl Optimizer {
         self.write_moments(&[state.m1.clone(), state.m2.clone()])?;
         let last = (state.iteration as usize + 1) % 2;
         let mut snapshot = state.restir.as_ref();
+        let mut cv_snapshot = state.control_variate.as_ref();
         match &state.previous {
             Some(p) => {
                 if p.adjoint.len() as u64 * 4 != self.adjoint[last].size()
@@ -1069,11 +1299,22 @@ impl Optimizer {
                 let prev = &self.renderer.scene.params_prev;
                 q.write_buffer(prev, 0, bytemuck::cast_slice(&p.params));
             }
-            // Kept samples cannot be reused without the state they were drawn at.
-            None => snapshot = None,
+            // Kept samples and the last image cannot be reused without the state they were
+            // drawn at.
+            None => {
+                snapshot = None;
+                cv_snapshot = None;
+            }
         }
         self.estimator
             .restore(&self.gpu, snapshot, state.iteration)?;
+        if let Some(cv) = &mut self.control_variate {
+            cv.restore(&self.gpu, cv_snapshot)?;
+        }
+        if state.exposure.values.len() == self.cams.len() {
+            self.exposure = state.exposure.clone();
+            self.upload_exposure();
+        }
         self.iteration = state.iteration;
         self.gpu.check("restore optimizer state")
     }
@@ -1104,6 +1345,29 @@ impl Optimizer {
         };
         self.estimator.faults(&self.gpu, &mut f)?;
         Ok(f)
+    }
+
+    /// The control-variate primal image of task camera `k` from the last iteration or
+    /// estimate (the image its loss and adjoint used, at the textures of that iteration);
+    /// None for the independent primal.
+    pub fn control_variate_image(&self, k: usize) -> Result<Option<Image>> {
+        let Some(cv) = &self.control_variate else {
+            return Ok(None);
+        };
+        let (w, h) = (self.settings.width, self.settings.height);
+        Ok(Some(Image {
+            width: w,
+            height: h,
+            rgb: cv.image(&self.gpu, k, (w * h) as usize)?,
+        }))
+    }
+
+    /// The textures of the last iteration (those its primal and gradient were drawn at;
+    /// [`Optimizer::read_params`] has them after the Adam step).
+    pub fn read_params_prev(&self) -> Result<Vec<f32>> {
+        let mut v: Vec<f32> = self.gpu.read_pod(&self.renderer.scene.params_prev)?;
+        v.truncate(self.set.values.len());
+        Ok(v)
     }
 
     /// What ReSTIR's merge pass counted (None for the baseline).

@@ -27,6 +27,14 @@ pub struct Problem {
     pub set: ParamSet,
     /// Ground-truth texture values laid out like `set.values`, when known.
     pub reference: Option<Vec<f32>>,
+    /// Per camera, a weight per pixel of its loss and gradient (0 leaves the pixel out);
+    /// None: every pixel counts fully.
+    pub masks: Vec<Option<Vec<f32>>>,
+    /// Per camera, the factor its render is multiplied by before the comparison (the
+    /// starting value when exposures are optimized).
+    pub exposure: Vec<f32>,
+    /// Per camera, the image a camera file gave its frame, if any.
+    pub frame_images: Vec<Option<std::path::PathBuf>>,
 }
 
 impl Problem {
@@ -62,6 +70,7 @@ impl Problem {
     }
 
     fn without_targets(scene: Scene, cameras: Vec<usize>, set: ParamSet) -> Problem {
+        let n = cameras.len();
         Problem {
             scene,
             truth: None,
@@ -69,6 +78,9 @@ impl Problem {
             targets: Vec::new(),
             set,
             reference: None,
+            masks: vec![None; n],
+            exposure: vec![1.0; n],
+            frame_images: vec![None; n],
         }
     }
 
@@ -145,22 +157,44 @@ impl Problem {
         Ok(())
     }
 
-    /// Load a task's scene, find its cameras and lay out its textures, without targets (no
-    /// GPU needed; [`Problem::from_task`] adds them).
+    /// Load a task's scene with what the task adds (lights, cameras, a camera file's
+    /// frames, and a default camera and light where the scene has none), find its cameras
+    /// and lay out its textures, without targets (no GPU needed; [`Problem::from_task`] adds
+    /// them).
     pub fn load(task: &Task) -> Result<Problem> {
-        let scene = load_scene(task, &task.scene)?;
+        let (scene, added, frames) = task_scene(task, &task.scene)?;
         let cameras: Vec<usize> = match &task.cameras {
             Some(names) => names
                 .iter()
                 .map(|n| scene.camera(Some(n)))
                 .collect::<Result<_>>()?,
+            None if !added.is_empty() => added,
             None => {
                 scene.camera(None)?;
                 (0..scene.cameras.len()).collect()
             }
         };
         let set = ParamSet::from_specs(&scene, &task.textures, task.optimizer.filter, &task.path)?;
-        Ok(Problem::without_targets(scene, cameras, set))
+        let exposure = cameras
+            .iter()
+            .map(|&c| {
+                let name = &scene.cameras[c].name;
+                task.target
+                    .exposure
+                    .as_ref()
+                    .and_then(|e| e.get(name).or_else(|| e.get(&c.to_string())))
+                    .copied()
+                    .unwrap_or(1.0)
+            })
+            .collect();
+        let frame_images = cameras
+            .iter()
+            .map(|&c| frames.get(&scene.cameras[c].name).cloned().flatten())
+            .collect();
+        let mut p = Problem::without_targets(scene, cameras, set);
+        p.exposure = exposure;
+        p.frame_images = frame_images;
+        Ok(p)
     }
 
     /// Load a task's scenes, find its cameras, render or load its targets (reusing
@@ -179,7 +213,7 @@ impl Problem {
             e => e,
         };
         if let Some(path) = &task.target.scene {
-            let truth = load_scene(task, path)?;
+            let (truth, _, _) = task_scene(task, path)?;
             if reuse && cached.iter().all(|c| c.exists()) {
                 p.set_truth(truth).map_err(in_task)?;
                 for c in &cached {
@@ -193,47 +227,124 @@ impl Problem {
                 }
             }
         } else {
-            let images = task
-                .target
-                .images
-                .as_ref()
-                .ok_or_else(|| Error::file(&task.path, "`target`: no images"))?;
-            for &cam in &p.cameras {
-                let name = &p.scene.cameras[cam].name;
-                let path = images
-                    .get(name)
-                    .or_else(|| images.get(&cam.to_string()))
+            for (k, &cam) in p.cameras.iter().enumerate() {
+                let name = p.scene.cameras[cam].name.clone();
+                let listed = task
+                    .target
+                    .images
+                    .as_ref()
+                    .and_then(|m| m.get(&name).or_else(|| m.get(&cam.to_string())))
+                    .map(|f| task.resolve(f));
+                let path = listed
+                    .or_else(|| p.frame_images[k].clone())
                     .ok_or_else(|| {
                         Error::file(
                             &task.path,
-                            format!("`target.images`: no image for camera `{name}`"),
+                            format!(
+                            "`target.images`: no image for camera `{name}` (and no camera-file \
+                             frame gives one)"
+                        ),
                         )
                     })?;
-                let img = image_io::load_linear(&task.resolve(path))?;
+                let (img, alpha) = image_io::load_linear_alpha(&path)?;
                 if (img.width, img.height) != (w, h) {
                     return Err(Error::file(
-                        task.resolve(path),
+                        &path,
                         format!(
-                            "target is {}x{}, the task renders {w}x{h}",
+                            "target is {}x{}, the task renders {w}x{h} (set the task's width \
+                             and height to the photos' size, or resize the photos)",
                             img.width, img.height
                         ),
                     ));
                 }
                 p.targets.push(img);
+                if alpha.is_some() {
+                    log::info!("{}: its alpha channel masks the loss", path.display());
+                }
+                p.masks[k] = alpha;
+            }
+        }
+        // Explicit masks.
+        if let Some(masks) = &task.target.masks {
+            for (k, &cam) in p.cameras.iter().enumerate() {
+                let name = &p.scene.cameras[cam].name;
+                if let Some(f) = masks.get(name).or_else(|| masks.get(&cam.to_string())) {
+                    let path = task.resolve(f);
+                    let (mw, mh, m) = image_io::load_mask(&path)?;
+                    if (mw, mh) != (w, h) {
+                        return Err(Error::file(
+                            &path,
+                            format!("mask is {mw}x{mh}, the task renders {w}x{h}"),
+                        ));
+                    }
+                    p.masks[k] = Some(m);
+                }
+            }
+            for key in masks.keys() {
+                if !p
+                    .cameras
+                    .iter()
+                    .any(|&c| &p.scene.cameras[c].name == key || c.to_string() == *key)
+                {
+                    return Err(Error::file(
+                        &task.path,
+                        format!("`target.masks`: `{key}` is not a camera of the task"),
+                    ));
+                }
             }
         }
         Ok(p)
     }
 }
 
-fn load_scene(task: &Task, path: &Path) -> Result<Scene> {
+/// A task's scene: the file at `path`, the task's environment, lights and cameras, the
+/// frames of its camera file, and defaults for what is still missing. Also returns the
+/// indices of the cameras the task added and each camera-file frame's image by camera name.
+fn task_scene(
+    task: &Task,
+    path: &Path,
+) -> Result<(
+    Scene,
+    Vec<usize>,
+    std::collections::BTreeMap<String, Option<std::path::PathBuf>>,
+)> {
     let mut s = scene::load(&task.resolve(path))?;
     if let Some(env) = &task.env {
         let mut e = EnvMap::load(&task.resolve(env))?;
         e.scale = task.env_scale;
         s.env = Some(e);
     }
-    Ok(s)
+    for (i, l) in task.lights.iter().enumerate() {
+        s.lights.push(l.light(i));
+    }
+    let first = s.cameras.len();
+    for c in &task.camera_defs {
+        s.cameras.push(c.camera(task.width, task.height));
+    }
+    let mut frames = std::collections::BTreeMap::new();
+    if let Some(f) = &task.cameras_file {
+        for fr in scene::capture::load_frames(&task.resolve(f))? {
+            frames.insert(fr.camera.name.clone(), fr.image);
+            s.cameras.push(fr.camera);
+        }
+    }
+    let added: Vec<usize> = (first..s.cameras.len()).collect();
+    // Camera names must be unique: targets, masks and `cameras` refer to them.
+    for (i, c) in s.cameras.iter().enumerate() {
+        if s.cameras[..i].iter().any(|o| o.name == c.name) {
+            return Err(Error::file(
+                &task.path,
+                format!(
+                    "two cameras are named `{}` (the scene's, the task's `[[camera]]` tables                      and the camera file's frames share one namespace)",
+                    c.name
+                ),
+            ));
+        }
+    }
+    for note in s.add_defaults() {
+        log::warn!("{}: {note}", s.source.display());
+    }
+    Ok((s, added, frames))
 }
 
 /// `<index>_<name>` of a camera, safe in file names.

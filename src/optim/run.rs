@@ -74,6 +74,7 @@ pub fn task_settings(
         height: task.height,
         cameras: cameras.to_vec(),
         primal_spp: task.optimizer.primal_spp,
+        primal: task.optimizer.primal,
         gradient_spp: task.optimizer.gradient_spp,
         loss: task.optimizer.loss,
         seed: task.seed,
@@ -81,6 +82,10 @@ pub fn task_settings(
         restir,
         schedule: task.optimizer.schedule.clone(),
         adam_mask: task.optimizer.adam_mask,
+        exposure_learning_rate: task
+            .optimizer
+            .optimize_exposure
+            .then_some(task.optimizer.exposure_learning_rate),
     }
 }
 

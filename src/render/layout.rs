@@ -104,13 +104,16 @@ pub struct GpuSceneInfo {
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct GpuCameraInfo {
     pub origin: [f32; 3],
-    pub tan_half_fov_y: f32,
+    pub fx: f32,
     pub right: [f32; 3],
-    pub aspect: f32,
+    pub fy: f32,
     pub up: [f32; 3],
     pub width: u32,
     pub forward: [f32; 3],
     pub height: u32,
+    pub cx: f32,
+    pub cy: f32,
+    pub _pad: [u32; 2],
 }
 
 /// `RenderParams` in render.wgsl.
@@ -123,7 +126,8 @@ pub struct GpuRenderParams {
     pub spp: u32,
     pub techniques: u32,
     pub stride: u32,
-    pub _pad: [u32; 3],
+    pub two_states: u32,
+    pub _pad: [u32; 2],
 }
 
 /// `ParamTex` in types.wgsl.
@@ -205,6 +209,11 @@ mod tests {
                 "restir_merge",
                 "MergeParams",
                 size_of::<crate::optim::restir::MergeParams>(),
+            ),
+            (
+                "primal_cv",
+                "PrimalCvParams",
+                size_of::<crate::optim::primal::PrimalCvParams>(),
             ),
             (
                 "observed_texels",

@@ -481,21 +481,27 @@ pub(crate) fn encode_timed_pass(
     pass.dispatch_workgroups(grid.0, grid.1, 1);
 }
 
-/// Camera constants for a pinhole camera at the given image size.
+/// Camera constants for a pinhole camera at the given image size: the camera's intrinsics
+/// scaled to it, or, without intrinsics, square pixels with the vertical field of view and
+/// the principal point at the center.
 pub fn camera_info(cam: &crate::scene::Camera, width: u32, height: u32) -> GpuCameraInfo {
     let m = cam.world;
     let right = m.transform_vector3(Vec3::X).normalize_or(Vec3::X);
     let up = m.transform_vector3(Vec3::Y).normalize_or(Vec3::Y);
     let forward = m.transform_vector3(Vec3::NEG_Z).normalize_or(Vec3::NEG_Z);
+    let [fx, fy, cx, cy] = cam.pixel_intrinsics(width, height);
     GpuCameraInfo {
         origin: m.transform_point3(Vec3::ZERO).to_array(),
-        tan_half_fov_y: (0.5 * cam.yfov).tan(),
+        fx,
         right: right.to_array(),
-        aspect: width as f32 / height as f32,
+        fy,
         up: up.to_array(),
         width,
         forward: forward.to_array(),
         height,
+        cx,
+        cy,
+        _pad: [0; 2],
     }
 }
 
@@ -520,7 +526,7 @@ impl Renderer {
     pub fn with_params(gpu: &Gpu, scene: &Scene, param_set: &ParamSet) -> Result<Renderer> {
         let gscene = GpuScene::new(gpu, scene, param_set)?;
         use Binding::*;
-        let render_layout = gpu.layout("render", &[Uniform, StorageRw, StorageRw]);
+        let render_layout = gpu.layout("render", &[Uniform, StorageRw, StorageRw, StorageRw]);
         let render_pipeline = gpu.compute_pipeline("render", &[&gscene.layout, &render_layout])?;
         let trace_layout = gpu.layout("trace_rays", &[Uniform, Storage, StorageRw]);
         let trace_pipeline =
@@ -590,7 +596,8 @@ impl Renderer {
             spp: 0,
             techniques: settings.techniques.bits(),
             stride: grid.0 * WORKGROUP,
-            _pad: [0; 3],
+            two_states: 0,
+            _pad: [0; 2],
         };
         let uniform = self
             .gpu
@@ -599,9 +606,13 @@ impl Renderer {
             .gpu
             .storage_zeroed("render accum", n_pixels as u64 * 16);
         let stats = self.gpu.storage_zeroed("render stats", 16);
-        let group = self
-            .gpu
-            .bind_group("render", &self.render_layout, &[&uniform, &accum, &stats]);
+        // No second state: a placeholder for the previous-textures accumulator.
+        let unused = self.gpu.storage_zeroed("render accum_prev (unused)", 16);
+        let group = self.gpu.bind_group(
+            "render",
+            &self.render_layout,
+            &[&uniform, &accum, &stats, &unused],
+        );
         // Compile the pass (lavapipe compiles at first dispatch) before the clock starts.
         self.dispatch("render warm-up", &self.render_pipeline, &group, (1, 1));
         self.gpu.wait("render warm-up")?;

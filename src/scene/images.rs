@@ -136,10 +136,16 @@ pub fn decode_hdr(bytes: &[u8], path: &Path) -> Result<(u32, u32, Vec<[f32; 3]>)
 
 /// Decode the first RGB(A) layer of an OpenEXR image into linear RGB floats.
 pub fn decode_exr(path: &Path) -> Result<(u32, u32, Vec<[f32; 3]>)> {
+    let (w, h, px) = decode_exr_rgba(path)?;
+    Ok((w, h, px.iter().map(|p| [p[0], p[1], p[2]]).collect()))
+}
+
+/// [`decode_exr`] with the alpha channel (1 where the file has none).
+pub fn decode_exr_rgba(path: &Path) -> Result<(u32, u32, Vec<[f32; 4]>)> {
     crate::error::catch_panic(path, "the OpenEXR decoder", || decode_exr_unguarded(path))
 }
 
-fn decode_exr_unguarded(path: &Path) -> Result<(u32, u32, Vec<[f32; 3]>)> {
+fn decode_exr_unguarded(path: &Path) -> Result<(u32, u32, Vec<[f32; 4]>)> {
     use exr::prelude::traits::*;
     let meta = exr::meta::MetaData::read_from_file(path, false)
         .map_err(|e| Error::file(path, format!("not a readable OpenEXR file: {e}")))?;
@@ -162,10 +168,10 @@ fn decode_exr_unguarded(path: &Path) -> Result<(u32, u32, Vec<[f32; 3]>)> {
         .rgba_channels(
             |res, _| {
                 let (w, h) = (res.width(), res.height());
-                (w, vec![[0f32; 3]; w * h])
+                (w, vec![[0f32; 4]; w * h])
             },
-            |(w, px): &mut (usize, Vec<[f32; 3]>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-                px[pos.y() * *w + pos.x()] = [r, g, b];
+            |(w, px): &mut (usize, Vec<[f32; 4]>), pos, (r, g, b, a): (f32, f32, f32, f32)| {
+                px[pos.y() * *w + pos.x()] = [r, g, b, a];
             },
         )
         .first_valid_layer()

@@ -639,6 +639,7 @@ impl<'a> Loader<'a> {
                     world,
                     yfov: p.yfov(),
                     aspect: p.aspect_ratio(),
+                    intrinsics: None,
                 })
             }
             gltf::camera::Projection::Orthographic(_) => self.scene.warnings.push(format!(

@@ -5,6 +5,7 @@ pub mod authoring;
 pub mod bench_scenes;
 pub mod bundled;
 pub mod bvh;
+pub mod capture;
 pub mod env;
 pub mod images;
 mod load;
@@ -146,10 +147,47 @@ pub struct Camera {
     pub name: String,
     /// Camera-to-world transform (the camera looks down -Z, +Y up).
     pub world: Mat4,
-    /// Vertical field of view in radians.
+    /// Vertical field of view in radians (derived from `intrinsics` when those are given).
     pub yfov: f32,
     /// Width / height, when the file gives one.
     pub aspect: Option<f32>,
+    /// Pinhole intrinsics from a capture (focal lengths and principal point in pixels of an
+    /// image of a given size); they replace `yfov` and put the principal point anywhere.
+    pub intrinsics: Option<Intrinsics>,
+}
+
+/// Pinhole intrinsics in pixels of a `width` x `height` image (x right, y down, the origin at
+/// the top-left corner of the top-left pixel, as COLMAP and NeRF-style `transforms.json`
+/// use). Renders of another size scale them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Intrinsics {
+    /// Horizontal focal length.
+    pub fx: f32,
+    /// Vertical focal length.
+    pub fy: f32,
+    /// Principal point, x.
+    pub cx: f32,
+    /// Principal point, y.
+    pub cy: f32,
+    /// Width of the image these refer to.
+    pub width: u32,
+    /// Height of the image these refer to.
+    pub height: u32,
+}
+
+impl Intrinsics {
+    /// Whether the numbers make a pinhole camera: positive focal lengths and image size,
+    /// finite principal point.
+    pub fn valid(&self) -> bool {
+        self.fx.is_finite()
+            && self.fy.is_finite()
+            && self.fx > 0.0
+            && self.fy > 0.0
+            && self.cx.is_finite()
+            && self.cy.is_finite()
+            && self.width > 0
+            && self.height > 0
+    }
 }
 
 impl Camera {
@@ -178,6 +216,35 @@ impl Camera {
             ),
             yfov,
             aspect: None,
+            intrinsics: None,
+        }
+    }
+
+    /// A camera with camera-to-world transform `world` (glTF convention: it looks down -Z,
+    /// +Y up) and pinhole `intrinsics`.
+    pub fn with_intrinsics(name: &str, world: Mat4, k: Intrinsics) -> Camera {
+        Camera {
+            name: name.into(),
+            world,
+            yfov: 2.0 * (0.5 * k.height as f32 / k.fy).atan(),
+            aspect: Some(k.width as f32 / k.height as f32),
+            intrinsics: Some(k),
+        }
+    }
+
+    /// Focal lengths and principal point [fx, fy, cx, cy] in pixels of a `width` x `height`
+    /// render.
+    pub fn pixel_intrinsics(&self, width: u32, height: u32) -> [f32; 4] {
+        let (w, h) = (width as f32, height as f32);
+        match self.intrinsics {
+            Some(k) => {
+                let (sx, sy) = (w / k.width as f32, h / k.height as f32);
+                [k.fx * sx, k.fy * sy, k.cx * sx, k.cy * sy]
+            }
+            None => {
+                let f = 0.5 * h / (0.5 * self.yfov).tan();
+                [f, f, 0.5 * w, 0.5 * h]
+            }
         }
     }
 }
@@ -364,9 +431,13 @@ impl Scene {
             }
         }
         for c in &self.cameras {
-            if !c.world.is_finite() || !Camera::projection_valid(c.yfov, c.aspect) {
+            if !c.world.is_finite()
+                || !Camera::projection_valid(c.yfov, c.aspect)
+                || c.intrinsics.is_some_and(|k| !k.valid())
+            {
                 return Err(bad(format!(
-                    "camera `{}` has a non-finite transform, a field of view outside (0, pi)                      or a non-positive aspect ratio",
+                    "camera `{}` has a non-finite transform, a field of view outside (0, pi), \
+                     a non-positive aspect ratio or invalid intrinsics",
                     c.name
                 )));
             }
@@ -407,6 +478,44 @@ impl Scene {
             }
         }
         Ok(())
+    }
+
+    /// Whether anything emits light: a punctual light, an emissive material used by a
+    /// triangle, or an environment.
+    pub fn has_light(&self) -> bool {
+        !self.lights.is_empty()
+            || self.env.is_some()
+            || self.triangles.iter().any(|t| {
+                self.materials
+                    .get(t.material as usize)
+                    .is_some_and(|m| m.emissive.max_element() > 0.0)
+            })
+    }
+
+    /// Make a scene renderable as it comes from a modeling tool: without a camera, add one
+    /// named `default` that frames the scene's bounds (from the front, +Z, slightly above);
+    /// without any light, add a uniform white environment. Each addition is noted in
+    /// `warnings` and returned.
+    pub fn add_defaults(&mut self) -> Vec<String> {
+        let mut notes = Vec::new();
+        if self.cameras.is_empty() {
+            let (c, r) = self.bounding_sphere();
+            let yfov = 0.8f32;
+            let dir = Vec3::new(0.0, 0.35, 1.0).normalize();
+            let eye = c + dir * (1.05 * r / (0.5 * yfov).sin());
+            self.cameras
+                .push(Camera::look_at("default", eye, c, Vec3::Y, yfov));
+            notes.push(format!(
+                "the scene has no camera: added `default`, looking at its bounds from +Z                  (eye {:.3?})",
+                eye.to_array()
+            ));
+        }
+        if !self.has_light() {
+            self.env = Some(EnvMap::constant([1.0, 1.0, 1.0]));
+            notes.push("the scene has no light: added a uniform white environment".into());
+        }
+        self.warnings.extend(notes.iter().cloned());
+        notes
     }
 
     /// Centre and radius of a sphere around every triangle.

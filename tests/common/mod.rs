@@ -131,8 +131,9 @@ pub fn directional_albedo(base: Vec3, metallic: f32, roughness: f32, wo: Vec3) -
 /// Continuous pixel position -> camera ray direction, as shaders/shared/camera.wgsl.
 pub fn camera_dir(cam: &Camera, w: u32, h: u32, px: Vec2) -> (Vec3, Vec3) {
     let info = psrestir::render::camera_info(cam, w, h);
-    let sx = (2.0 * px.x / w as f32 - 1.0) * info.tan_half_fov_y * info.aspect;
-    let sy = (1.0 - 2.0 * px.y / h as f32) * info.tan_half_fov_y;
+    let _ = (w, h);
+    let sx = (px.x - info.cx) / info.fx;
+    let sy = (info.cy - px.y) / info.fy;
     let d = (Vec3::from(info.forward) + sx * Vec3::from(info.right) + sy * Vec3::from(info.up))
         .normalize();
     (Vec3::from(info.origin), d)
