@@ -160,6 +160,13 @@ enum Command {
         /// Output image: .exr (linear) or .png (sRGB).
         #[arg(short, long)]
         output: PathBuf,
+        /// A camera file from a capture tool (NeRF-style transforms.json, or a COLMAP text
+        /// model: its folder, cameras.txt or images.txt); render its frame `--frame`.
+        #[arg(long)]
+        cameras: Option<PathBuf>,
+        /// The frame of `--cameras` to render (index, or the image's name).
+        #[arg(long, default_value = "0")]
+        frame: String,
     },
     /// Recover textures from target images by gradient descent.
     Optimize {
@@ -307,6 +314,8 @@ fn run(cli: Cli) -> Result<()> {
             seed,
             technique,
             output,
+            cameras,
+            frame,
         } => {
             let ext = output
                 .extension()
@@ -329,10 +338,48 @@ fn run(cli: Cli) -> Result<()> {
                 map.scale = env_scale;
                 sc.env = Some(map);
             }
-            let cam = sc.camera(camera.as_deref())?;
+            let cam = match &cameras {
+                Some(file) => {
+                    if camera.is_some() {
+                        bail!("give --camera or --cameras, not both");
+                    }
+                    let frames = scene::capture::load_frames(file)?;
+                    let i = frames
+                        .iter()
+                        .position(|f| f.camera.name == frame)
+                        .or_else(|| frame.parse::<usize>().ok().filter(|&i| i < frames.len()))
+                        .with_context(|| {
+                            format!(
+                                "{}: no frame `{frame}` ({} frames: 0..{} or their names)",
+                                file.display(),
+                                frames.len(),
+                                frames.len()
+                            )
+                        })?;
+                    sc.cameras.push(frames[i].camera.clone());
+                    sc.cameras.len() - 1
+                }
+                None => {
+                    for note in sc.add_defaults() {
+                        log::warn!("{}: {note}", path.display());
+                    }
+                    sc.camera(camera.as_deref())?
+                }
+            };
+            if cameras.is_some() {
+                for note in sc.add_defaults() {
+                    log::warn!("{}: {note}", path.display());
+                }
+            }
             let (width, height) = size.unwrap_or_else(|| {
-                let aspect = sc.cameras[cam].aspect.unwrap_or(1.0).clamp(0.05, 20.0);
-                (512, ((512.0 / aspect).round() as u32).max(1))
+                match sc.cameras[cam].intrinsics {
+                    // A capture's own image size.
+                    Some(k) => (k.width, k.height),
+                    None => {
+                        let aspect = sc.cameras[cam].aspect.unwrap_or(1.0).clamp(0.05, 20.0);
+                        (512, ((512.0 / aspect).round() as u32).max(1))
+                    }
+                }
             });
             let gpu = Gpu::new()?;
             let renderer = Renderer::new(&gpu, &sc)

@@ -425,3 +425,85 @@ fn ctrl_c_writes_the_checkpoint_and_outputs_then_resumes() {
     let its: Vec<u32> = metrics(&out).iter().map(|r| r.0).collect();
     assert_eq!(its, (0..=done + 20).collect::<Vec<_>>());
 }
+
+#[test]
+fn a_run_killed_before_its_first_checkpoint_restarts_with_resume() {
+    if no_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let iterations = 40;
+    let task = write_task(dir.path(), iterations);
+    // No checkpoint before the end: by iterations or by time.
+    let text = std::fs::read_to_string(&task).unwrap().replace(
+        "checkpoint_every = 5",
+        "checkpoint_every = 0\ncheckpoint_every_s = 0",
+    );
+    std::fs::write(&task, text).unwrap();
+    let bin = env!("CARGO_BIN_EXE_psrestir");
+    let out = dir.path().join("b");
+    // The same command starts the job and restarts it.
+    let command = || {
+        let mut c = Command::new(bin);
+        c.arg("optimize")
+            .arg(&task)
+            .arg("--out")
+            .arg(&out)
+            .arg("--resume");
+        c
+    };
+    let mut child = command()
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // Kill it once its targets are written (with their key), long before the end.
+    let key = out.join("targets.key");
+    let t = Instant::now();
+    while !key.exists() {
+        assert!(child.try_wait().unwrap().is_none(), "the run ended early");
+        assert!(t.elapsed() < Duration::from_secs(300), "no targets");
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(
+        !out.join("checkpoint.bin").exists(),
+        "a checkpoint was written"
+    );
+    let target = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| {
+            p.file_name()
+                .unwrap()
+                .to_string_lossy()
+                .starts_with("target_")
+        })
+        .expect("a rendered target");
+    let mtime = std::fs::metadata(&target).unwrap().modified().unwrap();
+    // --resume without a checkpoint starts from the beginning, reading the targets back.
+    let o = command().output().unwrap();
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{log}");
+    assert!(log.contains("no checkpoint"), "{log}");
+    assert!(log.contains("reading the rendered targets back"), "{log}");
+    assert_eq!(
+        std::fs::metadata(&target).unwrap().modified().unwrap(),
+        mtime,
+        "the targets were rendered again"
+    );
+    let its: Vec<u32> = metrics(&out).iter().map(|r| r.0).collect();
+    assert_eq!(its, (0..=iterations as u32).collect::<Vec<_>>());
+    outputs_whole(&out);
+    // A changed task invalidates them: another seed renders them again.
+    let text = std::fs::read_to_string(&task)
+        .unwrap()
+        .replace("seed = 4", "seed = 5");
+    std::fs::write(&task, text).unwrap();
+    let o = command()
+        .args(["--iterations", &(iterations + 1).to_string()])
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(!log.contains("reading the rendered targets back"), "{log}");
+}

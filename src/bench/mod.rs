@@ -436,16 +436,14 @@ fn primal_phase(
         progress.message(format!("primal error, seed {}/{repeats}", rep + 1));
         let seed = task.seed.wrapping_add(2000 * (rep + 1));
         for mode in [PrimalMode::Independent, PrimalMode::ControlVariate] {
-            let mut opt = Optimizer::new(
+            let mut opt = Optimizer::for_problem(
                 gpu,
-                &prep.scene,
-                prep.set.clone(),
+                prep,
                 Settings {
                     seed,
                     primal: mode,
                     ..settings(prep, task, Method::Baseline, o)
                 },
-                &prep.targets,
             )?;
             let mut times = PassTimes::default();
             let mut timed = 0;
@@ -545,16 +543,14 @@ fn gradient_phase(
 ) -> Result<GradientPhase> {
     let spp = task.optimizer.gradient_spp.max(1);
     let new = |method: Method, gradient_spp: u32, seed: u32| -> Result<Optimizer> {
-        Optimizer::new(
+        Optimizer::for_problem(
             gpu,
-            &prep.scene,
-            prep.set.clone(),
+            prep,
             Settings {
                 gradient_spp,
                 seed,
                 ..settings(prep, task, method, o)
             },
-            &prep.targets,
         )
     };
     let repeats = o.repeats.max(1);
@@ -720,13 +716,7 @@ fn optimization_phase(
     method: Method,
     progress: &Progress,
 ) -> Result<OptimizationRun> {
-    let mut opt = Optimizer::new(
-        gpu,
-        &prep.scene,
-        prep.set.clone(),
-        settings(prep, task, method, o),
-        &prep.targets,
-    )?;
+    let mut opt = Optimizer::for_problem(gpu, prep, settings(prep, task, method, o))?;
     let truth = prep.reference.as_deref();
     let texture_rmse = |v: &[f32]| truth.map(|r| rmse(v, r)).unwrap_or(f64::NAN);
     let observed = opt.observed_texels()?.to_vec();
@@ -924,13 +914,7 @@ fn optimization_phases(
     o: &BenchOptions,
     progress: &Progress,
 ) -> Result<(OptimizationResult, FinalImages)> {
-    let init = Optimizer::new(
-        gpu,
-        &prep.scene,
-        prep.set.clone(),
-        settings(prep, task, Method::Baseline, o),
-        &prep.targets,
-    )?;
+    let init = Optimizer::for_problem(gpu, prep, settings(prep, task, Method::Baseline, o))?;
     let (image_initial, _) = evaluate(&init, prep, task, o.eval_spp)?;
     let texture_initial = prep
         .reference

@@ -529,7 +529,7 @@ impl Optimizer {
         let loss_layout = gpu.layout(
             "loss",
             &[
-                Uniform, Storage, Storage, StorageRw, StorageRw, StorageRw, StorageRw,
+                Uniform, Storage, Storage, StorageRw, StorageRw, StorageRw, StorageRw, Storage,
             ],
         );
         let adam_layout = gpu.layout(
@@ -657,6 +657,7 @@ impl Optimizer {
                             &loss_partial,
                             &stats.loss,
                             &exposure_partial,
+                            &adjoint[1 - p],
                         ],
                     )
                 }),

@@ -197,9 +197,11 @@ impl Problem {
         Ok(p)
     }
 
-    /// Load a task's scenes, find its cameras, render or load its targets (reusing
-    /// `target_*.exr` in `out` when `reuse` and present; rendered targets are saved there),
-    /// and lay out its textures.
+    /// Load a task's scenes, find its cameras, render or load its targets, and lay out its
+    /// textures. Rendered targets are saved in `out` as `target_CAMERA.exr` with
+    /// `targets.key`, a hash of everything they depend on (the task file, the ground-truth
+    /// scene with its buffers and images, the environment, the camera file); with `reuse`
+    /// they are read back from there when the key still matches, instead of rendered again.
     pub fn from_task(gpu: &Gpu, task: &Task, out: &Path, reuse: bool) -> Result<Problem> {
         let mut p = Problem::load(task)?;
         let (w, h) = (task.width, task.height);
@@ -214,7 +216,12 @@ impl Problem {
         };
         if let Some(path) = &task.target.scene {
             let (truth, _, _) = task_scene(task, path)?;
-            if reuse && cached.iter().all(|c| c.exists()) {
+            let key = format!("{:016x}\n", targets_key(task, path)?);
+            let key_path = out.join("targets.key");
+            let fresh = std::fs::read_to_string(&key_path).is_ok_and(|k| k == key)
+                && cached.iter().all(|c| c.exists());
+            if reuse && fresh {
+                log::info!("reading the rendered targets back from {}", out.display());
                 p.set_truth(truth).map_err(in_task)?;
                 for c in &cached {
                     p.targets.push(image_io::load_linear(c)?);
@@ -225,6 +232,8 @@ impl Problem {
                 for (img, c) in p.targets.iter().zip(&cached) {
                     img.save(c)?;
                 }
+                // The key last: a kill between the images and the key leaves no key.
+                image_io::write_atomic(&key_path, key.as_bytes())?;
             }
         } else {
             for (k, &cam) in p.cameras.iter().enumerate() {
@@ -295,6 +304,56 @@ impl Problem {
         }
         Ok(p)
     }
+}
+
+/// FNV-1a, 64 bits: a cache key that stays the same across runs and builds.
+fn fnv1a(h: &mut u64, bytes: &[u8]) {
+    for &b in bytes {
+        *h ^= b as u64;
+        *h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    // Separate the parts, so that moving bytes between them changes the key.
+    *h ^= bytes.len() as u64;
+    *h = h.wrapping_mul(0x0000_0100_0000_01b3);
+}
+
+/// The key of a task's rendered targets: the task file and everything the ground-truth scene
+/// at `truth` is made of (its JSON, buffers and images, the environment map, the camera file).
+fn targets_key(task: &Task, truth: &Path) -> Result<u64> {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    let text = std::fs::read(&task.path).unwrap_or_default();
+    fnv1a(&mut h, &text);
+    // The task as parsed too, for tasks built in code (their file may not exist).
+    fnv1a(
+        &mut h,
+        format!(
+            "{:?}",
+            (task.width, task.height, task.seed, task.target.spp)
+        )
+        .as_bytes(),
+    );
+    let (json, buffers, images) = scene::load_source(&task.resolve(truth))?;
+    fnv1a(&mut h, json.to_string().as_bytes());
+    for b in &buffers {
+        fnv1a(&mut h, b);
+    }
+    for i in images.iter().flatten() {
+        fnv1a(&mut h, i);
+    }
+    for extra in [&task.env, &task.cameras_file].into_iter().flatten() {
+        let p = task.resolve(extra);
+        if p.is_file() {
+            fnv1a(
+                &mut h,
+                &std::fs::read(&p).map_err(|e| Error::file(&p, e.to_string()))?,
+            );
+        } else if p.is_dir() {
+            for f in ["cameras.txt", "images.txt"] {
+                fnv1a(&mut h, &std::fs::read(p.join(f)).unwrap_or_default());
+            }
+        }
+    }
+    Ok(h)
 }
 
 /// A task's scene: the file at `path`, the task's environment, lights and cameras, the

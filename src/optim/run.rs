@@ -101,11 +101,16 @@ pub fn evaluate(
     let mut sum = 0.0;
     let mut images = Vec::new();
     for (k, target) in targets.iter().enumerate() {
-        let img = opt.render(
+        let mut img = opt.render(
             k,
             spp,
             super::pass_seed(seed, u32::MAX - 2, k as u32, super::Seeds::EVAL),
         )?;
+        // As compared with the target: times the camera's exposure.
+        let e = opt.exposure()[k];
+        for p in &mut img.rgb {
+            *p = p.map(|v| v * e);
+        }
         sum += super::loss::image_relmse(&img, target);
         images.push(img);
     }
@@ -212,21 +217,23 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     std::fs::create_dir_all(&out).map_err(|e| Error::file(&out, e.to_string()))?;
     remove_stale_temporaries(&out);
     let ckpt_path = out.join("checkpoint.bin");
-    let checkpoint = if opts.resume {
-        if !ckpt_path.exists() {
-            return Err(Error::file(
-                &ckpt_path,
-                "--resume: no checkpoint in the output folder",
-            ));
-        }
+    // --resume without a checkpoint starts from the beginning, so that one command both
+    // starts and restarts a job.
+    let checkpoint = if opts.resume && ckpt_path.exists() {
         Some(Checkpoint::load(&ckpt_path)?)
     } else {
+        if opts.resume {
+            log::warn!(
+                "--resume: no checkpoint in {} yet: starting from the beginning",
+                out.display()
+            );
+        }
         None
     };
     let prep = Problem::from_task(gpu, task, &out, opts.resume)?;
     let settings = task_settings(task, &prep.cameras, opts.method, opts.restir);
     let initial_rmse = prep.reference.as_ref().map(|r| rmse(&prep.set.values, r));
-    let mut opt = Optimizer::new(gpu, &prep.scene, prep.set.clone(), settings, &prep.targets)?;
+    let mut opt = Optimizer::for_problem(gpu, &prep, settings)?;
     let layout = layout_string(&prep.set);
     let mut rows: Vec<MetricRow> = Vec::new();
     let mut elapsed_before = 0.0;
@@ -347,6 +354,8 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     }
     let mut last_loss = rows.last().and_then(|r| r.loss).unwrap_or(f64::NAN);
     let ckpt_every = task.optimizer.checkpoint_every;
+    let ckpt_every_s = task.optimizer.checkpoint_every_s;
+    let mut last_ckpt = Instant::now();
     let mut pass_sum: Option<PassTimes> = None;
     let mut timed = 0u32;
     let interrupted = || {
@@ -420,8 +429,11 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
             }
             b.set_message(msg);
         }
-        if ckpt_every > 0 && opt.iteration % ckpt_every == 0 {
+        let by_iterations = ckpt_every > 0 && opt.iteration % ckpt_every == 0;
+        let by_time = ckpt_every_s > 0.0 && last_ckpt.elapsed().as_secs_f64() >= ckpt_every_s;
+        if by_iterations || by_time {
             save_checkpoint(&opt, &rows, elapsed)?;
+            last_ckpt = Instant::now();
         }
     }
     if let Some(b) = &bar {
@@ -451,6 +463,15 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         .as_ref()
         .map(|r| super::observed::rmse_observed(&prep.set, &prep.set.values, r, &observed));
     write_outputs(&out, task, &prep, &opt, &values, &rows)?;
+    if task.optimizer.optimize_exposure || task.target.exposure.is_some() {
+        let list: Vec<String> = prep
+            .cameras
+            .iter()
+            .zip(opt.exposure())
+            .map(|(&c, e)| format!("{} {e:.4}", prep.scene.cameras[c].name))
+            .collect();
+        log::info!("exposures: {}", list.join(", "));
+    }
     let faults = opt.faults()?;
     if faults != FaultCounts::default() {
         log::warn!("dropped or lost values during the run: {faults:?}");
@@ -494,6 +515,12 @@ fn write_outputs(
             task.target.spp.min(64),
             super::pass_seed(task.seed, u32::MAX - 1, k as u32, super::Seeds::EVAL),
         )?;
+        // As compared with the target: times the camera's exposure.
+        let e = opt.exposure()[k];
+        let mut img = img;
+        for p in &mut img.rgb {
+            *p = p.map(|v| v * e);
+        }
         img.save(&out.join(format!("final_{}.exr", camera_file_name(&prep.scene, cam))))?;
         image_io::side_by_side(&img, &prep.targets[k]).save(&out.join(format!(
             "final_vs_target_{}.png",
@@ -593,7 +620,7 @@ pub fn write_gradient(
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
     let prep = Problem::from_task(gpu, task, dir, false)?;
     let settings = task_settings(task, &prep.cameras, method, restir);
-    let mut opt = Optimizer::new(gpu, &prep.scene, prep.set.clone(), settings, &prep.targets)?;
+    let mut opt = Optimizer::for_problem(gpu, &prep, settings)?;
     let (grad, _) = opt.estimate_gradient(0)?;
     let mut written = Vec::new();
     for i in 0..prep.set.textures.len() {
