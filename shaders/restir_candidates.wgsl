@@ -36,7 +36,7 @@ var<private> offered: u32 = 0u;
 var<private> lost: u32 = 0u;
 var<private> dropped: u32 = 0u;
 
-fn offer_technique(g: GradientSample, ds: DirectSample, bg: BrdfGrad, dir: vec2f, adj: vec3f, info: u32) {
+fn offer_technique(g: GradientSample, ds: DirectSample, bg: BrdfGrad, vertex: PathVertex, adj: vec3f, info: u32) {
     if ds.scale == 0.0 {
         return;
     }
@@ -71,7 +71,7 @@ fn offer_technique(g: GradientSample, ds: DirectSample, bg: BrdfGrad, dir: vec2f
                 r += 1u;
             }
             offered += 1u;
-            if !reservoir_offer(r, w, rand(), Candidate(info, v, g.hit, dir, ds.radiance)) {
+            if !reservoir_offer(r, w, rand(), Candidate(info, v, vertex, ds.radiance)) {
                 lost += 1u;
             }
         }
@@ -93,8 +93,8 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         if !g.valid {
             continue;
         }
-        offer_technique(g, g.nee, g.nee_grad, g.nee_dir, a.adj, info);
-        offer_technique(g, g.bsdf, g.bsdf_grad, g.bsdf_dir, a.adj, info | (1u << INFO_TECH_SHIFT));
+        offer_technique(g, g.nee, g.nee_grad, g.nee_vertex, a.adj, info);
+        offer_technique(g, g.bsdf, g.bsdf_grad, g.bsdf_vertex, a.adj, info | (1u << INFO_TECH_SHIFT));
     }
     atomicAdd(&cstats[CANDIDATE_STAT_OFFERED], offered);
     if lost > 0u {

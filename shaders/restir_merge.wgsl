@@ -15,17 +15,17 @@
 // was drawn) stays a valid path with the same value of everything but the BRDF and the
 // adjoint. The shift is the identity in path space (Jacobian 1): a kept sample is evaluated
 // under the current textures and adjoint, a fresh one under the previous ones (both
-// double-buffered), each by one BRDF-with-derivative evaluation. Nothing here traces a ray:
-// shared/bvh is not part of this pass (a test checks the composed module).
+// double-buffered), each by one BRDF-with-derivative evaluation from what the reservoir
+// stores of the hit (material, texture coordinates, shading-frame directions): no geometry is
+// read. Nothing here traces a ray: shared/bvh is not part of this pass (a test checks the
+// composed module).
 // MIS: balance heuristic with confidences over the inputs' own targets.
 #import shared/rng
-#import shared/camera
 #import shared/surface
 #import gen/restir_layout
 
 // Mirrored by MergeParams in src/optim/estimator/restir.rs. flags: MERGE_FLAG_* (generated).
 struct MergeParams {
-    cameras: array<CameraInfo, MAX_CAMERAS>,
     n_texels: u32,
     n_pixels: u32,
     seed: u32,
@@ -58,8 +58,7 @@ struct Stored {
     info: u32,
     w: f32,
     v: vec3f,
-    hit: Hit,
-    dir: vec2f,
+    vertex: PathVertex,
     radiance: vec3f,
 }
 
@@ -68,8 +67,12 @@ fn unpack(words: array<u32, RESERVOIR_WORDS>) -> Stored {
     s.info = words[RES_INFO];
     s.w = bitcast<f32>(words[RES_W]);
     s.v = vec3f(bitcast<f32>(words[RES_VALUE]), bitcast<f32>(words[RES_VALUE + 1u]), bitcast<f32>(words[RES_VALUE + 2u]));
-    s.hit = Hit(0.0, words[RES_TRI], bitcast<f32>(words[RES_BARY]), bitcast<f32>(words[RES_BARY + 1u]));
-    s.dir = vec2f(bitcast<f32>(words[RES_DIR]), bitcast<f32>(words[RES_DIR + 1u]));
+    s.vertex = PathVertex(
+        words[RES_MATERIAL],
+        vec2f(bitcast<f32>(words[RES_UV]), bitcast<f32>(words[RES_UV + 1u])),
+        vec2f(bitcast<f32>(words[RES_WO]), bitcast<f32>(words[RES_WO + 1u])),
+        vec2f(bitcast<f32>(words[RES_WI]), bitcast<f32>(words[RES_WI + 1u])),
+    );
     s.radiance = vec3f(bitcast<f32>(words[RES_RADIANCE]), bitcast<f32>(words[RES_RADIANCE + 1u]), bitcast<f32>(words[RES_RADIANCE + 2u]));
     return s;
 }
@@ -97,11 +100,13 @@ fn store_merged(r: u32, s: Stored) {
     merged[b + RES_VALUE] = bitcast<u32>(s.v.x);
     merged[b + RES_VALUE + 1u] = bitcast<u32>(s.v.y);
     merged[b + RES_VALUE + 2u] = bitcast<u32>(s.v.z);
-    merged[b + RES_TRI] = s.hit.tri;
-    merged[b + RES_BARY] = bitcast<u32>(s.hit.b1);
-    merged[b + RES_BARY + 1u] = bitcast<u32>(s.hit.b2);
-    merged[b + RES_DIR] = bitcast<u32>(s.dir.x);
-    merged[b + RES_DIR + 1u] = bitcast<u32>(s.dir.y);
+    merged[b + RES_MATERIAL] = s.vertex.material;
+    merged[b + RES_UV] = bitcast<u32>(s.vertex.uv.x);
+    merged[b + RES_UV + 1u] = bitcast<u32>(s.vertex.uv.y);
+    merged[b + RES_WO] = bitcast<u32>(s.vertex.wo.x);
+    merged[b + RES_WO + 1u] = bitcast<u32>(s.vertex.wo.y);
+    merged[b + RES_WI] = bitcast<u32>(s.vertex.wi.x);
+    merged[b + RES_WI + 1u] = bitcast<u32>(s.vertex.wi.y);
     merged[b + RES_RADIANCE] = bitcast<u32>(s.radiance.x);
     merged[b + RES_RADIANCE + 1u] = bitcast<u32>(s.radiance.y);
     merged[b + RES_RADIANCE + 2u] = bitcast<u32>(s.radiance.z);
@@ -136,7 +141,7 @@ fn evaluate(st: Stored, ti: u32, local: u32, prev: bool) -> vec3f {
         adj = adjoint_prev[a].xyz;
     }
     use_prev_params = prev;
-    let v = path_value(mp.cameras[cam_index].origin, st.hit, oct_decode(st.dir), st.radiance, adj * mp.inv_spp, ti, local);
+    let v = path_value(st.vertex, st.radiance, adj * mp.inv_spp, ti, local);
     use_prev_params = false;
     if !all(abs(v) < vec3f(3.0e38)) {
         dropped += 1u;
@@ -164,6 +169,22 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     let ch = p.channels;
     let n_signs = select(1u, 2u, (mp.flags & MERGE_FLAG_POSITIVIZE) != 0u);
     let reuse = (mp.flags & MERGE_FLAG_TEMPORAL) != 0u && (mp.flags & MERGE_FLAG_HAVE_PREV) != 0u;
+    // Most texels of a typical task hold no sample at all (unobserved, or not hit this
+    // iteration and never before): their merged reservoirs stay empty (the fresh ones' W is
+    // 0 already) and their gradient is 0, found from four words.
+    var any_sample = false;
+    for (var r = 0u; r < n_signs; r++) {
+        any_sample = any_sample || bitcast<f32>(merged[(2u * t + r) * RESERVOIR_WORDS + RES_W]) > 0.0;
+        if reuse {
+            any_sample = any_sample || bitcast<f32>(kept[(2u * t + r) * RESERVOIR_WORDS + RES_W]) > 0.0;
+        }
+    }
+    if !any_sample {
+        for (var c = 0u; c < ch; c++) {
+            grad[p.offset + local * ch + c] = 0.0;
+        }
+        return;
+    }
 
     // Kept samples (their values under the previous state are stored) and fresh samples
     // (their values under the current state are stored). Evaluated: each kept sample under

@@ -166,22 +166,21 @@ fn direct_radiance_states(o: vec3f, d: vec3f, both: bool) -> array<vec3f, 2> {
 
 // A camera sample as the gradient passes see it: the surface it hits and its two direct
 // samples with their BRDF derivatives. valid is false when the ray misses, hits the back of a
-// single-sided surface, or hits a material without optimized textures. Each sample's
-// direction is rounded through the octahedral encoding that ReSTIR stores (about 1e-7), and
-// its derivatives are taken there, so that a stored path re-evaluates to the same value.
+// single-sided surface, or hits a material without optimized textures. The outgoing and each
+// sample's incident direction are taken to the shading frame and rounded through the
+// octahedral encoding that ReSTIR stores (about 1e-7), and the derivatives are taken there, so
+// that a stored path (shared/surface.wgsl, path_value) re-evaluates to the same value.
 struct GradientSample {
     valid: bool,
-    // The camera ray's hit (stored by ReSTIR as the path's first vertex).
-    hit: Hit,
     sf: Surface,
     m: Material,
     nee: DirectSample,
     nee_grad: BrdfGrad,
-    // The stored (octahedral) form of nee.wi.
-    nee_dir: vec2f,
+    // The path of each technique as ReSTIR stores it.
+    nee_vertex: PathVertex,
     bsdf: DirectSample,
     bsdf_grad: BrdfGrad,
-    bsdf_dir: vec2f,
+    bsdf_vertex: PathVertex,
 }
 
 fn gradient_sample(o: vec3f, d: vec3f) -> GradientSample {
@@ -191,7 +190,6 @@ fn gradient_sample(o: vec3f, d: vec3f) -> GradientSample {
     if hit.tri == NONE {
         return out;
     }
-    out.hit = hit;
     out.sf = surface_at(o, hit);
     out.m = materials[out.sf.material];
     let m = out.m;
@@ -199,16 +197,15 @@ fn gradient_sample(o: vec3f, d: vec3f) -> GradientSample {
         return out;
     }
     let mat = surface_material(out.sf);
-    let wo = to_local(out.sf.frame, out.sf.wo);
     let s = sample_direct(out.sf, mat);
     out.nee = s.nee;
     out.bsdf = s.bsdf;
-    out.nee_dir = oct_encode(s.nee.wi);
-    out.bsdf_dir = oct_encode(s.bsdf.wi);
-    out.nee.wi = oct_decode(out.nee_dir);
-    out.bsdf.wi = oct_decode(out.bsdf_dir);
-    out.nee_grad = brdf_eval_cos_grad(mat, wo, to_local(out.sf.frame, out.nee.wi));
-    out.bsdf_grad = brdf_eval_cos_grad(mat, wo, to_local(out.sf.frame, out.bsdf.wi));
+    let wo = oct_encode(to_local(out.sf.frame, out.sf.wo));
+    out.nee_vertex = PathVertex(out.sf.material, out.sf.uv, wo, oct_encode(to_local(out.sf.frame, s.nee.wi)));
+    out.bsdf_vertex = PathVertex(out.sf.material, out.sf.uv, wo, oct_encode(to_local(out.sf.frame, s.bsdf.wi)));
+    let wo_l = oct_decode(wo);
+    out.nee_grad = brdf_eval_cos_grad(mat, wo_l, oct_decode(out.nee_vertex.wi));
+    out.bsdf_grad = brdf_eval_cos_grad(mat, wo_l, oct_decode(out.bsdf_vertex.wi));
     out.valid = true;
     return out;
 }

@@ -3,10 +3,11 @@
 
 // Streaming reservoir updates for parameter-space ReSTIR. A reservoir holds one path (the
 // layout, RES_* and RESERVOIR_WORDS, is generated from src/optim/estimator/restir.rs): the
-// camera sample that started it (pixel, camera, technique in RES_INFO), the camera ray's hit
-// (triangle and barycentrics), the incident direction (octahedral) and the radiance arriving
-// along it, with its value under the iteration's textures and adjoint, the weight sum (fresh
-// reservoirs) or unbiased contribution weight W (merged), and the confidence M.
+// camera sample that started it (pixel, camera, technique in RES_INFO), what the BRDF needs of
+// the camera ray's hit (material, texture coordinates, and the outgoing and incident
+// directions in its shading frame, octahedral) and the radiance arriving along the incident
+// direction, with its value under the iteration's textures and adjoint, and the weight sum
+// (fresh reservoirs) or unbiased contribution weight W (merged).
 // Texel t owns reservoirs 2t (positive part of the target) and 2t + 1 (negative part).
 // Passes that offer candidates declare `fresh` (the reservoirs, as atomics) and `locks`.
 
@@ -23,9 +24,8 @@ struct Candidate {
     // Pixel | camera << INFO_CAMERA_SHIFT | technique << INFO_TECH_SHIFT (0 light, 1 BSDF).
     info: u32,
     value: vec3f,
-    hit: Hit,
-    // Incident direction, octahedral (oct_encode in shared/surface.wgsl).
-    dir: vec2f,
+    // The path's first vertex as path_value (shared/surface.wgsl) evaluates it.
+    vertex: PathVertex,
     radiance: vec3f,
 }
 
@@ -50,11 +50,13 @@ fn reservoir_offer(r: u32, w: f32, u: f32, c: Candidate) -> bool {
                 atomicStore(&fresh[base + RES_VALUE], bitcast<u32>(c.value.x));
                 atomicStore(&fresh[base + RES_VALUE + 1u], bitcast<u32>(c.value.y));
                 atomicStore(&fresh[base + RES_VALUE + 2u], bitcast<u32>(c.value.z));
-                atomicStore(&fresh[base + RES_TRI], c.hit.tri);
-                atomicStore(&fresh[base + RES_BARY], bitcast<u32>(c.hit.b1));
-                atomicStore(&fresh[base + RES_BARY + 1u], bitcast<u32>(c.hit.b2));
-                atomicStore(&fresh[base + RES_DIR], bitcast<u32>(c.dir.x));
-                atomicStore(&fresh[base + RES_DIR + 1u], bitcast<u32>(c.dir.y));
+                atomicStore(&fresh[base + RES_MATERIAL], c.vertex.material);
+                atomicStore(&fresh[base + RES_UV], bitcast<u32>(c.vertex.uv.x));
+                atomicStore(&fresh[base + RES_UV + 1u], bitcast<u32>(c.vertex.uv.y));
+                atomicStore(&fresh[base + RES_WI], bitcast<u32>(c.vertex.wi.x));
+                atomicStore(&fresh[base + RES_WI + 1u], bitcast<u32>(c.vertex.wi.y));
+                atomicStore(&fresh[base + RES_WO], bitcast<u32>(c.vertex.wo.x));
+                atomicStore(&fresh[base + RES_WO + 1u], bitcast<u32>(c.vertex.wo.y));
                 atomicStore(&fresh[base + RES_RADIANCE], bitcast<u32>(c.radiance.x));
                 atomicStore(&fresh[base + RES_RADIANCE + 1u], bitcast<u32>(c.radiance.y));
                 atomicStore(&fresh[base + RES_RADIANCE + 2u], bitcast<u32>(c.radiance.z));

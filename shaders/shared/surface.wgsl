@@ -1,6 +1,6 @@
 // A surface point as the shading code sees it, rebuilt from a triangle and barycentrics
-// alone. Tracing (shared/bvh) is not imported here: ReSTIR's merge evaluates stored paths with
-// these functions and must not be able to trace a ray.
+// alone, and the value of a stored path. Tracing (shared/bvh) is not imported here: ReSTIR's
+// merge evaluates stored paths with these functions and must not be able to trace a ray.
 #import shared/lights
 #import shared/brdf
 #import shared/params
@@ -59,22 +59,27 @@ fn surface_at(o: vec3f, hit: Hit) -> Surface {
 }
 
 fn surface_material(sf: Surface) -> SurfaceMaterial {
-    let m = materials[sf.material];
-    let bc = sample_texture(m.base_color_tex, transform_uv(m, 0u, sf.uv));
-    let mr = sample_texture(m.mr_tex, transform_uv(m, 1u, sf.uv));
+    return material_at(sf.material, sf.uv);
+}
+
+// The BRDF inputs of material `mi` at texture coordinates uv.
+fn material_at(mi: u32, uv: vec2f) -> SurfaceMaterial {
+    let m = materials[mi];
+    let bc = sample_texture(m.base_color_tex, transform_uv(m, 0u, uv));
+    let mr = sample_texture(m.mr_tex, transform_uv(m, 1u, uv));
     var out = SurfaceMaterial(m.base_color.rgb * bc.rgb, clamp(m.metallic * mr.b, 0.0, 1.0), clamp(m.roughness * mr.g, 0.0, 1.0));
     // Optimized textures replace the material's inputs (UV0, repeat wrap).
     if m.param_base_color != NONE {
         let p = param_textures[m.param_base_color];
-        out.base_color = param_value(p, param_footprint(p, sf.uv));
+        out.base_color = param_value(p, param_footprint(p, uv));
     }
     if m.param_metallic != NONE {
         let p = param_textures[m.param_metallic];
-        out.metallic = param_value(p, param_footprint(p, sf.uv)).x;
+        out.metallic = param_value(p, param_footprint(p, uv)).x;
     }
     if m.param_roughness != NONE {
         let p = param_textures[m.param_roughness];
-        out.roughness = param_value(p, param_footprint(p, sf.uv)).x;
+        out.roughness = param_value(p, param_footprint(p, uv)).x;
     }
     return out;
 }
@@ -85,9 +90,9 @@ fn offset_origin(sf: Surface, d: vec3f) -> vec3f {
     return sf.p + sf.ng * select(-scale, scale, dot(sf.ng, d) >= 0.0);
 }
 
-// Unit direction <-> two floats (octahedral map). ReSTIR stores incident directions this way;
-// decode(encode(d)) differs from d by about 1e-7, and the candidate pass evaluates every
-// sample at the decoded direction, so a stored path is re-evaluated exactly.
+// Unit direction <-> two floats (octahedral map). ReSTIR stores directions this way;
+// decode(encode(d)) differs from d by about 1e-7, and the gradient passes evaluate every
+// sample at the decoded directions, so a stored path is re-evaluated exactly.
 fn oct_encode(d: vec3f) -> vec2f {
     let n = d / (abs(d.x) + abs(d.y) + abs(d.z));
     if n.z >= 0.0 {
@@ -109,17 +114,13 @@ fn oct_decode(e: vec2f) -> vec3f {
 // The value of a path's contribution to texel `local` of optimized texture `ti`, as
 // adjoint x d(f)/d(texel) with f = BRDF x cos x L_i (per channel for base color, x for
 // scalars): the path-space integrand of the gradient, before any sampling density. Zero when
-// the path's surface does not use the texture or its filter does not reach the texel. Uses
-// the textures that use_prev_params selects.
-fn path_value(o: vec3f, hit: Hit, wi: vec3f, li: vec3f, adj: vec3f, ti: u32, local: u32) -> vec3f {
-    if hit.tri >= arrayLength(&tri_shading) || all(adj == vec3f(0.0)) {
+// the path's material does not use the texture or its filter does not reach the texel. Uses
+// the textures that use_prev_params selects. No geometry is looked at.
+fn path_value(pv: PathVertex, li: vec3f, adj: vec3f, ti: u32, local: u32) -> vec3f {
+    if pv.material >= arrayLength(&materials) || all(adj == vec3f(0.0)) {
         return vec3f(0.0);
     }
-    let sf = surface_at(o, hit);
-    if !sf.valid {
-        return vec3f(0.0);
-    }
-    let m = materials[sf.material];
+    let m = materials[pv.material];
     var slot = NONE;
     for (var s = 0u; s < 3u; s++) {
         if material_param(m, s) == ti {
@@ -129,7 +130,7 @@ fn path_value(o: vec3f, hit: Hit, wi: vec3f, li: vec3f, adj: vec3f, ti: u32, loc
     if slot == NONE {
         return vec3f(0.0);
     }
-    let fp = footprint_merged(param_footprint(param_textures[ti], sf.uv));
+    let fp = footprint_merged(param_footprint(param_textures[ti], pv.uv));
     var wf = 0.0;
     for (var k = 0u; k < 4u; k++) {
         if fp.texel[k] == local {
@@ -139,7 +140,7 @@ fn path_value(o: vec3f, hit: Hit, wi: vec3f, li: vec3f, adj: vec3f, ti: u32, loc
     if wf == 0.0 {
         return vec3f(0.0);
     }
-    let mat = surface_material(sf);
-    let bg = brdf_eval_cos_grad(mat, to_local(sf.frame, sf.wo), to_local(sf.frame, wi));
+    let mat = material_at(pv.material, pv.uv);
+    let bg = brdf_eval_cos_grad(mat, oct_decode(pv.wo), oct_decode(pv.wi));
     return wf * slot_derivative(slot, bg, li, adj);
 }

@@ -115,3 +115,15 @@ struct Hit {
     b1: f32,
     b2: f32,
 }
+
+// What the value of a direct-lighting path depends on besides the incident radiance, once
+// geometry is fixed: the hit's material and texture coordinates, and the outgoing and incident
+// directions in its shading frame (octahedral, shared/surface.wgsl). ReSTIR stores it; the
+// gradient passes evaluate every sample at the decoded directions, so a stored path
+// re-evaluates to the same value (shared/surface.wgsl, path_value).
+struct PathVertex {
+    material: u32,
+    uv: vec2f,
+    wo: vec2f,
+    wi: vec2f,
+}

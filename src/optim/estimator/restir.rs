@@ -33,16 +33,18 @@ pub mod reservoir {
     pub const W: u32 = 1;
     /// The path's value v (RGB, x for scalars) under the state the reservoir was formed at.
     pub const VALUE: u32 = 2;
-    /// Triangle of the camera ray's hit (GPU order).
-    pub const TRI: u32 = 5;
-    /// Barycentrics b1, b2 of the hit, f32.
-    pub const BARY: u32 = 6;
-    /// Incident direction, octahedral, two f32.
-    pub const DIR: u32 = 8;
+    /// Material of the camera ray's hit (index into the scene's materials).
+    pub const MATERIAL: u32 = 5;
+    /// Texture coordinates (UV0) of the hit, f32.
+    pub const UV: u32 = 6;
+    /// Incident direction in the hit's shading frame, octahedral, two f32.
+    pub const WI: u32 = 8;
+    /// Outgoing (towards the camera) direction in the shading frame, octahedral, two f32.
+    pub const WO: u32 = 10;
     /// Incident radiance, RGB f32.
-    pub const RADIANCE: u32 = 10;
+    pub const RADIANCE: u32 = 12;
     /// Words per reservoir.
-    pub const WORDS: u32 = 13;
+    pub const WORDS: u32 = 15;
     /// Bits of the pixel index (images up to 8192 x 8192 = 2^26 pixels).
     pub const CAMERA_SHIFT: u32 = 26;
     /// Camera index mask after the shift.
@@ -85,9 +87,10 @@ pub fn layout_wgsl() -> String {
         ("RES_INFO", INFO),
         ("RES_W", W),
         ("RES_VALUE", VALUE),
-        ("RES_TRI", TRI),
-        ("RES_BARY", BARY),
-        ("RES_DIR", DIR),
+        ("RES_MATERIAL", MATERIAL),
+        ("RES_UV", UV),
+        ("RES_WI", WI),
+        ("RES_WO", WO),
         ("RES_RADIANCE", RADIANCE),
         ("INFO_CAMERA_SHIFT", CAMERA_SHIFT),
         ("INFO_CAMERA_MASK", CAMERA_MASK),
@@ -186,7 +189,6 @@ pub struct CandidateParams {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct MergeParams {
-    pub cameras: [GpuCameraInfo; MAX_CAMERAS],
     pub n_texels: u32,
     pub n_pixels: u32,
     pub seed: u32,
@@ -304,11 +306,8 @@ impl Restir {
         let merge_stats = gpu.storage_zeroed("merge stats", 16);
         let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
         let merge_grid = grid_2d(n_texels as u32, WORKGROUP, max_dim);
-        let mut cameras = [GpuCameraInfo::default(); MAX_CAMERAS];
-        cameras[..n_cams].copy_from_slice(s.cameras);
         let spp = s.settings.gradient_spp;
         let merge_params = MergeParams {
-            cameras,
             n_texels: n_texels as u32,
             n_pixels,
             seed: 0,
