@@ -1,5 +1,5 @@
 // Scene bindings, group 0, shared by every pass that traces rays.
-// Keep in sync with SceneBuffers::layout in src/render/mod.rs.
+// The layout is reflected from here (Gpu::pass_layout); GpuScene::new binds the buffers.
 #import shared/types
 
 @group(0) @binding(0) var<storage, read> nodes: array<BvhNode>;

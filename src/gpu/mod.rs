@@ -422,9 +422,18 @@ impl Gpu {
         Ok(pipeline)
     }
 
-    /// A bind group layout of storage buffers (read-only unless listed in `writable`) and
-    /// uniform buffers, bindings numbered in order.
-    pub fn layout(&self, label: &str, kinds: &[Binding]) -> wgpu::BindGroupLayout {
+    /// The layout of bind group `group` of `pass`, reflected from its WGSL
+    /// ([`shaders::bindings`]): the only way the passes build their layouts.
+    pub fn pass_layout(&self, pass: &str, group: u32) -> Result<wgpu::BindGroupLayout> {
+        let kinds: Vec<Binding> = shaders::bindings(pass, group)?
+            .into_iter()
+            .map(|(_, k)| k)
+            .collect();
+        Ok(self.layout(&format!("{pass} group {group}"), &kinds))
+    }
+
+    /// A bind group layout of uniform and storage buffers, bindings numbered in order.
+    fn layout(&self, label: &str, kinds: &[Binding]) -> wgpu::BindGroupLayout {
         let entries: Vec<wgpu::BindGroupLayoutEntry> = kinds
             .iter()
             .enumerate()
@@ -474,7 +483,7 @@ impl Gpu {
 }
 
 /// Kind of a buffer binding in a [`Gpu::layout`].
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Binding {
     /// `var<uniform>`.
     Uniform,

@@ -140,6 +140,50 @@ pub fn validate(pass: &str) -> Result<naga::Module> {
     Ok(module)
 }
 
+/// The bindings of group `group` of a pass, reflected from its composed WGSL by naga:
+/// (variable name, kind) in binding order. Bind group layouts are built from this, so they
+/// cannot disagree with the shader; the bindings must be numbered 0, 1, 2, ... without gaps.
+pub fn bindings(pass: &str, group: u32) -> Result<Vec<(String, super::Binding)>> {
+    let module = validate(pass)?;
+    let mut found: Vec<(u32, String, super::Binding)> = Vec::new();
+    for (_, var) in module.global_variables.iter() {
+        let Some(rb) = &var.binding else { continue };
+        if rb.group != group {
+            continue;
+        }
+        let kind = match var.space {
+            naga::AddressSpace::Uniform => super::Binding::Uniform,
+            naga::AddressSpace::Storage { access } => {
+                if access.contains(naga::StorageAccess::STORE) {
+                    super::Binding::StorageRw
+                } else {
+                    super::Binding::Storage
+                }
+            }
+            other => {
+                return Err(Error::Shader {
+                    name: pass.into(),
+                    msg: format!(
+                        "binding {} of group {group}: unsupported {other:?}",
+                        rb.binding
+                    ),
+                })
+            }
+        };
+        found.push((rb.binding, var.name.clone().unwrap_or_default(), kind));
+    }
+    found.sort_by_key(|b| b.0);
+    for (i, b) in found.iter().enumerate() {
+        if b.0 != i as u32 {
+            return Err(Error::Shader {
+                name: pass.into(),
+                msg: format!("group {group} has no binding {i} (bindings must be 0, 1, 2, ...)"),
+            });
+        }
+    }
+    Ok(found.into_iter().map(|(_, n, k)| (n, k)).collect())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -154,6 +198,24 @@ mod tests {
             n += 1;
         }
         assert!(n >= 2);
+    }
+
+    #[test]
+    fn every_pass_has_contiguous_reflected_bindings() {
+        // texture_export binds a storage texture, which texture_export.rs lays out itself.
+        for pass in passes().filter(|&p| p != "texture_export") {
+            for group in 0..2 {
+                bindings(pass, group).unwrap_or_else(|e| panic!("{pass}: {e}"));
+            }
+        }
+        // The scene group as every tracing pass declares it (shared/scene.wgsl).
+        let scene = bindings("render", 0).unwrap();
+        assert_eq!(scene[0].0, "nodes");
+        assert_eq!(
+            scene[7],
+            ("scene".to_string(), crate::gpu::Binding::Uniform)
+        );
+        assert_eq!(bindings("loss", 0).unwrap()[6].0, "exposure_partial");
     }
 
     #[test]

@@ -15,7 +15,7 @@ pub mod run;
 pub mod schedule;
 pub mod texture_export;
 
-use crate::gpu::{grid_2d, Binding, Gpu};
+use crate::gpu::{grid_2d, Gpu};
 use crate::image_io::Image;
 use crate::render::layout::*;
 use crate::render::params::ParamSet;
@@ -525,17 +525,8 @@ impl Optimizer {
         }
         memory_plan(&set, &settings, targets.len()).check(gpu)?;
         let renderer = Renderer::with_params(gpu, scene, &set)?;
-        use Binding::*;
-        let loss_layout = gpu.layout(
-            "loss",
-            &[
-                Uniform, Storage, Storage, StorageRw, StorageRw, StorageRw, StorageRw, Storage,
-            ],
-        );
-        let adam_layout = gpu.layout(
-            "adam",
-            &[Uniform, Storage, StorageRw, StorageRw, StorageRw, StorageRw],
-        );
+        let loss_layout = gpu.pass_layout("loss", 0)?;
+        let adam_layout = gpu.pass_layout("adam", 0)?;
         let loss_pipeline = gpu.compute_pipeline("loss", &[&loss_layout])?;
         let adam_pipeline = gpu.compute_pipeline("adam", &[&adam_layout])?;
 

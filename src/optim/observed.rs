@@ -3,7 +3,6 @@
 //! gradient, keep their initial values, and are not determined by the images, so texture
 //! errors are reported over the observed ones as well ([`rmse_observed`]).
 use super::Optimizer;
-use crate::gpu::Binding;
 use crate::render::layout::GpuCameraInfo;
 use crate::render::params::ParamSet;
 use crate::render::WORKGROUP;
@@ -34,7 +33,7 @@ impl Optimizer {
             return Ok(m);
         }
         let gpu = &self.gpu;
-        let layout = gpu.layout("observed_texels", &[Binding::Uniform, Binding::StorageRw]);
+        let layout = gpu.pass_layout("observed_texels", 1)?;
         let scene = &self.renderer().scene;
         let pipeline = gpu.compute_pipeline("observed_texels", &[&scene.layout, &layout])?;
         let n_texels = scene.n_texels as u64;

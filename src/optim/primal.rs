@@ -13,7 +13,7 @@
 //! image) stays unbiased. The loss *value* is biased upwards by the image's variance (its mean
 //! is L(E[I]) + Var(I) x the loss's weights), as with any noisy render; the control variate
 //! lowers that bias with the variance.
-use crate::gpu::{Binding, Gpu};
+use crate::gpu::Gpu;
 use crate::optim::{PassKind, PassTimer};
 use crate::render::WORKGROUP;
 use crate::{Error, Result};
@@ -118,8 +118,7 @@ impl ControlVariate {
         accum_prev: &wgpu::Buffer,
     ) -> Result<ControlVariate> {
         let n_pixels = width * height;
-        use Binding::*;
-        let layout = gpu.layout("primal_cv", &[Uniform, StorageRw, Storage, StorageRw]);
+        let layout = gpu.pass_layout("primal_cv", 0)?;
         let pipeline = gpu.compute_pipeline("primal_cv", &[&layout])?;
         let sizes = memory(n_pixels as u64, n_cams as u64);
         let state = gpu.storage_zeroed(&sizes[0].0, sizes[0].1);

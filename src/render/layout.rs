@@ -158,75 +158,254 @@ mod tests {
     use super::*;
     use std::mem::size_of;
 
-    // Sizes as naga computes them for the WGSL structs.
-    fn wgsl_size(pass: &str, name: &str) -> usize {
+    fn field_size<T, F>(_: impl Fn(&T) -> &F) -> usize {
+        size_of::<F>()
+    }
+
+    /// Check a Rust mirror against the WGSL struct `name` of pass `pass` as naga lays it
+    /// out: the size, and every member's offset and size by name (members whose names start
+    /// with `_` are padding). A WGSL member without a Rust field, a Rust field without a WGSL
+    /// member, or two fields swapped fail here, without a GPU.
+    fn check_mirror(pass: &str, name: &str, size: usize, fields: &[(&str, usize, usize)]) {
         let module = crate::gpu::shaders::validate(pass).unwrap();
         let mut layouter = naga::proc::Layouter::default();
         layouter.update(module.to_ctx()).unwrap();
-        let (h, _) = module
+        let (h, ty) = module
             .types
             .iter()
             .find(|(_, t)| t.name.as_deref() == Some(name))
             .unwrap_or_else(|| panic!("no WGSL struct {name} in {pass}"));
-        layouter[h].size as usize
+        assert_eq!(size, layouter[h].size as usize, "size of {name}");
+        let naga::TypeInner::Struct { members, .. } = &ty.inner else {
+            panic!("{name} is not a struct in {pass}");
+        };
+        for m in members {
+            let member = m.name.as_deref().unwrap_or("");
+            if member.starts_with('_') {
+                continue;
+            }
+            let Some(&(_, offset, field_size)) = fields.iter().find(|f| f.0 == member) else {
+                panic!("WGSL {name}.{member} has no field in the Rust mirror");
+            };
+            assert_eq!(offset, m.offset as usize, "offset of {name}.{member}");
+            assert_eq!(
+                field_size, layouter[m.ty].size as usize,
+                "size of {name}.{member}"
+            );
+        }
+        for (field, _, _) in fields {
+            assert!(
+                members.iter().any(|m| m.name.as_deref() == Some(field)),
+                "Rust field {field} of {name}'s mirror is not in the WGSL struct"
+            );
+        }
     }
 
-    // Sizes as naga lays out the WGSL structs.
+    macro_rules! mirror {
+        ($pass:expr, $wgsl:expr, $ty:ty, [$($field:ident),* $(,)?]) => {
+            check_mirror(
+                $pass,
+                $wgsl,
+                size_of::<$ty>(),
+                &[$((
+                    stringify!($field),
+                    std::mem::offset_of!($ty, $field),
+                    field_size(|s: &$ty| &s.$field),
+                )),*],
+            )
+        };
+    }
+
+    // Every Rust mirror of a GPU struct, field by field against naga's layout of the WGSL.
     #[test]
-    fn sizes_match_wgsl() {
-        for (pass, name, size) in [
-            ("render", "TriShading", size_of::<GpuTriShading>()),
-            ("render", "TexRef", size_of::<GpuTexRef>()),
-            ("render", "Material", size_of::<GpuMaterial>()),
-            ("render", "Light", size_of::<GpuLight>()),
-            ("render", "SceneInfo", size_of::<GpuSceneInfo>()),
-            ("render", "CameraInfo", size_of::<GpuCameraInfo>()),
-            ("render", "RenderParams", size_of::<GpuRenderParams>()),
-            ("render", "ParamTex", size_of::<GpuParamTex>()),
-            ("render", "BvhNode", size_of::<crate::scene::bvh::BvhNode>()),
-            ("trace_rays", "TraceParams", size_of::<GpuTraceParams>()),
-            (
-                "gradient",
-                "GradientParams",
-                size_of::<crate::optim::estimator::baseline::GradientParams>(),
-            ),
-            (
-                "loss",
-                "LossParams",
-                size_of::<crate::optim::loss::LossParams>(),
-            ),
-            (
-                "adam",
-                "AdamParams",
-                size_of::<crate::optim::adam::AdamParams>(),
-            ),
-            (
-                "restir_candidates",
-                "CandidateParams",
-                size_of::<crate::optim::restir::CandidateParams>(),
-            ),
-            (
-                "restir_merge",
-                "MergeParams",
-                size_of::<crate::optim::restir::MergeParams>(),
-            ),
-            (
-                "primal_cv",
-                "PrimalCvParams",
-                size_of::<crate::optim::primal::PrimalCvParams>(),
-            ),
-            (
-                "observed_texels",
-                "ObservedParams",
-                size_of::<crate::optim::observed::ObservedParams>(),
-            ),
-            (
-                "texture_export",
-                "ExportParams",
-                size_of::<crate::optim::texture_export::ExportParams>(),
-            ),
-        ] {
-            assert_eq!(size, wgsl_size(pass, name), "{name}");
-        }
+    fn mirrors_match_wgsl_field_by_field() {
+        mirror!(
+            "render",
+            "TriShading",
+            GpuTriShading,
+            [n0, n1, n2, uv01, uv2, material, light]
+        );
+        mirror!(
+            "render",
+            "TexRef",
+            GpuTexRef,
+            [offset, width, height, flags]
+        );
+        mirror!(
+            "render",
+            "Material",
+            GpuMaterial,
+            [
+                base_color,
+                emissive,
+                metallic,
+                roughness,
+                double_sided,
+                param_base_color,
+                param_metallic,
+                param_roughness,
+                base_color_tex,
+                mr_tex,
+                emissive_tex,
+                uv_xf
+            ]
+        );
+        mirror!(
+            "render",
+            "Light",
+            GpuLight,
+            [
+                position,
+                kind,
+                direction,
+                tri,
+                intensity,
+                range,
+                spot_scale,
+                spot_offset,
+                pmf,
+                cdf
+            ]
+        );
+        mirror!(
+            "render",
+            "SceneInfo",
+            GpuSceneInfo,
+            [
+                n_nodes,
+                n_tris,
+                n_lights,
+                env_light,
+                env_width,
+                env_height,
+                env_marginal,
+                env_conditional,
+                env_scale,
+                env_total,
+                scene_radius
+            ]
+        );
+        mirror!(
+            "render",
+            "CameraInfo",
+            GpuCameraInfo,
+            [origin, fx, right, fy, up, width, forward, height, cx, cy]
+        );
+        mirror!(
+            "render",
+            "RenderParams",
+            GpuRenderParams,
+            [
+                camera,
+                seed,
+                sample_offset,
+                spp,
+                techniques,
+                stride,
+                two_states
+            ]
+        );
+        mirror!(
+            "render",
+            "ParamTex",
+            GpuParamTex,
+            [offset, width, height, channels, filtering, texel_offset]
+        );
+        mirror!(
+            "render",
+            "BvhNode",
+            crate::scene::bvh::BvhNode,
+            [bmin, left_first, bmax, count]
+        );
+        mirror!(
+            "trace_rays",
+            "TraceParams",
+            GpuTraceParams,
+            [n_rays, brute_force, stride]
+        );
+        mirror!(
+            "gradient",
+            "GradientParams",
+            crate::optim::estimator::baseline::GradientParams,
+            [
+                camera,
+                seed,
+                sample_offset,
+                spp,
+                techniques,
+                stride,
+                inv_spp,
+                adjoint_offset
+            ]
+        );
+        mirror!(
+            "loss",
+            "LossParams",
+            crate::optim::loss::LossParams,
+            [
+                n_pixels,
+                kind,
+                norm,
+                partial_offset,
+                adjoint_offset,
+                exposure
+            ]
+        );
+        mirror!(
+            "adam",
+            "AdamParams",
+            crate::optim::adam::AdamParams,
+            [offset, count, lr, beta1, beta2, eps, bias1, bias2, lo, hi, mask]
+        );
+        mirror!(
+            "restir_candidates",
+            "CandidateParams",
+            crate::optim::restir::CandidateParams,
+            [
+                camera,
+                seed,
+                spp,
+                stride,
+                inv_spp,
+                camera_index,
+                adjoint_offset,
+                positivize
+            ]
+        );
+        mirror!(
+            "restir_merge",
+            "MergeParams",
+            crate::optim::restir::MergeParams,
+            [n_texels, n_pixels, seed, flags, m_fresh, m_kept, inv_spp, n_textures, stride]
+        );
+        mirror!(
+            "primal_cv",
+            "PrimalCvParams",
+            crate::optim::primal::PrimalCvParams,
+            [
+                n_pixels,
+                pixel_offset,
+                updates,
+                use_weight,
+                have_prev,
+                beta1,
+                beta2,
+                phase,
+                width,
+                height
+            ]
+        );
+        mirror!(
+            "observed_texels",
+            "ObservedParams",
+            crate::optim::observed::ObservedParams,
+            [camera, strata, stride]
+        );
+        mirror!(
+            "texture_export",
+            "ExportParams",
+            crate::optim::texture_export::ExportParams,
+            [offset, width, height, channels]
+        );
     }
 }

@@ -6,7 +6,7 @@
 pub mod layout;
 pub mod params;
 
-use crate::gpu::{grid_2d, Binding, Gpu};
+use crate::gpu::{grid_2d, Gpu};
 use crate::image_io::Image;
 use crate::scene::{bvh, PunctualKind, Scene, TextureSlot, Wrap};
 use crate::{Error, Result};
@@ -326,7 +326,8 @@ impl GpuScene {
             ),
         ];
         let bytes = buffers.iter().map(|b| b.size()).sum();
-        let layout = Self::bind_group_layout(gpu);
+        // Group 0 of every tracing pass (shaders/shared/scene.wgsl).
+        let layout = gpu.pass_layout("render", 0)?;
         let refs: Vec<&wgpu::Buffer> = buffers.iter().collect();
         let bind_group = gpu.bind_group("scene", &layout, &refs);
         gpu.check("scene upload")?;
@@ -343,18 +344,6 @@ impl GpuScene {
             param_count: param_set.values.len() as u32,
             n_texels: texel_offset,
         })
-    }
-
-    /// Group 0 layout; keep in sync with shaders/shared/scene.wgsl.
-    pub fn bind_group_layout(gpu: &Gpu) -> wgpu::BindGroupLayout {
-        use Binding::*;
-        gpu.layout(
-            "scene",
-            &[
-                Storage, Storage, Storage, Storage, Storage, Storage, Storage, Uniform, Storage,
-                Storage, Storage,
-            ],
-        )
     }
 }
 
@@ -525,10 +514,9 @@ impl Renderer {
     /// Upload `scene` with optimized textures replacing material inputs.
     pub fn with_params(gpu: &Gpu, scene: &Scene, param_set: &ParamSet) -> Result<Renderer> {
         let gscene = GpuScene::new(gpu, scene, param_set)?;
-        use Binding::*;
-        let render_layout = gpu.layout("render", &[Uniform, StorageRw, StorageRw, StorageRw]);
+        let render_layout = gpu.pass_layout("render", 1)?;
         let render_pipeline = gpu.compute_pipeline("render", &[&gscene.layout, &render_layout])?;
-        let trace_layout = gpu.layout("trace_rays", &[Uniform, Storage, StorageRw]);
+        let trace_layout = gpu.pass_layout("trace_rays", 1)?;
         let trace_pipeline =
             gpu.compute_pipeline("trace_rays", &[&gscene.layout, &trace_layout])?;
         Ok(Renderer {

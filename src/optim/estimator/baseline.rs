@@ -4,7 +4,7 @@
 //! that the texture filter touches. Float additions are bounded compare-and-swap loops on
 //! 32-bit atomics; an exhausted bound is counted, never silently lost.
 use super::{Estimator, Frame, RestirSnapshot, Setup};
-use crate::gpu::{Binding, Gpu};
+use crate::gpu::Gpu;
 use crate::optim::{pass_seed, FaultCounts, PassKind, PassTimer, Seeds};
 use crate::render::encode_timed_pass;
 use crate::render::layout::GpuCameraInfo;
@@ -53,9 +53,8 @@ pub(crate) struct Baseline {
 
 impl Baseline {
     pub(crate) fn new(s: &Setup) -> Result<Baseline> {
-        use Binding::*;
         let gpu = s.gpu;
-        let layout = gpu.layout("gradient", &[Uniform, Storage, StorageRw, StorageRw]);
+        let layout = gpu.pass_layout("gradient", 1)?;
         let pipeline = gpu.compute_pipeline("gradient", &[&s.scene.layout, &layout])?;
         let stats = gpu.storage_zeroed("gradient stats", 16);
         let n_pixels = s.settings.width * s.settings.height;

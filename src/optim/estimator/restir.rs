@@ -16,7 +16,7 @@
 //!    identity shift in path space, sign routing), writes the merged reservoirs and the
 //!    gradient sum over signs of v(y) W. It traces no ray.
 use super::{Estimator, Frame, Setup};
-use crate::gpu::{grid_2d, Binding, Gpu};
+use crate::gpu::{grid_2d, Gpu};
 use crate::optim::{pass_seed, FaultCounts, PassKind, PassTimer, Seeds};
 use crate::render::encode_timed_pass;
 use crate::render::layout::GpuCameraInfo;
@@ -265,7 +265,6 @@ pub(crate) struct Restir {
 
 impl Restir {
     pub(crate) fn new(s: &Setup) -> Result<Restir> {
-        use Binding::*;
         let gpu = s.gpu;
         let o = s.settings.restir;
         let n_cams = s.cameras.len();
@@ -281,16 +280,8 @@ impl Restir {
                 reservoir::CAMERA_SHIFT
             )));
         }
-        let candidate_layout = gpu.layout(
-            "restir_candidates",
-            &[Uniform, Storage, StorageRw, StorageRw, StorageRw],
-        );
-        let merge_layout = gpu.layout(
-            "restir_merge",
-            &[
-                Uniform, Storage, Storage, Storage, StorageRw, StorageRw, StorageRw,
-            ],
-        );
+        let candidate_layout = gpu.pass_layout("restir_candidates", 1)?;
+        let merge_layout = gpu.pass_layout("restir_merge", 1)?;
         let candidate_pipeline =
             gpu.compute_pipeline("restir_candidates", &[&s.scene.layout, &candidate_layout])?;
         let merge_pipeline =
@@ -525,15 +516,11 @@ pub fn selection_trial(
     reservoirs: u32,
     seed: u32,
 ) -> Result<(Vec<u32>, u32)> {
-    use Binding::*;
     let words = reservoir::WORDS as usize;
     let n_candidates = weights.len() as u32;
     let n_invocations = n_candidates * copies * reservoirs;
     let params: [u32; 4] = [n_candidates, copies, n_invocations, seed];
-    let layout = gpu.layout(
-        "reservoir_test",
-        &[Uniform, Storage, StorageRw, StorageRw, StorageRw],
-    );
+    let layout = gpu.pass_layout("reservoir_test", 0)?;
     let pipeline = gpu.compute_pipeline("reservoir_test", &[&layout])?;
     let uniform = gpu.uniform("reservoir_test params", bytemuck::cast_slice(&params));
     let w = gpu.storage(
