@@ -304,7 +304,7 @@ fn check_unbiased_across_shifts(filter: Filter) {
     let (ref_mean, ref_se) = batch_mean(&reference, 16);
     let mut re = optimizer_for(&gpu, &slots, filter, Method::Restir, opts, &a, &t);
     let mut samples = Vec::new();
-    for it in 0..640 {
+    for it in 0..1240 {
         let at_a = it % 2 == 0;
         re.write_params(if at_a { &a } else { &b }).unwrap();
         re.step().unwrap();
@@ -312,12 +312,19 @@ fn check_unbiased_across_shifts(filter: Filter) {
             samples.push(re.read_gradient().unwrap());
         }
     }
-    // Drop the first 20 estimates at A, batches of 25.
-    let (mean, se) = batch_mean(&samples[20..], 12);
+    // Drop the first 20 estimates at A, 24 batches of 25 (each batch spans 50 iterations,
+    // longer than a kept sample's memory at M cap 16, so batches are nearly independent).
+    let (mean, se) = batch_mean(&samples[20..], 24);
     let scale = ref_mean.iter().fold(0f64, |m, x| m.max(x.abs()));
     for i in 0..mean.len() {
-        // 4.5 standard errors of the difference, plus 0.1% of the largest entry for rounding.
-        let tol = 4.5 * (se[i].powi(2) + ref_se[i].powi(2)).sqrt() + 1e-3 * scale;
+        // 5.5 standard errors of the difference, plus 0.1% of the largest entry for rounding.
+        // The standard error comes from 24 batch means, so the difference over it follows
+        // Student's t with 23 degrees of freedom: P(|t| > 5.5) x 32 parameters is about 4e-4
+        // per test. (4.5 with 12 batches was a 3% false alarm per test under that model, and
+        // ReSTIR's persistent high-weight samples make the tails heavier still: it failed
+        // once in CI at 6.5 estimated standard errors, with a standard error a third of
+        // other runs'.)
+        let tol = 5.5 * (se[i].powi(2) + ref_se[i].powi(2)).sqrt() + 1e-3 * scale;
         eprintln!(
             "{filter:?} {i}: ReSTIR {:.4e} +- {:.1e}, baseline {:.4e} +- {:.1e}",
             mean[i], se[i], ref_mean[i], ref_se[i]

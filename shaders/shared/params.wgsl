@@ -31,7 +31,8 @@ fn param_footprint(p: ParamTex, uv: vec2f) -> Footprint {
     );
 }
 
-// Read the previous iteration's textures instead of the current ones (ReSTIR replays).
+// Read the previous iteration's textures instead of the current ones (the ReSTIR merge and
+// the control-variate primal evaluate paths under both).
 var<private> use_prev_params: bool = false;
 
 fn param_at(i: u32) -> f32 {

@@ -1,5 +1,5 @@
 // Counter-based random numbers: a sample is fully determined by (seed, sample index, dimension),
-// so any sample can be regenerated later (random replay).
+// so a pass can draw the same samples as another from the same camera-sample index.
 
 var<private> rng_state: u32;
 

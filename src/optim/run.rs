@@ -89,6 +89,14 @@ pub fn task_settings(
     }
 }
 
+/// A render as it is compared with its target: times the camera's exposure.
+fn exposed(mut img: Image, exposure: f32) -> Image {
+    for p in &mut img.rgb {
+        *p = p.map(|v| v * exposure);
+    }
+    img
+}
+
 /// Image relMSE of an `spp`-sample render of every camera of `opt` against its target
 /// (mean over cameras), with the same seed at every call, so that differences between calls
 /// are the textures', not the noise's; and the renders.
@@ -101,16 +109,14 @@ pub fn evaluate(
     let mut sum = 0.0;
     let mut images = Vec::new();
     for (k, target) in targets.iter().enumerate() {
-        let mut img = opt.render(
-            k,
-            spp,
-            super::pass_seed(seed, u32::MAX - 2, k as u32, super::Seeds::EVAL),
-        )?;
-        // As compared with the target: times the camera's exposure.
-        let e = opt.exposure()[k];
-        for p in &mut img.rgb {
-            *p = p.map(|v| v * e);
-        }
+        let img = exposed(
+            opt.render(
+                k,
+                spp,
+                super::pass_seed(seed, u32::MAX - 2, k as u32, super::Seeds::EVAL),
+            )?,
+            opt.exposure()[k],
+        );
         sum += super::loss::image_relmse(&img, target);
         images.push(img);
     }
@@ -515,12 +521,7 @@ fn write_outputs(
             task.target.spp.min(64),
             super::pass_seed(task.seed, u32::MAX - 1, k as u32, super::Seeds::EVAL),
         )?;
-        // As compared with the target: times the camera's exposure.
-        let e = opt.exposure()[k];
-        let mut img = img;
-        for p in &mut img.rgb {
-            *p = p.map(|v| v * e);
-        }
+        let img = exposed(img, opt.exposure()[k]);
         img.save(&out.join(format!("final_{}.exr", camera_file_name(&prep.scene, cam))))?;
         image_io::side_by_side(&img, &prep.targets[k]).save(&out.join(format!(
             "final_vs_target_{}.png",
