@@ -377,6 +377,17 @@ learning_rate = 0.05
 
 /// The shadow scene with a 2x2 base color texture on the plane.
 fn masked_optimizer(gpu: &psrestir::gpu::Gpu, target: &Image) -> Optimizer {
+    let settings = Settings {
+        method: Method::Baseline,
+        primal_spp: 4,
+        gradient_spp: 4,
+        ..Settings::new(16, 16, vec![0])
+    };
+    plane_optimizer(gpu, settings, target)
+}
+
+/// The shadow scene with a 2x2 base color texture on the plane, with `settings`.
+fn plane_optimizer(gpu: &psrestir::gpu::Gpu, settings: Settings, target: &Image) -> Optimizer {
     let scene = shadow_scene();
     let spec = TextureSpec {
         material: "plane".into(),
@@ -386,12 +397,6 @@ fn masked_optimizer(gpu: &psrestir::gpu::Gpu, target: &Image) -> Optimizer {
         learning_rate: 0.0,
     };
     let set = ParamSet::from_specs(&scene, &[spec], Filter::Bilinear, Path::new("t")).unwrap();
-    let settings = Settings {
-        method: Method::Baseline,
-        primal_spp: 4,
-        gradient_spp: 4,
-        ..Settings::new(16, 16, vec![0])
-    };
     Optimizer::new(gpu, &scene, set, settings, std::slice::from_ref(target)).unwrap()
 }
 
@@ -449,15 +454,6 @@ fn the_exposure_of_a_camera_is_recovered() {
     for p in &mut target.rgb {
         *p = p.map(|v| 1.4 * v);
     }
-    let scene = shadow_scene();
-    let spec = TextureSpec {
-        material: "plane".into(),
-        slot: Slot::BaseColor,
-        resolution: [2, 2],
-        init: Init::Vector(vec![0.5; 3]),
-        learning_rate: 0.0,
-    };
-    let set = ParamSet::from_specs(&scene, &[spec], Filter::Bilinear, Path::new("t")).unwrap();
     let settings = Settings {
         method: Method::Baseline,
         primal_spp: 4,
@@ -466,7 +462,7 @@ fn the_exposure_of_a_camera_is_recovered() {
         schedule: Schedule::cosine(0.05),
         ..Settings::new(16, 16, vec![0])
     };
-    let mut opt = Optimizer::new(&gpu, &scene, set, settings, &[target]).unwrap();
+    let mut opt = plane_optimizer(&gpu, settings, &target);
     opt.write_params(&truth).unwrap();
     for i in 0..120 {
         opt.set_progress(i as f64 / 120.0);
