@@ -1,0 +1,238 @@
+//! What an iteration reports, and the optimizer's state as checkpoints save it.
+
+use super::{ControlVariateSnapshot, Optimizer, RestirSnapshot};
+use crate::{Error, Result};
+
+/// What one iteration reports.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct StepStats {
+    /// Loss of this iteration's primal render (before the update).
+    pub loss: f64,
+}
+
+/// Counters of dropped or lost values since the optimizer was created.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FaultCounts {
+    /// Gradient additions that exhausted the compare-and-swap bound.
+    pub lost_updates: u32,
+    /// Non-finite values dropped by the gradient or candidate pass.
+    pub dropped_gradient: u32,
+    /// Non-finite gradients skipped by Adam.
+    pub skipped_adam: u32,
+    /// Non-finite primal samples dropped.
+    pub dropped_primal: u32,
+    /// Pixels whose loss or adjoint was not finite (e.g. a NaN in the target), counted once
+    /// per iteration and camera, and left out of the loss and the gradient.
+    pub dropped_pixels: u32,
+    /// ReSTIR candidates whose reservoir lock was not taken within the bound.
+    pub lost_offers: u32,
+    /// Non-finite values of stored ReSTIR paths dropped by the merge.
+    pub dropped_replays: u32,
+}
+
+/// The textures and adjoint images of the last iteration, which the next one evaluates kept
+/// samples under (ReSTIR's merge).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PreviousState {
+    /// The textures at which the last iteration drew its samples.
+    pub params: Vec<f32>,
+    /// The last iteration's adjoint images (RGBA per pixel, cameras one after another).
+    pub adjoint: Vec<f32>,
+}
+
+/// The state of an optimizer between iterations, on the CPU (see [`Optimizer::state`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct OptimizerState {
+    /// Iterations done.
+    pub iteration: u32,
+    /// Texture values, laid out like [`ParamSet::values`].
+    pub params: Vec<f32>,
+    /// Adam first moments.
+    pub m1: Vec<f32>,
+    /// Adam second moments.
+    pub m2: Vec<f32>,
+    /// The last iteration's textures and adjoint, when the estimator or the primal uses
+    /// them.
+    pub previous: Option<PreviousState>,
+    /// The ReSTIR estimator's reservoirs; `None` for the baseline.
+    pub restir: Option<RestirSnapshot>,
+    /// The control-variate primal's state; `None` for the independent primal.
+    pub control_variate: Option<ControlVariateSnapshot>,
+    /// Per-camera exposures and, when they are optimized, their Adam moments.
+    pub exposure: ExposureState,
+}
+
+/// Per-camera exposures and the Adam moments of their logarithms.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ExposureState {
+    /// The factor each camera's render is multiplied by.
+    pub values: Vec<f32>,
+    /// Adam first moments (of the logarithms).
+    pub m1: Vec<f32>,
+    /// Adam second moments.
+    pub m2: Vec<f32>,
+    /// Adam steps taken.
+    pub steps: u32,
+}
+
+impl Optimizer {
+    /// The gradient of the last iteration or estimate, laid out like the parameters.
+    pub fn read_gradient(&self) -> Result<Vec<f32>> {
+        let mut g: Vec<f32> = self.gpu.read_pod(&self.grad)?;
+        g.truncate(self.set.values.len());
+        Ok(g)
+    }
+
+    /// Current texture values.
+    pub fn read_params(&self) -> Result<Vec<f32>> {
+        let mut v: Vec<f32> = self.gpu.read_pod(&self.renderer.scene.params)?;
+        v.truncate(self.set.values.len());
+        Ok(v)
+    }
+
+    /// Replace the texture values (e.g. from a checkpoint).
+    pub fn write_params(&self, values: &[f32]) -> Result<()> {
+        if values.len() != self.set.values.len() {
+            return Err(Error::Invalid(format!(
+                "{} values for {} parameters",
+                values.len(),
+                self.set.values.len()
+            )));
+        }
+        self.gpu
+            .queue
+            .write_buffer(&self.renderer.scene.params, 0, bytemuck::cast_slice(values));
+        self.gpu.check("write params")
+    }
+
+    /// Adam's first and second moments.
+    pub fn read_moments(&self) -> Result<[Vec<f32>; 2]> {
+        let n = self.set.values.len();
+        let mut a: Vec<f32> = self.gpu.read_pod(&self.moments[0])?;
+        let mut b: Vec<f32> = self.gpu.read_pod(&self.moments[1])?;
+        a.truncate(n);
+        b.truncate(n);
+        Ok([a, b])
+    }
+
+    /// Restore Adam's moments.
+    pub fn write_moments(&self, m: &[Vec<f32>; 2]) -> Result<()> {
+        for (buf, v) in self.moments.iter().zip(m) {
+            if v.len() != self.set.values.len() {
+                return Err(Error::Invalid(
+                    "Adam moments do not match the parameters".into(),
+                ));
+            }
+            self.gpu.queue.write_buffer(buf, 0, bytemuck::cast_slice(v));
+        }
+        self.gpu.check("write moments")
+    }
+
+    /// Current values of texture `i` (index into `set.textures`), copied to the CPU.
+    pub fn texture_values(&self, i: usize) -> Result<Vec<f32>> {
+        let t = self.set.textures.get(i).ok_or_else(|| {
+            Error::Invalid(format!(
+                "texture {i} does not exist ({} optimized)",
+                self.set.textures.len()
+            ))
+        })?;
+        let all = self.read_params()?;
+        Ok(all[t.offset as usize..t.offset as usize + t.len()].to_vec())
+    }
+
+    /// Everything a later run needs to continue exactly where this one stands: iteration,
+    /// textures, Adam moments and, for ReSTIR, the kept reservoirs with the textures and
+    /// adjoint they were drawn at. Restore it with [`Optimizer::restore`].
+    pub fn state(&self) -> Result<OptimizerState> {
+        let [m1, m2] = self.read_moments()?;
+        let previous = if self.uses_previous_state() {
+            let last = (self.iteration as usize + 1) % 2;
+            let mut params: Vec<f32> = self.gpu.read_pod(&self.renderer.scene.params_prev)?;
+            params.truncate(self.set.values.len());
+            Some(PreviousState {
+                params,
+                adjoint: self.gpu.read_pod(&self.adjoint[last])?,
+            })
+        } else {
+            None
+        };
+        Ok(OptimizerState {
+            iteration: self.iteration,
+            params: self.read_params()?,
+            m1,
+            m2,
+            previous,
+            restir: self.estimator.snapshot(&self.gpu, self.iteration)?,
+            control_variate: match &self.control_variate {
+                Some(cv) => Some(cv.snapshot(&self.gpu)?),
+                None => None,
+            },
+            exposure: self.exposure.clone(),
+        })
+    }
+
+    /// Continue from a state taken with [`Optimizer::state`] of an optimizer made with the same
+    /// scene, textures and estimator. A state without reservoirs restores a ReSTIR optimizer
+    /// with empty ones (its next iteration starts afresh, as the first does).
+    pub fn restore(&mut self, state: &OptimizerState) -> Result<()> {
+        self.write_params(&state.params)?;
+        self.write_moments(&[state.m1.clone(), state.m2.clone()])?;
+        let last = (state.iteration as usize + 1) % 2;
+        let mut snapshot = state.restir.as_ref();
+        let mut cv_snapshot = state.control_variate.as_ref();
+        match &state.previous {
+            Some(p) => {
+                if p.adjoint.len() as u64 * 4 != self.adjoint[last].size()
+                    || p.params.len() != self.set.values.len()
+                {
+                    return Err(Error::Invalid(
+                        "the saved state does not match this optimizer's textures and images"
+                            .into(),
+                    ));
+                }
+                let q = &self.gpu.queue;
+                q.write_buffer(&self.adjoint[last], 0, bytemuck::cast_slice(&p.adjoint));
+                let prev = &self.renderer.scene.params_prev;
+                q.write_buffer(prev, 0, bytemuck::cast_slice(&p.params));
+            }
+            // Kept samples and the last image cannot be reused without the state they were
+            // drawn at.
+            None => {
+                snapshot = None;
+                cv_snapshot = None;
+            }
+        }
+        self.estimator
+            .restore(&self.gpu, snapshot, state.iteration)?;
+        if let Some(cv) = &mut self.control_variate {
+            cv.restore(&self.gpu, cv_snapshot)?;
+        }
+        if state.exposure.values.len() == self.cams.len() {
+            self.exposure = state.exposure.clone();
+            self.upload_exposure();
+        }
+        self.iteration = state.iteration;
+        self.gpu.check("restore optimizer state")
+    }
+
+    /// Bytes of GPU memory the optimizer keeps per optimized texel: the textures (current and
+    /// previous), gradient and Adam moments, plus the reservoirs and locks of ReSTIR. Buffers
+    /// that scale with the image (targets, adjoints) are not counted.
+    pub fn state_bytes_per_texel(&self) -> f64 {
+        let scene = &self.renderer.scene;
+        let bytes = scene.params.size()
+            + scene.params_prev.size()
+            + self.grad.size()
+            + self.moments.iter().map(|b| b.size()).sum::<u64>()
+            + self.estimator.state_bytes();
+        bytes as f64 / scene.n_texels.max(1) as f64
+    }
+
+    /// The textures of the last iteration (those its primal and gradient were drawn at;
+    /// [`Optimizer::read_params`] has them after the Adam step).
+    pub fn read_params_prev(&self) -> Result<Vec<f32>> {
+        let mut v: Vec<f32> = self.gpu.read_pod(&self.renderer.scene.params_prev)?;
+        v.truncate(self.set.values.len());
+        Ok(v)
+    }
+}

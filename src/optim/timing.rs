@@ -1,0 +1,133 @@
+//! GPU time per kind of pass, from timestamp queries.
+
+use crate::gpu::Gpu;
+use crate::Result;
+
+/// The kinds of pass that timestamp queries time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum PassKind {
+    Primal,
+    Loss,
+    Gradient,
+    Merge,
+    Adam,
+}
+
+/// GPU milliseconds of each kind of pass in the last iteration (from timestamp queries).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct PassTimes {
+    /// Primal renders of all cameras.
+    pub primal_ms: f64,
+    /// Loss and adjoint.
+    pub loss_ms: f64,
+    /// Gradient passes (baseline), or ReSTIR's candidate passes.
+    pub gradient_ms: f64,
+    /// ReSTIR's merge pass.
+    pub merge_ms: f64,
+    /// Adam updates.
+    pub adam_ms: f64,
+}
+
+impl PassTimes {
+    /// Add `other` pass by pass.
+    pub fn add(&mut self, other: &PassTimes) {
+        self.primal_ms += other.primal_ms;
+        self.loss_ms += other.loss_ms;
+        self.gradient_ms += other.gradient_ms;
+        self.merge_ms += other.merge_ms;
+        self.adam_ms += other.adam_ms;
+    }
+
+    /// Every pass divided by `n` (the mean of `n` added iterations).
+    pub fn divided(&self, n: f64) -> PassTimes {
+        PassTimes {
+            primal_ms: self.primal_ms / n,
+            loss_ms: self.loss_ms / n,
+            gradient_ms: self.gradient_ms / n,
+            merge_ms: self.merge_ms / n,
+            adam_ms: self.adam_ms / n,
+        }
+    }
+
+    /// All passes together.
+    pub fn total(&self) -> f64 {
+        self.primal_ms + self.loss_ms + self.gradient_ms + self.merge_ms + self.adam_ms
+    }
+}
+
+/// Timestamp queries around the passes of one iteration, where the device has them: each
+/// pass asks for the next begin/end pair with [`PassTimer::next`], naming its kind.
+pub(crate) struct PassTimer {
+    queries: Option<(wgpu::QuerySet, wgpu::Buffer)>,
+    capacity: u32,
+    kinds: Vec<PassKind>,
+}
+
+impl PassTimer {
+    pub(super) fn new(gpu: &Gpu, capacity: u32) -> PassTimer {
+        let queries = gpu.timestamps.then(|| {
+            let n = 2 * capacity;
+            (
+                gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+                    label: Some("pass timestamps"),
+                    ty: wgpu::QueryType::Timestamp,
+                    count: n,
+                }),
+                gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("pass timestamps resolve"),
+                    size: 8 * n as u64,
+                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                }),
+            )
+        });
+        PassTimer {
+            queries,
+            capacity,
+            kinds: Vec::new(),
+        }
+    }
+
+    pub(super) fn begin(&mut self) {
+        self.kinds.clear();
+    }
+
+    /// The query pair of the next pass, of kind `kind` (None without timestamps).
+    pub(crate) fn next(&mut self, kind: PassKind) -> Option<(&wgpu::QuerySet, u32)> {
+        let (q, _) = self.queries.as_ref()?;
+        let k = self.kinds.len() as u32;
+        if k >= self.capacity {
+            return None;
+        }
+        self.kinds.push(kind);
+        Some((q, k))
+    }
+
+    pub(super) fn resolve(&self, enc: &mut wgpu::CommandEncoder) {
+        if let Some((q, buf)) = &self.queries {
+            if !self.kinds.is_empty() {
+                enc.resolve_query_set(q, 0..2 * self.kinds.len() as u32, buf, 0);
+            }
+        }
+    }
+
+    pub(super) fn read(&self, gpu: &Gpu) -> Result<Option<PassTimes>> {
+        let Some((_, buf)) = &self.queries else {
+            return Ok(None);
+        };
+        let ticks: Vec<u64> = gpu.read_pod(buf)?;
+        let period = gpu.queue.get_timestamp_period() as f64 * 1e-6;
+        let mut t = PassTimes::default();
+        for (k, kind) in self.kinds.iter().enumerate() {
+            let ms = ticks[2 * k + 1].saturating_sub(ticks[2 * k]) as f64 * period;
+            match kind {
+                PassKind::Primal => t.primal_ms += ms,
+                PassKind::Loss => t.loss_ms += ms,
+                PassKind::Gradient => t.gradient_ms += ms,
+                PassKind::Merge => t.merge_ms += ms,
+                PassKind::Adam => t.adam_ms += ms,
+            }
+        }
+        Ok(Some(t))
+    }
+}
