@@ -624,6 +624,20 @@ fn run(cli: Cli) -> Result<()> {
                 l.max_storage_buffers_per_shader_stage,
                 l.max_compute_workgroups_per_dimension
             );
+            let offered = gpu
+                .adapter_features
+                .is_some_and(|f| f.contains(wgpu::Features::EXPERIMENTAL_RAY_QUERY));
+            println!(
+                "hardware ray queries: {}",
+                if offered { "offered" } else { "not offered" }
+            );
+            println!(
+                "tracing with: {} (PSRESTIR_TRACER=software|ray-query|auto chooses)",
+                match gpu.tracer {
+                    psrestir::gpu::Tracer::Software => "the software BVH (binned SAH, in WGSL)",
+                    psrestir::gpu::Tracer::RayQuery => "ray queries",
+                }
+            );
         }
         Command::MakeScenes { dir } => {
             scene::bundled::write_default_scene(&dir.join("default"))?;

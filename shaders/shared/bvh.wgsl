@@ -1,31 +1,10 @@
-// Ray-triangle intersection and BVH traversal.
+// Software ray tracing: traversal of the binned-SAH BVH built on the host
+// (src/scene/bvh.rs). shared/bvh_ray_query offers the same functions through hardware ray
+// queries; the composer picks one of the two for `#import shared/bvh` (gpu/shaders.rs).
 #import shared/scene
+#import shared/triangle
 
 const BVH_STACK: u32 = 64u;
-
-// Moeller-Trumbore. Returns t (or -1 on a miss) and the barycentrics of vertices 1 and 2.
-fn intersect_triangle(o: vec3f, d: vec3f, tri: u32) -> vec3f {
-    let p0 = tri_positions[3u * tri].xyz;
-    let e1 = tri_positions[3u * tri + 1u].xyz - p0;
-    let e2 = tri_positions[3u * tri + 2u].xyz - p0;
-    let pv = cross(d, e2);
-    let det = dot(e1, pv);
-    if abs(det) < 1e-20 {
-        return vec3f(-1.0, 0.0, 0.0);
-    }
-    let inv = 1.0 / det;
-    let tv = o - p0;
-    let u = dot(tv, pv) * inv;
-    if u < 0.0 || u > 1.0 {
-        return vec3f(-1.0, 0.0, 0.0);
-    }
-    let qv = cross(tv, e1);
-    let v = dot(d, qv) * inv;
-    if v < 0.0 || u + v > 1.0 {
-        return vec3f(-1.0, 0.0, 0.0);
-    }
-    return vec3f(dot(e2, qv) * inv, u, v);
-}
 
 // Entry distance of the ray into an AABB, or a huge value on a miss.
 fn intersect_aabb(o: vec3f, inv_d: vec3f, bmin: vec3f, bmax: vec3f, tmax: f32) -> f32 {
@@ -112,16 +91,4 @@ fn trace_closest(o: vec3f, d: vec3f, tmax: f32) -> Hit {
 
 fn occluded(o: vec3f, d: vec3f, tmax: f32) -> bool {
     return traverse(o, d, tmax, true).tri != NONE;
-}
-
-// Reference for tests: every triangle, no BVH. Bounded by the triangle count.
-fn trace_brute_force(o: vec3f, d: vec3f, tmax: f32) -> Hit {
-    var hit = Hit(tmax, NONE, 0.0, 0.0);
-    for (var tri = 0u; tri < scene.n_tris; tri++) {
-        let r = intersect_triangle(o, d, tri);
-        if r.x > 0.0 && r.x < hit.t {
-            hit = Hit(r.x, tri, r.y, r.z);
-        }
-    }
-    return hit;
 }

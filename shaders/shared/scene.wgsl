@@ -1,5 +1,6 @@
 // Scene bindings, group 0, shared by every pass that traces rays.
 // The layout is reflected from here (Gpu::pass_layout); GpuScene::new binds the buffers.
+// With ray queries, shared/bvh_ray_query adds the acceleration structure as binding 11.
 #import shared/types
 
 @group(0) @binding(0) var<storage, read> nodes: array<BvhNode>;

@@ -4,6 +4,7 @@
 //! far fewer features and say nothing.
 
 pub mod shaders;
+pub use shaders::Tracer;
 
 use crate::{Error, Result};
 use std::sync::{Arc, Mutex};
@@ -28,6 +29,11 @@ pub struct Gpu {
     /// Whether timestamp queries are enabled (used for per-pass timings when the adapter
     /// has them; nothing depends on them).
     pub timestamps: bool,
+    /// The adapter's features, when psrestir created the device (`None` for a device the
+    /// application passed in). Reported by `psrestir adapter`.
+    pub adapter_features: Option<wgpu::Features>,
+    /// How the passes trace rays ([`choose_tracer`]).
+    pub tracer: Tracer,
     /// Uncaptured errors, recorded instead of panicking; checked after each submission.
     errors: Arc<Mutex<Vec<Fault>>>,
     /// Why the device was lost, once it is.
@@ -114,10 +120,16 @@ fn backends() -> wgpu::Backends {
 impl Gpu {
     /// Create a headless device on the best adapter of the platform's primary backend.
     pub fn new() -> Result<Gpu> {
-        pollster::block_on(Self::new_async())
+        pollster::block_on(Self::new_async(None))
     }
 
-    async fn new_async() -> Result<Gpu> {
+    /// [`Gpu::new`] tracing with `tracer` whatever `PSRESTIR_TRACER` says; an error if the
+    /// adapter cannot (ray queries where it offers none).
+    pub fn with_tracer(tracer: Tracer) -> Result<Gpu> {
+        pollster::block_on(Self::new_async(Some(tracer)))
+    }
+
+    async fn new_async(tracer: Option<Tracer>) -> Result<Gpu> {
         let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
         desc.backends = backends();
         let instance = wgpu::Instance::new(desc);
@@ -131,19 +143,45 @@ impl Gpu {
             .await
             .map_err(|e| Error::NoAdapter(format!("no GPU adapter found ({e}). {INSTALL_HINT}")))?;
         let info = adapter.get_info();
-        let limits = Self::required_limits(&adapter.limits())?;
+        let mut limits = Self::required_limits(&adapter.limits())?;
+        let tracer = match tracer {
+            None => choose_tracer(adapter.features(), info.device_type)?,
+            Some(Tracer::RayQuery)
+                if !adapter
+                    .features()
+                    .contains(wgpu::Features::EXPERIMENTAL_RAY_QUERY) =>
+            {
+                return Err(Error::Unsuitable(format!(
+                    "{}: the adapter offers no ray queries",
+                    info.name
+                )))
+            }
+            Some(t) => t,
+        };
         // Timestamp queries are optional: requested when present, for per-pass timings.
-        let features = adapter.features() & wgpu::Features::TIMESTAMP_QUERY;
+        let mut features = adapter.features() & wgpu::Features::TIMESTAMP_QUERY;
+        let mut experimental = wgpu::ExperimentalFeatures::disabled();
+        if tracer == Tracer::RayQuery {
+            features |= wgpu::Features::EXPERIMENTAL_RAY_QUERY;
+            limits = limits.using_acceleration_structure_values(adapter.limits());
+            // SAFETY: wgpu marks ray queries experimental; psrestir uses them only for the
+            // scene's one static acceleration structure, and a test compares their hits
+            // with the software BVH's wherever the adapter offers them.
+            experimental = unsafe { wgpu::ExperimentalFeatures::enabled() };
+        }
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("psrestir"),
                 required_features: features,
                 required_limits: limits,
+                experimental_features: experimental,
                 ..Default::default()
             })
             .await
             .map_err(|e| Error::Unsuitable(format!("{}: {e}", info.name)))?;
-        let gpu = Gpu::wrap(device, queue, info);
+        let mut gpu = Gpu::wrap(device, queue, info);
+        gpu.adapter_features = Some(adapter.features());
+        gpu.tracer = tracer;
         log::info!("GPU adapter: {}", gpu.describe());
         Ok(gpu)
     }
@@ -199,7 +237,15 @@ impl Gpu {
         info: wgpu::AdapterInfo,
     ) -> Result<Gpu> {
         Self::check_limits(&device.limits())?;
-        Ok(Self::wrap(device, queue, info))
+        let limits = device.limits();
+        let features = device.features();
+        let device_type = info.device_type;
+        let mut gpu = Self::wrap(device, queue, info);
+        // Ray queries only where the application enabled them with room for one BLAS.
+        if limits.max_blas_geometry_count > 0 && limits.max_tlas_instance_count > 0 {
+            gpu.tracer = choose_tracer(features, device_type)?;
+        }
+        Ok(gpu)
     }
 
     /// Check a device's limits against what psrestir needs; the error lists each shortfall.
@@ -236,6 +282,8 @@ impl Gpu {
             queue,
             info,
             timestamps,
+            adapter_features: None,
+            tracer: Tracer::Software,
             errors,
             lost,
         }
@@ -386,7 +434,7 @@ impl Gpu {
         pass: &str,
         layouts: &[&wgpu::BindGroupLayout],
     ) -> Result<wgpu::ComputePipeline> {
-        let source = shaders::compose(pass)?;
+        let source = shaders::compose_for(pass, self.tracer)?;
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = self
             .device
@@ -425,14 +473,15 @@ impl Gpu {
     /// The layout of bind group `group` of `pass`, reflected from its WGSL
     /// ([`shaders::bindings`]): the only way the passes build their layouts.
     pub fn pass_layout(&self, pass: &str, group: u32) -> Result<wgpu::BindGroupLayout> {
-        let kinds: Vec<Binding> = shaders::bindings(pass, group)?
+        let kinds: Vec<Binding> = shaders::bindings_for(pass, group, self.tracer)?
             .into_iter()
             .map(|(_, k)| k)
             .collect();
         Ok(self.layout(&format!("{pass} group {group}"), &kinds))
     }
 
-    /// A bind group layout of uniform and storage buffers, bindings numbered in order.
+    /// A bind group layout of buffers (and an acceleration structure), bindings numbered in
+    /// order.
     fn layout(&self, label: &str, kinds: &[Binding]) -> wgpu::BindGroupLayout {
         let entries: Vec<wgpu::BindGroupLayoutEntry> = kinds
             .iter()
@@ -440,14 +489,21 @@ impl Gpu {
             .map(|(i, k)| wgpu::BindGroupLayoutEntry {
                 binding: i as u32,
                 visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: match k {
-                        Binding::Uniform => wgpu::BufferBindingType::Uniform,
-                        Binding::Storage => wgpu::BufferBindingType::Storage { read_only: true },
-                        Binding::StorageRw => wgpu::BufferBindingType::Storage { read_only: false },
+                ty: match k {
+                    Binding::AccelerationStructure => wgpu::BindingType::AccelerationStructure {
+                        vertex_return: false,
                     },
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
+                    _ => wgpu::BindingType::Buffer {
+                        ty: match k {
+                            Binding::Uniform => wgpu::BufferBindingType::Uniform,
+                            Binding::StorageRw => {
+                                wgpu::BufferBindingType::Storage { read_only: false }
+                            }
+                            _ => wgpu::BufferBindingType::Storage { read_only: true },
+                        },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
                 },
                 count: None,
             })
@@ -466,7 +522,18 @@ impl Gpu {
         layout: &wgpu::BindGroupLayout,
         buffers: &[&wgpu::Buffer],
     ) -> wgpu::BindGroup {
-        let entries: Vec<wgpu::BindGroupEntry> = buffers
+        self.bind_group_with_tlas(label, layout, buffers, None)
+    }
+
+    /// A bind group binding whole buffers in order, then the acceleration structure if any.
+    pub fn bind_group_with_tlas(
+        &self,
+        label: &str,
+        layout: &wgpu::BindGroupLayout,
+        buffers: &[&wgpu::Buffer],
+        tlas: Option<&wgpu::Tlas>,
+    ) -> wgpu::BindGroup {
+        let mut entries: Vec<wgpu::BindGroupEntry> = buffers
             .iter()
             .enumerate()
             .map(|(i, b)| wgpu::BindGroupEntry {
@@ -474,6 +541,12 @@ impl Gpu {
                 resource: b.as_entire_binding(),
             })
             .collect();
+        if let Some(t) = tlas {
+            entries.push(wgpu::BindGroupEntry {
+                binding: buffers.len() as u32,
+                resource: t.as_binding(),
+            });
+        }
         self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some(label),
             layout,
@@ -482,7 +555,33 @@ impl Gpu {
     }
 }
 
-/// Kind of a buffer binding in a [`Gpu::layout`].
+/// How the passes trace rays on an adapter with `features` of type `device_type`. The
+/// environment variable `PSRESTIR_TRACER` chooses (`software` or `ray-query`); by default
+/// ray queries are used where the adapter offers them on a GPU. On lavapipe, which offers
+/// them too, the WGSL BVH is faster (measured: 1.5 against 0.58 M rays/s), so CPU adapters
+/// keep it unless asked.
+pub fn choose_tracer(features: wgpu::Features, device_type: wgpu::DeviceType) -> Result<Tracer> {
+    let offered = features.contains(wgpu::Features::EXPERIMENTAL_RAY_QUERY);
+    match std::env::var("PSRESTIR_TRACER").ok().as_deref() {
+        None | Some("") | Some("auto") => Ok(if offered && device_type != wgpu::DeviceType::Cpu {
+            Tracer::RayQuery
+        } else {
+            Tracer::Software
+        }),
+        Some("software") => Ok(Tracer::Software),
+        Some("ray-query") if offered => Ok(Tracer::RayQuery),
+        Some("ray-query") => Err(Error::Unsuitable(
+            "PSRESTIR_TRACER=ray-query, but this adapter offers no ray queries \
+             (unset it to trace with the software BVH)"
+                .into(),
+        )),
+        Some(other) => Err(Error::Unsuitable(format!(
+            "PSRESTIR_TRACER={other}: expected `software`, `ray-query` or `auto`"
+        ))),
+    }
+}
+
+/// Kind of a binding in a [`Gpu::layout`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Binding {
     /// `var<uniform>`.
@@ -491,6 +590,8 @@ pub enum Binding {
     Storage,
     /// `var<storage, read_write>`.
     StorageRw,
+    /// `var: acceleration_structure` (the scene's, with ray queries).
+    AccelerationStructure,
 }
 
 /// Workgroups for `n` invocations of size `wg`, as a 2D grid that respects the per-dimension

@@ -5,6 +5,11 @@
 //! same file are dropped), so shared code stays in one place. A line `#import gen/NAME` pastes
 //! WGSL generated from Rust ([`GENERATED`]): constants that both sides use are defined once,
 //! in Rust. The composed source is validated with naga by `cargo test` without any GPU.
+//!
+//! `#import shared/bvh` is where rays are traced. With [`Tracer::RayQuery`] the composer
+//! pastes `shared/bvh_ray_query` there instead (the same functions through hardware ray
+//! queries) and starts the module with `enable wgpu_ray_query;`; every pass is validated in
+//! both forms.
 use crate::{Error, Result};
 use std::borrow::Cow;
 
@@ -29,7 +34,9 @@ pub const SOURCES: &[(&str, &str)] = sources!(
     "shared/rng",
     "shared/sampling",
     "shared/scene",
+    "shared/triangle",
     "shared/bvh",
+    "shared/bvh_ray_query",
     "shared/texture",
     "shared/brdf",
     "shared/lights",
@@ -80,15 +87,44 @@ fn source(name: &str) -> Option<Cow<'static, str>> {
         .map(|(_, f)| Cow::Owned(f()))
 }
 
-/// The full WGSL of a pass with its imports pasted in.
+/// How the passes trace rays: the WGSL BVH, or the device's ray queries.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Tracer {
+    /// The binned-SAH BVH built on the host, traversed in WGSL (`shared/bvh`).
+    #[default]
+    Software,
+    /// Hardware ray queries against an acceleration structure (`shared/bvh_ray_query`;
+    /// needs `Features::EXPERIMENTAL_RAY_QUERY`).
+    RayQuery,
+}
+
+/// The full WGSL of a pass with its imports pasted in, tracing with the software BVH.
 pub fn compose(pass: &str) -> Result<String> {
+    compose_for(pass, Tracer::Software)
+}
+
+/// The full WGSL of a pass with its imports pasted in, tracing with `tracer`.
+pub fn compose_for(pass: &str, tracer: Tracer) -> Result<String> {
     let mut out = String::new();
     let mut seen = Vec::new();
-    include(pass, &mut out, &mut seen, 0)?;
+    include(pass, tracer, &mut out, &mut seen, 0)?;
+    if tracer == Tracer::RayQuery && seen.iter().any(|s| s == "shared/bvh_ray_query") {
+        out.insert_str(0, "enable wgpu_ray_query;\n");
+    }
     Ok(out)
 }
 
-fn include(name: &str, out: &mut String, seen: &mut Vec<String>, depth: u32) -> Result<()> {
+fn include(
+    name: &str,
+    tracer: Tracer,
+    out: &mut String,
+    seen: &mut Vec<String>,
+    depth: u32,
+) -> Result<()> {
+    let name = match (name, tracer) {
+        ("shared/bvh", Tracer::RayQuery) => "shared/bvh_ray_query",
+        _ => name,
+    };
     if seen.iter().any(|s| s == name) {
         return Ok(());
     }
@@ -106,7 +142,7 @@ fn include(name: &str, out: &mut String, seen: &mut Vec<String>, depth: u32) -> 
     out.push_str(&format!("// ---- {name}.wgsl\n"));
     for line in src.lines() {
         if let Some(dep) = line.trim().strip_prefix("#import ") {
-            include(dep.trim(), out, seen, depth + 1)?;
+            include(dep.trim(), tracer, out, seen, depth + 1)?;
             out.push_str(&format!("// ---- (back in) {name}.wgsl\n"));
         } else {
             out.push_str(line);
@@ -118,14 +154,22 @@ fn include(name: &str, out: &mut String, seen: &mut Vec<String>, depth: u32) -> 
 
 /// Parse and validate a composed pass with naga; errors carry the pass name and location.
 pub fn validate(pass: &str) -> Result<naga::Module> {
-    let src = compose(pass)?;
+    validate_for(pass, Tracer::Software)
+}
+
+/// [`validate`] for the form of the pass that traces with `tracer`.
+pub fn validate_for(pass: &str, tracer: Tracer) -> Result<naga::Module> {
+    let src = compose_for(pass, tracer)?;
     let module = naga::front::wgsl::parse_str(&src).map_err(|e| Error::Shader {
         name: pass.into(),
         msg: e.emit_to_string(&src),
     })?;
     let mut validator = naga::valid::Validator::new(
         naga::valid::ValidationFlags::all(),
-        naga::valid::Capabilities::empty(),
+        match tracer {
+            Tracer::Software => naga::valid::Capabilities::empty(),
+            Tracer::RayQuery => naga::valid::Capabilities::RAY_QUERY,
+        },
     );
     validator.validate(&module).map_err(|e| Error::Shader {
         name: pass.into(),
@@ -144,7 +188,16 @@ pub fn validate(pass: &str) -> Result<naga::Module> {
 /// (variable name, kind) in binding order. Bind group layouts are built from this, so they
 /// cannot disagree with the shader; the bindings must be numbered 0, 1, 2, ... without gaps.
 pub fn bindings(pass: &str, group: u32) -> Result<Vec<(String, super::Binding)>> {
-    let module = validate(pass)?;
+    bindings_for(pass, group, Tracer::Software)
+}
+
+/// [`bindings`] of the form of the pass that traces with `tracer`.
+pub fn bindings_for(
+    pass: &str,
+    group: u32,
+    tracer: Tracer,
+) -> Result<Vec<(String, super::Binding)>> {
+    let module = validate_for(pass, tracer)?;
     let mut found: Vec<(u32, String, super::Binding)> = Vec::new();
     for (_, var) in module.global_variables.iter() {
         let Some(rb) = &var.binding else { continue };
@@ -153,6 +206,14 @@ pub fn bindings(pass: &str, group: u32) -> Result<Vec<(String, super::Binding)>>
         }
         let kind = match var.space {
             naga::AddressSpace::Uniform => super::Binding::Uniform,
+            naga::AddressSpace::Handle
+                if matches!(
+                    module.types[var.ty].inner,
+                    naga::TypeInner::AccelerationStructure { .. }
+                ) =>
+            {
+                super::Binding::AccelerationStructure
+            }
             naga::AddressSpace::Storage { access } => {
                 if access.contains(naga::StorageAccess::STORE) {
                     super::Binding::StorageRw
@@ -192,8 +253,10 @@ mod tests {
     fn every_pass_validates_with_naga() {
         let mut n = 0;
         for pass in passes() {
-            if let Err(e) = validate(pass) {
-                panic!("{e}");
+            for tracer in [Tracer::Software, Tracer::RayQuery] {
+                if let Err(e) = validate_for(pass, tracer) {
+                    panic!("{tracer:?}: {e}");
+                }
             }
             n += 1;
         }
@@ -216,6 +279,27 @@ mod tests {
             ("scene".to_string(), crate::gpu::Binding::Uniform)
         );
         assert_eq!(bindings("loss", 0).unwrap()[6].0, "exposure_partial");
+        // With ray queries the tracing passes add the acceleration structure after the
+        // buffers; the merge, which traces nothing, is the same in both forms.
+        let rq = bindings_for("render", 0, Tracer::RayQuery).unwrap();
+        assert_eq!(rq.len(), scene.len() + 1);
+        assert_eq!(
+            rq.last().unwrap(),
+            &(
+                "scene_tlas".to_string(),
+                crate::gpu::Binding::AccelerationStructure
+            )
+        );
+        for pass in passes().filter(|&p| p != "texture_export") {
+            for group in 0..2 {
+                bindings_for(pass, group, Tracer::RayQuery)
+                    .unwrap_or_else(|e| panic!("{pass} with ray queries: {e}"));
+            }
+        }
+        assert_eq!(
+            compose_for("restir_merge", Tracer::RayQuery).unwrap(),
+            compose("restir_merge").unwrap()
+        );
     }
 
     #[test]

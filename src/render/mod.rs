@@ -6,6 +6,7 @@
 pub mod layout;
 pub mod params;
 
+use crate::gpu::Tracer;
 use crate::gpu::{grid_2d, Gpu};
 use crate::image_io::Image;
 use crate::scene::{bvh, PunctualKind, Scene, TextureSlot, Wrap};
@@ -22,8 +23,10 @@ pub const WORKGROUP: u32 = 64;
 pub struct GpuScene {
     /// Layout of group 0 (see shaders/shared/scene.wgsl).
     pub layout: wgpu::BindGroupLayout,
-    /// The bound buffers.
+    /// The bound buffers (and, with ray queries, the acceleration structure).
     pub bind_group: wgpu::BindGroup,
+    /// The acceleration structure when the device traces with ray queries.
+    pub accel: Option<AccelerationStructure>,
     /// Scene constants as uploaded.
     pub info: GpuSceneInfo,
     /// Cameras of the scene.
@@ -54,6 +57,75 @@ fn wrap_bits(w: Wrap) -> u32 {
 /// finite.
 fn luminance(c: Vec3) -> f64 {
     0.2126 * c.x as f64 + 0.7152 * c.y as f64 + 0.0722 * c.z as f64
+}
+
+/// The scene's ray-query acceleration structure: one BLAS over the triangles in GPU order
+/// (so a hit's primitive index is the triangle index of the other scene buffers) and one TLAS
+/// instance of it with the identity transform. Built once; geometry never changes.
+pub struct AccelerationStructure {
+    /// The triangles.
+    pub blas: wgpu::Blas,
+    /// Its one instance, bound at group 0, binding 11 (shaders/shared/bvh_ray_query.wgsl).
+    pub tlas: wgpu::Tlas,
+}
+
+/// Build the acceleration structure over `n_tris` triangles whose vertices are the vec4
+/// entries of `positions` (three per triangle; w ignored).
+fn build_acceleration_structure(
+    gpu: &Gpu,
+    positions: &wgpu::Buffer,
+    n_tris: u32,
+) -> AccelerationStructure {
+    let size = wgpu::BlasTriangleGeometrySizeDescriptor {
+        vertex_format: wgpu::VertexFormat::Float32x3,
+        vertex_count: 3 * n_tris,
+        index_format: None,
+        index_count: None,
+        flags: wgpu::AccelerationStructureGeometryFlags::OPAQUE,
+    };
+    let blas = gpu.device.create_blas(
+        &wgpu::CreateBlasDescriptor {
+            label: Some("scene blas"),
+            flags: wgpu::AccelerationStructureFlags::PREFER_FAST_TRACE,
+            update_mode: wgpu::AccelerationStructureUpdateMode::Build,
+        },
+        wgpu::BlasGeometrySizeDescriptors::Triangles {
+            descriptors: vec![size.clone()],
+        },
+    );
+    let mut tlas = gpu.device.create_tlas(&wgpu::CreateTlasDescriptor {
+        label: Some("scene tlas"),
+        max_instances: 1,
+        flags: wgpu::AccelerationStructureFlags::PREFER_FAST_TRACE,
+        update_mode: wgpu::AccelerationStructureUpdateMode::Build,
+    });
+    let mut enc = gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("scene acceleration structure"),
+        });
+    if n_tris > 0 {
+        const IDENTITY: [f32; 12] = [1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0.];
+        tlas[0] = Some(wgpu::TlasInstance::new(&blas, IDENTITY, 0, 0xff));
+        let entry = wgpu::BlasBuildEntry {
+            blas: &blas,
+            geometry: wgpu::BlasGeometries::TriangleGeometries(vec![wgpu::BlasTriangleGeometry {
+                size: &size,
+                vertex_buffer: positions,
+                first_vertex: 0,
+                vertex_stride: 16,
+                index_buffer: None,
+                first_index: None,
+                transform_buffer: None,
+                transform_buffer_offset: None,
+            }]),
+        };
+        enc.build_acceleration_structures(std::iter::once(&entry), std::iter::once(&tlas));
+    } else {
+        enc.build_acceleration_structures(std::iter::empty(), std::iter::once(&tlas));
+    }
+    gpu.queue.submit([enc.finish()]);
+    AccelerationStructure { blas, tlas }
 }
 
 impl GpuScene {
@@ -301,7 +373,11 @@ impl GpuScene {
             gpu.storage(
                 "scene tri_positions",
                 bytemuck::cast_slice(&positions),
-                none,
+                if gpu.tracer == Tracer::RayQuery {
+                    wgpu::BufferUsages::BLAS_INPUT
+                } else {
+                    none
+                },
             ),
             gpu.storage("scene tri_shading", bytemuck::cast_slice(&shading), none),
             gpu.storage("scene materials", bytemuck::cast_slice(&materials), none),
@@ -329,12 +405,22 @@ impl GpuScene {
         // Group 0 of every tracing pass (shaders/shared/scene.wgsl).
         let layout = gpu.pass_layout("render", 0)?;
         let refs: Vec<&wgpu::Buffer> = buffers.iter().collect();
-        let bind_group = gpu.bind_group("scene", &layout, &refs);
+        let accel = match gpu.tracer {
+            Tracer::RayQuery => Some(build_acceleration_structure(
+                gpu,
+                &buffers[1],
+                tris.len() as u32,
+            )),
+            Tracer::Software => None,
+        };
+        let bind_group =
+            gpu.bind_group_with_tlas("scene", &layout, &refs, accel.as_ref().map(|a| &a.tlas));
         gpu.check("scene upload")?;
         let [_, _, _, _, _, _, _, _, _, params, params_prev] = buffers;
         Ok(GpuScene {
             layout,
             bind_group,
+            accel,
             info,
             cameras: scene.cameras.clone(),
             gpu_index,
