@@ -405,6 +405,17 @@ impl GpuScene {
         // Group 0 of every tracing pass (shaders/shared/scene.wgsl).
         let layout = gpu.pass_layout("render", 0)?;
         let refs: Vec<&wgpu::Buffer> = buffers.iter().collect();
+        if gpu.tracer == Tracer::RayQuery
+            && tris.len() as u64 > limits.max_blas_primitive_count as u64
+        {
+            return Err(Error::Unsuitable(format!(
+                "{}: {} triangles, the device's ray-query acceleration structures hold at most \
+                 {} (set PSRESTIR_TRACER=software to trace with the software BVH)",
+                scene.source.display(),
+                tris.len(),
+                limits.max_blas_primitive_count
+            )));
+        }
         let accel = match gpu.tracer {
             Tracer::RayQuery => Some(build_acceleration_structure(
                 gpu,
