@@ -24,14 +24,9 @@ pub fn linear_to_srgb(x: f32) -> f32 {
     }
 }
 
-/// sRGB to linear transfer function.
-pub fn srgb_to_linear(x: f32) -> f32 {
-    if x <= 0.04045 {
-        x / 12.92
-    } else {
-        ((x + 0.055) / 1.055).powf(2.4)
-    }
-}
+/// sRGB to linear transfer function (defined beside the decoders, which use it too; this
+/// module depends on `scene::images`, not the other way round).
+pub use crate::scene::images::srgb_to_linear;
 
 /// `name` with every character other than ASCII letters, digits and '-' replaced by '_', for
 /// use in file names.

@@ -70,6 +70,7 @@ pub mod optim;
 pub mod render;
 pub mod scene;
 pub mod task;
+pub mod vocab;
 
 pub use error::{Error, Result};
 pub use gpu::Gpu;

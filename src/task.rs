@@ -36,108 +36,11 @@
 //! init = [0.5, 0.5, 0.5]          # one value for roughness and metallic
 //! learning_rate = 0.02
 //! ```
+pub use crate::vocab::{check_texture, Filter, Init, Loss, Slot, TextureSpec, ROUGHNESS_FLOOR};
 use crate::{Error, Result};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-
-/// Which material input a texture replaces.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Slot {
-    /// Linear RGB base color (replaces baseColorFactor x baseColorTexture).
-    BaseColor,
-    /// Perceptual roughness (replaces roughnessFactor x metallicRoughness.G).
-    Roughness,
-    /// Metalness (replaces metallicFactor x metallicRoughness.B).
-    Metallic,
-}
-
-impl Slot {
-    /// Floats per texel.
-    pub fn channels(self) -> u32 {
-        match self {
-            Slot::BaseColor => 3,
-            _ => 1,
-        }
-    }
-    /// The valid range that the optimizer clamps to.
-    pub fn range(self) -> (f32, f32) {
-        match self {
-            Slot::Roughness => (ROUGHNESS_FLOOR, 1.0),
-            _ => (0.0, 1.0),
-        }
-    }
-    /// Name as in task files.
-    pub fn name(self) -> &'static str {
-        match self {
-            Slot::BaseColor => "base_color",
-            Slot::Roughness => "roughness",
-            Slot::Metallic => "metallic",
-        }
-    }
-}
-
-/// Smallest roughness the optimizer allows (alpha = 4e-4, the renderer's floor).
-pub const ROUGHNESS_FLOOR: f32 = 0.02;
-
-/// Texture filter for optimized textures.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Filter {
-    /// One texel, weight 1.
-    Nearest,
-    /// Four texels with bilinear weights.
-    #[default]
-    Bilinear,
-}
-
-/// Image loss.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Loss {
-    /// Mean of (I - G)^2.
-    #[default]
-    L2,
-    /// Mean of (I - G)^2 / (G^2 + 0.01).
-    Relmse,
-}
-
-/// Initial value: RGB for base color, one number for scalar textures.
-#[derive(Clone, Debug, PartialEq, Deserialize)]
-#[serde(untagged)]
-pub enum Init {
-    /// One value.
-    Scalar(f32),
-    /// Several values (RGB).
-    Vector(Vec<f32>),
-}
-
-/// One texture to optimize.
-#[derive(Clone, Debug, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct TextureSpec {
-    /// Material name in the scene.
-    pub material: String,
-    /// Which input.
-    pub slot: Slot,
-    /// Width and height in texels.
-    pub resolution: [u32; 2],
-    /// Constant initial value.
-    pub init: Init,
-    /// Adam learning rate.
-    pub learning_rate: f32,
-}
-
-impl TextureSpec {
-    /// The initial value as one float per channel.
-    pub fn init_values(&self) -> Vec<f32> {
-        match &self.init {
-            Init::Scalar(v) => vec![*v; self.slot.channels() as usize],
-            Init::Vector(v) => v.clone(),
-        }
-    }
-}
 
 /// Where the target images come from.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
@@ -357,50 +260,6 @@ pub struct Task {
 
 fn unit() -> f32 {
     1.0
-}
-
-/// Check one texture to optimize, listed after `earlier`: on failure, the key at fault
-/// (`resolution`, `init`, `learning_rate` or `slot`) and what is wrong.
-pub fn check_texture(
-    tex: &TextureSpec,
-    earlier: &[TextureSpec],
-) -> std::result::Result<(), (&'static str, String)> {
-    let [w, h] = tex.resolution;
-    if !(1..=4096).contains(&w) || !(1..=4096).contains(&h) {
-        return Err(("resolution", "each side must be between 1 and 4096".into()));
-    }
-    let init = tex.init_values();
-    if init.len() != tex.slot.channels() as usize {
-        return Err((
-            "init",
-            format!(
-                "{} takes {} value(s), got {}",
-                tex.slot.name(),
-                tex.slot.channels(),
-                init.len()
-            ),
-        ));
-    }
-    let (lo, hi) = tex.slot.range();
-    if init
-        .iter()
-        .any(|v| !(v.is_finite() && *v >= lo && *v <= hi))
-    {
-        return Err(("init", format!("values must lie in [{lo}, {hi}]")));
-    }
-    if !(tex.learning_rate.is_finite() && tex.learning_rate >= 0.0) {
-        return Err(("learning_rate", "must be a finite number >= 0".into()));
-    }
-    if earlier
-        .iter()
-        .any(|o| o.material == tex.material && o.slot == tex.slot)
-    {
-        return Err((
-            "slot",
-            format!("{} of `{}` is listed twice", tex.slot.name(), tex.material),
-        ));
-    }
-    Ok(())
 }
 
 fn finite3(v: &Option<[f32; 3]>) -> bool {

@@ -47,7 +47,7 @@ impl Protocol {
         if self == Protocol::Paper {
             t.optimizer.primal_spp = 32;
             t.optimizer.gradient_spp = 1;
-            t.optimizer.filter = crate::task::Filter::Nearest;
+            t.optimizer.filter = crate::vocab::Filter::Nearest;
         }
         t
     }

@@ -4,7 +4,7 @@ use crate::image_io::linear_to_srgb;
 use crate::render::params::{slot_values, ParamSet};
 use crate::scene::authoring::{png_bytes, GltfBuilder};
 use crate::scene::Scene;
-use crate::task::Slot;
+use crate::vocab::Slot;
 use crate::{Error, Result};
 use serde_json::{json, Value};
 use std::path::Path;

@@ -1,5 +1,5 @@
 //! Image losses on the CPU: the reference for shaders/loss.wgsl and for tests.
-use crate::task::Loss;
+use crate::vocab::Loss;
 
 /// Epsilon of relMSE: (I - G)^2 / (G^2 + REL_EPS).
 pub const REL_EPS: f32 = 0.01;

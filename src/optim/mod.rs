@@ -33,7 +33,7 @@ use crate::render::layout::*;
 use crate::render::params::ParamSet;
 use crate::render::{camera_info, encode_timed_pass, Renderer, Techniques, WORKGROUP};
 use crate::scene::Scene;
-use crate::task::Loss;
+use crate::vocab::Loss;
 use crate::{Error, Result};
 pub use estimator::restir::{self, MergeDiagnostics};
 use estimator::Estimator;

@@ -7,7 +7,8 @@ use crate::image_io::{self, Image};
 use crate::render::params::ParamSet;
 use crate::render::{RenderSettings, Renderer, Techniques};
 use crate::scene::{self, EnvMap, Scene};
-use crate::task::{Filter, Task, TextureSpec};
+use crate::task::Task;
+use crate::vocab::{Filter, TextureSpec};
 use crate::{Error, Result};
 use std::path::Path;
 
@@ -62,7 +63,7 @@ impl Problem {
             ));
         }
         for (i, t) in textures.iter().enumerate() {
-            crate::task::check_texture(t, &textures[..i])
+            crate::vocab::check_texture(t, &textures[..i])
                 .map_err(|(key, msg)| Error::Invalid(format!("textures[{i}].{key}: {msg}")))?;
         }
         let set = ParamSet::from_specs(&scene, textures, filter, Path::new("<problem>"))?;

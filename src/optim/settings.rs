@@ -1,7 +1,7 @@
 //! What an optimization samples and how it stops: [`Settings`], [`Stop`], [`Progress`].
 
 use super::{Method, PrimalMode, RestirOptions, Schedule};
-use crate::task::Loss;
+use crate::vocab::Loss;
 
 /// How each iteration samples.
 #[derive(Clone, Debug)]

@@ -225,9 +225,9 @@ impl GpuScene {
                 ))
             })?;
             let slot = match t.slot {
-                crate::task::Slot::BaseColor => &mut m.param_base_color,
-                crate::task::Slot::Metallic => &mut m.param_metallic,
-                crate::task::Slot::Roughness => &mut m.param_roughness,
+                crate::vocab::Slot::BaseColor => &mut m.param_base_color,
+                crate::vocab::Slot::Metallic => &mut m.param_metallic,
+                crate::vocab::Slot::Roughness => &mut m.param_roughness,
             };
             *slot = i as u32;
             param_textures.push(GpuParamTex {
@@ -236,8 +236,8 @@ impl GpuScene {
                 height: t.height,
                 channels: t.channels(),
                 filtering: match t.filter {
-                    crate::task::Filter::Nearest => 0,
-                    crate::task::Filter::Bilinear => 1,
+                    crate::vocab::Filter::Nearest => 0,
+                    crate::vocab::Filter::Bilinear => 1,
                 },
                 texel_offset,
                 _pad: [0; 2],

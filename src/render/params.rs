@@ -1,7 +1,7 @@
 //! Optimized textures ("parameter textures"): the values the optimizer changes, laid out as on
 //! the GPU (all textures in one float array, `channels` floats per texel, row-major).
 use crate::scene::{Material, Scene};
-use crate::task::{Filter, Slot, TextureSpec};
+use crate::vocab::{Filter, Slot, TextureSpec};
 use crate::{Error, Result};
 
 /// One optimized texture.

@@ -3,6 +3,15 @@ use crate::{Error, Result};
 use std::io::Cursor;
 use std::path::Path;
 
+/// sRGB to linear transfer function.
+pub fn srgb_to_linear(x: f32) -> f32 {
+    if x <= 0.04045 {
+        x / 12.92
+    } else {
+        ((x + 0.055) / 1.055).powf(2.4)
+    }
+}
+
 /// Largest width or height psrestir decodes.
 pub const MAX_IMAGE_DIM: u32 = 16384;
 /// Largest decoded size psrestir accepts, in bytes (RGBA8 or RGB f32).
@@ -215,7 +224,7 @@ pub fn sample_bilinear(
         let f = |c: u8| {
             let v = c as f32 / 255.0;
             if srgb {
-                crate::image_io::srgb_to_linear(v)
+                srgb_to_linear(v)
             } else {
                 v
             }
