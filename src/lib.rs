@@ -62,6 +62,7 @@
 //! checkpoints and outputs. `examples/` holds two complete programs.
 #![warn(missing_docs)]
 
+pub mod assets;
 pub mod bench;
 pub mod error;
 pub mod gpu;

@@ -2,6 +2,7 @@
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
+use psrestir::assets;
 use psrestir::gpu::Gpu;
 use psrestir::optim::{self, run::RunOptions};
 use psrestir::render::{RenderSettings, Renderer, Techniques};
@@ -577,7 +578,7 @@ fn run(cli: Cli) -> Result<()> {
             restir,
         } => {
             let names: Vec<String> = if scenes.is_empty() {
-                scene::bench_scenes::BENCH_SCENES
+                assets::bench_scenes::BENCH_SCENES
                     .iter()
                     .map(|s| s.to_string())
                     .collect()
@@ -640,9 +641,9 @@ fn run(cli: Cli) -> Result<()> {
             );
         }
         Command::MakeScenes { dir } => {
-            scene::bundled::write_default_scene(&dir.join("default"))?;
+            assets::bundled::write_default_scene(&dir.join("default"))?;
             println!("wrote {}", dir.join("default").display());
-            scene::bench_scenes::write_bench_scenes(&dir.join("bench"))?;
+            assets::bench_scenes::write_bench_scenes(&dir.join("bench"))?;
             println!("wrote {}", dir.join("bench").display());
         }
     }

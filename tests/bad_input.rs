@@ -3,7 +3,7 @@
 mod common;
 
 use common::crc32;
-use psrestir::scene::authoring::{png_bytes, GltfBuilder};
+use psrestir::assets::authoring::{png_bytes, GltfBuilder};
 use psrestir::scene::load;
 use serde_json::json;
 use std::path::{Path, PathBuf};

@@ -178,9 +178,9 @@ fn bench_rejects_unknown_scenes_and_bad_options_clearly() {
 #[test]
 fn committed_bench_scenes_are_what_the_generator_writes() {
     let dir = tempfile::tempdir().unwrap();
-    psrestir::scene::bench_scenes::write_bench_scenes(dir.path()).unwrap();
+    psrestir::assets::bench_scenes::write_bench_scenes(dir.path()).unwrap();
     let committed = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/bench");
-    for name in psrestir::scene::bench_scenes::BENCH_SCENES {
+    for name in psrestir::assets::bench_scenes::BENCH_SCENES {
         let fresh_dir = dir.path().join(name);
         let mut files: Vec<_> = std::fs::read_dir(&fresh_dir)
             .unwrap()

@@ -22,8 +22,8 @@
 mod common;
 
 use common::crc32;
+use psrestir::assets::authoring::glb_bytes;
 use psrestir::optim::Problem;
-use psrestir::scene::authoring::glb_bytes;
 use psrestir::scene::{self, bvh, images, EnvMap};
 use psrestir::task::Task;
 use serde_json::Value;

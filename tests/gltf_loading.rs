@@ -2,7 +2,7 @@
 //! KHR_texture_transform, KHR_materials_emissive_strength, a camera, lights) loads to the
 //! expected world-space triangles, UVs and material values, in .gltf and .glb form alike.
 use glam::{Vec2, Vec3, Vec4};
-use psrestir::scene::authoring::{png_bytes, GltfBuilder};
+use psrestir::assets::authoring::{png_bytes, GltfBuilder};
 use psrestir::scene::{load, PunctualKind, Scene, Wrap};
 use serde_json::json;
 use std::path::Path;
@@ -221,7 +221,7 @@ fn the_bundled_scene_has_every_light_type_textures_and_cameras() {
     );
     // The committed files are what the generator writes today.
     let dir = tempfile::tempdir().unwrap();
-    psrestir::scene::bundled::write_default_scene(dir.path()).unwrap();
+    psrestir::assets::bundled::write_default_scene(dir.path()).unwrap();
     let fresh = load(&dir.path().join("scene.gltf")).unwrap();
     assert_eq!(strip(fresh).triangles, strip(s.clone()).triangles);
     let sky = psrestir::scene::EnvMap::load(&path.with_file_name("sky.exr")).unwrap();

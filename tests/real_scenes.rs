@@ -6,13 +6,13 @@ mod common;
 
 use common::*;
 use glam::{Mat3, Mat4, Quat, Vec3};
+use psrestir::assets::authoring::{png_bytes, GltfBuilder};
 use psrestir::image_io::{srgb_to_linear, Image};
 use psrestir::optim::run::{run, RunOptions};
 use psrestir::optim::schedule::Schedule;
 use psrestir::optim::{Method, Optimizer, Settings};
 use psrestir::render::params::ParamSet;
 use psrestir::render::{camera_info, RenderSettings, Renderer, Techniques};
-use psrestir::scene::authoring::{png_bytes, GltfBuilder};
 use psrestir::scene::{capture, Camera, Intrinsics};
 use psrestir::task::{Filter, Init, Slot, Task, TextureSpec};
 use serde_json::json;
@@ -92,7 +92,7 @@ fn blender_like_glb(path: &Path, plane_png: &[u8]) {
         Some(&[0, 1, 2, 0, 2, 3]),
         Some(mat_a),
     );
-    let cube = psrestir::scene::authoring::box_triangles([0.55, 0.2, -0.55], [0.2; 3]);
+    let cube = psrestir::assets::authoring::box_triangles([0.55, 0.2, -0.55], [0.2; 3]);
     let uvs: Vec<[f32; 2]> = (0..cube.len())
         .map(|i| [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]][i % 3])
         .collect();

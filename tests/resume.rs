@@ -1,7 +1,7 @@
 //! A run killed at random moments (SIGKILL) continues with --resume from its last checkpoint:
 //! the metrics have no gap and no repeat, no output is ever left half-written, and the result
 //! is as good as an uninterrupted run's.
-use psrestir::scene::authoring::{png_bytes, GltfBuilder};
+use psrestir::assets::authoring::{png_bytes, GltfBuilder};
 use serde_json::json;
 use std::path::Path;
 use std::process::Command;

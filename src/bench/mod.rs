@@ -330,7 +330,7 @@ pub fn resolve_scene(arg: &str) -> Result<PathBuf> {
     Err(Error::Invalid(format!(
         "bench: `{arg}` is neither a benchmark scene ({}) nor a task file nor a folder with \
          task.toml",
-        crate::scene::bench_scenes::BENCH_SCENES.join(", ")
+        crate::assets::bench_scenes::BENCH_SCENES.join(", ")
     )))
 }
 

@@ -1,8 +1,8 @@
 //! The optimized scene as a self-contained `.glb`: the source scene with every buffer and
 //! image embedded, and the optimized textures written into its materials.
+use crate::assets::authoring::{png_bytes, GltfBuilder};
 use crate::image_io::linear_to_srgb;
 use crate::render::params::{slot_values, ParamSet};
-use crate::scene::authoring::{png_bytes, GltfBuilder};
 use crate::scene::Scene;
 use crate::vocab::Slot;
 use crate::{Error, Result};

@@ -1,9 +1,6 @@
 //! Scenes: what the renderer sees after loading a glTF file (world-space triangles, materials,
 //! textures, cameras, lights, an optional environment map), and the BVH over the triangles.
 
-pub mod authoring;
-pub mod bench_scenes;
-pub mod bundled;
 pub mod bvh;
 pub mod capture;
 pub mod env;
