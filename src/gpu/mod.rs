@@ -515,6 +515,38 @@ impl Gpu {
             })
     }
 
+    /// A bind group of the group that `decl` declares, from whole buffers given by their
+    /// WGSL names in any order. Every declared name must be given once, and nothing else:
+    /// a mismatch is a bug in psrestir and panics naming the pass and both lists.
+    pub fn bind(
+        &self,
+        decl: &GroupDecl,
+        label: &str,
+        layout: &wgpu::BindGroupLayout,
+        named: &[(&str, &wgpu::Buffer)],
+    ) -> wgpu::BindGroup {
+        let given: Vec<&str> = named.iter().map(|(n, _)| *n).collect();
+        let mut sorted_given = given.clone();
+        sorted_given.sort_unstable();
+        let mut sorted_declared = decl.names.to_vec();
+        sorted_declared.sort_unstable();
+        assert!(
+            sorted_given == sorted_declared,
+            "{label}: group {} of pass `{}` binds {:?}, given {:?}",
+            decl.group,
+            decl.pass,
+            decl.names,
+            given
+        );
+        let buffers: Vec<&wgpu::Buffer> = decl
+            .names
+            .iter()
+            .map(|n| named.iter().find(|(m, _)| m == n).map(|(_, b)| *b))
+            .collect::<Option<_>>()
+            .expect("checked above");
+        self.bind_group(label, layout, &buffers)
+    }
+
     /// A bind group binding whole buffers in order.
     pub fn bind_group(
         &self,
@@ -579,6 +611,19 @@ pub fn choose_tracer(features: wgpu::Features, device_type: wgpu::DeviceType) ->
             "PSRESTIR_TRACER={other}: expected `software`, `ray-query` or `auto`"
         ))),
     }
+}
+
+/// The bindings of one bind group of a pass, by WGSL name in binding order, declared beside
+/// the code that drives the pass. [`Gpu::bind`] binds buffers to them by name; a test checks
+/// every declaration against naga's reflection of the pass's WGSL, without a GPU.
+#[derive(Clone, Copy, Debug)]
+pub struct GroupDecl {
+    /// The pass (its WGSL file under `shaders/`).
+    pub pass: &'static str,
+    /// The bind group index.
+    pub group: u32,
+    /// Variable names in binding order.
+    pub names: &'static [&'static str],
 }
 
 /// Kind of a binding in a [`Gpu::layout`].

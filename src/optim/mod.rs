@@ -42,6 +42,28 @@ pub use primal::{ControlVariateSnapshot, PrimalMode};
 pub use problem::Problem;
 pub use schedule::{Schedule, ScheduleKind};
 
+/// Group 0 of `loss.wgsl`.
+pub(crate) const LOSS_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
+    pass: "loss",
+    group: 0,
+    names: &[
+        "lp",
+        "accum",
+        "target_image",
+        "adjoint",
+        "loss_partial",
+        "loss_stats",
+        "exposure_partial",
+        "adjoint_prev",
+    ],
+};
+/// Group 0 of `adam.wgsl`.
+pub(crate) const ADAM_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
+    pass: "adam",
+    group: 0,
+    names: &["ap", "grad", "params", "moment1", "moment2", "adam_stats"],
+};
+
 /// The primal render and loss of one camera.
 struct CameraPasses {
     render_uniform: wgpu::Buffer,
@@ -249,24 +271,31 @@ impl Optimizer {
                 bytemuck::bytes_of(&loss_params),
             );
             cams.push(CameraPasses {
-                render_group: gpu.bind_group(
+                render_group: gpu.bind(
+                    &crate::render::RENDER_GROUP,
                     "primal",
                     &renderer.render_layout,
-                    &[&render_uniform, &accum, &stats.primal, &accum_prev],
+                    &[
+                        ("rp", &render_uniform),
+                        ("accum", &accum),
+                        ("stats", &stats.primal),
+                        ("accum_prev", &accum_prev),
+                    ],
                 ),
                 loss_groups: [0usize, 1].map(|p| {
-                    gpu.bind_group(
+                    gpu.bind(
+                        &LOSS_GROUP,
                         "loss",
                         &loss_layout,
                         &[
-                            &loss_uniform,
-                            &accum,
-                            &target_buf,
-                            &adjoint[p],
-                            &loss_partial,
-                            &stats.loss,
-                            &exposure_partial,
-                            &adjoint[1 - p],
+                            ("lp", &loss_uniform),
+                            ("accum", &accum),
+                            ("target_image", &target_buf),
+                            ("adjoint", &adjoint[p]),
+                            ("loss_partial", &loss_partial),
+                            ("loss_stats", &stats.loss),
+                            ("exposure_partial", &exposure_partial),
+                            ("adjoint_prev", &adjoint[1 - p]),
                         ],
                     )
                 }),
@@ -295,16 +324,17 @@ impl Optimizer {
                 _pad: 0,
             };
             let u = gpu.uniform(&format!("adam params {}", t.name()), bytemuck::bytes_of(&p));
-            let g = gpu.bind_group(
+            let g = gpu.bind(
+                &ADAM_GROUP,
                 "adam",
                 &adam_layout,
                 &[
-                    &u,
-                    &grad,
-                    &renderer.scene.params,
-                    &moments[0],
-                    &moments[1],
-                    &stats.adam,
+                    ("ap", &u),
+                    ("grad", &grad),
+                    ("params", &renderer.scene.params),
+                    ("moment1", &moments[0]),
+                    ("moment2", &moments[1]),
+                    ("adam_stats", &stats.adam),
                 ],
             );
             adam.push((u, g, p));

@@ -9,6 +9,13 @@ use crate::render::WORKGROUP;
 use crate::Result;
 use bytemuck::{Pod, Zeroable};
 
+/// Group 1 of `observed_texels.wgsl`.
+pub(crate) const OBSERVED_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
+    pass: "observed_texels",
+    group: 1,
+    names: &["op", "observed"],
+};
+
 /// `ObservedParams` in shaders/observed_texels.wgsl (a test checks the layout).
 /// The fields are documented in the WGSL twin.
 #[allow(missing_docs)]
@@ -49,7 +56,12 @@ impl Optimizer {
                 &format!("observed_texels params {k}"),
                 bytemuck::bytes_of(&params),
             );
-            let group = gpu.bind_group("observed_texels", &layout, &[&uniform, &mask]);
+            let group = gpu.bind(
+                &OBSERVED_GROUP,
+                "observed_texels",
+                &layout,
+                &[("op", &uniform), ("observed", &mask)],
+            );
             let mut enc = gpu
                 .device
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {

@@ -20,6 +20,13 @@ use crate::{Error, Result};
 use bytemuck::{Pod, Zeroable};
 use serde::Deserialize;
 
+/// Group 0 of `primal_cv.wgsl`.
+pub(crate) const PRIMAL_CV_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
+    pass: "primal_cv",
+    group: 0,
+    names: &["cp", "accum", "accum_prev", "cv_state"],
+};
+
 /// How the primal image of each iteration is estimated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -140,10 +147,16 @@ impl ControlVariate {
                     )
                 });
                 let groups = [0, 1].map(|phase| {
-                    gpu.bind_group(
+                    gpu.bind(
+                        &PRIMAL_CV_GROUP,
                         "primal_cv",
                         &layout,
-                        &[&uniforms[phase], accum, accum_prev, &state],
+                        &[
+                            ("cp", &uniforms[phase]),
+                            ("accum", accum),
+                            ("accum_prev", accum_prev),
+                            ("cv_state", &state),
+                        ],
                     )
                 });
                 Camera {

@@ -158,6 +158,48 @@ mod tests {
     use super::*;
     use std::mem::size_of;
 
+    #[test]
+    fn every_bind_group_declaration_names_its_wgsl_bindings() {
+        use crate::gpu::shaders::{bindings, passes};
+        use crate::optim::estimator::{baseline, restir};
+        let decls = [
+            crate::render::RENDER_GROUP,
+            crate::render::TRACE_RAYS_GROUP,
+            crate::optim::LOSS_GROUP,
+            crate::optim::ADAM_GROUP,
+            crate::optim::primal::PRIMAL_CV_GROUP,
+            crate::optim::observed::OBSERVED_GROUP,
+            baseline::GRADIENT_GROUP,
+            restir::CANDIDATES_GROUP,
+            restir::MERGE_GROUP,
+            restir::RESERVOIR_TEST_GROUP,
+        ];
+        for d in &decls {
+            let wgsl: Vec<String> = bindings(d.pass, d.group)
+                .unwrap()
+                .into_iter()
+                .map(|(n, _)| n)
+                .collect();
+            assert_eq!(wgsl, d.names, "group {} of {}", d.group, d.pass);
+        }
+        // Every group of every pass is declared, except the scene's (group 0 of the passes
+        // that read the scene, bound once by GpuScene::new) and texture_export's storage
+        // texture group, which texture_export.rs lays out itself.
+        let scene = bindings("render", 0).unwrap();
+        for pass in passes().filter(|&p| p != "texture_export") {
+            for group in 0..2 {
+                let b = bindings(pass, group).unwrap();
+                if b.is_empty() || (group == 0 && scene.starts_with(&b)) {
+                    continue;
+                }
+                assert!(
+                    decls.iter().any(|d| d.pass == pass && d.group == group),
+                    "group {group} of {pass} has no GroupDecl"
+                );
+            }
+        }
+    }
+
     fn field_size<T, F>(_: impl Fn(&T) -> &F) -> usize {
         size_of::<F>()
     }

@@ -16,6 +16,19 @@ use layout::*;
 use params::ParamSet;
 use std::time::Instant;
 
+/// Group 1 of `render.wgsl` (the optimizer's primal render binds it too).
+pub(crate) const RENDER_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
+    pass: "render",
+    group: 1,
+    names: &["rp", "accum", "stats", "accum_prev"],
+};
+/// Group 1 of `trace_rays.wgsl`.
+pub(crate) const TRACE_RAYS_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
+    pass: "trace_rays",
+    group: 1,
+    names: &["tp", "rays", "hits"],
+};
+
 /// Invocations per workgroup of every pass.
 pub const WORKGROUP: u32 = 64;
 
@@ -693,10 +706,16 @@ impl Renderer {
         let stats = self.gpu.storage_zeroed("render stats", 16);
         // No second state: a placeholder for the previous-textures accumulator.
         let unused = self.gpu.storage_zeroed("render accum_prev (unused)", 16);
-        let group = self.gpu.bind_group(
+        let group = self.gpu.bind(
+            &RENDER_GROUP,
             "render",
             &self.render_layout,
-            &[&uniform, &accum, &stats, &unused],
+            &[
+                ("rp", &uniform),
+                ("accum", &accum),
+                ("stats", &stats),
+                ("accum_prev", &unused),
+            ],
         );
         // Compile the pass (lavapipe compiles at first dispatch) before the clock starts.
         self.dispatch("render warm-up", &self.render_pipeline, &group, (1, 1));
@@ -775,10 +794,11 @@ impl Renderer {
             wgpu::BufferUsages::empty(),
         );
         let hit_buf = self.gpu.storage_zeroed("trace_rays hits", n as u64 * 16);
-        let group = self.gpu.bind_group(
+        let group = self.gpu.bind(
+            &TRACE_RAYS_GROUP,
             "trace_rays",
             &self.trace_layout,
-            &[&uniform, &ray_buf, &hit_buf],
+            &[("tp", &uniform), ("rays", &ray_buf), ("hits", &hit_buf)],
         );
         self.dispatch("trace_rays", &self.trace_pipeline, &group, grid);
         self.gpu.wait("trace_rays")?;

@@ -12,6 +12,13 @@ use crate::render::{Techniques, WORKGROUP};
 use crate::Result;
 use bytemuck::{Pod, Zeroable};
 
+/// Group 1 of `gradient.wgsl`.
+pub(crate) const GRADIENT_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
+    pass: "gradient",
+    group: 1,
+    names: &["gp", "adjoint", "grad", "gstats"],
+};
+
 /// `GradientParams` in shaders/gradient.wgsl (a test checks the layout).
 /// The fields are documented in the WGSL twin.
 #[allow(missing_docs)]
@@ -75,10 +82,16 @@ impl Baseline {
                 let uniform =
                     gpu.uniform(&format!("gradient params {k}"), bytemuck::bytes_of(&params));
                 let groups = [0usize, 1].map(|p| {
-                    gpu.bind_group(
+                    gpu.bind(
+                        &GRADIENT_GROUP,
                         "gradient",
                         &layout,
-                        &[&uniform, &s.adjoint[p], s.grad, &stats],
+                        &[
+                            ("gp", &uniform),
+                            ("adjoint", &s.adjoint[p]),
+                            ("grad", s.grad),
+                            ("gstats", &stats),
+                        ],
                     )
                 });
                 Camera {

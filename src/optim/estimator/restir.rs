@@ -24,6 +24,33 @@ use crate::render::WORKGROUP;
 use crate::{Error, Result};
 use bytemuck::{Pod, Zeroable};
 
+/// Group 1 of `restir_candidates.wgsl`.
+pub(crate) const CANDIDATES_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
+    pass: "restir_candidates",
+    group: 1,
+    names: &["cp", "adjoint", "fresh", "locks", "cstats"],
+};
+/// Group 1 of `restir_merge.wgsl`.
+pub(crate) const MERGE_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
+    pass: "restir_merge",
+    group: 1,
+    names: &[
+        "mp",
+        "adjoint",
+        "adjoint_prev",
+        "kept",
+        "merged",
+        "grad",
+        "mstats",
+    ],
+};
+/// Group 0 of `reservoir_test.wgsl`.
+pub(crate) const RESERVOIR_TEST_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
+    pass: "reservoir_test",
+    group: 0,
+    names: &["tp", "weights", "fresh", "locks", "failures"],
+};
+
 /// Word offsets within a reservoir, and the packing of its info word. The WGSL constants
 /// (`RES_*`, `INFO_*`, `RESERVOIR_WORDS` in `gen/restir_layout`) are generated from these.
 pub mod reservoir {
@@ -315,17 +342,18 @@ impl Restir {
         };
         let merge_uniform = gpu.uniform("merge params", bytemuck::bytes_of(&merge_params));
         let merge_groups = [0usize, 1].map(|p| {
-            gpu.bind_group(
+            gpu.bind(
+                &MERGE_GROUP,
                 "restir_merge",
                 &merge_layout,
                 &[
-                    &merge_uniform,
-                    &s.adjoint[p],
-                    &s.adjoint[1 - p],
-                    &reservoirs[1 - p],
-                    &reservoirs[p],
-                    s.grad,
-                    &merge_stats,
+                    ("mp", &merge_uniform),
+                    ("adjoint", &s.adjoint[p]),
+                    ("adjoint_prev", &s.adjoint[1 - p]),
+                    ("kept", &reservoirs[1 - p]),
+                    ("merged", &reservoirs[p]),
+                    ("grad", s.grad),
+                    ("mstats", &merge_stats),
                 ],
             )
         });
@@ -350,15 +378,16 @@ impl Restir {
                     bytemuck::bytes_of(&params),
                 );
                 let groups = [0usize, 1].map(|p| {
-                    gpu.bind_group(
+                    gpu.bind(
+                        &CANDIDATES_GROUP,
                         "restir_candidates",
                         &candidate_layout,
                         &[
-                            &uniform,
-                            &s.adjoint[p],
-                            &reservoirs[p],
-                            &locks,
-                            &candidate_stats,
+                            ("cp", &uniform),
+                            ("adjoint", &s.adjoint[p]),
+                            ("fresh", &reservoirs[p]),
+                            ("locks", &locks),
+                            ("cstats", &candidate_stats),
                         ],
                     )
                 });
@@ -540,10 +569,17 @@ pub fn selection_trial(
     );
     let locks = gpu.storage_zeroed("reservoir_test locks", reservoirs as u64 * 4);
     let failures = gpu.storage_zeroed("reservoir_test failures", 16);
-    let group = gpu.bind_group(
+    let group = gpu.bind(
+        &RESERVOIR_TEST_GROUP,
         "reservoir_test",
         &layout,
-        &[&uniform, &w, &res, &locks, &failures],
+        &[
+            ("tp", &uniform),
+            ("weights", &w),
+            ("fresh", &res),
+            ("locks", &locks),
+            ("failures", &failures),
+        ],
     );
     let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
     let grid = grid_2d(n_invocations, WORKGROUP, max_dim);
