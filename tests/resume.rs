@@ -349,9 +349,12 @@ fn kill_and_resume(method: &str) {
         return;
     }
     // ReSTIR is not: which candidate takes a reservoir lock first varies, and Adam amplifies
-    // it, so the runs differ (the median RMSE of the last 100 iterations ranges over 0.006 to
-    // 0.017 across runs of this task). Both must have converged; that the restored state
-    // continues exactly is tested in tests/restir.rs.
+    // it, so the runs differ. The median RMSE of the last 100 iterations has a heavy tail:
+    // over 22 runs of this test (2-core lavapipe; 44 medians, uninterrupted and resumed) it
+    // ranged over 0.007 to 0.076, most below 0.018, and 4 exceeded a tenth of the initial
+    // RMSE (0.036), an uninterrupted one included. Both must have converged to a quarter of
+    // it (0.090); that the restored state continues exactly is tested in tests/restir.rs,
+    // and a resume from gray would break the jump check above.
     let median_tail = |rows: &[(u32, f64)]| {
         let mut v: Vec<f64> = rows[rows.len() - 100..].iter().map(|r| r.1).collect();
         v.sort_by(f64::total_cmp);
@@ -359,7 +362,7 @@ fn kill_and_resume(method: &str) {
     };
     let (ra, rb) = (median_tail(&ref_rows), median_tail(&rows));
     eprintln!("texture RMSE: first {r0:.4}, median of the last 100: uninterrupted {ra:.4}, resumed {rb:.4}");
-    assert!(ra < r0 / 10.0 && rb < r0 / 10.0, "{ra} {rb} vs {r0}");
+    assert!(ra < r0 / 4.0 && rb < r0 / 4.0, "{ra} {rb} vs {r0}");
 }
 
 #[test]
