@@ -45,6 +45,7 @@ pub fn run(scene_path: &Path, out: &Path, iterations: u32) -> psrestir::Result<O
     let settings = Settings {
         primal_spp: 2,
         primal: Default::default(),
+        cv_max_weight: psrestir::optim::primal::DEFAULT_MAX_WEIGHT,
         gradient_spp: 2,
         ..Settings::new(64, 64, vec![main])
     };

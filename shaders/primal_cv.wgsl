@@ -33,8 +33,10 @@ struct PrimalCvParams {
     phase: u32,
     width: u32,
     height: u32,
+    // Upper clamp of the weight (cv_max_weight): below 1 it bounds how long a pixel's noise
+    // persists in the image, which an optimizer would otherwise fit (see src/optim/primal.rs).
+    max_weight: f32,
     _pad0: u32,
-    _pad1: u32,
 }
 
 // Words of state per pixel: vec4s, rgb in xyz.
@@ -107,7 +109,7 @@ fn main(@builtin(global_invocation_id) gid: vec3u) {
             let st = neighbour_stats(i32(i % cp.width), i32(i / cp.width));
             // Var(I_{t-1}) from Var(I_{t-2}) and the weight used then.
             v_image = finite_or_zero(w * w * (v_image + st.v_h) + st.v_f - 2.0 * w * st.cov);
-            w = clamp(finite_or_zero(st.cov / (st.v_h + v_image)), vec3f(0.0), vec3f(1.0));
+            w = clamp(finite_or_zero(st.cov / (st.v_h + v_image)), vec3f(0.0), vec3f(cp.max_weight));
         } else {
             w = vec3f(0.0);
         }

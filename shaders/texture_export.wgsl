@@ -2,7 +2,7 @@
 // application can bind: RGB for base color, the value in R, G and B for scalar textures,
 // alpha 1. Texel (x, y) is parameter texel (x, y), row 0 first, as in the saved images.
 
-// Keep in sync with GpuExportParams in src/render/layout.rs.
+// Mirrored by ExportParams in src/optim/texture_export.rs.
 struct ExportParams {
     offset: u32,
     width: u32,

@@ -481,6 +481,9 @@ fn run(cli: Cli) -> Result<()> {
                 match (summary.initial_rmse, summary.final_rmse) {
                     (Some(a), Some(b)) => format!(", texture RMSE {a:.4} -> {b:.4}"),
                     _ => String::new(),
+                } + &match (summary.initial_rmse_observed, summary.final_rmse_observed) {
+                    (Some(a), Some(b)) => format!(" (observed texels {a:.4} -> {b:.4})"),
+                    _ => String::new(),
                 },
                 summary.out.display()
             );

@@ -17,6 +17,7 @@
 //! iterations = 300                # and/or time_budget_s
 //! primal_spp = 2
 //! primal = "control_variate"      # or "independent" (the default)
+//! cv_max_weight = 0.9             # upper clamp of the control variate's weight (0..1)
 //! gradient_spp = 2
 //! loss = "l2"                     # or "relmse"
 //! filter = "bilinear"             # or "nearest"
@@ -152,6 +153,9 @@ pub struct OptimizerSpec {
     /// How the primal image is estimated: "independent" or "control_variate".
     #[serde(default)]
     pub primal: crate::optim::PrimalMode,
+    /// Upper clamp of the control variate's per-pixel weight, in [0, 1].
+    #[serde(default = "default_cv_max_weight")]
+    pub cv_max_weight: f32,
     /// Samples per pixel of the gradient pass.
     #[serde(default = "one")]
     pub gradient_spp: u32,
@@ -200,6 +204,10 @@ fn default_eval_every() -> u32 {
 }
 fn default_eval_spp() -> u32 {
     16
+}
+
+fn default_cv_max_weight() -> f32 {
+    crate::optim::primal::DEFAULT_MAX_WEIGHT
 }
 
 fn default_primal_spp() -> u32 {
@@ -514,6 +522,9 @@ impl Task {
         if o.primal_spp == 0 || o.primal_spp > 4096 {
             return Err(self.bad("optimizer.primal_spp", "must be between 1 and 4096"));
         }
+        if !(0.0..=1.0).contains(&o.cv_max_weight) {
+            return Err(self.bad("optimizer.cv_max_weight", "must be between 0 and 1"));
+        }
         if o.gradient_spp == 0 || o.gradient_spp > 4096 {
             return Err(self.bad("optimizer.gradient_spp", "must be between 1 and 4096"));
         }
@@ -652,5 +663,7 @@ learning_rate = 0.01
         assert!(e.contains("`target`"), "{e}");
         let e = err(&GOOD.replace("iterations = 10", "iterations = 10\nprimal_spp = 0"));
         assert!(e.contains("optimizer.primal_spp"), "{e}");
+        let e = err(&GOOD.replace("iterations = 10", "iterations = 10\ncv_max_weight = 1.5"));
+        assert!(e.contains("optimizer.cv_max_weight"), "{e}");
     }
 }

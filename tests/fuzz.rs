@@ -23,8 +23,9 @@ mod common;
 
 use common::crc32;
 use psrestir::assets::authoring::glb_bytes;
+use psrestir::image_io::decode as images;
 use psrestir::optim::Problem;
-use psrestir::scene::{self, bvh, images, EnvMap};
+use psrestir::scene::{self, bvh, EnvMap};
 use psrestir::task::Task;
 use serde_json::Value;
 use std::alloc::{GlobalAlloc, Layout, System};

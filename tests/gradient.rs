@@ -49,6 +49,7 @@ fn check_gradient_with(
         cameras: vec![0],
         primal_spp: 16,
         primal,
+        cv_max_weight: psrestir::optim::primal::DEFAULT_MAX_WEIGHT,
         gradient_spp: 16,
         loss: Loss::L2,
         seed: 7,

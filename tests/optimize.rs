@@ -77,6 +77,7 @@ fn setup_with(
         cameras: vec![0],
         primal_spp: 4,
         primal: Default::default(),
+        cv_max_weight: psrestir::optim::primal::DEFAULT_MAX_WEIGHT,
         gradient_spp: 4,
         loss: Loss::L2,
         seed: 3,

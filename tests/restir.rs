@@ -72,6 +72,30 @@ fn optimizer_for(
     values: &[f32],
     target_values: &[f32],
 ) -> Optimizer {
+    optimizer_seeded(
+        gpu,
+        slots,
+        filter,
+        method,
+        restir,
+        values,
+        target_values,
+        11,
+    )
+}
+
+/// [`optimizer_for`] with the run's seed.
+#[allow(clippy::too_many_arguments)]
+fn optimizer_seeded(
+    gpu: &psrestir::gpu::Gpu,
+    slots: &[Slot],
+    filter: Filter,
+    method: Method,
+    restir: RestirOptions,
+    values: &[f32],
+    target_values: &[f32],
+    seed: u32,
+) -> Optimizer {
     let scene = shadow_scene();
     let specs: Vec<TextureSpec> = slots
         .iter()
@@ -90,9 +114,10 @@ fn optimizer_for(
         cameras: vec![0],
         primal_spp: 8,
         primal: Default::default(),
+        cv_max_weight: psrestir::optim::primal::DEFAULT_MAX_WEIGHT,
         gradient_spp: 2,
         loss: Loss::L2,
-        seed: 11,
+        seed,
         method,
         restir,
         schedule: Default::default(),
@@ -147,6 +172,7 @@ fn without_reuse_restir_equals_the_baseline_for_scalar_textures() {
             cameras: vec![0],
             primal_spp: 8,
             primal: Default::default(),
+            cv_max_weight: psrestir::optim::primal::DEFAULT_MAX_WEIGHT,
             gradient_spp: 2,
             loss: Loss::L2,
             seed: 11,
@@ -283,38 +309,8 @@ fn check_unbiased_with_reuse(slot: Slot, filter: Filter, v: &[f32], t: &[f32]) {
 /// value under the state it was drawn at.
 fn check_unbiased_across_shifts(filter: Filter) {
     let Some(gpu) = gpu() else { return };
-    let slots = [Slot::BaseColor, Slot::Roughness];
-    let a = [
-        0.5, 0.4, 0.3, 0.6, 0.5, 0.2, 0.3, 0.3, 0.3, 0.7, 0.6, 0.5, 0.3, 0.5, 0.7, 0.4,
-    ];
-    let b = [
-        0.7, 0.2, 0.5, 0.4, 0.7, 0.4, 0.5, 0.1, 0.6, 0.5, 0.8, 0.3, 0.6, 0.2, 0.4, 0.8,
-    ];
-    let t = [
-        0.8, 0.2, 0.1, 0.3, 0.6, 0.4, 0.5, 0.5, 0.5, 0.2, 0.3, 0.9, 0.8, 0.2, 0.4, 0.9,
-    ];
-    let opts = RestirOptions {
-        verify_paths: true,
-        ..Default::default()
-    };
-    let mut base = optimizer_for(&gpu, &slots, filter, Method::Baseline, opts, &a, &t);
-    let reference: Vec<Vec<f32>> = (0..160)
-        .map(|it| base.estimate_gradient(10_000 + it).unwrap().0)
-        .collect();
-    let (ref_mean, ref_se) = batch_mean(&reference, 16);
-    let mut re = optimizer_for(&gpu, &slots, filter, Method::Restir, opts, &a, &t);
-    let mut samples = Vec::new();
-    for it in 0..1240 {
-        let at_a = it % 2 == 0;
-        re.write_params(if at_a { &a } else { &b }).unwrap();
-        re.step().unwrap();
-        if at_a {
-            samples.push(re.read_gradient().unwrap());
-        }
-    }
-    // Drop the first 20 estimates at A, 24 batches of 25 (each batch spans 50 iterations,
-    // longer than a kept sample's memory at M cap 16, so batches are nearly independent).
-    let (mean, se) = batch_mean(&samples[20..], 24);
+    let trial = shift_trial(&gpu, filter, 11);
+    let (mean, se, ref_mean, ref_se) = (&trial.mean, &trial.se, &trial.ref_mean, &trial.ref_se);
     let scale = ref_mean.iter().fold(0f64, |m, x| m.max(x.abs()));
     for i in 0..mean.len() {
         // 5.5 standard errors of the difference, plus 0.1% of the largest entry for rounding.
@@ -336,8 +332,7 @@ fn check_unbiased_across_shifts(filter: Filter) {
             ref_mean[i]
         );
     }
-    assert_eq!(re.faults().unwrap(), Default::default());
-    let d = re.merge_diagnostics().unwrap().unwrap();
+    let d = trial.diagnostics;
     eprintln!("{filter:?}: {d:?}");
     // Both sides evaluate the same f32 arithmetic on the same stored words (directions are
     // rounded through the octahedral encoding before the candidate pass evaluates them), in
@@ -347,6 +342,94 @@ fn check_unbiased_across_shifts(filter: Filter) {
         d.max_relative_error < 1e-4,
         "a stored path does not evaluate to its stored value: {d:?}"
     );
+}
+
+/// One run of the A/B alternation: ReSTIR's batch means at A and a baseline reference.
+struct ShiftTrial {
+    mean: Vec<f64>,
+    se: Vec<f64>,
+    ref_mean: Vec<f64>,
+    ref_se: Vec<f64>,
+    diagnostics: psrestir::optim::MergeDiagnostics,
+}
+
+fn shift_trial(gpu: &psrestir::gpu::Gpu, filter: Filter, seed: u32) -> ShiftTrial {
+    let slots = [Slot::BaseColor, Slot::Roughness];
+    let a = [
+        0.5, 0.4, 0.3, 0.6, 0.5, 0.2, 0.3, 0.3, 0.3, 0.7, 0.6, 0.5, 0.3, 0.5, 0.7, 0.4,
+    ];
+    let b = [
+        0.7, 0.2, 0.5, 0.4, 0.7, 0.4, 0.5, 0.1, 0.6, 0.5, 0.8, 0.3, 0.6, 0.2, 0.4, 0.8,
+    ];
+    let t = [
+        0.8, 0.2, 0.1, 0.3, 0.6, 0.4, 0.5, 0.5, 0.5, 0.2, 0.3, 0.9, 0.8, 0.2, 0.4, 0.9,
+    ];
+    let opts = RestirOptions {
+        verify_paths: true,
+        ..Default::default()
+    };
+    let (base_method, re_method) = (Method::Baseline, Method::Restir);
+    let mut base = optimizer_seeded(gpu, &slots, filter, base_method, opts, &a, &t, seed);
+    let reference: Vec<Vec<f32>> = (0..160)
+        .map(|it| base.estimate_gradient(10_000 + it).unwrap().0)
+        .collect();
+    let (ref_mean, ref_se) = batch_mean(&reference, 16);
+    let mut re = optimizer_seeded(gpu, &slots, filter, re_method, opts, &a, &t, seed);
+    let mut samples = Vec::new();
+    for it in 0..1240 {
+        let at_a = it % 2 == 0;
+        re.write_params(if at_a { &a } else { &b }).unwrap();
+        re.step().unwrap();
+        if at_a {
+            samples.push(re.read_gradient().unwrap());
+        }
+    }
+    // Drop the first 20 estimates at A, 24 batches of 25 (each batch spans 50 iterations,
+    // longer than a kept sample's memory at M cap 16, so batches are nearly independent).
+    let (mean, se) = batch_mean(&samples[20..], 24);
+    assert_eq!(re.faults().unwrap(), Default::default());
+    ShiftTrial {
+        mean,
+        se,
+        ref_mean,
+        ref_se,
+        diagnostics: re.merge_diagnostics().unwrap().unwrap(),
+    }
+}
+
+/// Not run by default (about 10 s per seed and filter): the A/B alternation over several
+/// seeds, pooling each parameter's z-score of ReSTIR's mean against the reference. Under
+/// no bias the pooled z (sum / sqrt(seeds)) is standard normal for every parameter; a
+/// parameter that sits on the same side in every seed shows up as a large pooled z.
+/// `cargo test --release --test restir -- --ignored bias_scan --nocapture`
+#[test]
+#[ignore]
+fn bias_scan_across_seeds() {
+    let Some(gpu) = gpu() else { return };
+    let seeds: Vec<u32> = (1..=8).collect();
+    for filter in [Filter::Nearest, Filter::Bilinear] {
+        let mut z_sum: Vec<f64> = Vec::new();
+        let mut rel: Vec<Vec<f64>> = Vec::new();
+        for &seed in &seeds {
+            let t = shift_trial(&gpu, filter, seed);
+            z_sum.resize(t.mean.len(), 0.0);
+            rel.resize(t.mean.len(), Vec::new());
+            for i in 0..t.mean.len() {
+                let se = (t.se[i].powi(2) + t.ref_se[i].powi(2)).sqrt();
+                z_sum[i] += (t.mean[i] - t.ref_mean[i]) / se.max(1e-30);
+                rel[i].push(t.mean[i] / t.ref_mean[i]);
+            }
+        }
+        let n = seeds.len() as f64;
+        for (i, z) in z_sum.iter().enumerate() {
+            let r: Vec<String> = rel[i].iter().map(|r| format!("{r:.3}")).collect();
+            eprintln!(
+                "{filter:?} {i}: pooled z {:+.2}, ReSTIR/reference {}",
+                z / n.sqrt(),
+                r.join(" ")
+            );
+        }
+    }
 }
 
 #[test]
@@ -461,6 +544,7 @@ fn gradients_follow_a_sign_change() {
             cameras: vec![0],
             primal_spp: 8,
             primal: Default::default(),
+            cv_max_weight: psrestir::optim::primal::DEFAULT_MAX_WEIGHT,
             gradient_spp: 2,
             loss: Loss::L2,
             seed: 5,

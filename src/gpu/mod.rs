@@ -493,6 +493,11 @@ impl Gpu {
                     Binding::AccelerationStructure => wgpu::BindingType::AccelerationStructure {
                         vertex_return: false,
                     },
+                    Binding::StorageTextureRgba32FloatWrite => wgpu::BindingType::StorageTexture {
+                        access: wgpu::StorageTextureAccess::WriteOnly,
+                        format: wgpu::TextureFormat::Rgba32Float,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                    },
                     _ => wgpu::BindingType::Buffer {
                         ty: match k {
                             Binding::Uniform => wgpu::BufferBindingType::Uniform,
@@ -525,6 +530,21 @@ impl Gpu {
         layout: &wgpu::BindGroupLayout,
         named: &[(&str, &wgpu::Buffer)],
     ) -> wgpu::BindGroup {
+        let named: Vec<(&str, wgpu::BindingResource)> = named
+            .iter()
+            .map(|(n, b)| (*n, b.as_entire_binding()))
+            .collect();
+        self.bind_resources(decl, label, layout, &named)
+    }
+
+    /// [`Gpu::bind`] for any resources (texture views too).
+    pub fn bind_resources(
+        &self,
+        decl: &GroupDecl,
+        label: &str,
+        layout: &wgpu::BindGroupLayout,
+        named: &[(&str, wgpu::BindingResource)],
+    ) -> wgpu::BindGroup {
         let given: Vec<&str> = named.iter().map(|(n, _)| *n).collect();
         let mut sorted_given = given.clone();
         sorted_given.sort_unstable();
@@ -538,13 +558,23 @@ impl Gpu {
             decl.names,
             given
         );
-        let buffers: Vec<&wgpu::Buffer> = decl
+        let entries: Vec<wgpu::BindGroupEntry> = decl
             .names
             .iter()
-            .map(|n| named.iter().find(|(m, _)| m == n).map(|(_, b)| *b))
-            .collect::<Option<_>>()
-            .expect("checked above");
-        self.bind_group(label, layout, &buffers)
+            .enumerate()
+            .map(|(i, n)| {
+                let (_, resource) = named.iter().find(|(m, _)| m == n).expect("checked above");
+                wgpu::BindGroupEntry {
+                    binding: i as u32,
+                    resource: resource.clone(),
+                }
+            })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout,
+            entries: &entries,
+        })
     }
 
     /// A bind group binding whole buffers in order.
@@ -637,6 +667,8 @@ pub enum Binding {
     StorageRw,
     /// `var: acceleration_structure` (the scene's, with ray queries).
     AccelerationStructure,
+    /// `var: texture_storage_2d<rgba32float, write>` (what the export pass writes).
+    StorageTextureRgba32FloatWrite,
 }
 
 /// Workgroups for `n` invocations of size `wg`, as a 2D grid that respects the per-dimension
@@ -650,6 +682,42 @@ pub fn grid_2d(n: u32, wg: u32, max_dim: u32) -> (u32, u32) {
         let y = groups.div_ceil(max_dim);
         (groups.div_ceil(y), y)
     }
+}
+
+/// Record one compute pass: `groups[k]` is bound at group k.
+pub fn encode_pass(
+    enc: &mut wgpu::CommandEncoder,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    groups: &[&wgpu::BindGroup],
+    grid: (u32, u32),
+) {
+    encode_timed_pass(enc, label, pipeline, groups, grid, None)
+}
+
+/// [`encode_pass`], writing timestamps `2k` and `2k + 1` of the query set at the pass's start
+/// and end when given `(query set, k)`.
+pub fn encode_timed_pass(
+    enc: &mut wgpu::CommandEncoder,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    groups: &[&wgpu::BindGroup],
+    grid: (u32, u32),
+    timing: Option<(&wgpu::QuerySet, u32)>,
+) {
+    let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+        label: Some(label),
+        timestamp_writes: timing.map(|(q, k)| wgpu::ComputePassTimestampWrites {
+            query_set: q,
+            beginning_of_pass_write_index: Some(2 * k),
+            end_of_pass_write_index: Some(2 * k + 1),
+        }),
+    });
+    pass.set_pipeline(pipeline);
+    for (k, g) in groups.iter().enumerate() {
+        pass.set_bind_group(k as u32, *g, &[]);
+    }
+    pass.dispatch_workgroups(grid.0, grid.1, 1);
 }
 
 #[cfg(test)]

@@ -214,6 +214,21 @@ pub fn bindings_for(
             {
                 super::Binding::AccelerationStructure
             }
+            naga::AddressSpace::Handle
+                if matches!(
+                    module.types[var.ty].inner,
+                    naga::TypeInner::Image {
+                        dim: naga::ImageDimension::D2,
+                        arrayed: false,
+                        class: naga::ImageClass::Storage {
+                            format: naga::StorageFormat::Rgba32Float,
+                            access: naga::StorageAccess::STORE,
+                        },
+                    }
+                ) =>
+            {
+                super::Binding::StorageTextureRgba32FloatWrite
+            }
             naga::AddressSpace::Storage { access } => {
                 if access.contains(naga::StorageAccess::STORE) {
                     super::Binding::StorageRw

@@ -2,7 +2,7 @@
 //! tests): an estimate under this iteration's or a given adjoint, and a converged adjoint.
 
 use super::{pass_seed, Optimizer, Seeds};
-use crate::render::encode_timed_pass;
+use crate::gpu::encode_timed_pass;
 use crate::{Error, Result};
 
 impl Optimizer {
@@ -91,9 +91,8 @@ impl Optimizer {
                 if done == 0 {
                     enc.clear_buffer(&self.accum, 0, None);
                 }
-                let groups = [&self.renderer.scene.bind_group, &cam.render_group];
-                let pipe = &self.renderer.render_pipeline;
-                encode_timed_pass(&mut enc, "primal", pipe, &groups, self.grid, None);
+                self.renderer
+                    .encode_render(&mut enc, "primal", &cam.render_group, self.grid, None);
                 done += cam.render_params.spp;
                 if done >= spp {
                     let groups = [&cam.loss_groups[parity]];

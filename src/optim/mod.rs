@@ -20,6 +20,7 @@ mod memory;
 mod seeds;
 mod settings;
 mod state;
+mod targets;
 mod timing;
 pub use memory::*;
 pub use seeds::*;
@@ -27,11 +28,11 @@ pub use settings::*;
 pub use state::*;
 pub use timing::*;
 
-use crate::gpu::{grid_2d, Gpu};
+use crate::gpu::{encode_timed_pass, grid_2d, Gpu};
 use crate::image_io::Image;
 use crate::render::layout::*;
-use crate::render::params::ParamSet;
-use crate::render::{camera_info, encode_timed_pass, Renderer, Techniques, WORKGROUP};
+use crate::render::params::{ParamBuffers, ParamSet};
+use crate::render::{camera_info, Renderer, Techniques, WORKGROUP};
 use crate::scene::Scene;
 use crate::vocab::Loss;
 use crate::{Error, Result};
@@ -87,6 +88,8 @@ struct Stats {
 pub struct Optimizer {
     gpu: Gpu,
     renderer: Renderer,
+    /// The optimized textures' values, current and previous (the renderer binds them).
+    params: ParamBuffers,
     /// Layout and learning rates of the optimized textures (values as at creation).
     pub set: ParamSet,
     settings: Settings,
@@ -164,7 +167,8 @@ impl Optimizer {
             }
         }
         memory_plan(&set, &settings, targets.len()).check(gpu)?;
-        let renderer = Renderer::with_params(gpu, scene, &set)?;
+        let params = ParamBuffers::new(gpu, &set);
+        let renderer = Renderer::with_param_buffers(gpu, scene, &set, &params)?;
         let loss_layout = gpu.pass_layout("loss", 0)?;
         let adam_layout = gpu.pass_layout("adam", 0)?;
         let loss_pipeline = gpu.compute_pipeline("loss", &[&loss_layout])?;
@@ -176,6 +180,12 @@ impl Optimizer {
         if settings.primal == PrimalMode::ControlVariate && settings.primal_spp == 0 {
             return Err(Error::Invalid("primal_spp must be at least 1".into()));
         }
+        if !(0.0..=1.0).contains(&settings.cv_max_weight) {
+            return Err(Error::Invalid(format!(
+                "cv_max_weight must be between 0 and 1, not {}",
+                settings.cv_max_weight
+            )));
+        }
         let accum = gpu.storage_zeroed("primal accum", n_pixels as u64 * 16);
         let accum_prev = gpu.storage_zeroed("primal accum_prev", n_pixels as u64 * 16);
         let control_variate = match settings.primal {
@@ -185,6 +195,7 @@ impl Optimizer {
                 targets.len(),
                 &accum,
                 &accum_prev,
+                settings.cv_max_weight,
             )?),
             PrimalMode::Independent => None,
         };
@@ -271,10 +282,8 @@ impl Optimizer {
                 bytemuck::bytes_of(&loss_params),
             );
             cams.push(CameraPasses {
-                render_group: gpu.bind(
-                    &crate::render::RENDER_GROUP,
+                render_group: renderer.bind_render_group(
                     "primal",
-                    &renderer.render_layout,
                     &[
                         ("rp", &render_uniform),
                         ("accum", &accum),
@@ -331,7 +340,7 @@ impl Optimizer {
                 &[
                     ("ap", &u),
                     ("grad", &grad),
-                    ("params", &renderer.scene.params),
+                    ("params", &params.values),
                     ("moment1", &moments[0]),
                     ("moment2", &moments[1]),
                     ("adam_stats", &stats.adam),
@@ -346,6 +355,7 @@ impl Optimizer {
         Ok(Optimizer {
             gpu: gpu.clone(),
             renderer,
+            params,
             set,
             settings,
             cams,
@@ -413,10 +423,9 @@ impl Optimizer {
             if self.control_variate.is_some() {
                 enc.clear_buffer(&self.accum_prev, 0, None);
             }
-            let groups = [&self.renderer.scene.bind_group, &cam.render_group];
-            let pipe = &self.renderer.render_pipeline;
             let t = self.timer.next(PassKind::Primal);
-            encode_timed_pass(enc, "primal", pipe, &groups, self.grid, t);
+            self.renderer
+                .encode_render(enc, "primal", &cam.render_group, self.grid, t);
             if let Some(cv) = &mut self.control_variate {
                 cv.encode(enc, k, &mut self.timer);
             }
@@ -440,9 +449,7 @@ impl Optimizer {
         };
         self.estimator.encode(enc, &frame, &mut self.timer);
         if self.uses_previous_state() {
-            let params = &self.renderer.scene.params;
-            let prev = &self.renderer.scene.params_prev;
-            enc.copy_buffer_to_buffer(params, 0, prev, 0, params.size());
+            self.params.encode_copy_to_previous(enc);
         }
     }
 
@@ -465,113 +472,6 @@ impl Optimizer {
     fn read_loss(&self) -> Result<f64> {
         let partial: Vec<f32> = self.gpu.read_pod(&self.loss_partial)?;
         Ok(partial.iter().map(|&v| v as f64).sum())
-    }
-
-    /// Weigh each camera's pixels by a mask (one value per pixel in [0, 1]; None: all 1):
-    /// masked-out pixels add neither loss nor gradient. The loss is the mean over the
-    /// masked pixels.
-    pub fn set_masks(&mut self, masks: &[Option<Vec<f32>>]) -> Result<()> {
-        let n_pixels = (self.settings.width * self.settings.height) as usize;
-        if masks.len() != self.cams.len() {
-            return Err(Error::Invalid(format!(
-                "{} masks for {} cameras",
-                masks.len(),
-                self.cams.len()
-            )));
-        }
-        let mut total = 0f64;
-        for (k, m) in masks.iter().enumerate() {
-            let data: Vec<[f32; 4]> = match m {
-                Some(m) => {
-                    if m.len() != n_pixels || m.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
-                        return Err(Error::Invalid(format!(
-                            "the mask of camera {k} needs {n_pixels} finite weights >= 0"
-                        )));
-                    }
-                    self.targets[k]
-                        .rgb
-                        .iter()
-                        .zip(m)
-                        .map(|(p, &w)| [p[0], p[1], p[2], w])
-                        .collect()
-                }
-                None => self.targets[k]
-                    .rgb
-                    .iter()
-                    .map(|p| [p[0], p[1], p[2], 1.0])
-                    .collect(),
-            };
-            total += data.iter().map(|p| p[3] as f64).sum::<f64>();
-            self.gpu
-                .queue
-                .write_buffer(&self.cams[k].target_buf, 0, bytemuck::cast_slice(&data));
-        }
-        if !(total > 0.0) {
-            return Err(Error::Invalid("the masks leave no pixel to compare".into()));
-        }
-        let norm = (1.0 / (3.0 * total)) as f32;
-        for cam in &mut self.cams {
-            cam.loss_params.norm = norm;
-            self.gpu
-                .queue
-                .write_buffer(&cam.loss_uniform, 0, bytemuck::bytes_of(&cam.loss_params));
-        }
-        self.gpu.check("set masks")
-    }
-
-    /// Set the factor each camera's render is multiplied by before it is compared with its
-    /// target (photos have their own exposure). With `Settings::exposure_learning_rate` the
-    /// optimizer goes on from these values.
-    pub fn set_exposure(&mut self, values: &[f32]) -> Result<()> {
-        if values.len() != self.cams.len() || values.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
-            return Err(Error::Invalid(format!(
-                "{} exposures for {} cameras (each positive)",
-                values.len(),
-                self.cams.len()
-            )));
-        }
-        self.exposure.values = values.to_vec();
-        self.upload_exposure();
-        self.gpu.check("set exposure")
-    }
-
-    /// The current per-camera exposures.
-    pub fn exposure(&self) -> &[f32] {
-        &self.exposure.values
-    }
-
-    fn upload_exposure(&mut self) {
-        for (cam, &e) in self.cams.iter_mut().zip(&self.exposure.values) {
-            cam.loss_params.exposure = e;
-            self.gpu
-                .queue
-                .write_buffer(&cam.loss_uniform, 0, bytemuck::bytes_of(&cam.loss_params));
-        }
-    }
-
-    /// One Adam step of the exposures' logarithms from this iteration's dL/d(exposure).
-    fn step_exposure(&mut self, lr: f32) -> Result<()> {
-        let partial: Vec<f32> = self.gpu.read_pod(&self.exposure_partial)?;
-        let n = self.n_loss_groups as usize;
-        let e = &mut self.exposure;
-        e.steps += 1;
-        let t = e.steps as i32;
-        for k in 0..e.values.len() {
-            let d: f64 = partial[k * n..(k + 1) * n].iter().map(|&v| v as f64).sum();
-            // d/d(log e) = e d/de.
-            let g = (d * e.values[k] as f64) as f32;
-            if !g.is_finite() {
-                continue;
-            }
-            e.m1[k] = adam::BETA1 * e.m1[k] + (1.0 - adam::BETA1) * g;
-            e.m2[k] = adam::BETA2 * e.m2[k] + (1.0 - adam::BETA2) * g * g;
-            let m = e.m1[k] / (1.0 - adam::BETA1.powi(t));
-            let v = e.m2[k] / (1.0 - adam::BETA2.powi(t));
-            let log_e = e.values[k].ln() - lr * m / (v.sqrt() + adam::EPS);
-            e.values[k] = log_e.clamp(-20.0, 20.0).exp();
-        }
-        self.upload_exposure();
-        Ok(())
     }
 
     /// One iteration: render, loss, gradient, Adam. Returns the loss of the render.
@@ -715,7 +615,7 @@ impl Optimizer {
     /// `STORAGE | COPY_SRC | COPY_DST` usage; the application may bind or copy it between
     /// calls. Writes to it change what the next iteration optimizes from.
     pub fn params_buffer(&self) -> &wgpu::Buffer {
-        &self.renderer.scene.params
+        &self.params.values
     }
 
     /// Dropped and lost values so far.

@@ -67,7 +67,7 @@ impl Optimizer {
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("observed_texels"),
                 });
-            crate::render::encode_pass(
+            crate::gpu::encode_pass(
                 &mut enc,
                 "observed_texels",
                 &pipeline,

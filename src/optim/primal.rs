@@ -64,7 +64,8 @@ pub struct PrimalCvParams {
     pub phase: u32,
     pub width: u32,
     pub height: u32,
-    pub _pad: [u32; 2],
+    pub max_weight: f32,
+    pub _pad0: u32,
 }
 
 /// Decay of the running means (as Adam's first moment).
@@ -72,6 +73,14 @@ pub const BETA1: f32 = 0.9;
 /// Decay of the running second moments: a long memory, so that the weight of an iteration
 /// hardly depends on the last few samples (which also make up the carried image).
 pub const BETA2: f32 = 0.999;
+/// The default upper clamp of the weight. With w -> 1 a pixel's image keeps its early noise
+/// for many iterations, and an optimizer whose textures follow the images fits that noise
+/// (the per-iteration unbiasedness holds for parameters independent of the noise, not for
+/// parameters that learned from it). Measured on the default task (ReSTIR, 150 iterations):
+/// observed-texel RMSE 0.211 with w <= 1, 0.160 with w <= 0.9 (independent renders: 0.159),
+/// while the cap costs little variance: with fully correlated F and H the steady-state
+/// variance is (1 - w) / (1 + w) of one render's, 0.05 at w = 0.9.
+pub const DEFAULT_MAX_WEIGHT: f32 = 0.9;
 /// Iterations before the weight is used (the statistics need one update first).
 pub const WARMUP: u32 = 1;
 /// vec4s of state per pixel (`CV_VEC4S` in the shader).
@@ -123,6 +132,7 @@ impl ControlVariate {
         n_cams: usize,
         accum: &wgpu::Buffer,
         accum_prev: &wgpu::Buffer,
+        max_weight: f32,
     ) -> Result<ControlVariate> {
         let n_pixels = width * height;
         let layout = gpu.pass_layout("primal_cv", 0)?;
@@ -138,6 +148,7 @@ impl ControlVariate {
                     beta2: BETA2,
                     width,
                     height,
+                    max_weight,
                     ..Default::default()
                 };
                 let uniforms = [0, 1].map(|phase| {
@@ -194,7 +205,7 @@ impl ControlVariate {
             cam.params.phase = phase as u32;
             self.queue
                 .write_buffer(&cam.uniforms[phase], 0, bytemuck::bytes_of(&cam.params));
-            crate::render::encode_timed_pass(
+            crate::gpu::encode_timed_pass(
                 enc,
                 "primal_cv",
                 &self.pipeline,

@@ -76,6 +76,7 @@ pub fn task_settings(
         cameras: cameras.to_vec(),
         primal_spp: task.optimizer.primal_spp,
         primal: task.optimizer.primal,
+        cv_max_weight: task.optimizer.cv_max_weight,
         gradient_spp: task.optimizer.gradient_spp,
         loss: task.optimizer.loss,
         seed: task.seed,

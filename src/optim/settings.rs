@@ -17,6 +17,9 @@ pub struct Settings {
     /// How the primal image is estimated: independently, or with the recursive control
     /// variate.
     pub primal: PrimalMode,
+    /// Upper clamp of the control variate's per-pixel weight (in [0, 1]; see
+    /// [`PrimalMode::ControlVariate`]).
+    pub cv_max_weight: f32,
     /// Samples per pixel of the gradient pass.
     pub gradient_spp: u32,
     /// Image loss.
@@ -48,6 +51,7 @@ impl Settings {
             cameras,
             primal_spp: 4,
             primal: PrimalMode::Independent,
+            cv_max_weight: super::primal::DEFAULT_MAX_WEIGHT,
             gradient_spp: 1,
             loss: Loss::L2,
             seed: 1,

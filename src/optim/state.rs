@@ -85,7 +85,7 @@ impl Optimizer {
 
     /// Current texture values.
     pub fn read_params(&self) -> Result<Vec<f32>> {
-        let mut v: Vec<f32> = self.gpu.read_pod(&self.renderer.scene.params)?;
+        let mut v: Vec<f32> = self.gpu.read_pod(&self.params.values)?;
         v.truncate(self.set.values.len());
         Ok(v)
     }
@@ -101,7 +101,7 @@ impl Optimizer {
         }
         self.gpu
             .queue
-            .write_buffer(&self.renderer.scene.params, 0, bytemuck::cast_slice(values));
+            .write_buffer(&self.params.values, 0, bytemuck::cast_slice(values));
         self.gpu.check("write params")
     }
 
@@ -147,7 +147,7 @@ impl Optimizer {
         let [m1, m2] = self.read_moments()?;
         let previous = if self.uses_previous_state() {
             let last = (self.iteration as usize + 1) % 2;
-            let mut params: Vec<f32> = self.gpu.read_pod(&self.renderer.scene.params_prev)?;
+            let mut params: Vec<f32> = self.gpu.read_pod(&self.params.previous)?;
             params.truncate(self.set.values.len());
             Some(PreviousState {
                 params,
@@ -192,7 +192,7 @@ impl Optimizer {
                 }
                 let q = &self.gpu.queue;
                 q.write_buffer(&self.adjoint[last], 0, bytemuck::cast_slice(&p.adjoint));
-                let prev = &self.renderer.scene.params_prev;
+                let prev = &self.params.previous;
                 q.write_buffer(prev, 0, bytemuck::cast_slice(&p.params));
             }
             // Kept samples and the last image cannot be reused without the state they were
@@ -219,19 +219,18 @@ impl Optimizer {
     /// previous), gradient and Adam moments, plus the reservoirs and locks of ReSTIR. Buffers
     /// that scale with the image (targets, adjoints) are not counted.
     pub fn state_bytes_per_texel(&self) -> f64 {
-        let scene = &self.renderer.scene;
-        let bytes = scene.params.size()
-            + scene.params_prev.size()
+        let bytes = self.params.values.size()
+            + self.params.previous.size()
             + self.grad.size()
             + self.moments.iter().map(|b| b.size()).sum::<u64>()
             + self.estimator.state_bytes();
-        bytes as f64 / scene.n_texels.max(1) as f64
+        bytes as f64 / self.renderer.scene.n_texels.max(1) as f64
     }
 
     /// The textures of the last iteration (those its primal and gradient were drawn at;
     /// [`Optimizer::read_params`] has them after the Adam step).
     pub fn read_params_prev(&self) -> Result<Vec<f32>> {
-        let mut v: Vec<f32> = self.gpu.read_pod(&self.renderer.scene.params_prev)?;
+        let mut v: Vec<f32> = self.gpu.read_pod(&self.params.previous)?;
         v.truncate(self.set.values.len());
         Ok(v)
     }

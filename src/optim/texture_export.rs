@@ -18,42 +18,16 @@ pub struct ExportParams {
     pub channels: u32,
 }
 
-fn entry(binding: u32, ty: wgpu::BindingType) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty,
-        count: None,
-    }
-}
+/// Group 0 of `texture_export.wgsl`.
+pub(crate) const TEXTURE_EXPORT_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
+    pass: "texture_export",
+    group: 0,
+    names: &["ep", "params", "texture_out"],
+};
 
 /// The pass's pipeline (built on first use).
 pub(crate) fn pipeline(gpu: &crate::gpu::Gpu) -> Result<wgpu::ComputePipeline> {
-    let buffer = |read_only: Option<bool>| wgpu::BindingType::Buffer {
-        ty: match read_only {
-            None => wgpu::BufferBindingType::Uniform,
-            Some(read_only) => wgpu::BufferBindingType::Storage { read_only },
-        },
-        has_dynamic_offset: false,
-        min_binding_size: None,
-    };
-    let layout = gpu
-        .device
-        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("texture_export"),
-            entries: &[
-                entry(0, buffer(None)),
-                entry(1, buffer(Some(true))),
-                entry(
-                    2,
-                    wgpu::BindingType::StorageTexture {
-                        access: wgpu::StorageTextureAccess::WriteOnly,
-                        format: wgpu::TextureFormat::Rgba32Float,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                    },
-                ),
-            ],
-        });
+    let layout = gpu.pass_layout("texture_export", 0)?;
     gpu.compute_pipeline("texture_export", &[&layout])
 }
 
@@ -103,30 +77,22 @@ impl Optimizer {
         };
         let uniform = gpu.uniform("texture_export params", bytemuck::bytes_of(&params));
         let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("texture_export"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: uniform.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: self.params_buffer().as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(&view),
-                },
+        let group = gpu.bind_resources(
+            &TEXTURE_EXPORT_GROUP,
+            "texture_export",
+            &pipeline.get_bind_group_layout(0),
+            &[
+                ("ep", uniform.as_entire_binding()),
+                ("params", self.params_buffer().as_entire_binding()),
+                ("texture_out", wgpu::BindingResource::TextureView(&view)),
             ],
-        });
+        );
         let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("texture_export"),
         });
         let max_dim = device.limits().max_compute_workgroups_per_dimension;
         let grid = grid_2d(t.width * t.height, WORKGROUP, max_dim);
-        crate::render::encode_pass(&mut enc, "texture_export", pipeline, &[&group], grid);
+        crate::gpu::encode_pass(&mut enc, "texture_export", pipeline, &[&group], grid);
         gpu.queue.submit([enc.finish()]);
         gpu.check("texture_export")?;
         Ok(texture)

@@ -173,6 +173,7 @@ mod tests {
             restir::CANDIDATES_GROUP,
             restir::MERGE_GROUP,
             restir::RESERVOIR_TEST_GROUP,
+            crate::optim::texture_export::TEXTURE_EXPORT_GROUP,
         ];
         for d in &decls {
             let wgsl: Vec<String> = bindings(d.pass, d.group)
@@ -183,10 +184,9 @@ mod tests {
             assert_eq!(wgsl, d.names, "group {} of {}", d.group, d.pass);
         }
         // Every group of every pass is declared, except the scene's (group 0 of the passes
-        // that read the scene, bound once by GpuScene::new) and texture_export's storage
-        // texture group, which texture_export.rs lays out itself.
+        // that read the scene, bound once by GpuScene::new).
         let scene = bindings("render", 0).unwrap();
-        for pass in passes().filter(|&p| p != "texture_export") {
+        for pass in passes() {
             for group in 0..2 {
                 let b = bindings(pass, group).unwrap();
                 if b.is_empty() || (group == 0 && scene.starts_with(&b)) {
@@ -434,7 +434,8 @@ mod tests {
                 beta2,
                 phase,
                 width,
-                height
+                height,
+                max_weight
             ]
         );
         mirror!(

@@ -48,6 +48,33 @@ impl ParamTexture {
     }
 }
 
+/// The optimized textures' values on the GPU: group 0, bindings 9 (`params`, current) and 10
+/// (`params_prev`, the previous iteration's) of every tracing pass. Whoever changes them
+/// owns them (the optimizer); the renderer only binds them.
+pub struct ParamBuffers {
+    /// The current values (Adam writes them).
+    pub values: wgpu::Buffer,
+    /// The values of the previous iteration (ReSTIR's merge and the control variate read
+    /// them).
+    pub previous: wgpu::Buffer,
+}
+
+impl ParamBuffers {
+    /// Both buffers, holding `set.values`.
+    pub fn new(gpu: &crate::gpu::Gpu, set: &ParamSet) -> ParamBuffers {
+        let usage = wgpu::BufferUsages::COPY_SRC;
+        ParamBuffers {
+            values: gpu.storage("params", bytemuck::cast_slice(&set.values), usage),
+            previous: gpu.storage("params_prev", bytemuck::cast_slice(&set.values), usage),
+        }
+    }
+
+    /// Record the copy that makes the current values the previous ones.
+    pub fn encode_copy_to_previous(&self, enc: &mut wgpu::CommandEncoder) {
+        enc.copy_buffer_to_buffer(&self.values, 0, &self.previous, 0, self.values.size());
+    }
+}
+
 /// All optimized textures and their current values.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ParamSet {

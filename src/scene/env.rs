@@ -24,10 +24,10 @@ impl EnvMap {
             .map(|e| e.to_string_lossy().to_ascii_lowercase())
             .unwrap_or_default();
         let (width, height, rgb) = match ext.as_str() {
-            "exr" => super::images::decode_exr(path)?,
+            "exr" => crate::image_io::decode::decode_exr(path)?,
             "hdr" => {
                 let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
-                super::images::decode_hdr(&bytes, path)?
+                crate::image_io::decode::decode_hdr(&bytes, path)?
             }
             _ => {
                 return Err(Error::file(

@@ -3,8 +3,8 @@
 //! External files are read only from the scene's folder and below: absolute paths, `..` and
 //! URIs with a scheme other than `data:` are refused.
 use super::{
-    images, in_bounds, Camera, Material, PunctualKind, PunctualLight, Scene, TextureSlot, Triangle,
-    Wrap, MAX_COORD,
+    in_bounds, Camera, Material, PunctualKind, PunctualLight, Scene, TextureSlot, Triangle, Wrap,
+    MAX_COORD,
 };
 use crate::{Error, Result};
 use base64::Engine;
@@ -366,7 +366,7 @@ impl<'a> Loader<'a> {
                 (self.read_uri(uri, &format!("image `{name}`"))?, what)
             }
         };
-        let decoded = images::decode_texture(&bytes, self.path, &what, &name)?;
+        let decoded = crate::image_io::decode::decode_texture(&bytes, self.path, &what, &name)?;
         self.scene.images.push(decoded);
         let i = self.scene.images.len() - 1;
         self.image_map.insert(img.index(), i);

@@ -4,9 +4,9 @@
 //! that the texture filter touches. Float additions are bounded compare-and-swap loops on
 //! 32-bit atomics; an exhausted bound is counted, never silently lost.
 use super::{Estimator, Frame, RestirSnapshot, Setup};
+use crate::gpu::encode_timed_pass;
 use crate::gpu::Gpu;
 use crate::optim::{pass_seed, FaultCounts, PassKind, PassTimer, Seeds};
-use crate::render::encode_timed_pass;
 use crate::render::layout::GpuCameraInfo;
 use crate::render::{Techniques, WORKGROUP};
 use crate::Result;

@@ -16,9 +16,9 @@
 //!    identity shift in path space, sign routing), writes the merged reservoirs and the
 //!    gradient sum over signs of v(y) W. It traces no ray.
 use super::{Estimator, Frame, Setup};
+use crate::gpu::encode_timed_pass;
 use crate::gpu::{grid_2d, Gpu};
 use crate::optim::{pass_seed, FaultCounts, PassKind, PassTimer, Seeds};
-use crate::render::encode_timed_pass;
 use crate::render::layout::GpuCameraInfo;
 use crate::render::WORKGROUP;
 use crate::{Error, Result};
@@ -593,7 +593,7 @@ pub fn selection_trial(
         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("reservoir_test"),
         });
-    crate::render::encode_pass(&mut enc, "reservoir_test", &pipeline, &[&group], grid);
+    crate::gpu::encode_pass(&mut enc, "reservoir_test", &pipeline, &[&group], grid);
     gpu.queue.submit([enc.finish()]);
     let out: Vec<u32> = gpu.read_pod(&res)?;
     let fails: Vec<u32> = gpu.read_pod(&failures)?;

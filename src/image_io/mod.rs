@@ -1,4 +1,7 @@
-//! Float images and their output: OpenEXR (linear) or PNG (sRGB), written atomically.
+//! Float images and their output: OpenEXR (linear) or PNG (sRGB), written atomically; and
+//! every image decoder ([`decode`]). It depends on no psrestir module but `error`.
+pub mod decode;
+
 use crate::{Error, Result};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -24,9 +27,14 @@ pub fn linear_to_srgb(x: f32) -> f32 {
     }
 }
 
-/// sRGB to linear transfer function (defined beside the decoders, which use it too; this
-/// module depends on `scene::images`, not the other way round).
-pub use crate::scene::images::srgb_to_linear;
+/// sRGB to linear transfer function.
+pub fn srgb_to_linear(x: f32) -> f32 {
+    if x <= 0.04045 {
+        x / 12.92
+    } else {
+        ((x + 0.055) / 1.055).powf(2.4)
+    }
+}
 
 /// `name` with every character other than ASCII letters, digits and '-' replaced by '_', for
 /// use in file names.
@@ -164,14 +172,14 @@ pub fn load_linear_alpha(path: &Path) -> Result<(Image, Option<Vec<f32>>)> {
         .unwrap_or_default();
     let (width, height, rgb, alpha) = match ext.as_str() {
         "exr" => {
-            let (w, h, px) = crate::scene::images::decode_exr_rgba(path)?;
+            let (w, h, px) = decode::decode_exr_rgba(path)?;
             let rgb = px.iter().map(|p| [p[0], p[1], p[2]]).collect();
             let a: Vec<f32> = px.iter().map(|p| p[3]).collect();
             (w, h, rgb, a)
         }
         "hdr" => {
             let bytes = std::fs::read(path).map_err(|e| Error::file(path, e.to_string()))?;
-            let (w, h, rgb) = crate::scene::images::decode_hdr(&bytes, path)?;
+            let (w, h, rgb) = decode::decode_hdr(&bytes, path)?;
             (w, h, rgb, Vec::new())
         }
         "png" | "jpg" | "jpeg" => {
@@ -180,7 +188,7 @@ pub fn load_linear_alpha(path: &Path) -> Result<(Image, Option<Vec<f32>>)> {
                 .file_name()
                 .map(|n| n.to_string_lossy().into_owned())
                 .unwrap_or_default();
-            let img = crate::scene::images::decode_texture(&bytes, path, "image", &name)?;
+            let img = decode::decode_texture(&bytes, path, "image", &name)?;
             let rgb = img
                 .rgba
                 .iter()

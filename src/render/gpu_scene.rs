@@ -1,0 +1,431 @@
+//! Scene upload: the BVH (or the ray-query acceleration structure), triangles, materials,
+//! textures, lights and environment as bind group 0 of every tracing pass
+//! (shaders/shared/scene.wgsl).
+use super::layout::*;
+use super::params::{ParamBuffers, ParamSet};
+use crate::gpu::{Gpu, Tracer};
+use crate::scene::{bvh, PunctualKind, Scene, TextureSlot, Wrap};
+use crate::{Error, Result};
+use glam::Vec3;
+
+/// Scene data on the GPU: bind group 0 of every pass that traces rays.
+pub struct GpuScene {
+    /// Layout of group 0 (see shaders/shared/scene.wgsl).
+    pub layout: wgpu::BindGroupLayout,
+    /// The bound buffers (and, with ray queries, the acceleration structure).
+    pub bind_group: wgpu::BindGroup,
+    /// The acceleration structure when the device traces with ray queries.
+    pub accel: Option<AccelerationStructure>,
+    /// Scene constants as uploaded.
+    pub info: GpuSceneInfo,
+    /// Cameras of the scene.
+    pub cameras: Vec<crate::scene::Camera>,
+    /// Position of each input triangle in GPU (BVH) order: `gpu_index[input] = k`.
+    pub gpu_index: Vec<u32>,
+    /// Bytes uploaded, for reports.
+    pub bytes: u64,
+    /// Number of floats of the optimized textures (bound at 9 and 10, see [`ParamBuffers`]).
+    pub param_count: u32,
+    /// Number of texels of all optimized textures.
+    pub n_texels: u32,
+}
+
+fn wrap_bits(w: Wrap) -> u32 {
+    match w {
+        Wrap::Repeat => 0,
+        Wrap::Clamp => 1,
+        Wrap::Mirror => 2,
+    }
+}
+
+/// Luminance in f64, so that the power of a light with an intensity near f32::MAX stays
+/// finite.
+fn luminance(c: Vec3) -> f64 {
+    0.2126 * c.x as f64 + 0.7152 * c.y as f64 + 0.0722 * c.z as f64
+}
+
+/// The scene's ray-query acceleration structure: one BLAS over the triangles in GPU order
+/// (so a hit's primitive index is the triangle index of the other scene buffers) and one TLAS
+/// instance of it with the identity transform. Built once; geometry never changes.
+pub struct AccelerationStructure {
+    /// The triangles.
+    pub blas: wgpu::Blas,
+    /// Its one instance, bound at group 0, binding 11 (shaders/shared/bvh_ray_query.wgsl).
+    pub tlas: wgpu::Tlas,
+}
+
+/// Build the acceleration structure over `n_tris` triangles whose vertices are the vec4
+/// entries of `positions` (three per triangle; w ignored).
+fn build_acceleration_structure(
+    gpu: &Gpu,
+    positions: &wgpu::Buffer,
+    n_tris: u32,
+) -> AccelerationStructure {
+    let size = wgpu::BlasTriangleGeometrySizeDescriptor {
+        vertex_format: wgpu::VertexFormat::Float32x3,
+        vertex_count: 3 * n_tris,
+        index_format: None,
+        index_count: None,
+        flags: wgpu::AccelerationStructureGeometryFlags::OPAQUE,
+    };
+    let blas = gpu.device.create_blas(
+        &wgpu::CreateBlasDescriptor {
+            label: Some("scene blas"),
+            flags: wgpu::AccelerationStructureFlags::PREFER_FAST_TRACE,
+            update_mode: wgpu::AccelerationStructureUpdateMode::Build,
+        },
+        wgpu::BlasGeometrySizeDescriptors::Triangles {
+            descriptors: vec![size.clone()],
+        },
+    );
+    let mut tlas = gpu.device.create_tlas(&wgpu::CreateTlasDescriptor {
+        label: Some("scene tlas"),
+        max_instances: 1,
+        flags: wgpu::AccelerationStructureFlags::PREFER_FAST_TRACE,
+        update_mode: wgpu::AccelerationStructureUpdateMode::Build,
+    });
+    let mut enc = gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("scene acceleration structure"),
+        });
+    if n_tris > 0 {
+        const IDENTITY: [f32; 12] = [1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0.];
+        tlas[0] = Some(wgpu::TlasInstance::new(&blas, IDENTITY, 0, 0xff));
+        let entry = wgpu::BlasBuildEntry {
+            blas: &blas,
+            geometry: wgpu::BlasGeometries::TriangleGeometries(vec![wgpu::BlasTriangleGeometry {
+                size: &size,
+                vertex_buffer: positions,
+                first_vertex: 0,
+                vertex_stride: 16,
+                index_buffer: None,
+                first_index: None,
+                transform_buffer: None,
+                transform_buffer_offset: None,
+            }]),
+        };
+        enc.build_acceleration_structures(std::iter::once(&entry), std::iter::once(&tlas));
+    } else {
+        enc.build_acceleration_structures(std::iter::empty(), std::iter::once(&tlas));
+    }
+    gpu.queue.submit([enc.finish()]);
+    AccelerationStructure { blas, tlas }
+}
+
+impl GpuScene {
+    /// Upload a scene: BVH, triangles, materials, textures, lights and environment, and bind
+    /// the optimized textures that replace material inputs (`param_set` lays them out,
+    /// `params` holds their values).
+    pub fn new(
+        gpu: &Gpu,
+        scene: &Scene,
+        param_set: &ParamSet,
+        params: &ParamBuffers,
+    ) -> Result<GpuScene> {
+        scene.validate()?;
+        let limits = gpu.device.limits();
+        let max_binding = limits.max_storage_buffer_binding_size;
+        let check = |label: &str, bytes: usize| -> Result<()> {
+            if bytes as u64 > max_binding {
+                return Err(Error::Unsuitable(format!(
+                    "{}: {label} needs {bytes} bytes, the device binds at most {max_binding} \
+                     bytes per buffer (all images share one buffer: use smaller textures, or a \
+                     GPU with larger limits)",
+                    scene.source.display(),
+                )));
+            }
+            Ok(())
+        };
+        let tris: Vec<[Vec3; 3]> = scene.triangles.iter().map(|t| t.p).collect();
+        let bvh = bvh::build(&tris);
+        let mut gpu_index = vec![0u32; tris.len()];
+        for (k, &i) in bvh.order.iter().enumerate() {
+            gpu_index[i as usize] = k as u32;
+        }
+
+        // Textures: one packed RGBA8 buffer.
+        let mut image_offsets = Vec::new();
+        let mut texels: Vec<u32> = Vec::new();
+        for img in &scene.images {
+            image_offsets.push(texels.len() as u32);
+            texels.extend(img.rgba.iter().map(|p| u32::from_le_bytes(*p)));
+        }
+        check("the texture buffer", texels.len() * 4)?;
+        let tex_ref = |slot: &Option<TextureSlot>, srgb: bool| -> GpuTexRef {
+            match slot {
+                None => GpuTexRef::NONE,
+                Some(s) => {
+                    let img = &scene.images[s.image];
+                    GpuTexRef {
+                        offset: image_offsets[s.image],
+                        width: img.width,
+                        height: img.height,
+                        flags: wrap_bits(s.wrap_s)
+                            | (wrap_bits(s.wrap_t) << 2)
+                            | if srgb { 16 } else { 0 }
+                            | if s.nearest { 32 } else { 0 },
+                    }
+                }
+            }
+        };
+        let xf = |slot: &Option<TextureSlot>| -> [[f32; 4]; 2] {
+            let t = slot
+                .as_ref()
+                .map(|s| s.transform)
+                .unwrap_or([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+            [
+                [t[0][0], t[0][1], t[0][2], 0.0],
+                [t[1][0], t[1][1], t[1][2], 0.0],
+            ]
+        };
+        let materials: Vec<GpuMaterial> = scene
+            .materials
+            .iter()
+            .map(|m| {
+                let [a, b] = xf(&m.base_color_texture);
+                let [c, d] = xf(&m.metallic_roughness_texture);
+                let [e, f] = xf(&m.emissive_texture);
+                GpuMaterial {
+                    base_color: m.base_color.to_array(),
+                    emissive: m.emissive.to_array(),
+                    metallic: m.metallic,
+                    roughness: m.roughness,
+                    double_sided: m.double_sided as u32,
+                    param_base_color: u32::MAX,
+                    param_metallic: u32::MAX,
+                    param_roughness: u32::MAX,
+                    _pad: [0; 3],
+                    base_color_tex: tex_ref(&m.base_color_texture, true),
+                    mr_tex: tex_ref(&m.metallic_roughness_texture, false),
+                    emissive_tex: tex_ref(&m.emissive_texture, true),
+                    uv_xf: [a, b, c, d, e, f],
+                }
+            })
+            .collect();
+
+        let mut materials = materials;
+        let mut param_textures = Vec::new();
+        let mut texel_offset = 0u32;
+        for (i, t) in param_set.textures.iter().enumerate() {
+            let m = materials.get_mut(t.material as usize).ok_or_else(|| {
+                Error::Invalid(format!(
+                    "optimized texture {i} refers to material {} of {}",
+                    t.material,
+                    scene.materials.len()
+                ))
+            })?;
+            let slot = match t.slot {
+                crate::vocab::Slot::BaseColor => &mut m.param_base_color,
+                crate::vocab::Slot::Metallic => &mut m.param_metallic,
+                crate::vocab::Slot::Roughness => &mut m.param_roughness,
+            };
+            *slot = i as u32;
+            param_textures.push(GpuParamTex {
+                offset: t.offset,
+                width: t.width,
+                height: t.height,
+                channels: t.channels(),
+                filtering: match t.filter {
+                    crate::vocab::Filter::Nearest => 0,
+                    crate::vocab::Filter::Bilinear => 1,
+                },
+                texel_offset,
+                _pad: [0; 2],
+            });
+            texel_offset += t.width * t.height;
+        }
+        check("the optimized textures", param_set.values.len() * 4)?;
+        if params.values.size() < param_set.values.len() as u64 * 4 {
+            return Err(Error::Invalid(format!(
+                "the parameter buffers hold {} bytes, the optimized textures need {}",
+                params.values.size(),
+                param_set.values.len() * 4
+            )));
+        }
+
+        // Lights, with selection probability proportional to a power estimate.
+        let (_, radius) = scene.bounding_sphere();
+        use std::f64::consts::PI;
+        let mut lights: Vec<GpuLight> = Vec::new();
+        let mut power: Vec<f64> = Vec::new();
+        for l in &scene.lights {
+            let mut g = GpuLight {
+                position: l.position.to_array(),
+                direction: l.direction.to_array(),
+                intensity: l.intensity.to_array(),
+                range: l.range,
+                ..Default::default()
+            };
+            let lum = luminance(l.intensity);
+            match l.kind {
+                PunctualKind::Point => {
+                    g.kind = LIGHT_POINT;
+                    power.push(4.0 * PI * lum);
+                }
+                PunctualKind::Spot {
+                    inner_cone,
+                    outer_cone,
+                } => {
+                    g.kind = LIGHT_SPOT;
+                    let scale = 1.0 / (inner_cone.cos() - outer_cone.cos()).max(1e-3);
+                    g.spot_scale = scale;
+                    g.spot_offset = -outer_cone.cos() * scale;
+                    power.push(2.0 * PI * (1.0 - outer_cone.cos() as f64).max(1e-3) * lum);
+                }
+                PunctualKind::Directional => {
+                    g.kind = LIGHT_DIRECTIONAL;
+                    power.push(PI * (radius as f64).powi(2) * lum);
+                }
+            }
+            lights.push(g);
+        }
+        let mut tri_light = vec![u32::MAX; tris.len()];
+        for (i, t) in scene.triangles.iter().enumerate() {
+            let m = &scene.materials[t.material as usize];
+            let lum = luminance(m.emissive);
+            let area = t.area();
+            if lum > 0.0 && area > 0.0 {
+                tri_light[i] = lights.len() as u32;
+                lights.push(GpuLight {
+                    kind: LIGHT_AREA,
+                    tri: gpu_index[i],
+                    ..Default::default()
+                });
+                let sides = if m.double_sided { 2.0 } else { 1.0 };
+                power.push(PI * lum * area as f64 * sides);
+            }
+        }
+        let mut env_table = vec![0f32; 4];
+        let mut info = GpuSceneInfo {
+            n_nodes: bvh.nodes.len() as u32,
+            n_tris: tris.len() as u32,
+            env_light: u32::MAX,
+            scene_radius: radius,
+            ..Default::default()
+        };
+        if let Some(env) = &scene.env {
+            let (table, marginal, conditional) = env.gpu_table();
+            env_table = table;
+            info.env_width = env.width;
+            info.env_height = env.height;
+            info.env_marginal = marginal;
+            info.env_conditional = conditional;
+            info.env_scale = env.scale;
+            let p = env.power(radius);
+            if p > 0.0 {
+                info.env_light = lights.len() as u32;
+                lights.push(GpuLight {
+                    kind: LIGHT_ENV,
+                    ..Default::default()
+                });
+                power.push(p);
+            }
+        }
+        let total: f64 = power.iter().map(|&p| p.max(0.0)).sum();
+        if total <= 0.0 {
+            log::warn!(
+                "{}: the scene has no light with positive power (no punctual light, emissive \
+                 triangle of non-zero area or environment): every render is black",
+                scene.source.display()
+            );
+        }
+        let mut acc = 0f64;
+        for (l, p) in lights.iter_mut().zip(&power) {
+            let pmf = if total > 0.0 { p.max(0.0) / total } else { 0.0 };
+            acc += pmf;
+            l.pmf = pmf as f32;
+            l.cdf = acc as f32;
+        }
+        if let Some(last) = lights.last_mut() {
+            last.cdf = 1.0;
+        }
+        info.n_lights = lights.len() as u32;
+        check("the environment map", env_table.len() * 4)?;
+
+        // Triangles in BVH order.
+        let mut positions: Vec<[f32; 4]> = Vec::with_capacity(tris.len() * 3);
+        let mut shading: Vec<GpuTriShading> = Vec::with_capacity(tris.len());
+        for &i in &bvh.order {
+            let t = &scene.triangles[i as usize];
+            for p in t.p {
+                positions.push([p.x, p.y, p.z, 0.0]);
+            }
+            shading.push(GpuTriShading {
+                n0: t.n[0].extend(0.0).to_array(),
+                n1: t.n[1].extend(0.0).to_array(),
+                n2: t.n[2].extend(0.0).to_array(),
+                uv01: [t.uv[0].x, t.uv[0].y, t.uv[1].x, t.uv[1].y],
+                uv2: t.uv[2].to_array(),
+                material: t.material,
+                light: tri_light[i as usize],
+            });
+        }
+        check("the triangle positions", positions.len() * 16)?;
+        check("the triangle attributes", shading.len() * 80)?;
+        check("the BVH", bvh.nodes.len() * 32)?;
+
+        let none = wgpu::BufferUsages::empty();
+        let buffers = [
+            gpu.storage("scene nodes", bytemuck::cast_slice(&bvh.nodes), none),
+            gpu.storage(
+                "scene tri_positions",
+                bytemuck::cast_slice(&positions),
+                if gpu.tracer == Tracer::RayQuery {
+                    wgpu::BufferUsages::BLAS_INPUT
+                } else {
+                    none
+                },
+            ),
+            gpu.storage("scene tri_shading", bytemuck::cast_slice(&shading), none),
+            gpu.storage("scene materials", bytemuck::cast_slice(&materials), none),
+            gpu.storage("scene texels", bytemuck::cast_slice(&texels), none),
+            gpu.storage("scene lights", bytemuck::cast_slice(&lights), none),
+            gpu.storage("scene env", bytemuck::cast_slice(&env_table), none),
+            gpu.uniform("scene info", bytemuck::bytes_of(&info)),
+            gpu.storage(
+                "scene param_textures",
+                bytemuck::cast_slice(&param_textures),
+                none,
+            ),
+        ];
+        let bytes = buffers.iter().map(|b| b.size()).sum();
+        // Group 0 of every tracing pass (shaders/shared/scene.wgsl).
+        let layout = gpu.pass_layout("render", 0)?;
+        let mut refs: Vec<&wgpu::Buffer> = buffers.iter().collect();
+        refs.extend([&params.values, &params.previous]);
+        if gpu.tracer == Tracer::RayQuery
+            && tris.len() as u64 > limits.max_blas_primitive_count as u64
+        {
+            return Err(Error::Unsuitable(format!(
+                "{}: {} triangles, the device's ray-query acceleration structures hold at most \
+                 {} (set PSRESTIR_TRACER=software to trace with the software BVH)",
+                scene.source.display(),
+                tris.len(),
+                limits.max_blas_primitive_count
+            )));
+        }
+        let accel = match gpu.tracer {
+            Tracer::RayQuery => Some(build_acceleration_structure(
+                gpu,
+                &buffers[1],
+                tris.len() as u32,
+            )),
+            Tracer::Software => None,
+        };
+        let bind_group =
+            gpu.bind_group_with_tlas("scene", &layout, &refs, accel.as_ref().map(|a| &a.tlas));
+        gpu.check("scene upload")?;
+        Ok(GpuScene {
+            layout,
+            bind_group,
+            accel,
+            info,
+            cameras: scene.cameras.clone(),
+            gpu_index,
+            bytes,
+            param_count: param_set.values.len() as u32,
+            n_texels: texel_offset,
+        })
+    }
+}
