@@ -14,10 +14,11 @@
 // (pixel, camera-ray hit, incident direction, incident radiance; visibility was tested when it
 // was drawn) stays a valid path with the same value of everything but the BRDF and the
 // adjoint. The shift is the identity in path space (Jacobian 1): a kept sample is evaluated
-// under the current textures and adjoint, a fresh one under the previous ones (both
-// double-buffered), each by one BRDF-with-derivative evaluation from what the reservoir
-// stores of the hit (material, texture coordinates, shading-frame directions): no geometry is
-// read. Nothing here traces a ray: shared/bvh is not part of this pass (a test checks the
+// under the current textures and adjoint by one BRDF-with-derivative evaluation from what the
+// reservoir stores of the hit (material, texture coordinates, shading-frame directions): no
+// geometry is read. A fresh sample's target under the previous textures and adjoint (both
+// double-buffered) comes with it from the candidate pass (RES_Q_PREV), which evaluated the
+// same path there; with the verify flag the merge evaluates it again and compares. Nothing here traces a ray: shared/bvh is not part of this pass (a test checks the
 // composed module).
 // MIS: balance heuristic with confidences over the inputs' own targets.
 #import shared/rng
@@ -60,6 +61,8 @@ struct Stored {
     v: vec3f,
     vertex: PathVertex,
     radiance: vec3f,
+    // Fresh reservoirs: the target under the previous state (see RES_Q_PREV).
+    q_prev: f32,
 }
 
 fn unpack(words: array<u32, RESERVOIR_WORDS>) -> Stored {
@@ -74,6 +77,7 @@ fn unpack(words: array<u32, RESERVOIR_WORDS>) -> Stored {
         vec2f(bitcast<f32>(words[RES_WI]), bitcast<f32>(words[RES_WI + 1u])),
     );
     s.radiance = vec3f(bitcast<f32>(words[RES_RADIANCE]), bitcast<f32>(words[RES_RADIANCE + 1u]), bitcast<f32>(words[RES_RADIANCE + 2u]));
+    s.q_prev = bitcast<f32>(words[RES_Q_PREV]);
     return s;
 }
 
@@ -110,6 +114,7 @@ fn store_merged(r: u32, s: Stored) {
     merged[b + RES_RADIANCE] = bitcast<u32>(s.radiance.x);
     merged[b + RES_RADIANCE + 1u] = bitcast<u32>(s.radiance.y);
     merged[b + RES_RADIANCE + 2u] = bitcast<u32>(s.radiance.z);
+    merged[b + RES_Q_PREV] = bitcast<u32>(s.q_prev);
 }
 
 // The target of a value: luminance for RGB textures, the value for scalar ones.
@@ -187,8 +192,8 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     }
 
     // Kept samples (their values under the previous state are stored) and fresh samples
-    // (their values under the current state are stored). Evaluated: each kept sample under
-    // the current state, each fresh sample under the previous one.
+    // (their values under the current state and their targets under the previous one are
+    // stored). Evaluated: each kept sample under the current state.
     var k_st: array<Stored, 2>;
     var k_ok: array<bool, 2>;
     var k_cur: array<vec3f, 2>;
@@ -226,7 +231,19 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
             f_st[s] = load_fresh(2u * t + s);
             f_ok[s] = f_st[s].w > 0.0;
             if f_ok[s] && reuse {
-                c_qprev[s] = target_of(evaluate(f_st[s], ti, local, true), ch);
+                c_qprev[s] = f_st[s].q_prev;
+                if (mp.flags & MERGE_FLAG_VERIFY) != 0u {
+                    // The candidate pass evaluated the same path under the same state, in
+                    // another shader (so the rounding may differ). The error is relative to
+                    // the larger of the sample's targets under both states, the scale at
+                    // which q_prev enters the MIS weights (a target near zero is a sum that
+                    // cancels, whose own relative rounding error is unbounded).
+                    let again = target_of(evaluate(f_st[s], ti, local, true), ch);
+                    let scale = max(max(abs(again), abs(target_of(f_st[s].v, ch))), 1e-30);
+                    let err = abs(again - c_qprev[s]) / scale;
+                    atomicAdd(&mstats[MERGE_STAT_VERIFIED], 1u);
+                    atomicMax(&mstats[MERGE_STAT_VERIFY_MAX_ERROR], bitcast<u32>(min(err, 3.0e38)));
+                }
             }
         }
     }

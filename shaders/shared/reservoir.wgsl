@@ -27,6 +27,9 @@ struct Candidate {
     // The path's first vertex as path_value (shared/surface.wgsl) evaluates it.
     vertex: PathVertex,
     radiance: vec3f,
+    // Target of the path's value for this texel under the previous iteration's textures and
+    // adjoint (0 when the merge will not reuse; RES_Q_PREV).
+    q_prev: f32,
 }
 
 // Streaming update from many invocations at once. Design: a per-reservoir lock taken with
@@ -60,6 +63,7 @@ fn reservoir_offer(r: u32, w: f32, u: f32, c: Candidate) -> bool {
                 atomicStore(&fresh[base + RES_RADIANCE], bitcast<u32>(c.radiance.x));
                 atomicStore(&fresh[base + RES_RADIANCE + 1u], bitcast<u32>(c.radiance.y));
                 atomicStore(&fresh[base + RES_RADIANCE + 2u], bitcast<u32>(c.radiance.z));
+                atomicStore(&fresh[base + RES_Q_PREV], bitcast<u32>(c.q_prev));
             }
             atomicStore(&locks[r], 0u);
             return true;

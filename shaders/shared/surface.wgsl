@@ -62,11 +62,18 @@ fn surface_material(sf: Surface) -> SurfaceMaterial {
     return material_at(sf.material, sf.uv);
 }
 
-// The BRDF inputs of material `mi` at texture coordinates uv.
+// The BRDF inputs of material `mi` at texture coordinates uv. A glTF texture whose every
+// channel in use is replaced by an optimized texture is not sampled.
 fn material_at(mi: u32, uv: vec2f) -> SurfaceMaterial {
     let m = materials[mi];
-    let bc = sample_texture(m.base_color_tex, transform_uv(m, 0u, uv));
-    let mr = sample_texture(m.mr_tex, transform_uv(m, 1u, uv));
+    var bc = vec4f(1.0);
+    if m.param_base_color == NONE {
+        bc = sample_texture(m.base_color_tex, transform_uv(m, 0u, uv));
+    }
+    var mr = vec4f(1.0);
+    if m.param_metallic == NONE || m.param_roughness == NONE {
+        mr = sample_texture(m.mr_tex, transform_uv(m, 1u, uv));
+    }
     var out = SurfaceMaterial(m.base_color.rgb * bc.rgb, clamp(m.metallic * mr.b, 0.0, 1.0), clamp(m.roughness * mr.g, 0.0, 1.0));
     // Optimized textures replace the material's inputs (UV0, repeat wrap).
     if m.param_base_color != NONE {

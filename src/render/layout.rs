@@ -411,7 +411,8 @@ mod tests {
                 inv_spp,
                 camera_index,
                 adjoint_offset,
-                positivize
+                positivize,
+                prev_targets
             ]
         );
         mirror!(

@@ -28,7 +28,7 @@ use bytemuck::{Pod, Zeroable};
 pub(crate) const CANDIDATES_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
     pass: "restir_candidates",
     group: 1,
-    names: &["cp", "adjoint", "fresh", "locks", "cstats"],
+    names: &["cp", "adjoint", "fresh", "locks", "cstats", "adjoint_prev"],
 };
 /// Group 1 of `restir_merge.wgsl`.
 pub(crate) const MERGE_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
@@ -70,8 +70,12 @@ pub mod reservoir {
     pub const WO: u32 = 10;
     /// Incident radiance, RGB f32.
     pub const RADIANCE: u32 = 12;
+    /// Fresh reservoirs: the target of the path's value under the previous iteration's
+    /// textures and adjoint (f32), computed by the candidate pass, which has the material
+    /// at hand, so that the merge does not evaluate fresh paths again.
+    pub const Q_PREV: u32 = 15;
     /// Words per reservoir.
-    pub const WORDS: u32 = 15;
+    pub const WORDS: u32 = 16;
     /// Bits of the pixel index (images up to 8192 x 8192 = 2^26 pixels).
     pub const CAMERA_SHIFT: u32 = 26;
     /// Camera index mask after the shift.
@@ -119,6 +123,7 @@ pub fn layout_wgsl() -> String {
         ("RES_WI", WI),
         ("RES_WO", WO),
         ("RES_RADIANCE", RADIANCE),
+        ("RES_Q_PREV", Q_PREV),
         ("INFO_CAMERA_SHIFT", CAMERA_SHIFT),
         ("INFO_CAMERA_MASK", CAMERA_MASK),
         ("INFO_PIXEL_MASK", PIXEL_MASK),
@@ -207,7 +212,7 @@ pub struct CandidateParams {
     pub camera_index: u32,
     pub adjoint_offset: u32,
     pub positivize: u32,
-    pub _pad: u32,
+    pub prev_targets: u32,
 }
 
 /// `MergeParams` in shaders/restir_merge.wgsl (a test checks the layout).
@@ -371,7 +376,7 @@ impl Restir {
                     camera_index: k as u32,
                     adjoint_offset: k as u32 * n_pixels,
                     positivize: o.positivization as u32,
-                    _pad: 0,
+                    prev_targets: 0,
                 };
                 let uniform = gpu.uniform(
                     &format!("candidate params {k}"),
@@ -388,6 +393,7 @@ impl Restir {
                             ("fresh", &reservoirs[p]),
                             ("locks", &locks),
                             ("cstats", &candidate_stats),
+                            ("adjoint_prev", &s.adjoint[1 - p]),
                         ],
                     )
                 });
@@ -434,8 +440,11 @@ impl Estimator for Restir {
         let parity = frame.parity();
         enc.clear_buffer(&self.reservoirs[parity], 0, None);
         enc.clear_buffer(&self.locks, 0, None);
+        let have_prev = self.history > 0;
+        let reuse = self.options.temporal && have_prev;
         for (k, cam) in self.cameras.iter_mut().enumerate() {
             cam.params.seed = pass_seed(self.seed, frame.iteration, k as u32, Seeds::GRADIENT);
+            cam.params.prev_targets = reuse as u32;
             self.queue
                 .write_buffer(&cam.uniform, 0, bytemuck::bytes_of(&cam.params));
             encode_timed_pass(
@@ -449,7 +458,6 @@ impl Estimator for Restir {
         }
         let o = &self.options;
         self.merge_params.seed = pass_seed(self.seed, frame.iteration, 0, Seeds::MERGE);
-        let have_prev = self.history > 0;
         self.merge_params.flags = if o.temporal { FLAG_TEMPORAL } else { 0 }
             | if o.positivization { FLAG_POSITIVIZE } else { 0 }
             | if have_prev { FLAG_HAVE_PREV } else { 0 }
