@@ -9,7 +9,7 @@
 #import shared/adjoint_pixel
 #import shared/integrator
 
-// Keep in sync with GpuGradientParams in src/render/layout.rs.
+// Mirrored by GradientParams in src/optim/estimator/baseline.rs.
 struct GradientParams {
     camera: CameraInfo,
     seed: u32,

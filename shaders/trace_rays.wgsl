@@ -1,7 +1,7 @@
 // Trace a list of rays, through the BVH or against every triangle (the reference for tests).
 #import shared/bvh
 
-// Keep in sync with GpuTraceParams in src/render/layout.rs.
+// Mirrored by GpuTraceParams in src/render/layout.rs.
 struct TraceParams {
     n_rays: u32,
     brute_force: u32,

@@ -1,4 +1,4 @@
-// Pinhole camera. Keep in sync with CameraInfo in src/render/layout.rs.
+// Pinhole camera. CameraInfo is mirrored by GpuCameraInfo in src/render/layout.rs.
 
 struct CameraInfo {
     origin: vec3f,

@@ -1,4 +1,4 @@
-// GPU structs shared by every pass. Keep in sync with src/render/layout.rs.
+// GPU structs shared by every pass, mirrored in src/render/layout.rs (Gpu* types).
 
 const PI: f32 = 3.14159265358979;
 const INV_PI: f32 = 0.318309886183791;
@@ -94,7 +94,7 @@ struct SceneInfo {
 }
 
 // An optimized texture: linear values, `channels` floats per texel from params[offset], row 0
-// at v = 0, repeat wrap. filtering: 0 nearest, 1 bilinear. Keep in sync with GpuParamTex in
+// at v = 0, repeat wrap. filtering: 0 nearest, 1 bilinear. Mirrored by GpuParamTex in
 // src/render/layout.rs.
 // texel_offset: index of the texture's first texel among the texels of all optimized textures
 // (reservoirs are per texel).

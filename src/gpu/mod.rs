@@ -3,7 +3,9 @@
 //! On Linux the Vulkan backend is chosen explicitly: without it wgpu may pick a GL adapter with
 //! far fewer features and say nothing.
 
+mod binding;
 pub mod shaders;
+pub use binding::{Binding, GroupDecl};
 pub use shaders::Tracer;
 
 use crate::{Error, Result};
@@ -469,152 +471,6 @@ impl Gpu {
         }
         Ok(pipeline)
     }
-
-    /// The layout of bind group `group` of `pass`, reflected from its WGSL
-    /// ([`shaders::bindings`]): the only way the passes build their layouts.
-    pub fn pass_layout(&self, pass: &str, group: u32) -> Result<wgpu::BindGroupLayout> {
-        let kinds: Vec<Binding> = shaders::bindings_for(pass, group, self.tracer)?
-            .into_iter()
-            .map(|(_, k)| k)
-            .collect();
-        Ok(self.layout(&format!("{pass} group {group}"), &kinds))
-    }
-
-    /// A bind group layout of buffers (and an acceleration structure), bindings numbered in
-    /// order.
-    fn layout(&self, label: &str, kinds: &[Binding]) -> wgpu::BindGroupLayout {
-        let entries: Vec<wgpu::BindGroupLayoutEntry> = kinds
-            .iter()
-            .enumerate()
-            .map(|(i, k)| wgpu::BindGroupLayoutEntry {
-                binding: i as u32,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: match k {
-                    Binding::AccelerationStructure => wgpu::BindingType::AccelerationStructure {
-                        vertex_return: false,
-                    },
-                    Binding::StorageTextureRgba32FloatWrite => wgpu::BindingType::StorageTexture {
-                        access: wgpu::StorageTextureAccess::WriteOnly,
-                        format: wgpu::TextureFormat::Rgba32Float,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                    },
-                    _ => wgpu::BindingType::Buffer {
-                        ty: match k {
-                            Binding::Uniform => wgpu::BufferBindingType::Uniform,
-                            Binding::StorageRw => {
-                                wgpu::BufferBindingType::Storage { read_only: false }
-                            }
-                            _ => wgpu::BufferBindingType::Storage { read_only: true },
-                        },
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                },
-                count: None,
-            })
-            .collect();
-        self.device
-            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some(label),
-                entries: &entries,
-            })
-    }
-
-    /// A bind group of the group that `decl` declares, from whole buffers given by their
-    /// WGSL names in any order. Every declared name must be given once, and nothing else:
-    /// a mismatch is a bug in psrestir and panics naming the pass and both lists.
-    pub fn bind(
-        &self,
-        decl: &GroupDecl,
-        label: &str,
-        layout: &wgpu::BindGroupLayout,
-        named: &[(&str, &wgpu::Buffer)],
-    ) -> wgpu::BindGroup {
-        let named: Vec<(&str, wgpu::BindingResource)> = named
-            .iter()
-            .map(|(n, b)| (*n, b.as_entire_binding()))
-            .collect();
-        self.bind_resources(decl, label, layout, &named)
-    }
-
-    /// [`Gpu::bind`] for any resources (texture views too).
-    pub fn bind_resources(
-        &self,
-        decl: &GroupDecl,
-        label: &str,
-        layout: &wgpu::BindGroupLayout,
-        named: &[(&str, wgpu::BindingResource)],
-    ) -> wgpu::BindGroup {
-        let given: Vec<&str> = named.iter().map(|(n, _)| *n).collect();
-        let mut sorted_given = given.clone();
-        sorted_given.sort_unstable();
-        let mut sorted_declared = decl.names.to_vec();
-        sorted_declared.sort_unstable();
-        assert!(
-            sorted_given == sorted_declared,
-            "{label}: group {} of pass `{}` binds {:?}, given {:?}",
-            decl.group,
-            decl.pass,
-            decl.names,
-            given
-        );
-        let entries: Vec<wgpu::BindGroupEntry> = decl
-            .names
-            .iter()
-            .enumerate()
-            .map(|(i, n)| {
-                let (_, resource) = named.iter().find(|(m, _)| m == n).expect("checked above");
-                wgpu::BindGroupEntry {
-                    binding: i as u32,
-                    resource: resource.clone(),
-                }
-            })
-            .collect();
-        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(label),
-            layout,
-            entries: &entries,
-        })
-    }
-
-    /// A bind group binding whole buffers in order.
-    pub fn bind_group(
-        &self,
-        label: &str,
-        layout: &wgpu::BindGroupLayout,
-        buffers: &[&wgpu::Buffer],
-    ) -> wgpu::BindGroup {
-        self.bind_group_with_tlas(label, layout, buffers, None)
-    }
-
-    /// A bind group binding whole buffers in order, then the acceleration structure if any.
-    pub fn bind_group_with_tlas(
-        &self,
-        label: &str,
-        layout: &wgpu::BindGroupLayout,
-        buffers: &[&wgpu::Buffer],
-        tlas: Option<&wgpu::Tlas>,
-    ) -> wgpu::BindGroup {
-        let mut entries: Vec<wgpu::BindGroupEntry> = buffers
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: b.as_entire_binding(),
-            })
-            .collect();
-        if let Some(t) = tlas {
-            entries.push(wgpu::BindGroupEntry {
-                binding: buffers.len() as u32,
-                resource: t.as_binding(),
-            });
-        }
-        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(label),
-            layout,
-            entries: &entries,
-        })
-    }
 }
 
 /// How the passes trace rays on an adapter with `features` of type `device_type`. The
@@ -641,34 +497,6 @@ pub fn choose_tracer(features: wgpu::Features, device_type: wgpu::DeviceType) ->
             "PSRESTIR_TRACER={other}: expected `software`, `ray-query` or `auto`"
         ))),
     }
-}
-
-/// The bindings of one bind group of a pass, by WGSL name in binding order, declared beside
-/// the code that drives the pass. [`Gpu::bind`] binds buffers to them by name; a test checks
-/// every declaration against naga's reflection of the pass's WGSL, without a GPU.
-#[derive(Clone, Copy, Debug)]
-pub struct GroupDecl {
-    /// The pass (its WGSL file under `shaders/`).
-    pub pass: &'static str,
-    /// The bind group index.
-    pub group: u32,
-    /// Variable names in binding order.
-    pub names: &'static [&'static str],
-}
-
-/// Kind of a binding in a [`Gpu::layout`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Binding {
-    /// `var<uniform>`.
-    Uniform,
-    /// `var<storage, read>`.
-    Storage,
-    /// `var<storage, read_write>`.
-    StorageRw,
-    /// `var: acceleration_structure` (the scene's, with ray queries).
-    AccelerationStructure,
-    /// `var: texture_storage_2d<rgba32float, write>` (what the export pass writes).
-    StorageTextureRgba32FloatWrite,
 }
 
 /// Workgroups for `n` invocations of size `wg`, as a 2D grid that respects the per-dimension

@@ -7,7 +7,7 @@ pub const MAX_DEPTH: usize = 60;
 const BINS: usize = 16;
 const MAX_LEAF: usize = 1;
 
-/// A node. Keep in sync with `BvhNode` in shaders/shared/types.wgsl.
+/// A node, mirrored by `BvhNode` in shaders/shared/types.wgsl.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct BvhNode {
