@@ -42,14 +42,6 @@ var<private> offered: u32 = 0u;
 var<private> lost: u32 = 0u;
 var<private> dropped: u32 = 0u;
 
-// The target of a value: luminance for RGB textures, the value for scalar ones.
-fn target_of(v: vec3f, channels: u32) -> f32 {
-    if channels == 3u {
-        return luminance(v);
-    }
-    return v.x;
-}
-
 // bg_prev and adj_prev: the path's BRDF derivatives and the pixel's adjoint under the previous
 // iteration's state (unused unless cp.prev_targets).
 fn offer_technique(g: GradientSample, ds: DirectSample, bg: BrdfGrad, bg_prev: BrdfGrad, vertex: PathVertex, adj: vec3f, adj_prev: vec3f, info: u32) {

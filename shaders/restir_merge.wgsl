@@ -117,14 +117,6 @@ fn store_merged(r: u32, s: Stored) {
     merged[b + RES_Q_PREV] = bitcast<u32>(s.q_prev);
 }
 
-// The target of a value: luminance for RGB textures, the value for scalar ones.
-fn target_of(v: vec3f, channels: u32) -> f32 {
-    if channels == 3u {
-        return luminance(v);
-    }
-    return v.x;
-}
-
 // Target of reservoir sign s (0 positive, 1 negative) for signed target q; |q| without
 // positivization.
 fn tau(q: f32, s: u32) -> f32 {

@@ -101,3 +101,12 @@ fn param_value(p: ParamTex, fp: Footprint) -> vec3f {
     }
     return v;
 }
+
+// ReSTIR's resampling target of a path's value v for one texel: luminance for RGB textures,
+// the value for scalar ones.
+fn target_of(v: vec3f, channels: u32) -> f32 {
+    if channels == 3u {
+        return luminance(v);
+    }
+    return v.x;
+}

@@ -112,16 +112,6 @@ impl Gpu {
         })
     }
 
-    /// A bind group binding whole buffers in order.
-    pub fn bind_group(
-        &self,
-        label: &str,
-        layout: &wgpu::BindGroupLayout,
-        buffers: &[&wgpu::Buffer],
-    ) -> wgpu::BindGroup {
-        self.bind_group_with_tlas(label, layout, buffers, None)
-    }
-
     /// A bind group binding whole buffers in order, then the acceleration structure if any.
     pub fn bind_group_with_tlas(
         &self,
