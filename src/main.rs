@@ -190,6 +190,9 @@ enum Command {
         /// Primal estimator (overrides the task).
         #[arg(long, value_enum)]
         primal: Option<PrimalArg>,
+        /// Levels of the multiscale gradient, 0 (off) to 4 (overrides the task).
+        #[arg(long, value_parser = clap::value_parser!(u32).range(0..=4))]
+        multiscale_levels: Option<u32>,
     },
     /// Write one gradient estimate at the task's initial textures, as images in texel space.
     Gradient {
@@ -431,11 +434,15 @@ fn run(cli: Cli) -> Result<()> {
             out,
             resume,
             primal,
+            multiscale_levels,
         } => {
             let path = task.unwrap_or_else(|| PathBuf::from(DEFAULT_TASK));
             let mut task = Task::load(&path)?;
             if let Some(p) = primal {
                 task.optimizer.primal = p.mode();
+            }
+            if let Some(l) = multiscale_levels {
+                task.optimizer.multiscale_levels = l;
             }
             if let Some(b) = time_budget {
                 if !(b.is_finite() && b > 0.0) {

@@ -23,6 +23,7 @@
 //! filter = "bilinear"             # or "nearest"
 //! checkpoint_every = 25
 //! adam_mask = true                # sparse Adam: zero-gradient entries keep value and moments
+//! multiscale_levels = 4           # gradient averaged over 2^l-texel blocks, l <= 4 (0: off)
 //! eval_every = 10                 # low-noise image error every N iterations (0: never)
 //! eval_spp = 16
 //!
@@ -184,6 +185,10 @@ pub struct OptimizerSpec {
     /// Sparse Adam: entries with an exactly zero gradient keep their value and moments.
     #[serde(default)]
     pub adam_mask: bool,
+    /// Levels of the multiscale gradient (0: off, at most 4): before Adam, each observed
+    /// texel's gradient is averaged with the mean gradients of its 2^l x 2^l blocks.
+    #[serde(default)]
+    pub multiscale_levels: u32,
     /// Iterations between evaluation renders (image relMSE of an `eval_spp` render of every
     /// camera against its target, outside the timed budget); 0: none.
     #[serde(default = "default_eval_every")]
@@ -559,6 +564,15 @@ impl Task {
         o.schedule
             .check()
             .map_err(|(key, msg)| self.bad(&format!("optimizer.schedule.{key}"), msg))?;
+        if o.multiscale_levels > crate::optim::multiscale::MAX_LEVELS {
+            return Err(self.bad(
+                "optimizer.multiscale_levels",
+                format!(
+                    "must be between 0 and {}",
+                    crate::optim::multiscale::MAX_LEVELS
+                ),
+            ));
+        }
         if o.eval_spp == 0 || o.eval_spp > 4096 {
             return Err(self.bad("optimizer.eval_spp", "must be between 1 and 4096"));
         }

@@ -57,6 +57,7 @@ fn check_gradient_with(
         restir: Default::default(),
         schedule: Default::default(),
         adam_mask: false,
+        multiscale_levels: 0,
         exposure_learning_rate: None,
     };
     // Target: the scene with other texel values, rendered with many samples.

@@ -1,5 +1,5 @@
 //! Adam on the GPU equals the Rust reference (with a learning-rate schedule and with masked
-//! updates too), the observed-texel mask equals the texels that the camera's pixels reach, and
+//! updates too), so does the multiscale gradient, the observed-texel mask equals the texels that the camera's pixels reach, and
 //! an optimization from a constant texture recovers a known texture.
 mod common;
 
@@ -85,6 +85,7 @@ fn setup_with(
         restir: Default::default(),
         schedule: Default::default(),
         adam_mask: false,
+        multiscale_levels: 0,
         exposure_learning_rate: None,
     };
     change(&mut settings);
@@ -286,6 +287,84 @@ fn the_observed_mask_is_what_the_camera_sees() {
 }
 
 #[test]
+fn the_multiscale_gradient_on_the_gpu_equals_the_cpu_reference() {
+    use psrestir::optim::multiscale::{reference, shift, MultiscaleParams};
+    let Some(gpu) = gpu() else { return };
+    // 40 x 40 texels (partial tiles at every shift) of which the camera sees the middle: the
+    // mask has both kinds of texel. A gradient of distinct values in every channel.
+    let mut scene = plane();
+    scene.cameras[0] = look_at(Vec3::new(0.0, 1.2, 0.0), Vec3::ZERO, Vec3::NEG_Z, 0.9);
+    let res = 40u32;
+    let spec = TextureSpec {
+        material: "plane".into(),
+        slot: Slot::BaseColor,
+        resolution: [res, res],
+        init: Init::Scalar(0.5),
+        learning_rate: 0.01,
+    };
+    let set = ParamSet::from_specs(
+        &scene,
+        &[spec],
+        Filter::Bilinear,
+        std::path::Path::new("test"),
+    )
+    .unwrap();
+    let n = set.values.len();
+    let grad: Vec<f32> = (0..n)
+        .map(|i| ((i * 7919) % 1009) as f32 / 1009.0 - 0.4)
+        .collect();
+    for levels in [1, 4] {
+        let mut settings = Settings::new(48, 48, vec![0]);
+        settings.multiscale_levels = levels;
+        settings.seed = 11;
+        let mut opt =
+            Optimizer::new(&gpu, &scene, set.clone(), settings, &[Image::new(48, 48)]).unwrap();
+        let observed = opt.observed_texels().unwrap().to_vec();
+        let seen = observed.iter().filter(|&&o| o).count();
+        assert!(
+            seen > 100 && seen < (res * res) as usize - 100,
+            "{seen} observed"
+        );
+        for iteration in [0, 5] {
+            let got = opt.apply_multiscale(&grad, iteration).unwrap();
+            let (shift_x, shift_y) = shift(11, iteration);
+            let p = MultiscaleParams {
+                offset: 0,
+                width: res,
+                height: res,
+                channels: 3,
+                levels,
+                shift_x,
+                shift_y,
+                texel_offset: 0,
+            };
+            let mut want = grad.clone();
+            reference(&p, &mut want, &observed);
+            for i in 0..n {
+                if !observed[i / 3] {
+                    // Unobserved texels keep their gradient (zero in a real iteration).
+                    assert_eq!(got[i], grad[i], "levels {levels}, entry {i}");
+                    continue;
+                }
+                // Sums of up to 256 values in another order: a few ulps of the largest.
+                assert!(
+                    (got[i] - want[i]).abs() <= 1e-5,
+                    "levels {levels}, iteration {iteration}, entry {i}: {} vs {}",
+                    got[i],
+                    want[i]
+                );
+            }
+            // Not the identity: the blocks changed the gradient.
+            let changed = (0..n).filter(|&i| (got[i] - grad[i]).abs() > 1e-3).count();
+            assert!(
+                changed > n / 10,
+                "levels {levels}: only {changed} entries changed"
+            );
+        }
+    }
+}
+
+#[test]
 fn optimization_recovers_a_known_texture() {
     let Some(gpu) = gpu() else { return };
     // A 4x4 texture of distinct colors.
@@ -299,21 +378,33 @@ fn optimization_recovers_a_known_texture() {
             ]
         })
         .collect();
-    let (mut opt, init) = setup(&gpu, Slot::BaseColor, 0.03, 4, &truth);
-    let before = rmse(&init, &truth);
-    let mut losses = Vec::new();
-    for _ in 0..120 {
-        losses.push(opt.step().unwrap().loss);
+    // Plain, and with the multiscale gradient over 2x2 and 4x4 blocks (the whole texture): it
+    // must not blur the texels it converges to.
+    for levels in [0, 2] {
+        let (mut opt, init) = setup_with(
+            &gpu,
+            Slot::BaseColor,
+            0.03,
+            4,
+            &truth,
+            Filter::Bilinear,
+            |s| s.multiscale_levels = levels,
+        );
+        let before = rmse(&init, &truth);
+        let mut losses = Vec::new();
+        for _ in 0..120 {
+            losses.push(opt.step().unwrap().loss);
+        }
+        let after = rmse(&opt.read_params().unwrap(), &truth);
+        eprintln!(
+            "multiscale levels {levels}: texture RMSE {before:.4} -> {after:.4}; loss {:.3e} -> {:.3e}",
+            losses[0],
+            losses[losses.len() - 1]
+        );
+        assert!(
+            after < before / 3.0,
+            "multiscale levels {levels}: texture RMSE fell only from {before} to {after}"
+        );
+        assert_eq!(opt.faults().unwrap(), Default::default());
     }
-    let after = rmse(&opt.read_params().unwrap(), &truth);
-    eprintln!(
-        "texture RMSE {before:.4} -> {after:.4}; loss {:.3e} -> {:.3e}",
-        losses[0],
-        losses[losses.len() - 1]
-    );
-    assert!(
-        after < before / 3.0,
-        "texture RMSE fell only from {before} to {after}"
-    );
-    assert_eq!(opt.faults().unwrap(), Default::default());
 }

@@ -109,6 +109,7 @@ fn optimizer_seeded(
         restir,
         schedule: Default::default(),
         adam_mask: false,
+        multiscale_levels: 0,
         exposure_learning_rate: None,
     };
     let base = Settings {
@@ -167,6 +168,7 @@ fn without_reuse_restir_equals_the_baseline_for_scalar_textures() {
             restir: opts,
             schedule: Default::default(),
             adam_mask: false,
+            multiscale_levels: 0,
             exposure_learning_rate: None,
         };
         let opt = Optimizer::new(
@@ -537,6 +539,7 @@ fn gradients_follow_a_sign_change() {
             restir: RestirOptions::default(),
             schedule: Default::default(),
             adam_mask: false,
+            multiscale_levels: 0,
             exposure_learning_rate: None,
         };
         let opt = Optimizer::new(

@@ -57,6 +57,7 @@ pub const SOURCES: &[(&str, &str)] = sources!(
     "texture_export",
     "observed_texels",
     "primal_cv",
+    "multiscale_gradient",
 );
 
 /// WGSL `const` declarations of `u32` values, with a header naming the Rust file they come

@@ -7,6 +7,7 @@ pub mod checkpoint;
 pub mod estimator;
 pub mod export;
 pub mod loss;
+pub mod multiscale;
 pub mod observed;
 pub mod plot;
 pub mod primal;
@@ -126,6 +127,8 @@ pub struct Optimizer {
     export_pipeline: std::sync::OnceLock<wgpu::ComputePipeline>,
     /// The observed-texel mask, computed on first use.
     observed: std::sync::OnceLock<Vec<bool>>,
+    /// The multiscale gradient pass, built at the first step that uses it.
+    multiscale: Option<multiscale::Multiscale>,
     /// Fraction of the run done, for the learning-rate schedule.
     progress: f64,
     /// Learning rate of each texture in the last Adam step.
@@ -350,7 +353,7 @@ impl Optimizer {
         }
         // Primal, control variate and loss per camera, the estimator's passes (at most two
         // per camera), Adam per texture.
-        let timer = PassTimer::new(gpu, 6 * n_cams + 2 + set.textures.len() as u32);
+        let timer = PassTimer::new(gpu, 6 * n_cams + 2 + 2 * set.textures.len() as u32);
         gpu.check("optimizer setup")?;
         Ok(Optimizer {
             gpu: gpu.clone(),
@@ -386,6 +389,7 @@ impl Optimizer {
             camera_infos,
             export_pipeline: std::sync::OnceLock::new(),
             observed: std::sync::OnceLock::new(),
+            multiscale: None,
             progress: 0.0,
             last_learning_rates: Vec::new(),
             iteration: 0,
@@ -476,6 +480,7 @@ impl Optimizer {
 
     /// One iteration: render, loss, gradient, Adam. Returns the loss of the render.
     pub fn step(&mut self) -> Result<StepStats> {
+        self.prepare_multiscale()?;
         let mut enc = self
             .gpu
             .device
@@ -489,6 +494,7 @@ impl Optimizer {
             .device
             .limits()
             .max_compute_workgroups_per_dimension;
+        self.encode_multiscale(&mut enc, self.iteration);
         let factor = self.settings.schedule.factor(self.iteration, self.progress);
         self.last_learning_rates.clear();
         for ((u, g, p), tex) in self.adam.iter_mut().zip(&self.set.textures) {

@@ -84,6 +84,7 @@ pub fn task_settings(
         restir,
         schedule: task.optimizer.schedule.clone(),
         adam_mask: task.optimizer.adam_mask,
+        multiscale_levels: task.optimizer.multiscale_levels,
         exposure_learning_rate: task
             .optimizer
             .optimize_exposure

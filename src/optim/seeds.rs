@@ -22,6 +22,8 @@ impl Seeds {
     pub const EVAL: u32 = 3;
     /// ReSTIR's merge.
     pub const MERGE: u32 = 4;
+    /// The tile-grid shift of the multiscale gradient.
+    pub const MULTISCALE: u32 = 5;
 }
 
 /// Seed of pass `kind` ([`Seeds`]) of camera `camera` at iteration `iteration`: independent

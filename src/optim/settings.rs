@@ -36,6 +36,9 @@ pub struct Settings {
     /// Masked (sparse) Adam: entries whose gradient is exactly zero in an iteration keep
     /// their value and moments, as Mitsuba 3's `mask_updates`.
     pub adam_mask: bool,
+    /// Levels of the multiscale gradient (0: off; at most 4; see [`super::multiscale`]): each
+    /// observed texel's gradient is averaged with its 2^l x 2^l blocks' before Adam.
+    pub multiscale_levels: u32,
     /// Optimize the per-camera exposures (see [`Optimizer::set_exposure`]) with Adam on
     /// their logarithms, at this learning rate; None: exposures stay fixed.
     pub exposure_learning_rate: Option<f32>,
@@ -59,6 +62,7 @@ impl Settings {
             restir: RestirOptions::default(),
             schedule: Schedule::constant(),
             adam_mask: false,
+            multiscale_levels: 0,
             exposure_learning_rate: None,
         }
     }

@@ -24,7 +24,7 @@ pub struct PassTimes {
     pub gradient_ms: f64,
     /// ReSTIR's merge pass.
     pub merge_ms: f64,
-    /// Adam updates.
+    /// Adam updates, with the multiscale gradient before them when it is on.
     pub adam_ms: f64,
 }
 

@@ -170,6 +170,7 @@ mod tests {
             crate::optim::ADAM_GROUP,
             crate::optim::primal::PRIMAL_CV_GROUP,
             crate::optim::observed::OBSERVED_GROUP,
+            crate::optim::multiscale::MULTISCALE_GROUP,
             baseline::GRADIENT_GROUP,
             restir::CANDIDATES_GROUP,
             restir::MERGE_GROUP,
@@ -399,6 +400,21 @@ mod tests {
             "AdamParams",
             crate::optim::adam::AdamParams,
             [offset, count, lr, beta1, beta2, eps, bias1, bias2, lo, hi, mask]
+        );
+        mirror!(
+            "multiscale_gradient",
+            "MultiscaleParams",
+            crate::optim::multiscale::MultiscaleParams,
+            [
+                offset,
+                width,
+                height,
+                channels,
+                levels,
+                shift_x,
+                shift_y,
+                texel_offset
+            ]
         );
         mirror!(
             "restir_candidates",
