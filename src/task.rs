@@ -679,5 +679,10 @@ learning_rate = 0.01
         assert!(e.contains("optimizer.primal_spp"), "{e}");
         let e = err(&GOOD.replace("iterations = 10", "iterations = 10\ncv_max_weight = 1.5"));
         assert!(e.contains("optimizer.cv_max_weight"), "{e}");
+        let e = err(&GOOD.replace("iterations = 10", "iterations = 10\nmultiscale_levels = 5"));
+        assert!(
+            e.contains("optimizer.multiscale_levels") && e.contains("between 0 and 4"),
+            "{e}"
+        );
     }
 }

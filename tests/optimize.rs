@@ -1,6 +1,7 @@
 //! Adam on the GPU equals the Rust reference (with a learning-rate schedule and with masked
-//! updates too), so does the multiscale gradient, the observed-texel mask equals the texels that the camera's pixels reach, and
-//! an optimization from a constant texture recovers a known texture.
+//! updates too), so does the multiscale gradient, the observed-texel mask equals the texels
+//! that the camera's pixels reach, and an optimization from a constant texture recovers a
+//! known texture (with and without the multiscale gradient).
 mod common;
 
 use common::*;
@@ -313,6 +314,13 @@ fn the_multiscale_gradient_on_the_gpu_equals_the_cpu_reference() {
     let grad: Vec<f32> = (0..n)
         .map(|i| ((i * 7919) % 1009) as f32 / 1009.0 - 0.4)
         .collect();
+    // More levels than the pass has is refused by name.
+    let mut too_many = Settings::new(48, 48, vec![0]);
+    too_many.multiscale_levels = 5;
+    let e = Optimizer::new(&gpu, &scene, set.clone(), too_many, &[Image::new(48, 48)])
+        .err()
+        .expect("5 levels accepted");
+    assert!(e.to_string().contains("multiscale_levels"), "{e}");
     for levels in [1, 4] {
         let mut settings = Settings::new(48, 48, vec![0]);
         settings.multiscale_levels = levels;

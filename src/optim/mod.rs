@@ -183,6 +183,13 @@ impl Optimizer {
         if settings.primal == PrimalMode::ControlVariate && settings.primal_spp == 0 {
             return Err(Error::Invalid("primal_spp must be at least 1".into()));
         }
+        if settings.multiscale_levels > multiscale::MAX_LEVELS {
+            return Err(Error::Invalid(format!(
+                "multiscale_levels must be between 0 and {}, not {}",
+                multiscale::MAX_LEVELS,
+                settings.multiscale_levels
+            )));
+        }
         if !(0.0..=1.0).contains(&settings.cv_max_weight) {
             return Err(Error::Invalid(format!(
                 "cv_max_weight must be between 0 and 1, not {}",

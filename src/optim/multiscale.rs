@@ -1,7 +1,8 @@
 //! The multiscale gradient (shaders/multiscale_gradient.wgsl): before Adam, each observed
 //! texel's gradient becomes a weighted mean over levels 0..=L of the gradient averaged over
-//! its 2^l x 2^l block (the texel's own with weight [`FINE_WEIGHT`], each block with 1). For plain gradient descent this is descent on a pyramid of textures that
-//! are added up; the fixed points are those of the plain gradient. [`reference`] is the CPU
+//! its 2^l x 2^l block (the texel's own with weight [`FINE_WEIGHT`], each block with 1). For
+//! plain gradient descent this is descent on a pyramid of textures that are added up; the
+//! fixed points are those of the plain gradient. [`reference`] is the CPU
 //! twin that the tests compare against.
 
 use bytemuck::{Pod, Zeroable};
