@@ -181,11 +181,8 @@ impl super::Optimizer {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("multiscale_gradient"),
             });
-        let seed = self.settings.seed;
-        if let Some(m) = &mut self.multiscale {
-            self.timer.begin();
-            m.encode(&self.gpu, &mut enc, seed, iteration, &mut self.timer);
-        }
+        self.timer.begin();
+        self.encode_multiscale(&mut enc, iteration);
         self.gpu.queue.submit([enc.finish()]);
         self.read_gradient()
     }
