@@ -37,6 +37,8 @@ struct CandidateParams {
 // CANDIDATE_STAT_* slots (generated from src/optim/estimator/restir.rs).
 @group(1) @binding(4) var<storage, read_write> cstats: array<atomic<u32>, 4>;
 @group(1) @binding(5) var<storage, read> adjoint_prev: array<vec4f>;
+// Which slots hold each texel's kept reservoirs (shared/reservoir.wgsl).
+@group(1) @binding(6) var<storage, read> headers: array<u32>;
 
 var<private> offered: u32 = 0u;
 var<private> lost: u32 = 0u;
@@ -79,12 +81,10 @@ fn offer_technique(g: GradientSample, ds: DirectSample, bg: BrdfGrad, bg_prev: B
                 continue;
             }
             let texel = p.texel_offset + fp.texel[k];
-            var r = 2u * texel;
-            if cp.positivize != 0u && q < 0.0 {
-                r += 1u;
-            }
+            let s = select(0u, 1u, cp.positivize != 0u && q < 0.0);
+            let r = RESERVOIR_SLOTS * texel + fresh_slot(headers[texel], s);
             offered += 1u;
-            if !reservoir_offer(r, w, rand(), Candidate(info, v, vertex, ds.radiance, q_prev)) {
+            if !reservoir_offer(r, 2u * texel + s, w, rand(), Candidate(info, v, vertex, ds.radiance, q_prev)) {
                 lost += 1u;
             }
         }

@@ -18,11 +18,17 @@
 // reservoir stores of the hit (material, texture coordinates, shading-frame directions): no
 // geometry is read. A fresh sample's target under the previous textures and adjoint (both
 // double-buffered) comes with it from the candidate pass (RES_Q_PREV), which evaluated the
-// same path there; with the verify flag the merge evaluates it again and compares. Nothing here traces a ray: shared/bvh is not part of this pass (a test checks the
-// composed module).
+// same path there; with the verify flag the merge evaluates it again and compares. Nothing
+// here traces a ray: shared/bvh is not part of this pass (a test checks the composed module).
 // MIS: balance heuristic with confidences over the inputs' own targets.
+// Selection is in place: a texel's four reservoir slots hold its two kept reservoirs and the
+// two fresh ones (shared/reservoir.wgsl); the merged reservoir of sign s is whichever input
+// it selected, where it already lies, with its W (and, for a kept sample, its value under the
+// current state) rewritten, and the texel's header says which slot that is. The two slots
+// the new header leaves free get W = 0 for the next iteration's candidates.
 #import shared/rng
 #import shared/surface
+#import shared/reservoir_slots
 #import gen/restir_layout
 
 // Mirrored by MergeParams in src/optim/estimator/restir.rs. flags: MERGE_FLAG_* (generated).
@@ -45,9 +51,9 @@ struct MergeParams {
 @group(1) @binding(0) var<uniform> mp: MergeParams;
 @group(1) @binding(1) var<storage, read> adjoint: array<vec4f>;
 @group(1) @binding(2) var<storage, read> adjoint_prev: array<vec4f>;
-@group(1) @binding(3) var<storage, read> kept: array<u32>;
-// Fresh reservoirs in, merged reservoirs out (each texel's invocation owns its two).
-@group(1) @binding(4) var<storage, read_write> merged: array<u32>;
+// Reservoir slots and headers (each texel's invocation owns its four slots and its header).
+@group(1) @binding(3) var<storage, read_write> slots: array<u32>;
+@group(1) @binding(4) var<storage, read_write> headers: array<u32>;
 @group(1) @binding(5) var<storage, read_write> grad: array<f32>;
 // MERGE_STAT_* slots (generated from src/optim/estimator/restir.rs).
 @group(1) @binding(6) var<storage, read_write> mstats: array<atomic<u32>, 4>;
@@ -55,66 +61,49 @@ struct MergeParams {
 var<private> evaluations: u32 = 0u;
 var<private> dropped: u32 = 0u;
 
+// A stored path with its W and its value under the state it was formed at.
 struct Stored {
     info: u32,
     w: f32,
     v: vec3f,
     vertex: PathVertex,
     radiance: vec3f,
-    // Fresh reservoirs: the target under the previous state (see RES_Q_PREV).
-    q_prev: f32,
 }
 
-fn unpack(words: array<u32, RESERVOIR_WORDS>) -> Stored {
+fn slot_w(r: u32) -> f32 {
+    return bitcast<f32>(slots[r * RESERVOIR_WORDS + RES_W]);
+}
+
+fn slot_value(r: u32) -> vec3f {
+    let b = r * RESERVOIR_WORDS;
+    return vec3f(bitcast<f32>(slots[b + RES_VALUE]), bitcast<f32>(slots[b + RES_VALUE + 1u]), bitcast<f32>(slots[b + RES_VALUE + 2u]));
+}
+
+fn load(r: u32) -> Stored {
+    let b = r * RESERVOIR_WORDS;
     var s: Stored;
-    s.info = words[RES_INFO];
-    s.w = bitcast<f32>(words[RES_W]);
-    s.v = vec3f(bitcast<f32>(words[RES_VALUE]), bitcast<f32>(words[RES_VALUE + 1u]), bitcast<f32>(words[RES_VALUE + 2u]));
+    s.info = slots[b + RES_INFO];
+    s.w = slot_w(r);
+    s.v = slot_value(r);
     s.vertex = PathVertex(
-        words[RES_MATERIAL],
-        vec2f(bitcast<f32>(words[RES_UV]), bitcast<f32>(words[RES_UV + 1u])),
-        vec2f(bitcast<f32>(words[RES_WO]), bitcast<f32>(words[RES_WO + 1u])),
-        vec2f(bitcast<f32>(words[RES_WI]), bitcast<f32>(words[RES_WI + 1u])),
+        slots[b + RES_MATERIAL],
+        vec2f(bitcast<f32>(slots[b + RES_UV]), bitcast<f32>(slots[b + RES_UV + 1u])),
+        vec2f(bitcast<f32>(slots[b + RES_WO]), bitcast<f32>(slots[b + RES_WO + 1u])),
+        vec2f(bitcast<f32>(slots[b + RES_WI]), bitcast<f32>(slots[b + RES_WI + 1u])),
     );
-    s.radiance = vec3f(bitcast<f32>(words[RES_RADIANCE]), bitcast<f32>(words[RES_RADIANCE + 1u]), bitcast<f32>(words[RES_RADIANCE + 2u]));
-    s.q_prev = bitcast<f32>(words[RES_Q_PREV]);
+    s.radiance = vec3f(bitcast<f32>(slots[b + RES_RADIANCE]), bitcast<f32>(slots[b + RES_RADIANCE + 1u]), bitcast<f32>(slots[b + RES_RADIANCE + 2u]));
     return s;
 }
 
-fn load_kept(r: u32) -> Stored {
-    var words: array<u32, RESERVOIR_WORDS>;
-    for (var k = 0u; k < RESERVOIR_WORDS; k++) {
-        words[k] = kept[r * RESERVOIR_WORDS + k];
-    }
-    return unpack(words);
+fn set_w(r: u32, w: f32) {
+    slots[r * RESERVOIR_WORDS + RES_W] = bitcast<u32>(w);
 }
 
-fn load_fresh(r: u32) -> Stored {
-    var words: array<u32, RESERVOIR_WORDS>;
-    for (var k = 0u; k < RESERVOIR_WORDS; k++) {
-        words[k] = merged[r * RESERVOIR_WORDS + k];
-    }
-    return unpack(words);
-}
-
-fn store_merged(r: u32, s: Stored) {
+fn set_value(r: u32, v: vec3f) {
     let b = r * RESERVOIR_WORDS;
-    merged[b + RES_INFO] = s.info;
-    merged[b + RES_W] = bitcast<u32>(s.w);
-    merged[b + RES_VALUE] = bitcast<u32>(s.v.x);
-    merged[b + RES_VALUE + 1u] = bitcast<u32>(s.v.y);
-    merged[b + RES_VALUE + 2u] = bitcast<u32>(s.v.z);
-    merged[b + RES_MATERIAL] = s.vertex.material;
-    merged[b + RES_UV] = bitcast<u32>(s.vertex.uv.x);
-    merged[b + RES_UV + 1u] = bitcast<u32>(s.vertex.uv.y);
-    merged[b + RES_WO] = bitcast<u32>(s.vertex.wo.x);
-    merged[b + RES_WO + 1u] = bitcast<u32>(s.vertex.wo.y);
-    merged[b + RES_WI] = bitcast<u32>(s.vertex.wi.x);
-    merged[b + RES_WI + 1u] = bitcast<u32>(s.vertex.wi.y);
-    merged[b + RES_RADIANCE] = bitcast<u32>(s.radiance.x);
-    merged[b + RES_RADIANCE + 1u] = bitcast<u32>(s.radiance.y);
-    merged[b + RES_RADIANCE + 2u] = bitcast<u32>(s.radiance.z);
-    merged[b + RES_Q_PREV] = bitcast<u32>(s.q_prev);
+    slots[b + RES_VALUE] = bitcast<u32>(v.x);
+    slots[b + RES_VALUE + 1u] = bitcast<u32>(v.y);
+    slots[b + RES_VALUE + 2u] = bitcast<u32>(v.z);
 }
 
 // Target of reservoir sign s (0 positive, 1 negative) for signed target q; |q| without
@@ -147,6 +136,12 @@ fn evaluate(st: Stored, ti: u32, local: u32, prev: bool) -> vec3f {
     return v;
 }
 
+// With the verify flag: the largest relative error of a re-evaluation.
+fn record_verified(err: f32) {
+    atomicAdd(&mstats[MERGE_STAT_VERIFIED], 1u);
+    atomicMax(&mstats[MERGE_STAT_VERIFY_MAX_ERROR], bitcast<u32>(min(err, 3.0e38)));
+}
+
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {
     let t = id.x + id.y * mp.stride;
@@ -166,145 +161,156 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     let ch = p.channels;
     let n_signs = select(1u, 2u, (mp.flags & MERGE_FLAG_POSITIVIZE) != 0u);
     let reuse = (mp.flags & MERGE_FLAG_TEMPORAL) != 0u && (mp.flags & MERGE_FLAG_HAVE_PREV) != 0u;
-    // Most texels of a typical task hold no sample at all (unobserved, or not hit this
-    // iteration and never before): their merged reservoirs stay empty (the fresh ones' W is
-    // 0 already) and their gradient is 0, found from four words.
-    var any_sample = false;
-    for (var r = 0u; r < n_signs; r++) {
-        any_sample = any_sample || bitcast<f32>(merged[(2u * t + r) * RESERVOIR_WORDS + RES_W]) > 0.0;
-        if reuse {
-            any_sample = any_sample || bitcast<f32>(kept[(2u * t + r) * RESERVOIR_WORDS + RES_W]) > 0.0;
-        }
+    let verify = (mp.flags & MERGE_FLAG_VERIFY) != 0u;
+    let h = headers[t];
+    let base = RESERVOIR_SLOTS * t;
+    // Slots of the kept reservoirs (signs 0 and 1 of the last merge) and of the fresh ones.
+    let kept_r = base + vec2u(header_slot(h, 0u), header_slot(h, 1u));
+    let fresh_r = base + vec2u(fresh_slot(h, 0u), fresh_slot(h, 1u));
+    let fresh_w = vec2f(slot_w(fresh_r.x), slot_w(fresh_r.y));
+    var kept_w = vec2f(0.0);
+    if reuse {
+        kept_w = vec2f(slot_w(kept_r.x), slot_w(kept_r.y));
+        // Without positivization the sign-1 reservoir is always empty.
+        kept_w.y = select(0.0, kept_w.y, n_signs == 2u);
     }
-    if !any_sample {
+    // Most texels of a typical task hold no sample at all (unobserved, or not hit this
+    // iteration and never before): their reservoirs stay empty (W = 0 in all four slots, so
+    // the header may stay too) and their gradient is 0, found from the header and four words.
+    if !any(fresh_w > vec2f(0.0)) && !any(kept_w > vec2f(0.0)) {
         for (var c = 0u; c < ch; c++) {
             grad[p.offset + local * ch + c] = 0.0;
         }
         return;
     }
 
-    // Kept samples (their values under the previous state are stored) and fresh samples
-    // (their values under the current state and their targets under the previous one are
-    // stored). Evaluated: each kept sample under the current state.
-    var k_st: array<Stored, 2>;
-    var k_ok: array<bool, 2>;
-    var k_cur: array<vec3f, 2>;
-    var k_qprev: array<f32, 2>;
-    var k_qcur: array<f32, 2>;
-    var f_st: array<Stored, 2>;
-    var f_ok: array<bool, 2>;
-    var c_qprev: array<f32, 2>;
-    for (var r = 0u; r < 2u; r++) {
-        k_ok[r] = false;
-        k_qcur[r] = 0.0;
-        if reuse && r < n_signs {
-            let st = load_kept(2u * t + r);
-            if st.w > 0.0 {
-                k_st[r] = st;
-                k_ok[r] = true;
-                k_qprev[r] = target_of(st.v, ch);
-                k_cur[r] = evaluate(st, ti, local, false);
-                k_qcur[r] = target_of(k_cur[r], ch);
-                if (mp.flags & MERGE_FLAG_VERIFY) != 0u {
-                    // The stored value was computed under the previous state: evaluating the
-                    // stored path there must give it back. Record the largest relative error.
-                    let again = evaluate(st, ti, local, true);
-                    let err = length(again - st.v) / max(length(st.v), 1e-30);
-                    atomicAdd(&mstats[MERGE_STAT_VERIFIED], 1u);
-                    atomicMax(&mstats[MERGE_STAT_VERIFY_MAX_ERROR], bitcast<u32>(min(err, 3.0e38)));
-                }
-            }
+    // Kept samples (their values under the previous state are stored), each evaluated under
+    // the current state. Plain variables, not arrays indexed by a loop counter: on a CPU
+    // device those live in memory.
+    var k0: Stored;
+    var k1: Stored;
+    var k_cur0 = vec3f(0.0);
+    var k_cur1 = vec3f(0.0);
+    var k_qprev = vec2f(0.0);
+    var k_qcur = vec2f(0.0);
+    if kept_w.x > 0.0 {
+        k0 = load(kept_r.x);
+        k_qprev.x = target_of(k0.v, ch);
+        k_cur0 = evaluate(k0, ti, local, false);
+        k_qcur.x = target_of(k_cur0, ch);
+        if verify {
+            // The stored value was computed under the previous state: evaluating the stored
+            // path there must give it back.
+            let again = evaluate(k0, ti, local, true);
+            record_verified(length(again - k0.v) / max(length(k0.v), 1e-30));
         }
     }
-    for (var s = 0u; s < 2u; s++) {
-        f_ok[s] = false;
-        c_qprev[s] = 0.0;
-        if s < n_signs {
-            f_st[s] = load_fresh(2u * t + s);
-            f_ok[s] = f_st[s].w > 0.0;
-            if f_ok[s] && reuse {
-                c_qprev[s] = f_st[s].q_prev;
-                if (mp.flags & MERGE_FLAG_VERIFY) != 0u {
-                    // The candidate pass evaluated the same path under the same state, in
-                    // another shader (so the rounding may differ). The error is relative to
-                    // the larger of the sample's targets under both states, the scale at
-                    // which q_prev enters the MIS weights (a target near zero is a sum that
-                    // cancels, whose own relative rounding error is unbounded).
-                    let again = target_of(evaluate(f_st[s], ti, local, true), ch);
-                    let scale = max(max(abs(again), abs(target_of(f_st[s].v, ch))), 1e-30);
-                    let err = abs(again - c_qprev[s]) / scale;
-                    atomicAdd(&mstats[MERGE_STAT_VERIFIED], 1u);
-                    atomicMax(&mstats[MERGE_STAT_VERIFY_MAX_ERROR], bitcast<u32>(min(err, 3.0e38)));
-                }
-            }
+    if kept_w.y > 0.0 {
+        k1 = load(kept_r.y);
+        k_qprev.y = target_of(k1.v, ch);
+        k_cur1 = evaluate(k1, ti, local, false);
+        k_qcur.y = target_of(k_cur1, ch);
+        if verify {
+            let again = evaluate(k1, ti, local, true);
+            record_verified(length(again - k1.v) / max(length(k1.v), 1e-30));
         }
     }
     // Confidence-weighted balance heuristic over all inputs, empty ones included.
     let m_c = mp.m_fresh;
     let m_k = select(0.0, mp.m_kept, reuse);
     var g = vec3f(0.0);
-    for (var s = 0u; s < 2u; s++) {
-        var empty: Stored;
-        empty.info = 0u;
-        empty.w = 0.0;
-        if s >= n_signs {
-            store_merged(2u * t + s, empty);
-            continue;
+    // The slot each sign's merged reservoir ends in.
+    var out_slot = vec2u(fresh_r.x - base, fresh_r.y - base);
+    for (var s = 0u; s < n_signs; s++) {
+        let r_fresh = fresh_r[s];
+        let c_ok = fresh_w[s] > 0.0;
+        // A fresh sample's value under the current state and its target under the previous
+        // one are stored.
+        var c_v = vec3f(0.0);
+        var c_qprev = 0.0;
+        if c_ok {
+            c_v = slot_value(r_fresh);
+            if reuse {
+                c_qprev = bitcast<f32>(slots[r_fresh * RESERVOIR_WORDS + RES_Q_PREV]);
+                if verify {
+                    // The candidate pass evaluated the same path under the same state, in
+                    // another shader (so the rounding may differ). The error is relative to
+                    // the larger of the sample's targets under both states, the scale at
+                    // which q_prev enters the MIS weights (a target near zero is a sum that
+                    // cancels, whose own relative rounding error is unbounded).
+                    let again = target_of(evaluate(load(r_fresh), ti, local, true), ch);
+                    let scale = max(max(abs(again), abs(target_of(c_v, ch))), 1e-30);
+                    record_verified(abs(again - c_qprev) / scale);
+                }
+            }
         }
-        let fresh = f_st[s];
-        let c_ok = f_ok[s];
-        let c_qcur = target_of(fresh.v, ch);
-        // Resampling weights m_r(y_r) * tau_s(q_cur(y_r)) * W_r.
-        var w: array<f32, 3>;
-        w[0] = 0.0;
+        let c_qcur = target_of(c_v, ch);
+        // Resampling weights m_r(y_r) * tau_s(q_cur(y_r)) * W_r of the fresh input (w0) and
+        // the kept ones (wk).
+        var w0 = 0.0;
         if c_ok {
             let own = m_c * tau(c_qcur, s);
             var den = own;
             for (var r = 0u; r < n_signs; r++) {
-                den += m_k * tau(c_qprev[s], r);
+                den += m_k * tau(c_qprev, r);
             }
-            let big_w = fresh.w / tau(c_qcur, s);
-            w[0] = select(0.0, own / den * tau(c_qcur, s) * big_w, den > 0.0);
+            let big_w = fresh_w[s] / tau(c_qcur, s);
+            w0 = select(0.0, own / den * tau(c_qcur, s) * big_w, den > 0.0);
         }
+        var wk = vec2f(0.0);
         for (var r = 0u; r < 2u; r++) {
-            w[r + 1u] = 0.0;
-            if k_ok[r] && tau(k_qcur[r], s) > 0.0 {
-                let own = m_k * tau(k_qprev[r], r);
-                var den = m_c * tau(k_qcur[r], s);
+            let qc = k_qcur[r];
+            if kept_w[r] > 0.0 && tau(qc, s) > 0.0 {
+                let qp = k_qprev[r];
+                let own = m_k * tau(qp, r);
+                var den = m_c * tau(qc, s);
                 for (var r2 = 0u; r2 < n_signs; r2++) {
-                    den += m_k * tau(k_qprev[r], r2);
+                    den += m_k * tau(qp, r2);
                 }
-                w[r + 1u] = select(0.0, own / den * tau(k_qcur[r], s) * k_st[r].w, den > 0.0);
+                wk[r] = select(0.0, own / den * tau(qc, s) * kept_w[r], den > 0.0);
             }
         }
-        let total = w[0] + w[1] + w[2];
+        let total = w0 + wk.x + wk.y;
         if !(total > 0.0) || !(total < 3.0e38) {
-            store_merged(2u * t + s, empty);
+            // Empty: the fresh slot (W = 0 from here on) stands for it.
+            if c_ok {
+                set_w(r_fresh, 0.0);
+            }
             continue;
         }
         rng_init(mp.seed, t, 1u + s);
         let u = rand() * total;
         var pick = 0u;
-        if u >= w[0] {
-            pick = select(2u, 1u, u < w[0] + w[1]);
+        if u >= w0 {
+            pick = select(2u, 1u, u < w0 + wk.x);
         }
         // Guard against rounding picking a zero-weight input.
-        if w[pick] <= 0.0 {
-            pick = select(select(2u, 1u, w[1] > 0.0), 0u, w[0] > 0.0);
+        if (pick == 0u && w0 <= 0.0) || (pick == 1u && wk.x <= 0.0) || (pick == 2u && wk.y <= 0.0) {
+            pick = select(select(2u, 1u, wk.x > 0.0), 0u, w0 > 0.0);
         }
-        var out: Stored;
-        var q = 0.0;
-        if pick == 0u {
-            out = fresh;
-            q = tau(c_qcur, s);
-        } else {
-            out = k_st[pick - 1u];
-            out.v = k_cur[pick - 1u];
-            q = tau(k_qcur[pick - 1u], s);
+        // A kept sample goes to at most one sign (its weight is zero for the other), so the
+        // two merged reservoirs always lie in different slots.
+        var r_out = r_fresh;
+        var v = c_v;
+        if pick != 0u {
+            r_out = kept_r[pick - 1u];
+            v = select(k_cur0, k_cur1, pick == 2u);
+            set_value(r_out, v);
         }
-        out.w = total / q;
-        store_merged(2u * t + s, out);
-        g += out.v * out.w;
+        let w_out = total / tau(target_of(v, ch), s);
+        set_w(r_out, w_out);
+        out_slot[s] = r_out - base;
+        g += v * w_out;
+    }
+    let new_h = out_slot.x | (out_slot.y << HEADER_SLOT_BITS);
+    headers[t] = new_h;
+    // The slots the new header leaves free take the next iteration's candidates: kept
+    // reservoirs that were not selected are emptied (fresh ones already are).
+    for (var s = 0u; s < 2u; s++) {
+        let r = base + fresh_slot(new_h, s);
+        if slot_w(r) != 0.0 {
+            set_w(r, 0.0);
+        }
     }
     for (var c = 0u; c < ch; c++) {
         grad[p.offset + local * ch + c] = g[c];

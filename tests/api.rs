@@ -240,9 +240,13 @@ fn a_task_too_large_for_the_device_is_refused_before_allocating() {
         .err()
         .expect("refused")
         .to_string();
-    let bytes = 400 * 400 * 2 * psrestir::optim::restir::reservoir::WORDS as u64 * 4;
+    let bytes = 400
+        * 400
+        * psrestir::optim::restir::reservoir::SLOTS as u64
+        * psrestir::optim::restir::reservoir::WORDS as u64
+        * 4;
     assert!(
-        e.contains(&format!("reservoirs even buffer needs {bytes} bytes"))
+        e.contains(&format!("reservoir slots buffer needs {bytes} bytes"))
             && e.contains("1048576 bytes"),
         "{e}"
     );

@@ -247,16 +247,19 @@ fn kill_and_resume(method: &str) {
             assert!(child.wait().unwrap().success());
             true
         } else {
-            if resume_from.is_none() && round >= 2 {
-                // Every kill so far came before the first checkpoint: let this run write one,
-                // so that a resume is tested in every run of the test.
+            let at = if resume_from.is_none() && round >= 2 {
+                // Every kill so far came before the first checkpoint: let this run write one
+                // and kill it right after, so that a resume is tested in every run of the
+                // test (a random moment after the checkpoint could come after the end).
                 let t = Instant::now();
                 while !ckpt.exists() && child.try_wait().unwrap().is_none() {
                     assert!(t.elapsed() < Duration::from_secs(300), "no checkpoint");
                     std::thread::sleep(Duration::from_millis(5));
                 }
-            }
-            let at = Duration::from_secs_f64(0.1 + 0.9 * full * uniform());
+                Duration::ZERO
+            } else {
+                Duration::from_secs_f64(0.1 + 0.9 * full * uniform())
+            };
             let t = Instant::now();
             while t.elapsed() < at && child.try_wait().unwrap().is_none() {
                 std::thread::sleep(Duration::from_millis(5));

@@ -1,5 +1,6 @@
 #import shared/types
 #import gen/restir_layout
+#import shared/reservoir_slots
 
 // Streaming reservoir updates for parameter-space ReSTIR. A reservoir holds one path (the
 // layout, RES_* and RESERVOIR_WORDS, is generated from src/optim/estimator/restir.rs): the
@@ -8,8 +9,12 @@
 // directions in its shading frame, octahedral) and the radiance arriving along the incident
 // direction, with its value under the iteration's textures and adjoint, and the weight sum
 // (fresh reservoirs) or unbiased contribution weight W (merged).
-// Texel t owns reservoirs 2t (positive part of the target) and 2t + 1 (negative part).
-// Passes that offer candidates declare `fresh` (the reservoirs, as atomics) and `locks`.
+// Texel t owns RESERVOIR_SLOTS reservoir slots, 4t to 4t + 3, and a header word that says
+// which slot holds its positive (sign 0) and its negative (sign 1) reservoir: two distinct
+// slots, so two are free for the next iteration's fresh candidates (fresh_slot). The merge
+// selects in place and rewrites the header: a kept sample is never copied.
+// Passes that offer candidates declare `fresh` (the slots, as atomics) and `locks` (one word
+// per texel and sign).
 
 // Tries before an offer gives up (and is counted as lost). Invocations of one SIMD group
 // never wait on each other (the holder finishes in the iteration that took the lock), so the
@@ -40,11 +45,11 @@ struct Candidate {
 // its payload: the candidate pass is the expensive part, and doubling it would cost more than
 // determinism is worth here. Every word is accessed atomically so that the next holder sees it. The
 // candidate replaces the sample with probability w / (Wsum_before + w), which makes the
-// selection exactly proportional to weight. Returns false if the bounded loop never got the
-// lock (the caller counts it).
-fn reservoir_offer(r: u32, w: f32, u: f32, c: Candidate) -> bool {
+// selection exactly proportional to weight. Offers to reservoir r hold lock word `lock`.
+// Returns false if the bounded loop never got the lock (the caller counts it).
+fn reservoir_offer(r: u32, lock: u32, w: f32, u: f32, c: Candidate) -> bool {
     for (var k = 0u; k < LOCK_BOUND; k++) {
-        if atomicCompareExchangeWeak(&locks[r], 0u, 1u).exchanged {
+        if atomicCompareExchangeWeak(&locks[lock], 0u, 1u).exchanged {
             let base = r * RESERVOIR_WORDS;
             let wsum = bitcast<f32>(atomicLoad(&fresh[base + RES_W])) + w;
             atomicStore(&fresh[base + RES_W], bitcast<u32>(wsum));
@@ -65,7 +70,7 @@ fn reservoir_offer(r: u32, w: f32, u: f32, c: Candidate) -> bool {
                 atomicStore(&fresh[base + RES_RADIANCE + 2u], bitcast<u32>(c.radiance.z));
                 atomicStore(&fresh[base + RES_Q_PREV], bitcast<u32>(c.q_prev));
             }
-            atomicStore(&locks[r], 0u);
+            atomicStore(&locks[lock], 0u);
             return true;
         }
     }

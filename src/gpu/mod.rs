@@ -558,10 +558,10 @@ mod tests {
         let oom = wgpu::Error::OutOfMemory {
             source: "allocation failed".into(),
         };
-        let e = Fault::of(&oom).into_error("reservoirs even");
+        let e = Fault::of(&oom).into_error("reservoir slots");
         assert!(matches!(e, Error::OutOfMemory { .. }), "{e:?}");
         let text = e.to_string();
-        assert!(text.contains("reservoirs even") && text.contains("Lower the image size"));
+        assert!(text.contains("reservoir slots") && text.contains("Lower the image size"));
         let validation = wgpu::Error::Validation {
             source: "bad binding".into(),
             description: "bad binding".into(),

@@ -43,6 +43,7 @@ pub const SOURCES: &[(&str, &str)] = sources!(
     "shared/camera",
     "shared/params",
     "shared/integrator",
+    "shared/reservoir_slots",
     "shared/reservoir",
     "shared/adjoint_pixel",
     "shared/surface",

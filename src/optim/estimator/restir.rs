@@ -28,7 +28,15 @@ use bytemuck::{Pod, Zeroable};
 pub(crate) const CANDIDATES_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
     pass: "restir_candidates",
     group: 1,
-    names: &["cp", "adjoint", "fresh", "locks", "cstats", "adjoint_prev"],
+    names: &[
+        "cp",
+        "adjoint",
+        "fresh",
+        "locks",
+        "cstats",
+        "adjoint_prev",
+        "headers",
+    ],
 };
 /// Group 1 of `restir_merge.wgsl`.
 pub(crate) const MERGE_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
@@ -38,8 +46,8 @@ pub(crate) const MERGE_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
         "mp",
         "adjoint",
         "adjoint_prev",
-        "kept",
-        "merged",
+        "slots",
+        "headers",
         "grad",
         "mstats",
     ],
@@ -84,14 +92,28 @@ pub mod reservoir {
     pub const PIXEL_MASK: u32 = (1 << CAMERA_SHIFT) - 1;
     /// The technique bit: 0 light sampling, 1 BSDF sampling.
     pub const TECH_SHIFT: u32 = 29;
+    /// Reservoir slots per texel: its two kept reservoirs and the two fresh ones.
+    pub const SLOTS: u32 = 4;
+    /// Bits of a slot index in a texel's header (sign 0's slot, then sign 1's).
+    pub const HEADER_SLOT_BITS: u32 = 2;
+    /// Slot index mask after the shift.
+    pub const HEADER_SLOT_MASK: u32 = (1 << HEADER_SLOT_BITS) - 1;
+    /// The header of a texel whose reservoirs lie in slots 0 (sign 0) and 1 (sign 1).
+    pub const HEADER_FIRST_TWO: u32 = 1 << HEADER_SLOT_BITS;
+
+    /// The slot of sign `sign`'s reservoir in header `h`.
+    pub fn header_slot(h: u32, sign: u32) -> u32 {
+        (h >> (HEADER_SLOT_BITS * sign)) & HEADER_SLOT_MASK
+    }
 }
 
 /// Cameras a ReSTIR optimizer can use (the camera index has three bits in a reservoir).
 pub const MAX_CAMERAS: usize = reservoir::CAMERA_MASK as usize + 1;
 
-/// Bytes of ReSTIR state per texel: two reservoirs (positive and negative) in each of two
-/// buffers (kept and fresh/merged), and a lock word per reservoir.
-pub const STATE_BYTES_PER_TEXEL: u64 = 2 * 2 * reservoir::WORDS as u64 * 4 + 2 * 4;
+/// Bytes of ReSTIR state per texel: four reservoir slots (the kept positive and negative
+/// reservoirs and the fresh ones), a header word and a lock word per sign.
+pub const STATE_BYTES_PER_TEXEL: u64 =
+    reservoir::SLOTS as u64 * reservoir::WORDS as u64 * 4 + 4 + 2 * 4;
 
 /// Merge flags (`MERGE_FLAG_*`).
 const FLAG_TEMPORAL: u32 = 1;
@@ -124,6 +146,9 @@ pub fn layout_wgsl() -> String {
         ("RES_WO", WO),
         ("RES_RADIANCE", RADIANCE),
         ("RES_Q_PREV", Q_PREV),
+        ("RESERVOIR_SLOTS", SLOTS),
+        ("HEADER_SLOT_BITS", HEADER_SLOT_BITS),
+        ("HEADER_SLOT_MASK", HEADER_SLOT_MASK),
         ("INFO_CAMERA_SHIFT", CAMERA_SHIFT),
         ("INFO_CAMERA_MASK", CAMERA_MASK),
         ("INFO_PIXEL_MASK", PIXEL_MASK),
@@ -258,10 +283,12 @@ pub struct MergeDiagnostics {
 
 /// The buffers ReSTIR allocates for `n_texels` texels, by label and size in bytes.
 pub(crate) fn memory(n_texels: u64) -> Vec<(String, u64)> {
-    let res = n_texels * 2 * reservoir::WORDS as u64 * 4;
     vec![
-        ("reservoirs even".to_string(), res),
-        ("reservoirs odd".to_string(), res),
+        (
+            "reservoir slots".to_string(),
+            n_texels * reservoir::SLOTS as u64 * reservoir::WORDS as u64 * 4,
+        ),
+        ("reservoir headers".to_string(), n_texels * 4),
         ("reservoir locks".to_string(), n_texels * 2 * 4),
     ]
 }
@@ -269,7 +296,7 @@ pub(crate) fn memory(n_texels: u64) -> Vec<(String, u64)> {
 struct Camera {
     uniform: wgpu::Buffer,
     params: CandidateParams,
-    /// Per parity of the iteration (adjoints and reservoirs alternate).
+    /// Per parity of the iteration (the adjoints alternate).
     groups: [wgpu::BindGroup; 2],
 }
 
@@ -278,8 +305,10 @@ pub(crate) struct Restir {
     candidate_pipeline: wgpu::ComputePipeline,
     merge_pipeline: wgpu::ComputePipeline,
     cameras: Vec<Camera>,
-    /// Reservoirs: fresh then merged at iteration t in buffer t % 2, kept in the other.
-    reservoirs: [wgpu::Buffer; 2],
+    /// Reservoir slots, four per texel, and the headers that say which hold the kept
+    /// reservoirs (shaders/shared/reservoir_slots.wgsl).
+    slots: wgpu::Buffer,
+    headers: wgpu::Buffer,
     locks: wgpu::Buffer,
     merge_uniform: wgpu::Buffer,
     merge_params: MergeParams,
@@ -320,10 +349,12 @@ impl Restir {
             gpu.compute_pipeline("restir_merge", &[&s.scene.layout, &merge_layout])?;
         let n_texels = s.scene.n_texels as u64;
         let sizes = memory(n_texels);
-        let reservoirs = [
-            gpu.storage_zeroed(&sizes[0].0, sizes[0].1),
-            gpu.storage_zeroed(&sizes[1].0, sizes[1].1),
-        ];
+        let slots = gpu.storage_zeroed(&sizes[0].0, sizes[0].1);
+        let headers = gpu.storage(
+            &sizes[1].0,
+            bytemuck::cast_slice(&vec![reservoir::HEADER_FIRST_TWO; n_texels as usize]),
+            wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        );
         let locks = gpu.storage_zeroed(&sizes[2].0, sizes[2].1);
         let candidate_stats = gpu.storage_zeroed("candidate stats", 16);
         let merge_stats = gpu.storage_zeroed("merge stats", 16);
@@ -355,8 +386,8 @@ impl Restir {
                     ("mp", &merge_uniform),
                     ("adjoint", &s.adjoint[p]),
                     ("adjoint_prev", &s.adjoint[1 - p]),
-                    ("kept", &reservoirs[1 - p]),
-                    ("merged", &reservoirs[p]),
+                    ("slots", &slots),
+                    ("headers", &headers),
                     ("grad", s.grad),
                     ("mstats", &merge_stats),
                 ],
@@ -390,10 +421,11 @@ impl Restir {
                         &[
                             ("cp", &uniform),
                             ("adjoint", &s.adjoint[p]),
-                            ("fresh", &reservoirs[p]),
+                            ("fresh", &slots),
                             ("locks", &locks),
                             ("cstats", &candidate_stats),
                             ("adjoint_prev", &s.adjoint[1 - p]),
+                            ("headers", &headers),
                         ],
                     )
                 });
@@ -408,7 +440,8 @@ impl Restir {
             candidate_pipeline,
             merge_pipeline,
             cameras: cams,
-            reservoirs,
+            slots,
+            headers,
             locks,
             merge_uniform,
             merge_params,
@@ -438,7 +471,8 @@ impl Restir {
 impl Estimator for Restir {
     fn encode(&mut self, enc: &mut wgpu::CommandEncoder, frame: &Frame, timer: &mut PassTimer) {
         let parity = frame.parity();
-        enc.clear_buffer(&self.reservoirs[parity], 0, None);
+        // The free slots are empty already: the merge empties them. Every lock is released by
+        // the invocation that took it; clearing them costs little and guards the invariant.
         enc.clear_buffer(&self.locks, 0, None);
         let have_prev = self.history > 0;
         let reuse = self.options.temporal && have_prev;
@@ -500,11 +534,13 @@ impl Estimator for Restir {
         Ok(())
     }
 
-    fn snapshot(&self, gpu: &Gpu, iteration: u32) -> Result<Option<RestirSnapshot>> {
-        // Iteration `iteration - 1` merged into buffer (iteration - 1) % 2.
-        let last = (iteration as usize + 1) % 2;
+    fn snapshot(&self, gpu: &Gpu, _iteration: u32) -> Result<Option<RestirSnapshot>> {
+        // The kept reservoirs, sign 0 then sign 1 of each texel, wherever they lie.
+        let slots: Vec<u32> = gpu.read_pod(&self.slots)?;
+        let headers: Vec<u32> = gpu.read_pod(&self.headers)?;
+        let n_texels = self.merge_params.n_texels as usize;
         Ok(Some(RestirSnapshot {
-            reservoirs: gpu.read_pod(&self.reservoirs[last])?,
+            reservoirs: kept_reservoirs(&slots, &headers[..n_texels]),
             history: self.history,
         }))
     }
@@ -513,33 +549,70 @@ impl Estimator for Restir {
         &mut self,
         gpu: &Gpu,
         snapshot: Option<&RestirSnapshot>,
-        iteration: u32,
+        _iteration: u32,
     ) -> Result<()> {
-        let last = (iteration as usize + 1) % 2;
-        match snapshot {
+        let n_texels = u64::from(self.merge_params.n_texels);
+        let (slots, headers) = match snapshot {
             Some(r) => {
-                let kept = &self.reservoirs[last];
-                if r.reservoirs.len() as u64 * 4 != kept.size() {
+                if r.reservoirs.len() as u64 != n_texels * 2 * reservoir::WORDS as u64 {
                     return Err(Error::Invalid(
                         "the saved ReSTIR state does not match this optimizer's textures".into(),
                     ));
                 }
-                gpu.queue
-                    .write_buffer(kept, 0, bytemuck::cast_slice(&r.reservoirs));
                 self.history = if self.options.temporal { r.history } else { 0 };
+                slots_holding(&r.reservoirs)
             }
-            None => self.history = 0,
-        }
+            None => {
+                self.history = 0;
+                let words = reservoir::SLOTS as usize * reservoir::WORDS as usize;
+                (
+                    vec![0; n_texels as usize * words],
+                    vec![reservoir::HEADER_FIRST_TWO; n_texels as usize],
+                )
+            }
+        };
+        gpu.queue
+            .write_buffer(&self.slots, 0, bytemuck::cast_slice(&slots));
+        gpu.queue
+            .write_buffer(&self.headers, 0, bytemuck::cast_slice(&headers));
         Ok(())
     }
 
     fn state_bytes(&self) -> u64 {
-        self.reservoirs.iter().map(|b| b.size()).sum::<u64>() + self.locks.size()
+        self.slots.size() + self.headers.size() + self.locks.size()
     }
 
     fn restir_diagnostics(&self, gpu: &Gpu) -> Result<Option<MergeDiagnostics>> {
         self.diagnostics(gpu).map(Some)
     }
+}
+
+/// The kept reservoirs (two per texel, sign 0 then sign 1) that `headers` point at in
+/// `slots`.
+fn kept_reservoirs(slots: &[u32], headers: &[u32]) -> Vec<u32> {
+    let words = reservoir::WORDS as usize;
+    let per_texel = reservoir::SLOTS as usize * words;
+    let mut out = Vec::with_capacity(headers.len() * 2 * words);
+    for (t, &h) in headers.iter().enumerate() {
+        for sign in 0..2 {
+            let r = t * per_texel + reservoir::header_slot(h, sign) as usize * words;
+            out.extend_from_slice(&slots[r..r + words]);
+        }
+    }
+    out
+}
+
+/// Slots and headers that hold `kept` (two reservoirs per texel) in slots 0 and 1, with
+/// slots 2 and 3 free.
+fn slots_holding(kept: &[u32]) -> (Vec<u32>, Vec<u32>) {
+    let words = reservoir::WORDS as usize;
+    let n_texels = kept.len() / (2 * words);
+    let mut slots = vec![0; n_texels * reservoir::SLOTS as usize * words];
+    for t in 0..n_texels {
+        let dst = t * reservoir::SLOTS as usize * words;
+        slots[dst..dst + 2 * words].copy_from_slice(&kept[t * 2 * words..(t + 1) * 2 * words]);
+    }
+    (slots, vec![reservoir::HEADER_FIRST_TWO; n_texels])
 }
 
 /// Run the streaming reservoir update of shaders/shared/reservoir.wgsl on the GPU for a test:
@@ -609,4 +682,30 @@ pub fn selection_trial(
         .map(|r| out[r * words + reservoir::INFO as usize])
         .collect();
     Ok((selected, fails[0]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn kept_reservoirs_follow_the_headers() {
+        let words = reservoir::WORDS as usize;
+        // Two texels whose reservoirs are numbered by (texel, sign).
+        let kept: Vec<u32> = (0..2 * 2 * words as u32).collect();
+        let (mut slots, mut headers) = slots_holding(&kept);
+        assert_eq!(kept_reservoirs(&slots, &headers), kept);
+        // Texel 1's reservoirs move to slots 3 (sign 0) and 2 (sign 1), as a merge that
+        // selected its fresh samples leaves them.
+        let per_texel = reservoir::SLOTS as usize * words;
+        let (s0, s1) = (per_texel, per_texel + words);
+        let moved: Vec<u32> = slots[s0..s0 + 2 * words].to_vec();
+        slots[per_texel + 3 * words..per_texel + 4 * words].copy_from_slice(&moved[..words]);
+        slots[per_texel + 2 * words..per_texel + 3 * words].copy_from_slice(&moved[words..]);
+        slots[s0..s1 + words].fill(0);
+        headers[1] = 3 | (2 << reservoir::HEADER_SLOT_BITS);
+        assert_eq!(reservoir::header_slot(headers[1], 0), 3);
+        assert_eq!(reservoir::header_slot(headers[1], 1), 2);
+        assert_eq!(kept_reservoirs(&slots, &headers), kept);
+    }
 }

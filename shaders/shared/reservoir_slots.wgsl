@@ -1,0 +1,16 @@
+// Where a texel's reservoirs lie: RESERVOIR_SLOTS slots per texel and a header word per texel
+// (the layout is generated from src/optim/estimator/restir.rs, gen/restir_layout). The header
+// names two distinct slots, those of the positive (sign 0) and the negative (sign 1)
+// reservoir; the other two are free for the next iteration's fresh candidates.
+#import gen/restir_layout
+
+// The slot of sign s's reservoir in header h.
+fn header_slot(h: u32, s: u32) -> u32 {
+    return (h >> (HEADER_SLOT_BITS * s)) & HEADER_SLOT_MASK;
+}
+
+// The slot that sign s's fresh candidates go to: the s-th slot that header h leaves free.
+fn fresh_slot(h: u32, s: u32) -> u32 {
+    let free = ~((1u << header_slot(h, 0u)) | (1u << header_slot(h, 1u))) & ((1u << RESERVOIR_SLOTS) - 1u);
+    return firstTrailingBit(select(free, free & (free - 1u), s == 1u));
+}
