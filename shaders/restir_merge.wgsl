@@ -142,6 +142,24 @@ fn record_verified(err: f32) {
     atomicMax(&mstats[MERGE_STAT_VERIFY_MAX_ERROR], bitcast<u32>(min(err, 3.0e38)));
 }
 
+// A kept sample: its target under the previous state (from its stored value) and its value
+// under the current state.
+struct Evaluated {
+    q_prev: f32,
+    v: vec3f,
+}
+
+fn evaluate_kept(r: u32, ti: u32, local: u32, ch: u32, verify: bool) -> Evaluated {
+    let st = load(r);
+    if verify {
+        // The stored value was computed under the previous state: evaluating the stored path
+        // there must give it back.
+        let again = evaluate(st, ti, local, true);
+        record_verified(length(again - st.v) / max(length(st.v), 1e-30));
+    }
+    return Evaluated(target_of(st.v, ch), evaluate(st, ti, local, false));
+}
+
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {
     let t = id.x + id.y * mp.stride;
@@ -175,8 +193,9 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         kept_w.y = select(0.0, kept_w.y, n_signs == 2u);
     }
     // Most texels of a typical task hold no sample at all (unobserved, or not hit this
-    // iteration and never before): their reservoirs stay empty (W = 0 in all four slots, so
-    // the header may stay too) and their gradient is 0, found from the header and four words.
+    // iteration and never before): their gradient is 0, found from the header and four
+    // words, and their slots and header stay as they are (the fresh slots are empty; kept
+    // ones that are not reused keep their slots until a merge selects something else).
     if !any(fresh_w > vec2f(0.0)) && !any(kept_w > vec2f(0.0)) {
         for (var c = 0u; c < ch; c++) {
             grad[p.offset + local * ch + c] = 0.0;
@@ -187,34 +206,16 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     // Kept samples (their values under the previous state are stored), each evaluated under
     // the current state. Plain variables, not arrays indexed by a loop counter: on a CPU
     // device those live in memory.
-    var k0: Stored;
-    var k1: Stored;
-    var k_cur0 = vec3f(0.0);
-    var k_cur1 = vec3f(0.0);
-    var k_qprev = vec2f(0.0);
-    var k_qcur = vec2f(0.0);
+    var k0 = Evaluated(0.0, vec3f(0.0));
+    var k1 = Evaluated(0.0, vec3f(0.0));
     if kept_w.x > 0.0 {
-        k0 = load(kept_r.x);
-        k_qprev.x = target_of(k0.v, ch);
-        k_cur0 = evaluate(k0, ti, local, false);
-        k_qcur.x = target_of(k_cur0, ch);
-        if verify {
-            // The stored value was computed under the previous state: evaluating the stored
-            // path there must give it back.
-            let again = evaluate(k0, ti, local, true);
-            record_verified(length(again - k0.v) / max(length(k0.v), 1e-30));
-        }
+        k0 = evaluate_kept(kept_r.x, ti, local, ch, verify);
     }
     if kept_w.y > 0.0 {
-        k1 = load(kept_r.y);
-        k_qprev.y = target_of(k1.v, ch);
-        k_cur1 = evaluate(k1, ti, local, false);
-        k_qcur.y = target_of(k_cur1, ch);
-        if verify {
-            let again = evaluate(k1, ti, local, true);
-            record_verified(length(again - k1.v) / max(length(k1.v), 1e-30));
-        }
+        k1 = evaluate_kept(kept_r.y, ti, local, ch, verify);
     }
+    let k_qprev = vec2f(k0.q_prev, k1.q_prev);
+    let k_qcur = vec2f(target_of(k0.v, ch), target_of(k1.v, ch));
     // Confidence-weighted balance heuristic over all inputs, empty ones included.
     let m_c = mp.m_fresh;
     let m_k = select(0.0, mp.m_kept, reuse);
@@ -294,7 +295,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         var v = c_v;
         if pick != 0u {
             r_out = kept_r[pick - 1u];
-            v = select(k_cur0, k_cur1, pick == 2u);
+            v = select(k0.v, k1.v, pick == 2u);
             set_value(r_out, v);
         }
         let w_out = total / tau(target_of(v, ch), s);
@@ -304,8 +305,8 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     }
     let new_h = out_slot.x | (out_slot.y << HEADER_SLOT_BITS);
     headers[t] = new_h;
-    // The slots the new header leaves free take the next iteration's candidates: kept
-    // reservoirs that were not selected are emptied (fresh ones already are).
+    // The slots the new header leaves free take the next iteration's candidates: the inputs
+    // that were not selected, kept or fresh, are emptied.
     for (var s = 0u; s < 2u; s++) {
         let r = base + fresh_slot(new_h, s);
         if slot_w(r) != 0.0 {

@@ -51,9 +51,13 @@ fn reservoir_offer(r: u32, lock: u32, w: f32, u: f32, c: Candidate) -> bool {
     for (var k = 0u; k < LOCK_BOUND; k++) {
         if atomicCompareExchangeWeak(&locks[lock], 0u, 1u).exchanged {
             let base = r * RESERVOIR_WORDS;
-            let wsum = bitcast<f32>(atomicLoad(&fresh[base + RES_W])) + w;
+            let before = bitcast<f32>(atomicLoad(&fresh[base + RES_W]));
+            let wsum = before + w;
             atomicStore(&fresh[base + RES_W], bitcast<u32>(wsum));
-            if u * wsum < w {
+            // The first offer to an empty reservoir is always taken (u * wsum < w can fail
+            // for a denormal w), so that its weight never stands beside the payload of an
+            // older sample left in a free slot.
+            if before == 0.0 || u * wsum < w {
                 atomicStore(&fresh[base + RES_INFO], c.info);
                 atomicStore(&fresh[base + RES_VALUE], bitcast<u32>(c.value.x));
                 atomicStore(&fresh[base + RES_VALUE + 1u], bitcast<u32>(c.value.y));

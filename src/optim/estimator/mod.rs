@@ -63,7 +63,7 @@ pub(crate) struct Frame<'a> {
 }
 
 impl Frame<'_> {
-    /// Which of the double-buffered adjoints (and reservoirs) this iteration writes.
+    /// Which of the double-buffered adjoints this iteration writes.
     pub fn parity(&self) -> usize {
         (self.iteration % 2) as usize
     }
