@@ -228,6 +228,10 @@ enum Command {
         /// ReSTIR iterations before the gradient error is measured.
         #[arg(long, default_value_t = 20)]
         warmup: u32,
+        /// ReSTIR estimates under the converged adjoint, at the textures after the warm-up,
+        /// before its estimator-only gradient error is measured.
+        #[arg(long, default_value_t = 20)]
+        settle: u32,
         /// Seeds the gradient error is averaged over.
         #[arg(long, default_value_t = 3)]
         repeats: u32,
@@ -578,6 +582,7 @@ fn run(cli: Cli) -> Result<()> {
             out,
             scale,
             warmup,
+            settle,
             repeats,
             reference_spp,
             reference_primal_spp,
@@ -603,6 +608,7 @@ fn run(cli: Cli) -> Result<()> {
                 budget_s,
                 scale,
                 warmup,
+                settle,
                 repeats,
                 reference_spp,
                 reference_primal_spp,

@@ -34,6 +34,7 @@ fn bench_json_has_every_field_finite_and_in_range() {
         budget_s: 1.0,
         scale: 0.25,
         warmup: 4,
+        settle: 2,
         repeats: 1,
         reference_spp: 16,
         reference_primal_spp: 64,

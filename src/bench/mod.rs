@@ -7,7 +7,9 @@
 //!    a reference from a converged adjoint (a `reference_primal_spp` primal render) and
 //!    `reference_spp` gradient samples. Each error is measured twice: *total*, each estimator
 //!    with the adjoint of its own task-spp primal render (what a user gets), and
-//!    *estimator-only*, both under the converged adjoint (what the reservoirs do);
+//!    *estimator-only*, both under the converged adjoint (what the reservoirs do), after
+//!    `settle` more ReSTIR estimates under it at the same textures (its reservoirs filled
+//!    for that integrand);
 //! 2. equal-time optimization: both estimators optimize from the same start for the same
 //!    wall-clock budget; image relMSE (a high-spp render against the target) and texture RMSE
 //!    against the ground truth, as curves over time and at the end;
@@ -68,6 +70,9 @@ pub struct BenchOptions {
     pub scale: f64,
     /// ReSTIR iterations before the gradient error is measured.
     pub warmup: u32,
+    /// ReSTIR estimates under the converged adjoint, at the textures after the warm-up,
+    /// before its estimator-only error is measured.
+    pub settle: u32,
     /// Seeds the gradient error is averaged over.
     pub repeats: u32,
     /// Gradient samples per pixel of the reference gradient.
@@ -99,6 +104,7 @@ impl Default for BenchOptions {
             budget_s: 60.0,
             scale: 1.0,
             warmup: 20,
+            settle: 20,
             repeats: 3,
             reference_spp: 256,
             reference_primal_spp: 256,
@@ -248,6 +254,7 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         budget_s: o.budget_s,
         scale: o.scale,
         warmup: o.warmup,
+        settle: o.settle,
         repeats: o.repeats.max(1),
         reference_spp: o.reference_spp,
         reference_primal_spp: o.reference_primal_spp,

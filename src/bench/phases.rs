@@ -104,6 +104,20 @@ pub(super) fn primal_phase(
     Ok(out)
 }
 
+/// The mean of `spp` gradient samples per pixel under `adjoint`, at `r`'s textures (`r` is a
+/// baseline optimizer of at most 64 spp).
+fn reference_gradient(r: &mut Optimizer, spp: u32, adjoint: &[f32]) -> Result<Vec<f64>> {
+    let estimates = spp.div_ceil(r.settings().gradient_spp).max(1);
+    let mut reference = vec![0f64; r.read_params()?.len()];
+    for it in 0..estimates {
+        let g = r.estimate_gradient_with_adjoint(it, adjoint)?;
+        for (acc, v) in reference.iter_mut().zip(&g) {
+            *acc += *v as f64 / estimates as f64;
+        }
+    }
+    Ok(reference)
+}
+
 /// Mean milliseconds of `n` steps after one untimed step.
 pub(super) fn time_steps(opt: &mut Optimizer, n: u32) -> Result<f64> {
     opt.step()?;
@@ -235,57 +249,75 @@ pub(super) fn gradient_phase(
             "gradient error, seed {}/{repeats}: reference",
             rep + 1
         ));
-        let ref_spp = o.reference_spp.clamp(1, 64);
-        let estimates = o.reference_spp.div_ceil(ref_spp).max(1);
-        let mut r = new(Method::Baseline, ref_spp, seed ^ 0x5eed)?;
+        let mut r = new(
+            Method::Baseline,
+            o.reference_spp.clamp(1, 64),
+            seed ^ 0x5eed,
+        )?;
         r.write_params(&state)?;
         let (converged, _) = r.converged_adjoint(o.reference_primal_spp, seed ^ 0xad)?;
-        let mut reference = vec![0f64; state.len()];
-        for it in 0..estimates {
-            let g = r.estimate_gradient_with_adjoint(it, &converged)?;
-            for (acc, v) in reference.iter_mut().zip(&g) {
-                *acc += *v as f64 / estimates as f64;
-            }
-        }
+        let reference = reference_gradient(&mut r, o.reference_spp, &converged)?;
         drop(r);
-        let relmse = |g: &[f32]| gradient_relmse(g, &reference);
 
-        // ReSTIR's next gradient: with its own primal render, then again from the same
-        // reservoirs under the converged adjoint.
+        // Total: ReSTIR's next gradient with its own primal render, and the baseline's at the
+        // task's spp and around the equal-time spp. The baseline continues from ReSTIR's
+        // state without the reservoirs: the same textures and, with the control-variate
+        // primal, the same carried image and statistics, so that its adjoint is what a
+        // baseline run would have after the same warm-up (a fresh control variate would
+        // start from an independent render).
         let it = re.iteration;
         let (g_restir_total, _) = re.estimate_gradient(it)?;
         re.restore(&kept)?;
-        let g_restir_only = re.estimate_gradient_with_adjoint(it, &converged)?;
-        drop(re);
-
-        // The baseline at the task's spp and around the equal-time spp, both ways. It
-        // continues from ReSTIR's state without the reservoirs: the same textures and, with
-        // the control-variate primal, the same carried image and statistics, so that its
-        // adjoint is what a baseline run would have after the same warm-up (a fresh
-        // control variate would start from an independent render).
-        let shared = crate::optim::OptimizerState {
-            restir: None,
-            ..kept.clone()
-        };
-        let baseline = |spp: u32, salt: u32| -> Result<(Vec<f32>, Vec<f32>)> {
+        let baseline_at = |at: &crate::optim::OptimizerState,
+                           spp: u32,
+                           salt: u32,
+                           adjoint: Option<&[f32]>|
+         -> Result<Vec<f32>> {
             let mut b = new(Method::Baseline, spp, seed ^ salt)?;
-            b.restore(&shared)?;
-            let (total, _) = b.estimate_gradient(it)?;
-            let only = b.estimate_gradient_with_adjoint(it + 1, &converged)?;
-            Ok((total, only))
+            b.restore(&crate::optim::OptimizerState {
+                restir: None,
+                ..at.clone()
+            })?;
+            let it = at.iteration;
+            match adjoint {
+                None => Ok(b.estimate_gradient(it)?.0),
+                Some(a) => b.estimate_gradient_with_adjoint(it + 1, a),
+            }
         };
-        let (b_total, b_only) = baseline(spp, 0xea)?;
-        let (b0_total, b0_only) = baseline(s0, 0xe9)?;
-        let (b1_total, b1_only) = baseline(s0 + 1, 0xeb)?;
-
-        out.total_restir += relmse(&g_restir_total) / n;
-        out.only_restir += relmse(&g_restir_only) / n;
-        out.total_baseline_equal_iterations += relmse(&b_total) / n;
-        out.only_baseline += relmse(&b_only) / n;
+        let total = |spp, salt| -> Result<f64> {
+            Ok(gradient_relmse(
+                &baseline_at(&kept, spp, salt, None)?,
+                &reference,
+            ))
+        };
+        out.total_restir += gradient_relmse(&g_restir_total, &reference) / n;
+        out.total_baseline_equal_iterations += total(spp, 0xea)? / n;
         out.total_baseline +=
-            interpolate_in_inverse_spp(k, s0, relmse(&b0_total), relmse(&b1_total)) / n;
+            interpolate_in_inverse_spp(k, s0, total(s0, 0xe9)?, total(s0 + 1, 0xeb)?) / n;
+
+        // Estimator-only: both under the converged adjoint. ReSTIR first draws `settle` more
+        // estimates under it at the same textures, so that its reservoirs hold samples
+        // chosen for the integrand it is measured on. Measured right after the warm-up, its
+        // reservoirs were filled under the noisy adjoints of its own primal renders, and the
+        // switch of adjoint, not the reuse, dominated the error. The textures stay where they
+        // are: under one fixed adjoint, Adam pushes every texel the same way at every step
+        // (on `vase`, 20 such steps made both estimators' errors 5-8x larger).
+        for j in 0..o.settle {
+            re.estimate_gradient_with_adjoint(it + j, &converged)?;
+        }
+        let g_restir_only = re.estimate_gradient_with_adjoint(it + o.settle, &converged)?;
+        drop(re);
+        let b_only = baseline_at(&kept, spp, 0xea, Some(&converged))?;
+        let only = |spp, salt| -> Result<f64> {
+            Ok(gradient_relmse(
+                &baseline_at(&kept, spp, salt, Some(&converged))?,
+                &reference,
+            ))
+        };
+        out.only_restir += gradient_relmse(&g_restir_only, &reference) / n;
+        out.only_baseline += gradient_relmse(&b_only, &reference) / n;
         out.only_baseline_equal_time +=
-            interpolate_in_inverse_spp(k, s0, relmse(&b0_only), relmse(&b1_only)) / n;
+            interpolate_in_inverse_spp(k, s0, only(s0, 0xe9)?, only(s0 + 1, 0xeb)?) / n;
         out.baseline_spp_equal_time = k;
         if rep == 0 {
             out.snapshot = GradientSnapshot {

@@ -328,14 +328,16 @@ pub fn write_report(out: &Path, r: &BenchReport) -> Result<()> {
     let _ = writeln!(
         md,
         "psrestir {} on `{}`; protocol `{:?}`; size scale {}; gradient error after {} ReSTIR \
-         iterations, mean of {} seeds, against a reference of {} gradient spp under a {}-spp \
-         converged adjoint; ReSTIR M cap {}, fresh confidence `{}`; {} s of optimization per \
-         estimator and scene; image error from {}-spp renders.\n",
+         iterations (estimator-only: {} more estimates under the converged adjoint), mean of \
+         {} seeds, against a reference of {} gradient spp under a {}-spp converged adjoint; \
+         ReSTIR M cap {}, fresh confidence `{}`; {} s of optimization per estimator and \
+         scene; image error from {}-spp renders.\n",
         r.version,
         r.adapter,
         r.protocol,
         r.scale,
         r.warmup,
+        r.settle,
         r.repeats,
         r.reference_spp,
         r.reference_primal_spp,
@@ -354,8 +356,8 @@ pub fn write_report(out: &Path, r: &BenchReport) -> Result<()> {
     md.push_str(&gradient_table(r));
     md.push_str(
         "\nRatios are ReSTIR / baseline (below 1: ReSTIR is better). Estimator-only: both \
-         estimators under the converged adjoint; total: each with the adjoint of its own primal \
-         render. The paper (RTX 2080 Ti, 1400² images, 2048² textures) reports gradient relMSE \
+         estimators under the converged adjoint, ReSTIR after the estimates under it named \
+         above; total: each with the adjoint of its own primal render. The paper (RTX 2080 Ti, 1400² images, 2048² textures) reports gradient relMSE \
          0.23–0.32× and final image relMSE 0.18–0.73× at equal time.\n\n",
     );
     if r.scenes.iter().any(|x| x.optimization.is_some()) {

@@ -157,6 +157,8 @@ pub struct BenchReport {
     pub scale: f64,
     /// ReSTIR iterations before the gradient error is measured.
     pub warmup: u32,
+    /// ReSTIR estimates under the converged adjoint before the estimator-only error.
+    pub settle: u32,
     /// Seeds the gradient error is averaged over.
     pub repeats: u32,
     /// Gradient spp of the reference gradient.
