@@ -372,7 +372,8 @@ fn shift_trial(gpu: &psrestir::gpu::Gpu, filter: Filter, seed: u32) -> ShiftTria
         }
     }
     // Drop the first 20 estimates at A, 24 batches of 25 (each batch spans 50 iterations,
-    // longer than a kept sample's memory at M cap 16, so batches are nearly independent).
+    // longer than a kept sample's memory at the default M cap of 8, so batches are nearly
+    // independent).
     let (mean, se) = batch_mean(&samples[20..], 24);
     assert_eq!(re.faults().unwrap(), Default::default());
     ShiftTrial {

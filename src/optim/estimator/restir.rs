@@ -214,7 +214,7 @@ pub struct RestirOptions {
 impl Default for RestirOptions {
     fn default() -> Self {
         RestirOptions {
-            m_cap: 16.0,
+            m_cap: 8.0,
             confidence: Confidence::default(),
             temporal: true,
             positivization: true,
