@@ -268,27 +268,19 @@ pub(super) fn gradient_phase(
         let it = re.iteration;
         let (g_restir_total, _) = re.estimate_gradient(it)?;
         re.restore(&kept)?;
-        let baseline_at = |at: &crate::optim::OptimizerState,
-                           spp: u32,
-                           salt: u32,
-                           adjoint: Option<&[f32]>|
-         -> Result<Vec<f32>> {
+        let baseline_at = |spp: u32, salt: u32, adjoint: Option<&[f32]>| -> Result<Vec<f32>> {
             let mut b = new(Method::Baseline, spp, seed ^ salt)?;
             b.restore(&crate::optim::OptimizerState {
                 restir: None,
-                ..at.clone()
+                ..kept.clone()
             })?;
-            let it = at.iteration;
             match adjoint {
                 None => Ok(b.estimate_gradient(it)?.0),
                 Some(a) => b.estimate_gradient_with_adjoint(it + 1, a),
             }
         };
         let total = |spp, salt| -> Result<f64> {
-            Ok(gradient_relmse(
-                &baseline_at(&kept, spp, salt, None)?,
-                &reference,
-            ))
+            Ok(gradient_relmse(&baseline_at(spp, salt, None)?, &reference))
         };
         out.total_restir += gradient_relmse(&g_restir_total, &reference) / n;
         out.total_baseline_equal_iterations += total(spp, 0xea)? / n;
@@ -307,10 +299,10 @@ pub(super) fn gradient_phase(
         }
         let g_restir_only = re.estimate_gradient_with_adjoint(it + o.settle, &converged)?;
         drop(re);
-        let b_only = baseline_at(&kept, spp, 0xea, Some(&converged))?;
+        let b_only = baseline_at(spp, 0xea, Some(&converged))?;
         let only = |spp, salt| -> Result<f64> {
             Ok(gradient_relmse(
-                &baseline_at(&kept, spp, salt, Some(&converged))?,
+                &baseline_at(spp, salt, Some(&converged))?,
                 &reference,
             ))
         };
