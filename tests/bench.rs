@@ -88,6 +88,21 @@ fn bench_json_has_every_field_finite_and_in_range() {
         "gradient_relmse_estimator_only_restir",
         "gradient_relmse_estimator_only_ratio_equal_time",
     );
+    check_ratio(
+        "gradient_relmse_mean_baseline",
+        "gradient_relmse_mean_restir",
+        "gradient_relmse_mean_ratio",
+    );
+    // The mean of 10 independent baseline estimates has a tenth of one estimate's variance
+    // (plus the reference's own error, a few percent of it): below half of one estimate's
+    // error leaves room for the fluctuation of that one. (ReSTIR's successive estimates are
+    // correlated, so its mean has no such bound against one of them.)
+    assert_eq!(number(s, "successive_estimates"), 10.0);
+    assert!(
+        number(s, "gradient_relmse_mean_baseline")
+            < 0.5 * number(s, "gradient_relmse_estimator_only_baseline"),
+        "the mean of independent baseline estimates gains less than 2x over one"
+    );
     // Both estimators' costs were timed: a ReSTIR iteration is never free, nor 100x a
     // baseline iteration.
     let ms = number(s, "ms_per_iteration_ratio");

@@ -9,7 +9,9 @@
 //!    with the adjoint of its own task-spp primal render (what a user gets), and
 //!    *estimator-only*, both under the converged adjoint (what the reservoirs do), after
 //!    `settle` more ReSTIR estimates under it at the same textures (its reservoirs filled
-//!    for that integrand);
+//!    for that integrand); and the estimator-only error of the mean of successive
+//!    estimates (ReSTIR's share kept samples) against a mean of as many independent
+//!    baseline estimates;
 //! 2. equal-time optimization: both estimators optimize from the same start for the same
 //!    wall-clock budget; image relMSE (a high-spp render against the target) and texture RMSE
 //!    against the ground truth, as curves over time and at the end;
@@ -304,6 +306,10 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
             gradient_relmse_estimator_only_baseline_equal_time: g.only_baseline_equal_time,
             gradient_relmse_estimator_only_ratio_equal_time: g.only_restir
                 / g.only_baseline_equal_time,
+            gradient_relmse_mean_baseline: g.mean_baseline,
+            gradient_relmse_mean_restir: g.mean_restir,
+            gradient_relmse_mean_ratio: g.mean_restir / g.mean_baseline,
+            successive_estimates: phases::SUCCESSIVE,
             ms_per_iteration_ratio: g.ms_ratio,
             primal: settings(&prep, task, Method::Restir, o)
                 .primal

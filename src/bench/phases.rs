@@ -138,8 +138,21 @@ pub(super) struct GradientPhase {
     pub(super) only_baseline: f64,
     pub(super) only_restir: f64,
     pub(super) only_baseline_equal_time: f64,
+    pub(super) mean_baseline: f64,
+    pub(super) mean_restir: f64,
     pub(super) ms_ratio: f64,
     pub(super) snapshot: GradientSnapshot,
+}
+
+/// How many successive estimates the mean-of-estimates error averages (`GradientPhase`'s
+/// `mean_*`): about the window of Adam's first moment (β1 = 0.9), and few enough that the
+/// 256-spp reference's own error stays a small part of the baseline's mean (about 4%).
+pub(super) const SUCCESSIVE: u32 = 10;
+
+fn add_to(sum: &mut [f64], g: &[f32]) {
+    for (s, &v) in sum.iter_mut().zip(g) {
+        *s += v as f64;
+    }
 }
 
 /// The baseline's error at `k` spp (fractional) from its errors at whole spp `s0` and
@@ -182,6 +195,8 @@ pub(super) fn gradient_phase(
         only_baseline: 0.0,
         only_restir: 0.0,
         only_baseline_equal_time: 0.0,
+        mean_baseline: 0.0,
+        mean_restir: 0.0,
         ms_ratio: f64::NAN,
         snapshot: GradientSnapshot {
             reference: Vec::new(),
@@ -298,8 +313,36 @@ pub(super) fn gradient_phase(
             re.estimate_gradient_with_adjoint(it + j, &converged)?;
         }
         let g_restir_only = re.estimate_gradient_with_adjoint(it + o.settle, &converged)?;
+        // An optimizer adds up successive estimates. ReSTIR's share samples (the kept ones),
+        // so their errors are correlated and their mean gains less than a mean of
+        // independent estimates would: the error of the mean of SUCCESSIVE estimates, from
+        // this one on, against the mean of as many independent baseline estimates.
+        let mut mean_restir = g_restir_only.iter().map(|&v| v as f64).collect::<Vec<_>>();
+        for j in 1..SUCCESSIVE {
+            let g = re.estimate_gradient_with_adjoint(it + o.settle + j, &converged)?;
+            add_to(&mut mean_restir, &g);
+        }
         drop(re);
         let b_only = baseline_at(spp, 0xea, Some(&converged))?;
+        let mut mean_baseline = vec![0.0; b_only.len()];
+        {
+            let mut b = new(Method::Baseline, spp, seed ^ 0xec)?;
+            b.restore(&crate::optim::OptimizerState {
+                restir: None,
+                ..kept.clone()
+            })?;
+            for j in 0..SUCCESSIVE {
+                let g = b.estimate_gradient_with_adjoint(it + 1 + j, &converged)?;
+                add_to(&mut mean_baseline, &g);
+            }
+        }
+        let mean = |sum: Vec<f64>| -> Vec<f32> {
+            sum.iter()
+                .map(|&v| (v / SUCCESSIVE as f64) as f32)
+                .collect()
+        };
+        out.mean_restir += gradient_relmse(&mean(mean_restir), &reference) / n;
+        out.mean_baseline += gradient_relmse(&mean(mean_baseline), &reference) / n;
         let only = |spp, salt| -> Result<f64> {
             Ok(gradient_relmse(
                 &baseline_at(spp, salt, Some(&converged))?,

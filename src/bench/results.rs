@@ -67,6 +67,17 @@ pub struct SceneResult {
     pub gradient_relmse_estimator_only_baseline_equal_time: f64,
     /// restir / baseline, estimator-only, equal time.
     pub gradient_relmse_estimator_only_ratio_equal_time: f64,
+    /// Estimator-only gradient relMSE of the mean of `successive_estimates` independent
+    /// baseline estimates (the task's spp).
+    pub gradient_relmse_mean_baseline: f64,
+    /// Estimator-only gradient relMSE of the mean of ReSTIR's next `successive_estimates`
+    /// estimates (successive iterations: they share kept samples).
+    pub gradient_relmse_mean_restir: f64,
+    /// restir / baseline of the means: what survives of the single-estimate ratio when an
+    /// optimizer adds up successive steps.
+    pub gradient_relmse_mean_ratio: f64,
+    /// How many estimates those means average.
+    pub successive_estimates: u32,
     /// Mean wall-clock ms of a ReSTIR and a baseline iteration in the gradient phase (at the
     /// task's spp, GPU work finished), and their ratio.
     pub ms_per_iteration_ratio: f64,
