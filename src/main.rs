@@ -232,6 +232,9 @@ enum Command {
         /// before its estimator-only gradient error is measured.
         #[arg(long, default_value_t = 20)]
         settle: u32,
+        /// Successive estimates averaged for the error of their mean (estimator-only).
+        #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..))]
+        successive: u32,
         /// Seeds the gradient error is averaged over.
         #[arg(long, default_value_t = 3)]
         repeats: u32,
@@ -583,6 +586,7 @@ fn run(cli: Cli) -> Result<()> {
             scale,
             warmup,
             settle,
+            successive,
             repeats,
             reference_spp,
             reference_primal_spp,
@@ -609,6 +613,7 @@ fn run(cli: Cli) -> Result<()> {
                 scale,
                 warmup,
                 settle,
+                successive,
                 repeats,
                 reference_spp,
                 reference_primal_spp,

@@ -75,6 +75,11 @@ pub struct BenchOptions {
     /// ReSTIR estimates under the converged adjoint, at the textures after the warm-up,
     /// before its estimator-only error is measured.
     pub settle: u32,
+    /// Successive estimates (ReSTIR) and independent ones (baseline) averaged for the
+    /// estimator-only error of their mean: 10, about the window of Adam's first moment
+    /// (β1 = 0.9), with the 256-spp reference's own error a small part of the baseline's
+    /// mean (about 4%).
+    pub successive: u32,
     /// Seeds the gradient error is averaged over.
     pub repeats: u32,
     /// Gradient samples per pixel of the reference gradient.
@@ -107,6 +112,7 @@ impl Default for BenchOptions {
             scale: 1.0,
             warmup: 20,
             settle: 20,
+            successive: 10,
             repeats: 3,
             reference_spp: 256,
             reference_primal_spp: 256,
@@ -309,7 +315,7 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
             gradient_relmse_mean_baseline: g.mean_baseline,
             gradient_relmse_mean_restir: g.mean_restir,
             gradient_relmse_mean_ratio: g.mean_restir / g.mean_baseline,
-            successive_estimates: phases::SUCCESSIVE,
+            successive_estimates: o.successive.max(1),
             ms_per_iteration_ratio: g.ms_ratio,
             primal: settings(&prep, task, Method::Restir, o)
                 .primal

@@ -144,11 +144,6 @@ pub(super) struct GradientPhase {
     pub(super) snapshot: GradientSnapshot,
 }
 
-/// How many successive estimates the mean-of-estimates error averages (`GradientPhase`'s
-/// `mean_*`): about the window of Adam's first moment (β1 = 0.9), and few enough that the
-/// 256-spp reference's own error stays a small part of the baseline's mean (about 4%).
-pub(super) const SUCCESSIVE: u32 = 10;
-
 fn add_to(sum: &mut [f64], g: &[f32]) {
     for (s, &v) in sum.iter_mut().zip(g) {
         *s += v as f64;
@@ -315,10 +310,11 @@ pub(super) fn gradient_phase(
         let g_restir_only = re.estimate_gradient_with_adjoint(it + o.settle, &converged)?;
         // An optimizer adds up successive estimates. ReSTIR's share samples (the kept ones),
         // so their errors are correlated and their mean gains less than a mean of
-        // independent estimates would: the error of the mean of SUCCESSIVE estimates, from
+        // independent estimates would: the error of the mean of `successive` estimates, from
         // this one on, against the mean of as many independent baseline estimates.
+        let successive = o.successive.max(1);
         let mut mean_restir = g_restir_only.iter().map(|&v| v as f64).collect::<Vec<_>>();
-        for j in 1..SUCCESSIVE {
+        for j in 1..successive {
             let g = re.estimate_gradient_with_adjoint(it + o.settle + j, &converged)?;
             add_to(&mut mean_restir, &g);
         }
@@ -331,14 +327,14 @@ pub(super) fn gradient_phase(
                 restir: None,
                 ..kept.clone()
             })?;
-            for j in 0..SUCCESSIVE {
+            for j in 0..successive {
                 let g = b.estimate_gradient_with_adjoint(it + 1 + j, &converged)?;
                 add_to(&mut mean_baseline, &g);
             }
         }
         let mean = |sum: Vec<f64>| -> Vec<f32> {
             sum.iter()
-                .map(|&v| (v / SUCCESSIVE as f64) as f32)
+                .map(|&v| (v / successive as f64) as f32)
                 .collect()
         };
         out.mean_restir += gradient_relmse(&mean(mean_restir), &reference) / n;
