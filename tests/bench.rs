@@ -171,15 +171,17 @@ fn bench_rejects_unknown_scenes_and_bad_options_clearly() {
     );
     let Some(gpu) = common::gpu() else { return };
     let task = resolve_scene("dish").unwrap();
-    for (budget_s, scale, eval_spp, what) in [
-        (0.0, 1.0, 64, "budget"),
-        (1.0, -2.0, 64, "--scale"),
-        (1.0, 1.0, 0, "--eval-spp"),
+    for (budget_s, scale, eval_spp, successive, what) in [
+        (0.0, 1.0, 64, 10, "budget"),
+        (1.0, -2.0, 64, 10, "--scale"),
+        (1.0, 1.0, 0, 10, "--eval-spp"),
+        (1.0, 1.0, 64, 0, "--successive"),
     ] {
         let opts = BenchOptions {
             budget_s,
             scale,
             eval_spp,
+            successive,
             progress: false,
             out: std::env::temp_dir().join("psrestir-bench-never-written"),
             ..Default::default()

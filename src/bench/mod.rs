@@ -248,6 +248,12 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
             o.eval_spp, o.reference_spp, o.reference_primal_spp
         )));
     }
+    if o.successive == 0 || o.successive > 4096 {
+        return Err(Error::Invalid(format!(
+            "bench: --successive must be in [1, 4096], not {}",
+            o.successive
+        )));
+    }
     // Load every task first, so that a bad one fails before hours of measuring.
     let mut loaded = Vec::new();
     for p in tasks {
@@ -315,7 +321,7 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
             gradient_relmse_mean_baseline: g.mean_baseline,
             gradient_relmse_mean_restir: g.mean_restir,
             gradient_relmse_mean_ratio: g.mean_restir / g.mean_baseline,
-            successive_estimates: o.successive.max(1),
+            successive_estimates: o.successive,
             ms_per_iteration_ratio: g.ms_ratio,
             primal: settings(&prep, task, Method::Restir, o)
                 .primal

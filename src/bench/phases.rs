@@ -312,7 +312,7 @@ pub(super) fn gradient_phase(
         // so their errors are correlated and their mean gains less than a mean of
         // independent estimates would: the error of the mean of `successive` estimates, from
         // this one on, against the mean of as many independent baseline estimates.
-        let successive = o.successive.max(1);
+        let successive = o.successive;
         let mut mean_restir = g_restir_only.iter().map(|&v| v as f64).collect::<Vec<_>>();
         for j in 1..successive {
             let g = re.estimate_gradient_with_adjoint(it + o.settle + j, &converged)?;
