@@ -233,7 +233,7 @@ enum Command {
         #[arg(long, default_value_t = 20)]
         settle: u32,
         /// Successive estimates averaged for the error of their mean (estimator-only).
-        #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..=4096))]
+        #[arg(long, default_value_t = 10)]
         successive: u32,
         /// Seeds the gradient error is averaged over.
         #[arg(long, default_value_t = 3)]

@@ -278,12 +278,17 @@ pub(super) fn gradient_phase(
         let it = re.iteration;
         let (g_restir_total, _) = re.estimate_gradient(it)?;
         re.restore(&kept)?;
-        let baseline_at = |spp: u32, salt: u32, adjoint: Option<&[f32]>| -> Result<Vec<f32>> {
+        // A baseline at ReSTIR's state without the reservoirs.
+        let baseline = |spp: u32, salt: u32| -> Result<Optimizer> {
             let mut b = new(Method::Baseline, spp, seed ^ salt)?;
             b.restore(&crate::optim::OptimizerState {
                 restir: None,
                 ..kept.clone()
             })?;
+            Ok(b)
+        };
+        let baseline_at = |spp: u32, salt: u32, adjoint: Option<&[f32]>| -> Result<Vec<f32>> {
+            let mut b = baseline(spp, salt)?;
             match adjoint {
                 None => Ok(b.estimate_gradient(it)?.0),
                 Some(a) => b.estimate_gradient_with_adjoint(it + 1, a),
@@ -322,11 +327,7 @@ pub(super) fn gradient_phase(
         let b_only = baseline_at(spp, 0xea, Some(&converged))?;
         let mut mean_baseline = vec![0.0; b_only.len()];
         {
-            let mut b = new(Method::Baseline, spp, seed ^ 0xec)?;
-            b.restore(&crate::optim::OptimizerState {
-                restir: None,
-                ..kept.clone()
-            })?;
+            let mut b = baseline(spp, 0xec)?;
             for j in 0..successive {
                 let g = b.estimate_gradient_with_adjoint(it + 1 + j, &converged)?;
                 add_to(&mut mean_baseline, &g);
