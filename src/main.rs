@@ -193,6 +193,9 @@ enum Command {
         /// Levels of the multiscale gradient, 0 (off) to 4 (overrides the task).
         #[arg(long, value_parser = clap::value_parser!(u32).range(0..=4))]
         multiscale_levels: Option<u32>,
+        /// Weight of the smoothness prior, 0 (off) or more (overrides the task).
+        #[arg(long)]
+        smoothness: Option<f32>,
     },
     /// Write one gradient estimate at the task's initial textures, as images in texel space.
     Gradient {
@@ -442,6 +445,7 @@ fn run(cli: Cli) -> Result<()> {
             resume,
             primal,
             multiscale_levels,
+            smoothness,
         } => {
             let path = task.unwrap_or_else(|| PathBuf::from(DEFAULT_TASK));
             let mut task = Task::load(&path)?;
@@ -450,6 +454,9 @@ fn run(cli: Cli) -> Result<()> {
             }
             if let Some(l) = multiscale_levels {
                 task.optimizer.multiscale_levels = l;
+            }
+            if let Some(s) = smoothness {
+                task.optimizer.smoothness = s;
             }
             if let Some(b) = time_budget {
                 if !(b.is_finite() && b > 0.0) {

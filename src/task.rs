@@ -24,6 +24,7 @@
 //! checkpoint_every = 25
 //! adam_mask = true                # sparse Adam: zero-gradient entries keep value and moments
 //! multiscale_levels = 4           # gradient averaged over 2^l-texel blocks, l <= 4 (0: off)
+//! smoothness = 0.1                # weight of the smoothness prior on observed texels (0: off)
 //! eval_every = 10                 # low-noise image error every N iterations (0: never)
 //! eval_spp = 16
 //!
@@ -189,6 +190,10 @@ pub struct OptimizerSpec {
     /// texel's gradient is averaged with the mean gradients of its 2^l x 2^l blocks.
     #[serde(default)]
     pub multiscale_levels: u32,
+    /// Weight of the smoothness prior (0: off): the mean squared difference of observed
+    /// neighbouring texels, times this, is added to the loss that Adam descends.
+    #[serde(default)]
+    pub smoothness: f32,
     /// Iterations between evaluation renders (image relMSE of an `eval_spp` render of every
     /// camera against its target, outside the timed budget); 0: none.
     #[serde(default = "default_eval_every")]
@@ -573,6 +578,12 @@ impl Task {
                 ),
             ));
         }
+        if !(o.smoothness.is_finite() && (0.0..=1.0e6).contains(&o.smoothness)) {
+            return Err(self.bad(
+                "optimizer.smoothness",
+                "must be a number between 0 (off) and 1e6",
+            ));
+        }
         if o.eval_spp == 0 || o.eval_spp > 4096 {
             return Err(self.bad("optimizer.eval_spp", "must be between 1 and 4096"));
         }
@@ -677,6 +688,11 @@ learning_rate = 0.01
         assert!(e.contains("`target`"), "{e}");
         let e = err(&GOOD.replace("iterations = 10", "iterations = 10\nprimal_spp = 0"));
         assert!(e.contains("optimizer.primal_spp"), "{e}");
+        let e = err(&GOOD.replace("iterations = 10", "iterations = 10\nsmoothness = -0.1"));
+        assert!(
+            e.contains("optimizer.smoothness") && e.contains("between 0"),
+            "{e}"
+        );
         let e = err(&GOOD.replace("iterations = 10", "iterations = 10\ncv_max_weight = 1.5"));
         assert!(e.contains("optimizer.cv_max_weight"), "{e}");
         let e = err(&GOOD.replace("iterations = 10", "iterations = 10\nmultiscale_levels = 5"));

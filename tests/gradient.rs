@@ -58,6 +58,7 @@ fn check_gradient_with(
         schedule: Default::default(),
         adam_mask: false,
         multiscale_levels: 0,
+        smoothness: 0.0,
         exposure_learning_rate: None,
     };
     // Target: the scene with other texel values, rendered with many samples.

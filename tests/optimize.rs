@@ -87,6 +87,7 @@ fn setup_with(
         schedule: Default::default(),
         adam_mask: false,
         multiscale_levels: 0,
+        smoothness: 0.0,
         exposure_learning_rate: None,
     };
     change(&mut settings);
@@ -287,19 +288,16 @@ fn the_observed_mask_is_what_the_camera_sees() {
     }
 }
 
-#[test]
-fn the_multiscale_gradient_on_the_gpu_equals_the_cpu_reference() {
-    use psrestir::optim::multiscale::{reference, shift, MultiscaleParams};
-    let Some(gpu) = gpu() else { return };
-    // 40 x 40 texels (partial tiles at every shift) of which the camera sees the middle: the
-    // mask has both kinds of texel. A gradient of distinct values in every channel.
+/// 40 x 40 texels (partial multiscale tiles at every shift) of which the camera sees the
+/// middle, so that the mask has both kinds of texel; and a gradient of distinct values in
+/// every channel.
+fn partly_observed_plane() -> (Scene, ParamSet, Vec<f32>) {
     let mut scene = plane();
     scene.cameras[0] = look_at(Vec3::new(0.0, 1.2, 0.0), Vec3::ZERO, Vec3::NEG_Z, 0.9);
-    let res = 40u32;
     let spec = TextureSpec {
         material: "plane".into(),
         slot: Slot::BaseColor,
-        resolution: [res, res],
+        resolution: [40, 40],
         init: Init::Scalar(0.5),
         learning_rate: 0.01,
     };
@@ -310,10 +308,24 @@ fn the_multiscale_gradient_on_the_gpu_equals_the_cpu_reference() {
         std::path::Path::new("test"),
     )
     .unwrap();
-    let n = set.values.len();
-    let grad: Vec<f32> = (0..n)
+    let grad: Vec<f32> = (0..set.values.len())
         .map(|i| ((i * 7919) % 1009) as f32 / 1009.0 - 0.4)
         .collect();
+    (scene, set, grad)
+}
+
+/// Asserts that `mask` has more than 100 texels of each kind.
+fn assert_partly_observed(mask: &[bool]) {
+    let seen = mask.iter().filter(|&&o| o).count();
+    assert!(seen > 100 && seen < mask.len() - 100, "{seen} observed");
+}
+
+#[test]
+fn the_multiscale_gradient_on_the_gpu_equals_the_cpu_reference() {
+    use psrestir::optim::multiscale::{reference, shift, MultiscaleParams};
+    let Some(gpu) = gpu() else { return };
+    let (scene, set, grad) = partly_observed_plane();
+    let (res, n) = (40u32, set.values.len());
     // More levels than the pass has is refused by name.
     let mut too_many = Settings::new(48, 48, vec![0]);
     too_many.multiscale_levels = 5;
@@ -328,11 +340,7 @@ fn the_multiscale_gradient_on_the_gpu_equals_the_cpu_reference() {
         let mut opt =
             Optimizer::new(&gpu, &scene, set.clone(), settings, &[Image::new(48, 48)]).unwrap();
         let observed = opt.observed_texels().unwrap().to_vec();
-        let seen = observed.iter().filter(|&&o| o).count();
-        assert!(
-            seen > 100 && seen < (res * res) as usize - 100,
-            "{seen} observed"
-        );
+        assert_partly_observed(&observed);
         for iteration in [0, 5] {
             let got = opt.apply_multiscale(&grad, iteration).unwrap();
             let (shift_x, shift_y) = shift(11, iteration);
@@ -370,6 +378,53 @@ fn the_multiscale_gradient_on_the_gpu_equals_the_cpu_reference() {
             );
         }
     }
+}
+
+#[test]
+fn the_smoothness_prior_on_the_gpu_equals_the_cpu_reference() {
+    use psrestir::optim::smoothness::{params, reference};
+    let Some(gpu) = gpu() else { return };
+    let (scene, set, grad) = partly_observed_plane();
+    let n = set.values.len();
+    // A negative or non-finite weight is refused by name.
+    for bad in [-1.0, f32::NAN] {
+        let mut s = Settings::new(48, 48, vec![0]);
+        s.smoothness = bad;
+        let e = Optimizer::new(&gpu, &scene, set.clone(), s, &[Image::new(48, 48)])
+            .err()
+            .expect("bad smoothness accepted");
+        assert!(e.to_string().contains("smoothness"), "{e}");
+    }
+    let lambda = 0.5;
+    let mut settings = Settings::new(48, 48, vec![0]);
+    settings.smoothness = lambda;
+    let mut opt =
+        Optimizer::new(&gpu, &scene, set.clone(), settings, &[Image::new(48, 48)]).unwrap();
+    let observed = opt.observed_texels().unwrap().to_vec();
+    assert_partly_observed(&observed);
+    // Textures that differ between neighbours in every channel.
+    let values: Vec<f32> = (0..n).map(|i| ((i * 31) % 97) as f32 / 97.0).collect();
+    opt.write_params(&values).unwrap();
+    let got = opt.apply_smoothness(&grad).unwrap();
+    let p = params(&set, &observed, lambda)[0];
+    let mut want = grad.clone();
+    reference(&p, &mut want, &values, &observed);
+    let mut changed = 0;
+    for i in 0..n {
+        // Up to four terms summed in another order: a few ulps.
+        assert!(
+            (got[i] - want[i]).abs() <= 1e-6 * want[i].abs().max(1.0),
+            "entry {i}: {} vs {}",
+            got[i],
+            want[i]
+        );
+        if !observed[i / 3] {
+            assert_eq!(got[i], grad[i], "unobserved entry {i} changed");
+        } else if (got[i] - grad[i]).abs() > 1e-7 {
+            changed += 1;
+        }
+    }
+    assert!(changed > n / 10, "only {changed} entries changed");
 }
 
 #[test]

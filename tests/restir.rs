@@ -110,6 +110,7 @@ fn optimizer_seeded(
         schedule: Default::default(),
         adam_mask: false,
         multiscale_levels: 0,
+        smoothness: 0.0,
         exposure_learning_rate: None,
     };
     let base = Settings {
@@ -169,6 +170,7 @@ fn without_reuse_restir_equals_the_baseline_for_scalar_textures() {
             schedule: Default::default(),
             adam_mask: false,
             multiscale_levels: 0,
+            smoothness: 0.0,
             exposure_learning_rate: None,
         };
         let opt = Optimizer::new(
@@ -542,6 +544,7 @@ fn gradients_follow_a_sign_change() {
             schedule: Default::default(),
             adam_mask: false,
             multiscale_levels: 0,
+            smoothness: 0.0,
             exposure_learning_rate: None,
         };
         let opt = Optimizer::new(

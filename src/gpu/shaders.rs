@@ -59,6 +59,7 @@ pub const SOURCES: &[(&str, &str)] = sources!(
     "observed_texels",
     "primal_cv",
     "multiscale_gradient",
+    "smoothness",
 );
 
 /// WGSL `const` declarations of `u32` values, with a header naming the Rust file they come

@@ -14,6 +14,7 @@ pub mod primal;
 pub mod problem;
 pub mod run;
 pub mod schedule;
+pub mod smoothness;
 pub mod texture_export;
 
 mod measure;
@@ -129,6 +130,8 @@ pub struct Optimizer {
     observed: std::sync::OnceLock<Vec<bool>>,
     /// The multiscale gradient pass, built at the first step that uses it.
     multiscale: Option<multiscale::Multiscale>,
+    /// The smoothness prior's pass, built at the first step that uses it.
+    smoothness: Option<smoothness::Smoothness>,
     /// Fraction of the run done, for the learning-rate schedule.
     progress: f64,
     /// Learning rate of each texture in the last Adam step.
@@ -188,6 +191,12 @@ impl Optimizer {
                 "multiscale_levels must be between 0 and {}, not {}",
                 multiscale::MAX_LEVELS,
                 settings.multiscale_levels
+            )));
+        }
+        if !(settings.smoothness.is_finite() && (0.0..=1.0e6).contains(&settings.smoothness)) {
+            return Err(Error::Invalid(format!(
+                "smoothness must be a number between 0 (off) and 1e6, not {}",
+                settings.smoothness
             )));
         }
         if !(0.0..=1.0).contains(&settings.cv_max_weight) {
@@ -359,8 +368,8 @@ impl Optimizer {
             adam.push((u, g, p));
         }
         // Primal, control variate and loss per camera, the estimator's passes (at most two
-        // per camera), Adam per texture.
-        let timer = PassTimer::new(gpu, 6 * n_cams + 2 + 2 * set.textures.len() as u32);
+        // per camera), smoothness, multiscale and Adam per texture.
+        let timer = PassTimer::new(gpu, 6 * n_cams + 2 + 3 * set.textures.len() as u32);
         gpu.check("optimizer setup")?;
         Ok(Optimizer {
             gpu: gpu.clone(),
@@ -397,6 +406,7 @@ impl Optimizer {
             export_pipeline: std::sync::OnceLock::new(),
             observed: std::sync::OnceLock::new(),
             multiscale: None,
+            smoothness: None,
             progress: 0.0,
             last_learning_rates: Vec::new(),
             iteration: 0,
@@ -487,6 +497,7 @@ impl Optimizer {
 
     /// One iteration: render, loss, gradient, Adam. Returns the loss of the render.
     pub fn step(&mut self) -> Result<StepStats> {
+        self.prepare_smoothness()?;
         self.prepare_multiscale()?;
         let mut enc = self
             .gpu
@@ -501,6 +512,9 @@ impl Optimizer {
             .device
             .limits()
             .max_compute_workgroups_per_dimension;
+        if let Some(s) = &self.smoothness {
+            s.encode(&mut enc, &mut self.timer);
+        }
         self.encode_multiscale(&mut enc, self.iteration);
         let factor = self.settings.schedule.factor(self.iteration, self.progress);
         self.last_learning_rates.clear();

@@ -85,6 +85,7 @@ pub fn task_settings(
         schedule: task.optimizer.schedule.clone(),
         adam_mask: task.optimizer.adam_mask,
         multiscale_levels: task.optimizer.multiscale_levels,
+        smoothness: task.optimizer.smoothness,
         exposure_learning_rate: task
             .optimizer
             .optimize_exposure

@@ -39,6 +39,10 @@ pub struct Settings {
     /// Levels of the multiscale gradient (0: off; at most 4; see [`super::multiscale`]): each
     /// observed texel's gradient is averaged with its 2^l x 2^l blocks' before Adam.
     pub multiscale_levels: u32,
+    /// Weight of the smoothness prior (0: off; see [`super::smoothness`]): the gradient of
+    /// `smoothness * mean squared difference of observed neighbouring texels` is added to
+    /// the image loss's before the multiscale gradient and Adam.
+    pub smoothness: f32,
     /// Optimize the per-camera exposures (see [`Optimizer::set_exposure`]) with Adam on
     /// their logarithms, at this learning rate; None: exposures stay fixed.
     pub exposure_learning_rate: Option<f32>,
@@ -63,6 +67,7 @@ impl Settings {
             schedule: Schedule::constant(),
             adam_mask: false,
             multiscale_levels: 0,
+            smoothness: 0.0,
             exposure_learning_rate: None,
         }
     }

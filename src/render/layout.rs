@@ -171,6 +171,7 @@ mod tests {
             crate::optim::primal::PRIMAL_CV_GROUP,
             crate::optim::observed::OBSERVED_GROUP,
             crate::optim::multiscale::MULTISCALE_GROUP,
+            crate::optim::smoothness::SMOOTHNESS_GROUP,
             baseline::GRADIENT_GROUP,
             restir::CANDIDATES_GROUP,
             restir::MERGE_GROUP,
@@ -415,6 +416,12 @@ mod tests {
                 shift_y,
                 texel_offset
             ]
+        );
+        mirror!(
+            "smoothness",
+            "SmoothnessParams",
+            crate::optim::smoothness::SmoothnessParams,
+            [offset, width, height, channels, texel_offset, scale]
         );
         mirror!(
             "restir_candidates",
