@@ -164,27 +164,10 @@ impl super::Optimizer {
                 "apply_multiscale: the settings have multiscale_levels = 0".into(),
             ));
         }
-        if grad.len() != self.set.values.len() {
-            return Err(crate::error::Error::Invalid(format!(
-                "apply_multiscale: {} values for {} parameters",
-                grad.len(),
-                self.set.values.len()
-            )));
-        }
         self.prepare_multiscale()?;
-        self.gpu
-            .queue
-            .write_buffer(&self.grad, 0, bytemuck::cast_slice(grad));
-        let mut enc = self
-            .gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("multiscale_gradient"),
-            });
-        self.timer.begin();
-        self.encode_multiscale(&mut enc, iteration);
-        self.gpu.queue.submit([enc.finish()]);
-        self.read_gradient()
+        self.transform_gradient("apply_multiscale", grad, |opt, enc| {
+            opt.encode_multiscale(enc, iteration)
+        })
     }
 
     /// Record the pass for `iteration` when the settings ask for it (after

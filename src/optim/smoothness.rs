@@ -222,29 +222,12 @@ impl super::Optimizer {
                 "apply_smoothness: the settings have smoothness = 0".into(),
             ));
         }
-        if grad.len() != self.set.values.len() {
-            return Err(crate::error::Error::Invalid(format!(
-                "apply_smoothness: {} values for {} parameters",
-                grad.len(),
-                self.set.values.len()
-            )));
-        }
         self.prepare_smoothness()?;
-        self.gpu
-            .queue
-            .write_buffer(&self.grad, 0, bytemuck::cast_slice(grad));
-        let mut enc = self
-            .gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("smoothness"),
-            });
-        self.timer.begin();
-        if let Some(s) = &self.smoothness {
-            s.encode(&mut enc, &mut self.timer);
-        }
-        self.gpu.queue.submit([enc.finish()]);
-        self.read_gradient()
+        self.transform_gradient("apply_smoothness", grad, |opt, enc| {
+            if let Some(s) = &opt.smoothness {
+                s.encode(enc, &mut opt.timer);
+            }
+        })
     }
 }
 
