@@ -208,11 +208,17 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     // device those live in memory.
     var k0 = Evaluated(0.0, vec3f(0.0));
     var k1 = Evaluated(0.0, vec3f(0.0));
-    if kept_w.x > 0.0 {
-        k0 = evaluate_kept(kept_r.x, ti, local, ch, verify);
-    }
-    if kept_w.y > 0.0 {
-        k1 = evaluate_kept(kept_r.y, ti, local, ch, verify);
+    // One loop over the kept inputs that hold a sample, so that neighbouring invocations
+    // that need one evaluation run it together whichever sign it is for.
+    let n_kept = u32(kept_w.x > 0.0) + u32(kept_w.y > 0.0);
+    for (var i = 0u; i < n_kept; i++) {
+        let second = i == 1u || !(kept_w.x > 0.0);
+        let e = evaluate_kept(select(kept_r.x, kept_r.y, second), ti, local, ch, verify);
+        if second {
+            k1 = e;
+        } else {
+            k0 = e;
+        }
     }
     let k_qprev = vec2f(k0.q_prev, k1.q_prev);
     let k_qcur = vec2f(target_of(k0.v, ch), target_of(k1.v, ch));
