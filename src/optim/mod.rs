@@ -127,7 +127,9 @@ pub struct Optimizer {
     /// The texture_export pipeline, built on first use.
     export_pipeline: std::sync::OnceLock<wgpu::ComputePipeline>,
     /// The observed-texel mask, computed on first use.
-    observed: std::sync::OnceLock<Vec<bool>>,
+    /// Its flags, and the GPU buffer they were read from (one word per texel, nonzero:
+    /// observed), which the multiscale and smoothness passes bind.
+    observed: std::sync::OnceLock<(Vec<bool>, wgpu::Buffer)>,
     /// The multiscale gradient pass, built at the first step that uses it.
     multiscale: Option<multiscale::Multiscale>,
     /// The smoothness prior's pass, built at the first step that uses it.

@@ -51,33 +51,25 @@ pub fn shift(seed: u32, iteration: u32) -> (u32, u32) {
     (h % TILE, (h / TILE) % TILE)
 }
 
-/// The pass over every optimized texture, with the observed-texel mask on the GPU.
+/// The pass over every optimized texture.
 pub(crate) struct Multiscale {
     pipeline: wgpu::ComputePipeline,
     /// Per texture: its uniform, bind group and parameters.
     textures: Vec<(wgpu::Buffer, wgpu::BindGroup, MultiscaleParams)>,
-    /// Keeps the mask alive for the bind groups.
-    _observed: wgpu::Buffer,
 }
 
 impl Multiscale {
     /// The pass for `set` with `levels` levels (1..=[`MAX_LEVELS`]) over the texels marked in
-    /// `observed` (one flag per texel, in the order of `set.textures`).
+    /// `mask` (the observed-texel buffer: one word per texel, in the order of `set.textures`).
     pub fn new(
         gpu: &Gpu,
         set: &ParamSet,
         grad: &wgpu::Buffer,
-        observed: &[bool],
+        mask: &wgpu::Buffer,
         levels: u32,
     ) -> Result<Multiscale> {
         let layout = gpu.pass_layout("multiscale_gradient", 0)?;
         let pipeline = gpu.compute_pipeline("multiscale_gradient", &[&layout])?;
-        let words: Vec<u32> = observed.iter().map(|&o| o as u32).collect();
-        let mask = gpu.storage(
-            "multiscale observed texels",
-            bytemuck::cast_slice(&words),
-            wgpu::BufferUsages::empty(),
-        );
         let mut textures = Vec::new();
         let mut texel_offset = 0;
         for t in &set.textures {
@@ -100,15 +92,11 @@ impl Multiscale {
                 &MULTISCALE_GROUP,
                 "multiscale_gradient",
                 &layout,
-                &[("mp", &u), ("grad", grad), ("observed", &mask)],
+                &[("mp", &u), ("grad", grad), ("observed", mask)],
             );
             textures.push((u, g, p));
         }
-        Ok(Multiscale {
-            pipeline,
-            textures,
-            _observed: mask,
-        })
+        Ok(Multiscale { pipeline, textures })
     }
 
     /// Record the pass over every texture for `iteration`.
@@ -148,8 +136,8 @@ impl super::Optimizer {
     pub(crate) fn prepare_multiscale(&mut self) -> Result<()> {
         let levels = self.settings.multiscale_levels;
         if levels > 0 && self.multiscale.is_none() {
-            let observed = self.observed_texels()?.to_vec();
-            let m = Multiscale::new(&self.gpu, &self.set, &self.grad, &observed, levels)?;
+            let (_, mask) = self.observed_mask()?;
+            let m = Multiscale::new(&self.gpu, &self.set, &self.grad, mask, levels)?;
             self.multiscale = Some(m);
         }
         Ok(())

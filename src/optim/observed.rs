@@ -36,6 +36,12 @@ impl Optimizer {
     /// within each), whether some camera sample of the task reaches it with a non-zero filter
     /// weight: 4 x 4 rays per pixel and camera, computed on the GPU at the first call.
     pub fn observed_texels(&self) -> Result<&[bool]> {
+        Ok(&self.observed_mask()?.0)
+    }
+
+    /// [`Optimizer::observed_texels`] and the GPU buffer it was read from (one `u32` per
+    /// texel, nonzero where observed).
+    pub(crate) fn observed_mask(&self) -> Result<&(Vec<bool>, wgpu::Buffer)> {
         if let Some(m) = self.observed.get() {
             return Ok(m);
         }
@@ -79,7 +85,7 @@ impl Optimizer {
         let words: Vec<u32> = gpu.read_pod(&mask)?;
         gpu.check("observed_texels")?;
         let m = words[..n_texels as usize].iter().map(|&w| w != 0).collect();
-        Ok(self.observed.get_or_init(|| m))
+        Ok(self.observed.get_or_init(|| (m, mask)))
     }
 }
 

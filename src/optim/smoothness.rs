@@ -141,23 +141,18 @@ pub(crate) struct Smoothness {
 
 impl Smoothness {
     /// The pass adding the prior's derivative with weight `lambda` to `grad`, from the
-    /// parameters in `params`, over the texels marked in `observed`.
+    /// parameters in `params`, over the texels marked in `observed` (one flag per texel)
+    /// and, on the GPU, in `mask` (the observed-texel buffer).
     pub fn new(
         gpu: &Gpu,
         set: &ParamSet,
         grad: &wgpu::Buffer,
         params_buf: &wgpu::Buffer,
-        observed: &[bool],
+        (observed, mask): &(Vec<bool>, wgpu::Buffer),
         lambda: f32,
     ) -> Result<Smoothness> {
         let layout = gpu.pass_layout("smoothness", 0)?;
         let pipeline = gpu.compute_pipeline("smoothness", &[&layout])?;
-        let words: Vec<u32> = observed.iter().map(|&o| o as u32).collect();
-        let mask = gpu.storage(
-            "smoothness observed texels",
-            bytemuck::cast_slice(&words),
-            wgpu::BufferUsages::empty(),
-        );
         let mut textures = Vec::new();
         for (t, p) in set.textures.iter().zip(params(set, observed, lambda)) {
             let u = gpu.uniform(
@@ -172,7 +167,7 @@ impl Smoothness {
                     ("sp", &u),
                     ("grad", grad),
                     ("params", params_buf),
-                    ("observed", &mask),
+                    ("observed", mask),
                 ],
             );
             textures.push((g, p));
@@ -199,13 +194,12 @@ impl super::Optimizer {
     pub(crate) fn prepare_smoothness(&mut self) -> Result<()> {
         let lambda = self.settings.smoothness;
         if lambda > 0.0 && self.smoothness.is_none() {
-            let observed = self.observed_texels()?.to_vec();
             let s = Smoothness::new(
                 &self.gpu,
                 &self.set,
                 &self.grad,
                 &self.params.values,
-                &observed,
+                self.observed_mask()?,
                 lambda,
             )?;
             self.smoothness = Some(s);
