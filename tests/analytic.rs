@@ -1,12 +1,13 @@
 //! Renders of scenes with a closed-form answer: a plane under a point light (radiance
 //! f cos I / d^2 at every point) and a plane under a constant environment (radiance =
-//! environment x directional albedo of the BRDF, integrated on the CPU).
+//! environment x directional albedo of the BRDF, integrated on the CPU); and the texel
+//! coordinates the shaders' texture lookups wrap to.
 mod common;
 
 use common::*;
 use glam::{Vec2, Vec3};
 use psrestir::render::{RenderSettings, Renderer, Techniques};
-use psrestir::scene::{EnvMap, PunctualKind, PunctualLight};
+use psrestir::scene::{EnvMap, PunctualKind, PunctualLight, Wrap};
 
 const W: u32 = 64;
 
@@ -143,4 +144,59 @@ fn plane_under_a_constant_environment_matches_the_albedo_integral() {
         .rgb
         .iter()
         .all(|p| p.iter().all(|&v| v.is_finite() && v >= 0.0)));
+}
+
+#[test]
+fn texel_coordinates_wrap_as_the_integer_modulo() {
+    let Some(gpu) = gpu() else { return };
+    // The shaders wrap without an integer division (shared/wrap.wgsl): exact for |i| <= 2^23,
+    // the range of texel coordinates that come from f32 texture coordinates with a sub-texel
+    // step; beyond it, at least inside the texture.
+    let exact = 1i64 << 23;
+    let mut rng = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        rng
+    };
+    for n in [1i32, 2, 3, 7, 64, 255, 256, 1000, 4096, 65536, 1 << 22] {
+        let mut coords: Vec<i32> = (-3 * n.min(5000)..=3 * n.min(5000)).collect();
+        for _ in 0..20000 {
+            coords.push((next() % (2 * exact as u64 + 1)) as i64 as i32 - exact as i32);
+        }
+        coords.extend([
+            i32::MIN,
+            i32::MAX,
+            -(1 << 24) - 1,
+            1 << 24,
+            1 << 30,
+            -(1 << 30),
+        ]);
+        for wrap in [Wrap::Repeat, Wrap::Clamp, Wrap::Mirror] {
+            let got = psrestir::render::wrap_trial(&gpu, &coords, n, wrap).unwrap();
+            for (&i, &g) in coords.iter().zip(&got) {
+                let (i64_, n64) = (i as i64, n as i64);
+                let want = match wrap {
+                    Wrap::Clamp => i64_.clamp(0, n64 - 1),
+                    Wrap::Repeat => i64_.rem_euclid(n64),
+                    Wrap::Mirror => {
+                        let m = i64_.rem_euclid(2 * n64);
+                        if m >= n64 {
+                            2 * n64 - 1 - m
+                        } else {
+                            m
+                        }
+                    }
+                };
+                assert!(
+                    (0..n).contains(&g),
+                    "{wrap:?}: {i} in width {n} wrapped to {g}"
+                );
+                if i64_.abs() <= exact {
+                    assert_eq!(g as i64, want, "{wrap:?}: {i} in width {n}");
+                }
+            }
+        }
+    }
 }

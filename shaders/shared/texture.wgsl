@@ -1,34 +1,11 @@
 // Texture lookups from the packed RGBA8 texel buffer: wrap modes, nearest and bilinear.
 #import shared/scene
+#import shared/wrap
 
 fn srgb_to_linear(c: vec3f) -> vec3f {
     let lo = c / 12.92;
     let hi = pow((c + 0.055) / 1.055, vec3f(2.4));
     return select(hi, lo, c <= vec3f(0.04045));
-}
-
-// Wrap an integer texel coordinate: 0 repeat, 1 clamp to edge, 2 mirrored repeat.
-fn wrap_coord(i: i32, n: i32, mode: u32) -> i32 {
-    switch mode {
-        case 1u: {
-            return clamp(i, 0, n - 1);
-        }
-        case 2u: {
-            let period = 2 * n;
-            var m = i % period;
-            if m < 0 {
-                m += period;
-            }
-            return select(m, period - 1 - m, m >= n);
-        }
-        default: {
-            var m = i % n;
-            if m < 0 {
-                m += n;
-            }
-            return m;
-        }
-    }
 }
 
 fn fetch_texel(t: TexRef, x: i32, y: i32) -> vec4f {

@@ -38,6 +38,76 @@ fn wrap_bits(w: Wrap) -> u32 {
     }
 }
 
+/// `TextureWrapTestParams` in texture_wrap_test.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct TextureWrapTestParams {
+    pub n: i32,
+    pub mode: u32,
+    pub count: u32,
+    pub _pad: u32,
+}
+
+/// Group 0 of `texture_wrap_test.wgsl`.
+pub(crate) const TEXTURE_WRAP_TEST_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
+    pass: "texture_wrap_test",
+    group: 0,
+    names: &["tw", "coords", "wrapped"],
+};
+
+/// The texel coordinates the shaders' lookups use for `coords` in a texture `n` texels wide
+/// with wrap mode `wrap` (shared/wrap.wgsl, run on the GPU), for tests against the CPU
+/// lookup. At most 4,194,240 coordinates.
+pub fn wrap_trial(gpu: &Gpu, coords: &[i32], n: i32, wrap: Wrap) -> Result<Vec<i32>> {
+    if coords.is_empty() {
+        return Ok(Vec::new());
+    }
+    let count = coords.len() as u32;
+    let groups = count.div_ceil(super::WORKGROUP);
+    if groups > gpu.device.limits().max_compute_workgroups_per_dimension || n <= 0 {
+        return Err(Error::Invalid(format!(
+            "wrap_trial: {count} coordinates, width {n}"
+        )));
+    }
+    let params = TextureWrapTestParams {
+        n,
+        mode: wrap_bits(wrap),
+        count,
+        _pad: 0,
+    };
+    let layout = gpu.pass_layout("texture_wrap_test", 0)?;
+    let pipeline = gpu.compute_pipeline("texture_wrap_test", &[&layout])?;
+    let uniform = gpu.uniform("texture_wrap_test params", bytemuck::bytes_of(&params));
+    let input = gpu.storage(
+        "texture_wrap_test coords",
+        bytemuck::cast_slice(coords),
+        wgpu::BufferUsages::empty(),
+    );
+    let output = gpu.storage_zeroed("texture_wrap_test wrapped", coords.len() as u64 * 4);
+    let group = gpu.bind(
+        &TEXTURE_WRAP_TEST_GROUP,
+        "texture_wrap_test",
+        &layout,
+        &[("tw", &uniform), ("coords", &input), ("wrapped", &output)],
+    );
+    let mut enc = gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("texture_wrap_test"),
+        });
+    crate::gpu::encode_pass(
+        &mut enc,
+        "texture_wrap_test",
+        &pipeline,
+        &[&group],
+        (groups, 1),
+    );
+    gpu.queue.submit([enc.finish()]);
+    let mut out: Vec<i32> = gpu.read_pod(&output)?;
+    out.truncate(coords.len());
+    Ok(out)
+}
+
 /// Luminance in f64, so that the power of a light with an intensity near f32::MAX stays
 /// finite.
 fn luminance(c: Vec3) -> f64 {

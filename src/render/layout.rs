@@ -176,6 +176,7 @@ mod tests {
             restir::CANDIDATES_GROUP,
             restir::MERGE_GROUP,
             restir::RESERVOIR_TEST_GROUP,
+            crate::render::gpu_scene::TEXTURE_WRAP_TEST_GROUP,
             crate::optim::texture_export::TEXTURE_EXPORT_GROUP,
         ];
         for d in &decls {
@@ -329,6 +330,12 @@ mod tests {
                 env_total,
                 scene_radius
             ]
+        );
+        mirror!(
+            "texture_wrap_test",
+            "TextureWrapTestParams",
+            crate::render::gpu_scene::TextureWrapTestParams,
+            [n, mode, count]
         );
         mirror!(
             "render",

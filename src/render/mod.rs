@@ -7,7 +7,7 @@ mod gpu_scene;
 pub mod layout;
 pub mod params;
 
-pub use gpu_scene::{AccelerationStructure, GpuScene};
+pub use gpu_scene::{wrap_trial, AccelerationStructure, GpuScene};
 
 use crate::gpu::{encode_pass, encode_timed_pass, grid_2d, Gpu};
 use crate::image_io::Image;
