@@ -57,7 +57,8 @@ pub(crate) const TEXTURE_WRAP_TEST_GROUP: crate::gpu::GroupDecl = crate::gpu::Gr
 
 /// The texel coordinates the shaders' lookups use for `coords` in a texture `n` texels wide
 /// with wrap mode `wrap` (shared/wrap.wgsl, run on the GPU), for tests against the CPU
-/// lookup. At most 4,194,240 coordinates.
+/// lookup. At most 64 times the device's workgroups-per-dimension limit of coordinates
+/// (4,194,240 on lavapipe).
 pub fn wrap_trial(gpu: &Gpu, coords: &[i32], n: i32, wrap: Wrap) -> Result<Vec<i32>> {
     if coords.is_empty() {
         return Ok(Vec::new());
