@@ -176,24 +176,12 @@ fn texel_coordinates_wrap_as_the_integer_modulo() {
         for wrap in [Wrap::Repeat, Wrap::Clamp, Wrap::Mirror] {
             let got = psrestir::render::wrap_trial(&gpu, &coords, n, wrap).unwrap();
             for (&i, &g) in coords.iter().zip(&got) {
-                let (i64_, n64) = (i as i64, n as i64);
-                let want = match wrap {
-                    Wrap::Clamp => i64_.clamp(0, n64 - 1),
-                    Wrap::Repeat => i64_.rem_euclid(n64),
-                    Wrap::Mirror => {
-                        let m = i64_.rem_euclid(2 * n64);
-                        if m >= n64 {
-                            2 * n64 - 1 - m
-                        } else {
-                            m
-                        }
-                    }
-                };
+                let want = psrestir::scene::images::wrap_texel(i as i64, n as i64, wrap);
                 assert!(
                     (0..n).contains(&g),
                     "{wrap:?}: {i} in width {n} wrapped to {g}"
                 );
-                if i64_.abs() <= exact {
+                if (i as i64).abs() <= exact {
                     assert_eq!(g as i64, want, "{wrap:?}: {i} in width {n}");
                 }
             }

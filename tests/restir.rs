@@ -616,12 +616,18 @@ fn gradients_follow_a_sign_change() {
     }
 }
 
-fn default_task() -> psrestir::task::Task {
+/// The bundled default task at `side`² pixels (a quarter of its own at 64) with targets of
+/// `target_spp`.
+fn shrunk_default_task(side: u32, target_spp: u32) -> psrestir::task::Task {
     let path = std::path::Path::new(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/scenes/default/task.toml"
     ));
-    psrestir::task::Task::load(path).unwrap()
+    let mut task = psrestir::task::Task::load(path).unwrap();
+    task.width = side;
+    task.height = side;
+    task.target.spp = target_spp;
+    task
 }
 
 #[test]
@@ -632,10 +638,7 @@ fn restir_beats_the_baseline_on_the_default_scene_at_low_sampling() {
     // sampling the task had before it moved to 4 and 2 spp with the control-variate primal:
     // a 2-spp independent primal and 1 gradient spp, the sparse regime where reuse gains.
     // (With the task's own sampling the two estimators end level: README, Quickstart.)
-    let mut task = default_task();
-    task.width = 64;
-    task.height = 64;
-    task.target.spp = 128;
+    let mut task = shrunk_default_task(64, 128);
     task.optimizer.primal_spp = 2;
     task.optimizer.gradient_spp = 1;
     task.optimizer.primal = psrestir::optim::PrimalMode::Independent;
@@ -689,10 +692,7 @@ fn the_shrunk_default_task_recovers_its_texture() {
     // after a third, at 64^2 and at 96^2). The bounds leave room for other devices' rounding
     // and fail on a late rise or on the speckle the task gave before its schedule and
     // multiscale gradient (all-texel RMSE 0.94x after 150 iterations).
-    let mut task = default_task();
-    task.width = 64;
-    task.height = 64;
-    task.target.spp = 512;
+    let mut task = shrunk_default_task(64, 512);
     task.textures[0].resolution = [128, 64];
     let dir = tempfile::tempdir().unwrap();
     let prep = psrestir::optim::Problem::from_task(&gpu, &task, dir.path(), false).unwrap();

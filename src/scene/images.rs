@@ -3,6 +3,23 @@
 pub use crate::image_io::decode::Image8;
 use crate::image_io::srgb_to_linear;
 
+/// Texel coordinate `i` of a texture `n` texels wide wrapped into [0, n) with mode `w`, as
+/// shaders/shared/wrap.wgsl does.
+pub fn wrap_texel(i: i64, n: i64, w: super::Wrap) -> i64 {
+    match w {
+        super::Wrap::Clamp => i.clamp(0, n - 1),
+        super::Wrap::Repeat => i.rem_euclid(n),
+        super::Wrap::Mirror => {
+            let m = i.rem_euclid(2 * n);
+            if m >= n {
+                2 * n - 1 - m
+            } else {
+                m
+            }
+        }
+    }
+}
+
 /// Bilinear lookup as in shaders/shared/texture.wgsl (wrap modes, transform, sRGB decoding),
 /// on the CPU. Returns linear RGBA.
 pub fn sample_bilinear(
@@ -14,20 +31,7 @@ pub fn sample_bilinear(
     let t = slot.transform;
     let u = t[0][0] * uv[0] + t[0][1] * uv[1] + t[0][2];
     let v = t[1][0] * uv[0] + t[1][1] * uv[1] + t[1][2];
-    let wrap = |i: i64, n: i64, w: super::Wrap| -> usize {
-        (match w {
-            super::Wrap::Clamp => i.clamp(0, n - 1),
-            super::Wrap::Repeat => i.rem_euclid(n),
-            super::Wrap::Mirror => {
-                let m = i.rem_euclid(2 * n);
-                if m >= n {
-                    2 * n - 1 - m
-                } else {
-                    m
-                }
-            }
-        }) as usize
-    };
+    let wrap = |i: i64, n: i64, w: super::Wrap| wrap_texel(i, n, w) as usize;
     let (w, h) = (img.width as i64, img.height as i64);
     let fetch = |x: i64, y: i64| -> [f32; 4] {
         let p = img.rgba[wrap(y, h, slot.wrap_t) * img.width as usize + wrap(x, w, slot.wrap_s)];
