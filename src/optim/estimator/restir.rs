@@ -82,8 +82,9 @@ pub mod reservoir {
     /// textures and adjoint (f32), computed by the candidate pass, which has the material
     /// at hand, so that the merge does not evaluate fresh paths again.
     pub const Q_PREV: u32 = 15;
-    /// Words per reservoir.
+    /// Words per reservoir (a multiple of 4: the merge reads a reservoir as vec4s).
     pub const WORDS: u32 = 16;
+    const _: () = assert!(WORDS.is_multiple_of(4));
     /// Bits of the pixel index (images up to 8192 x 8192 = 2^26 pixels).
     pub const CAMERA_SHIFT: u32 = 26;
     /// Camera index mask after the shift.
