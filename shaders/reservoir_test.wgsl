@@ -30,7 +30,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         return;
     }
     rng_init(tp.seed, i, 0u);
-    let cand = Candidate(c, vec3f(w, 0.0, 0.0), PathVertex(0u, vec2f(0.0), vec2f(0.0), vec2f(0.0)), vec3f(0.0), 0.0);
+    let cand = Candidate(c, vec3f(w, 0.0, 0.0), PathVertex(0u, vec2f(0.0), vec2f(0.0), vec2f(0.0), vec4f(0.0)), vec3f(0.0), 0.0);
     if !reservoir_offer(r, r, w, rand(), cand) {
         atomicAdd(&failures[0], 1u);
     }

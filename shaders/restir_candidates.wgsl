@@ -116,7 +116,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
             // The path's derivatives under the previous textures, from the stored (rounded)
             // directions, as the merge would evaluate them (shared/surface.wgsl, path_value).
             use_prev_params = true;
-            let mat_prev = material_at(g.sf.material, g.sf.uv);
+            let mat_prev = with_optimized(g.sf.material, g.sf.uv, fixed_unpack(g.sf.material, g.nee_vertex.fixed));
             use_prev_params = false;
             let wo = oct_decode(g.nee_vertex.wo);
             nee_prev = brdf_eval_cos_grad(mat_prev, wo, oct_decode(g.nee_vertex.wi));

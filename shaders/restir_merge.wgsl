@@ -112,6 +112,7 @@ fn load(r: u32) -> Stored {
         bitcast<vec2f>(vec2u(word_of(q, RES_UV), word_of(q, RES_UV + 1u))),
         bitcast<vec2f>(vec2u(word_of(q, RES_WO), word_of(q, RES_WO + 1u))),
         bitcast<vec2f>(vec2u(word_of(q, RES_WI), word_of(q, RES_WI + 1u))),
+        bitcast<vec4f>(vec4u(word_of(q, RES_FIXED), word_of(q, RES_FIXED + 1u), word_of(q, RES_FIXED + 2u), word_of(q, RES_FIXED + 3u))),
     );
     s.radiance = bitcast<vec3f>(vec3u(word_of(q, RES_RADIANCE), word_of(q, RES_RADIANCE + 1u), word_of(q, RES_RADIANCE + 2u)));
     return s;

@@ -481,6 +481,58 @@ fn the_merge_pass_traces_no_ray() {
     assert!(d.evaluations > 0, "{d:?}");
 }
 
+/// A stored path carries the material inputs that no optimized texture replaces
+/// (shaders/shared/surface.wgsl, fixed_pack), packed by which slots are optimized; the merge
+/// evaluates kept paths from them. For every combination of optimized slots on a material
+/// whose base color, metallic and roughness differ, with the textures alternating between
+/// two states, every kept path evaluates to its stored value (the path self-check): a
+/// packing that mixed up two inputs would miss by far more than rounding.
+#[test]
+fn stored_paths_keep_the_inputs_no_texture_replaces() {
+    let Some(gpu) = gpu() else { return };
+    let combinations: [&[Slot]; 5] = [
+        &[Slot::BaseColor],
+        &[Slot::Metallic],
+        &[Slot::Roughness],
+        &[Slot::Metallic, Slot::Roughness],
+        &[Slot::BaseColor, Slot::Metallic],
+    ];
+    let opts = RestirOptions {
+        verify_paths: true,
+        ..Default::default()
+    };
+    for slots in combinations {
+        let n: usize = slots.iter().map(|s| 4 * s.channels() as usize).sum();
+        let a: Vec<f32> = (0..n).map(|i| 0.3 + 0.05 * (i % 7) as f32).collect();
+        let b: Vec<f32> = (0..n).map(|i| 0.6 - 0.04 * (i % 5) as f32).collect();
+        let t = vec![0.5; n];
+        let mut re = optimizer_seeded(
+            &gpu,
+            slots,
+            Filter::Bilinear,
+            Method::Restir,
+            opts,
+            &a,
+            &t,
+            5,
+        );
+        for it in 0..12 {
+            re.write_params(if it % 2 == 0 { &a } else { &b }).unwrap();
+            re.step().unwrap();
+        }
+        let d = re.merge_diagnostics().unwrap().unwrap();
+        eprintln!("{slots:?}: {d:?}");
+        assert!(
+            d.verified > 100,
+            "{slots:?}: too few kept paths were checked: {d:?}"
+        );
+        assert!(
+            d.max_relative_error < 1e-4,
+            "{slots:?}: a stored path does not evaluate to its stored value: {d:?}"
+        );
+    }
+}
+
 #[test]
 fn restir_with_reuse_is_unbiased_for_base_color_nearest() {
     let v = [0.5, 0.4, 0.3, 0.6, 0.5, 0.2, 0.3, 0.3, 0.3, 0.7, 0.6, 0.5];

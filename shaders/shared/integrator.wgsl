@@ -151,14 +151,15 @@ fn direct_radiance_states(o: vec3f, d: vec3f, both: bool) -> array<vec3f, 2> {
         return array<vec3f, 2>(vec3f(0.0), vec3f(0.0));
     }
     let e = emitted(hit.tri, hit.b1, hit.b2, sf.front);
-    let mat = surface_material(sf);
+    let gltf = gltf_inputs(sf.material, sf.uv);
+    let mat = with_optimized(sf.material, sf.uv, gltf);
     let s = sample_direct(sf, mat);
     let l = e + contribution(mat, sf, s.nee) + contribution(mat, sf, s.bsdf);
     if !both {
         return array<vec3f, 2>(l, l);
     }
     use_prev_params = true;
-    let mat_prev = surface_material(sf);
+    let mat_prev = with_optimized(sf.material, sf.uv, gltf);
     use_prev_params = false;
     let l_prev = e + contribution(mat_prev, sf, s.nee) + contribution(mat_prev, sf, s.bsdf);
     return array<vec3f, 2>(l, l_prev);
@@ -196,13 +197,15 @@ fn gradient_sample(o: vec3f, d: vec3f) -> GradientSample {
     if !out.sf.valid || (m.param_base_color == NONE && m.param_metallic == NONE && m.param_roughness == NONE) {
         return out;
     }
-    let mat = surface_material(out.sf);
+    let gltf = gltf_inputs(out.sf.material, out.sf.uv);
+    let fixed = fixed_pack(out.sf.material, gltf);
+    let mat = with_optimized(out.sf.material, out.sf.uv, gltf);
     let s = sample_direct(out.sf, mat);
     out.nee = s.nee;
     out.bsdf = s.bsdf;
     let wo = oct_encode(to_local(out.sf.frame, out.sf.wo));
-    out.nee_vertex = PathVertex(out.sf.material, out.sf.uv, wo, oct_encode(to_local(out.sf.frame, s.nee.wi)));
-    out.bsdf_vertex = PathVertex(out.sf.material, out.sf.uv, wo, oct_encode(to_local(out.sf.frame, s.bsdf.wi)));
+    out.nee_vertex = PathVertex(out.sf.material, out.sf.uv, wo, oct_encode(to_local(out.sf.frame, s.nee.wi)), fixed);
+    out.bsdf_vertex = PathVertex(out.sf.material, out.sf.uv, wo, oct_encode(to_local(out.sf.frame, s.bsdf.wi)), fixed);
     let wo_l = oct_decode(wo);
     out.nee_grad = brdf_eval_cos_grad(mat, wo_l, oct_decode(out.nee_vertex.wi));
     out.bsdf_grad = brdf_eval_cos_grad(mat, wo_l, oct_decode(out.bsdf_vertex.wi));

@@ -6,8 +6,8 @@
 // layout, RES_* and RESERVOIR_WORDS, is generated from src/optim/estimator/restir.rs): the
 // camera sample that started it (pixel, camera, technique in RES_INFO), what the BRDF needs of
 // the camera ray's hit (material, texture coordinates, and the outgoing and incident
-// directions in its shading frame, octahedral) and the radiance arriving along the incident
-// direction, with its value under the iteration's textures and adjoint, and the weight sum
+// directions in its shading frame, octahedral, and its fixed material inputs) and the radiance
+// arriving along the incident direction, with its value under the iteration's textures and adjoint, and the weight sum
 // (fresh reservoirs) or unbiased contribution weight W (merged).
 // Texel t owns RESERVOIR_SLOTS reservoir slots, 4t to 4t + 3, and a header word that says
 // which slot holds its positive (sign 0) and its negative (sign 1) reservoir: two distinct
@@ -73,6 +73,10 @@ fn reservoir_offer(r: u32, lock: u32, w: f32, u: f32, c: Candidate) -> bool {
                 atomicStore(&fresh[base + RES_RADIANCE + 1u], bitcast<u32>(c.radiance.y));
                 atomicStore(&fresh[base + RES_RADIANCE + 2u], bitcast<u32>(c.radiance.z));
                 atomicStore(&fresh[base + RES_Q_PREV], bitcast<u32>(c.q_prev));
+                atomicStore(&fresh[base + RES_FIXED], bitcast<u32>(c.vertex.fixed.x));
+                atomicStore(&fresh[base + RES_FIXED + 1u], bitcast<u32>(c.vertex.fixed.y));
+                atomicStore(&fresh[base + RES_FIXED + 2u], bitcast<u32>(c.vertex.fixed.z));
+                atomicStore(&fresh[base + RES_FIXED + 3u], bitcast<u32>(c.vertex.fixed.w));
             }
             atomicStore(&locks[lock], 0u);
             return true;

@@ -62,33 +62,69 @@ fn surface_material(sf: Surface) -> SurfaceMaterial {
     return material_at(sf.material, sf.uv);
 }
 
-// The BRDF inputs of material `mi` at texture coordinates uv. A glTF texture whose every
-// channel in use is replaced by an optimized texture is not sampled.
+// The BRDF inputs of material `mi` at texture coordinates uv.
 fn material_at(mi: u32, uv: vec2f) -> SurfaceMaterial {
-    let m = materials[mi];
+    return with_optimized(mi, uv, gltf_inputs(mi, uv));
+}
+
+// The inputs of material `mi` at uv that the glTF material gives (factors and textures);
+// those of slots that an optimized texture replaces are left at 1 (with_optimized replaces
+// them), and a glTF texture whose every channel in use is replaced is not sampled. Fields
+// are read one by one, and the whole material only where a glTF texture is sampled: a CPU
+// device loads every word of a struct read at a per-invocation index.
+fn gltf_inputs(mi: u32, uv: vec2f) -> SurfaceMaterial {
     var bc = vec4f(1.0);
-    if m.param_base_color == NONE {
+    if materials[mi].param_base_color == NONE {
+        let m = materials[mi];
         bc = sample_texture(m.base_color_tex, transform_uv(m, 0u, uv));
     }
     var mr = vec4f(1.0);
-    if m.param_metallic == NONE || m.param_roughness == NONE {
+    if materials[mi].param_metallic == NONE || materials[mi].param_roughness == NONE {
+        let m = materials[mi];
         mr = sample_texture(m.mr_tex, transform_uv(m, 1u, uv));
     }
-    var out = SurfaceMaterial(m.base_color.rgb * bc.rgb, clamp(m.metallic * mr.b, 0.0, 1.0), clamp(m.roughness * mr.g, 0.0, 1.0));
-    // Optimized textures replace the material's inputs (UV0, repeat wrap).
-    if m.param_base_color != NONE {
-        let p = param_textures[m.param_base_color];
+    return SurfaceMaterial(materials[mi].base_color.rgb * bc.rgb, clamp(materials[mi].metallic * mr.b, 0.0, 1.0), clamp(materials[mi].roughness * mr.g, 0.0, 1.0));
+}
+
+// m with the inputs of the slots that optimized textures replace read from them (UV0, repeat
+// wrap; the textures that use_prev_params selects).
+fn with_optimized(mi: u32, uv: vec2f, m: SurfaceMaterial) -> SurfaceMaterial {
+    let pb = materials[mi].param_base_color;
+    let pm = materials[mi].param_metallic;
+    let pr = materials[mi].param_roughness;
+    var out = m;
+    if pb != NONE {
+        let p = param_textures[pb];
         out.base_color = param_value(p, param_footprint(p, uv));
     }
-    if m.param_metallic != NONE {
-        let p = param_textures[m.param_metallic];
+    if pm != NONE {
+        let p = param_textures[pm];
         out.metallic = param_value(p, param_footprint(p, uv)).x;
     }
-    if m.param_roughness != NONE {
-        let p = param_textures[m.param_roughness];
+    if pr != NONE {
+        let p = param_textures[pr];
         out.roughness = param_value(p, param_footprint(p, uv)).x;
     }
     return out;
+}
+
+// The inputs of m that no optimized texture of material `mi` replaces (they never change
+// during an optimization), packed in four floats: base color (RGB), then metallic, then
+// roughness, skipping the optimized ones. ReSTIR stores them with a path (RES_FIXED), so that
+// re-evaluating it samples no glTF texture. Only for a material with an optimized slot (at
+// most four inputs are left); fixed_unpack gives them back exactly.
+fn fixed_pack(mi: u32, m: SurfaceMaterial) -> vec4f {
+    if materials[mi].param_base_color == NONE {
+        return vec4f(m.base_color, select(m.metallic, m.roughness, materials[mi].param_metallic != NONE));
+    }
+    return vec4f(m.metallic, m.roughness, 0.0, 0.0);
+}
+
+fn fixed_unpack(mi: u32, fixed: vec4f) -> SurfaceMaterial {
+    if materials[mi].param_base_color == NONE {
+        return SurfaceMaterial(fixed.xyz, fixed.w, fixed.w);
+    }
+    return SurfaceMaterial(vec3f(1.0), fixed.x, fixed.y);
 }
 
 // Origin pushed off the surface along the geometric normal, on the side of direction d.
@@ -122,17 +158,18 @@ fn oct_decode(e: vec2f) -> vec3f {
 // adjoint x d(f)/d(texel) with f = BRDF x cos x L_i (per channel for base color, x for
 // scalars): the path-space integrand of the gradient, before any sampling density. Zero when
 // the path's material does not use the texture or its filter does not reach the texel. Uses
-// the textures that use_prev_params selects. No geometry is looked at.
+// the textures that use_prev_params selects. No geometry and no glTF texture is looked at.
 fn path_value(pv: PathVertex, li: vec3f, adj: vec3f, ti: u32, local: u32) -> vec3f {
     if pv.material >= arrayLength(&materials) || all(adj == vec3f(0.0)) {
         return vec3f(0.0);
     }
-    let m = materials[pv.material];
     var slot = NONE;
-    for (var s = 0u; s < 3u; s++) {
-        if material_param(m, s) == ti {
-            slot = s;
-        }
+    if materials[pv.material].param_roughness == ti {
+        slot = 2u;
+    } else if materials[pv.material].param_metallic == ti {
+        slot = 1u;
+    } else if materials[pv.material].param_base_color == ti {
+        slot = 0u;
     }
     if slot == NONE {
         return vec3f(0.0);
@@ -147,7 +184,7 @@ fn path_value(pv: PathVertex, li: vec3f, adj: vec3f, ti: u32, local: u32) -> vec
     if wf == 0.0 {
         return vec3f(0.0);
     }
-    let mat = material_at(pv.material, pv.uv);
+    let mat = with_optimized(pv.material, pv.uv, fixed_unpack(pv.material, pv.fixed));
     let bg = brdf_eval_cos_grad(mat, oct_decode(pv.wo), oct_decode(pv.wi));
     return wf * slot_derivative(slot, bg, li, adj);
 }

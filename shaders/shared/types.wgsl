@@ -117,8 +117,9 @@ struct Hit {
 }
 
 // What the value of a direct-lighting path depends on besides the incident radiance, once
-// geometry is fixed: the hit's material and texture coordinates, and the outgoing and incident
-// directions in its shading frame (octahedral, shared/surface.wgsl). ReSTIR stores it; the
+// geometry is fixed: the hit's material, texture coordinates and fixed material inputs
+// (shared/surface.wgsl, fixed_pack), and the outgoing and incident directions in its
+// shading frame (octahedral, shared/surface.wgsl). ReSTIR stores it; the
 // gradient passes evaluate every sample at the decoded directions, so a stored path
 // re-evaluates to the same value (shared/surface.wgsl, path_value).
 struct PathVertex {
@@ -126,4 +127,5 @@ struct PathVertex {
     uv: vec2f,
     wo: vec2f,
     wi: vec2f,
+    fixed: vec4f,
 }

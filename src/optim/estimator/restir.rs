@@ -82,8 +82,12 @@ pub mod reservoir {
     /// textures and adjoint (f32), computed by the candidate pass, which has the material
     /// at hand, so that the merge does not evaluate fresh paths again.
     pub const Q_PREV: u32 = 15;
+    /// The material inputs at the hit that no optimized texture replaces, four f32
+    /// (shaders/shared/surface.wgsl, fixed_pack): re-evaluating the path samples no glTF
+    /// texture.
+    pub const FIXED: u32 = 16;
     /// Words per reservoir (a multiple of 4: the merge reads a reservoir as vec4s).
-    pub const WORDS: u32 = 16;
+    pub const WORDS: u32 = 20;
     const _: () = assert!(WORDS.is_multiple_of(4));
     /// Bits of the pixel index (images up to 8192 x 8192 = 2^26 pixels).
     pub const CAMERA_SHIFT: u32 = 26;
@@ -147,6 +151,7 @@ pub fn layout_wgsl() -> String {
         ("RES_WO", WO),
         ("RES_RADIANCE", RADIANCE),
         ("RES_Q_PREV", Q_PREV),
+        ("RES_FIXED", FIXED),
         ("RESERVOIR_SLOTS", SLOTS),
         ("HEADER_SLOT_BITS", HEADER_SLOT_BITS),
         ("HEADER_SLOT_MASK", HEADER_SLOT_MASK),
@@ -555,10 +560,15 @@ impl Estimator for Restir {
         let n_texels = u64::from(self.merge_params.n_texels);
         let (slots, headers) = match snapshot {
             Some(r) => {
-                if r.reservoirs.len() as u64 != n_texels * 2 * reservoir::WORDS as u64 {
-                    return Err(Error::Invalid(
-                        "the saved ReSTIR state does not match this optimizer's textures".into(),
-                    ));
+                let expected = n_texels * 2 * reservoir::WORDS as u64;
+                if r.reservoirs.len() as u64 != expected {
+                    return Err(Error::Invalid(format!(
+                        "the saved ReSTIR state has {} words where this optimizer keeps {expected} \
+                         ({n_texels} texels x 2 reservoirs x {} words): it was saved for other \
+                         textures, or by a version of psrestir with another reservoir layout",
+                        r.reservoirs.len(),
+                        reservoir::WORDS
+                    )));
                 }
                 self.history = if self.options.temporal { r.history } else { 0 };
                 slots_holding(&r.reservoirs)
