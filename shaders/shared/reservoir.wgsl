@@ -5,10 +5,11 @@
 // Streaming reservoir updates for parameter-space ReSTIR. A reservoir holds one path (the
 // layout, RES_* and RESERVOIR_WORDS, is generated from src/optim/estimator/restir.rs): the
 // camera sample that started it (pixel, camera, technique in RES_INFO), what the BRDF needs of
-// the camera ray's hit (material, texture coordinates, and the outgoing and incident
-// directions in its shading frame, octahedral, and its fixed material inputs) and the radiance
-// arriving along the incident direction, with its value under the iteration's textures and adjoint, and the weight sum
-// (fresh reservoirs) or unbiased contribution weight W (merged).
+// the camera ray's hit (material, texture coordinates, the outgoing and incident directions
+// in its shading frame, octahedral, and the material inputs no optimized texture replaces)
+// and the radiance arriving along the incident direction, with its value under the
+// iteration's textures and adjoint, and the weight sum (fresh reservoirs) or unbiased
+// contribution weight W (merged).
 // Texel t owns RESERVOIR_SLOTS reservoir slots, 4t to 4t + 3, and a header word that says
 // which slot holds its positive (sign 0) and its negative (sign 1) reservoir: two distinct
 // slots, so two are free for the next iteration's fresh candidates (fresh_slot). The merge

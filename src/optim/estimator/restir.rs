@@ -88,7 +88,7 @@ pub mod reservoir {
     pub const FIXED: u32 = 16;
     /// Words per reservoir (a multiple of 4: the merge reads a reservoir as vec4s).
     pub const WORDS: u32 = 20;
-    const _: () = assert!(WORDS.is_multiple_of(4));
+    const _: () = assert!(WORDS % 4 == 0);
     /// Bits of the pixel index (images up to 8192 x 8192 = 2^26 pixels).
     pub const CAMERA_SHIFT: u32 = 26;
     /// Camera index mask after the shift.
