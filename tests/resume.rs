@@ -265,6 +265,19 @@ fn kill_and_resume(method: &str) {
                 std::thread::sleep(Duration::from_millis(5));
             }
             match child.try_wait().unwrap() {
+                Some(st) if resume_from.is_none() && resumes == 0 => {
+                    // The run ended before its kill moment (this run was faster than the
+                    // timed one) and nothing was resumed yet: start again from nothing,
+                    // so that a later round kills after a checkpoint and resumes.
+                    assert!(st.success());
+                    eprintln!(
+                        "{method}: finished before the kill at {:.2} s; again",
+                        at.as_secs_f64()
+                    );
+                    std::fs::remove_dir_all(&b).unwrap();
+                    let _ = log.join();
+                    continue;
+                }
                 Some(st) => {
                     assert!(st.success());
                     true
