@@ -373,7 +373,8 @@ fn scenes_built_in_code_are_checked_before_they_reach_the_gpu() {
     }
     use psrestir::glam::{Vec2, Vec3};
     let gpu = Gpu::new().unwrap();
-    let cases: Vec<(&str, Box<dyn Fn(&mut psrestir::Scene)>, &str)> = vec![
+    type Case<'a> = (&'a str, Box<dyn Fn(&mut psrestir::Scene)>, &'a str);
+    let cases: Vec<Case> = vec![
         (
             "material out of range",
             Box::new(|s| s.triangles[0].material = 99),

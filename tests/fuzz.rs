@@ -634,10 +634,13 @@ fn execute(
     (result, PEAK.load(Relaxed).saturating_sub(base))
 }
 
+/// A mutation: a new input from an input of the corpus and the whole corpus.
+type Mutate = dyn Fn(&mut Rng, &[u8], &[Vec<u8>]) -> Vec<u8>;
+
 struct Target<'a> {
     name: &'a str,
     seeds: Vec<Vec<u8>>,
-    mutate: &'a dyn Fn(&mut Rng, &[u8], &[Vec<u8>]) -> Vec<u8>,
+    mutate: &'a Mutate,
     run: &'a dyn Fn(&[u8]) -> Outcome,
 }
 

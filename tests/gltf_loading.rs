@@ -123,13 +123,9 @@ fn check(s: &Scene) {
     let bc = mat.base_color_texture.as_ref().unwrap();
     let (sn, cs) = 0.3f32.sin_cos();
     let want = [[cs * 2.0, -sn * 3.0, 0.25], [sn * 2.0, cs * 3.0, 0.5]];
-    for r in 0..2 {
-        for c in 0..3 {
-            assert!(
-                (bc.transform[r][c] - want[r][c]).abs() < 1e-6,
-                "transform {:?}",
-                bc.transform
-            );
+    for (got, want) in bc.transform.iter().zip(&want) {
+        for (g, w) in got.iter().zip(want) {
+            assert!((g - w).abs() < 1e-6, "transform {:?}", bc.transform);
         }
     }
     assert_eq!(

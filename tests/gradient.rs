@@ -66,7 +66,8 @@ fn check_gradient_with(
     let opt = Optimizer::new(&gpu, &scene, set.clone(), settings.clone(), &[blank]).unwrap();
     opt.write_params(target_values).unwrap();
     let target = opt.render(0, 4096, 99).unwrap();
-    let mut opt = Optimizer::new(&gpu, &scene, set, settings, &[target.clone()]).unwrap();
+    let mut opt =
+        Optimizer::new(&gpu, &scene, set, settings, std::slice::from_ref(&target)).unwrap();
     opt.write_params(values).unwrap();
 
     // Mean and spread of K independent baseline estimates.

@@ -190,7 +190,7 @@ fn without_reuse_restir_equals_the_baseline_for_scalar_textures() {
             &scene,
             set.clone(),
             settings.clone(),
-            &[target.clone()],
+            std::slice::from_ref(&target),
         )
         .unwrap();
         let mut re = Optimizer::new(

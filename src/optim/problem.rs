@@ -357,17 +357,13 @@ fn targets_key(task: &Task, truth: &Path) -> Result<u64> {
     Ok(h)
 }
 
+/// Each camera-file frame's image (if it names one), by camera name.
+type FrameImages = std::collections::BTreeMap<String, Option<std::path::PathBuf>>;
+
 /// A task's scene: the file at `path`, the task's environment, lights and cameras, the
 /// frames of its camera file, and defaults for what is still missing. Also returns the
 /// indices of the cameras the task added and each camera-file frame's image by camera name.
-fn task_scene(
-    task: &Task,
-    path: &Path,
-) -> Result<(
-    Scene,
-    Vec<usize>,
-    std::collections::BTreeMap<String, Option<std::path::PathBuf>>,
-)> {
+fn task_scene(task: &Task, path: &Path) -> Result<(Scene, Vec<usize>, FrameImages)> {
     let mut s = scene::load(&task.resolve(path))?;
     if let Some(env) = &task.env {
         let mut e = EnvMap::load(&task.resolve(env))?;

@@ -43,6 +43,8 @@ impl Optimizer {
                 .queue
                 .write_buffer(&self.cams[k].target_buf, 0, bytemuck::cast_slice(&data));
         }
+        // Also catches a NaN total.
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
         if !(total > 0.0) {
             return Err(Error::Invalid("the masks leave no pixel to compare".into()));
         }
