@@ -5,8 +5,9 @@
 //!    and of baseline gradients at the same parameter state, at equal iterations (the task's
 //!    spp) and at equal time (as many spp as fit in the time of one ReSTIR iteration), against
 //!    a reference from a converged adjoint (a `reference_primal_spp` primal render) and
-//!    `reference_spp` gradient samples. Each error is measured twice: *total*, each estimator
-//!    with the adjoint of its own task-spp primal render (what a user gets), and
+//!    `reference_spp` gradient samples. Each error is measured twice: *total*, under the
+//!    adjoint of a task-spp primal render (what a user gets), the same render for both
+//!    estimators and every baseline spp (common random numbers), and
 //!    *estimator-only*, both under the converged adjoint (what the reservoirs do), after
 //!    `settle` more ReSTIR estimates under it at the same textures (its reservoirs filled
 //!    for that integrand); and the estimator-only error of the mean of successive

@@ -381,7 +381,8 @@ pub fn write_report(out: &Path, r: &BenchReport) -> Result<()> {
     md.push_str(
         "\nRatios are ReSTIR / baseline (below 1: ReSTIR is better). Estimator-only: both \
          estimators under the converged adjoint, ReSTIR after the estimates under it named \
-         above; total: each with the adjoint of its own primal render. The paper (RTX 2080 Ti, 1400² images, 2048² textures) reports gradient relMSE \
+         above; total: both under the adjoint of one primal render at the protocol's spp, the same \
+         render for both (common random numbers: both see the same render's noise). The paper (RTX 2080 Ti, 1400² images, 2048² textures) reports gradient relMSE \
          0.23–0.32× and final image relMSE 0.18–0.73× at equal time.\n\n",
     );
     md.push_str("### Successive estimates\n\n");

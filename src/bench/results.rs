@@ -45,8 +45,8 @@ pub struct SceneResult {
     /// Gradient spp the baseline gets in the time of one ReSTIR iteration (fractional: the
     /// errors at equal time are interpolated in 1/spp between the two whole spp around it).
     pub baseline_spp_equal_time: f64,
-    /// Total gradient relMSE (each estimator with its own primal) of the baseline at equal
-    /// time (mean over seeds).
+    /// Total gradient relMSE (under the adjoint of ReSTIR's task-spp primal render of the
+    /// same iteration) of the baseline at equal time (mean over seeds).
     pub gradient_relmse_baseline: f64,
     /// Total gradient relMSE of ReSTIR after `warmup` iterations (mean over seeds).
     pub gradient_relmse_restir: f64,

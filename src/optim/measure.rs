@@ -53,6 +53,14 @@ impl Optimizer {
         Ok((self.read_gradient()?, loss))
     }
 
+    /// The adjoint that the primal render of `iteration` wrote (RGBA per pixel, the cameras
+    /// one after another, as [`Optimizer::estimate_gradient_with_adjoint`] takes it): read
+    /// right after [`Optimizer::estimate_gradient`] for that iteration, the adjoint its
+    /// gradient was estimated under.
+    pub fn read_adjoint(&self, iteration: u32) -> Result<Vec<f32>> {
+        self.gpu.read_pod(&self.adjoint[(iteration % 2) as usize])
+    }
+
     /// [`Optimizer::estimate_gradient`] with a given adjoint (RGBA per pixel, the cameras one
     /// after another, as [`Optimizer::converged_adjoint`] returns it) instead of the one of
     /// the iteration's own primal render: the gradient estimator alone, without the noise of
