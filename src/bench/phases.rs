@@ -277,9 +277,9 @@ pub(super) fn gradient_phase(
         // per estimate and seed dominated it (`sphere`, paper protocol, a render of its own
         // for each: the baseline's total error at 1 / 2 / 3 gradient spp was 17.2 / 1.3 /
         // about 7e-8, not falling with the spp, against 3.7e-8 estimator-only at 1 spp).
-        // The baseline continues from ReSTIR's state
-        // without the reservoirs: the same textures (and, with the control-variate primal,
-        // the same carried image and statistics).
+        // The baseline continues from ReSTIR's state without the reservoirs: the same
+        // textures (and, with the control-variate primal, the same carried image and
+        // statistics).
         let it = re.iteration;
         let (g_restir_total, _) = re.estimate_gradient(it)?;
         let adjoint_total = re.read_adjoint(it)?;
