@@ -58,14 +58,9 @@ fn surface_at(o: vec3f, hit: Hit) -> Surface {
     return out;
 }
 
-fn surface_material(sf: Surface) -> SurfaceMaterial {
-    return material_at(sf.material, sf.uv);
-}
-
-// The BRDF inputs of material `mi` at texture coordinates uv.
-fn material_at(mi: u32, uv: vec2f) -> SurfaceMaterial {
-    return with_optimized(mi, uv, gltf_inputs(mi, uv));
-}
+// The BRDF inputs of material `mi` at texture coordinates uv are
+// with_optimized(mi, uv, gltf_inputs(mi, uv)); a ReSTIR path keeps what gltf_inputs gave
+// (fixed_pack) and is re-evaluated with with_optimized(mi, uv, fixed_unpack(...)).
 
 // The inputs of material `mi` at uv that the glTF material gives (factors and textures);
 // those of slots that an optimized texture replaces are left at 1 (with_optimized replaces
