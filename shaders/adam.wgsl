@@ -28,11 +28,14 @@ struct AdamParams {
 @group(0) @binding(5) var<storage, read_write> adam_stats: array<atomic<u32>, 4>;
 
 @compute @workgroup_size(64)
-fn main(@builtin(global_invocation_id) gid: vec3u) {
-    if gid.x >= ap.count {
+fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) groups: vec3u) {
+    // Rows of the grid continue the entry index (src/gpu grid_2d: past the device's
+    // workgroups per dimension the grid has several rows).
+    let k = gid.x + gid.y * groups.x * 64u;
+    if k >= ap.count {
         return;
     }
-    let i = ap.offset + gid.x;
+    let i = ap.offset + k;
     let g_in = grad[i];
     if ap.mask != 0u && g_in == 0.0 {
         return;

@@ -44,8 +44,11 @@ const REL_EPS: f32 = 0.01;
 var<workgroup> partial: array<vec2f, 64>;
 
 @compute @workgroup_size(64)
-fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(local_invocation_index) li: u32, @builtin(workgroup_id) wg: vec3u) {
-    let i = gid.x;
+fn main(@builtin(local_invocation_index) li: u32, @builtin(workgroup_id) wg: vec3u, @builtin(num_workgroups) groups: vec3u) {
+    // Workgroup `group` takes pixels 64 group to 64 group + 63, whichever row of the grid it
+    // is in (src/gpu grid_2d).
+    let group = wg.x + wg.y * groups.x;
+    let i = group * 64u + li;
     var l = vec2f(0.0);
     if i < lp.n_pixels {
         let a = accum[i];
@@ -86,8 +89,10 @@ fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(local_invocation_ind
         }
         workgroupBarrier();
     }
-    if li == 0u {
-        loss_partial[lp.partial_offset + wg.x] = partial[0].x;
-        exposure_partial[lp.partial_offset + wg.x] = partial[0].y;
+    // A grid of several rows may end with groups past the last pixel: the partial sums
+    // hold one entry per group of 64 pixels.
+    if li == 0u && group * 64u < lp.n_pixels {
+        loss_partial[lp.partial_offset + group] = partial[0].x;
+        exposure_partial[lp.partial_offset + group] = partial[0].y;
     }
 }

@@ -91,8 +91,9 @@ fn neighbour_stats(x: i32, y: i32) -> Stats {
 }
 
 @compute @workgroup_size(64)
-fn main(@builtin(global_invocation_id) gid: vec3u) {
-    let i = gid.x;
+fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) groups: vec3u) {
+    // Rows of the grid continue the pixel index (src/gpu grid_2d).
+    let i = gid.x + gid.y * groups.x * 64u;
     if i >= cp.n_pixels {
         return;
     }

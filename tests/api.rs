@@ -3,7 +3,8 @@
 //! limits named; a task too large for the device is refused before allocating; two optimizers
 //! on one device, their steps interleaved, each end where they would alone; textures come out
 //! as a GPU texture equal to the CPU values; injected non-finite values are dropped and
-//! counted, never stored.
+//! counted, never stored; passes whose grid is split over two rows (past the device's
+//! workgroups per dimension) still cover every pixel and texel once.
 #[path = "../examples/gltf_textures.rs"]
 mod gltf_textures;
 #[path = "../examples/in_memory.rs"]
@@ -431,4 +432,124 @@ fn scenes_built_in_code_are_checked_before_they_reach_the_gpu() {
         assert!(e.contains(expect), "{what}: {e}");
         assert!(e.starts_with("invalid scene"), "{what}: {e}");
     }
+}
+
+/// A device limited to `groups` workgroups per grid dimension.
+fn device_with_workgroups_per_dimension(groups: u32) -> Gpu {
+    let adapter = in_memory::adapter().unwrap();
+    let limits = wgpu::Limits {
+        max_compute_workgroups_per_dimension: groups,
+        ..Gpu::required_limits(&adapter.limits()).unwrap()
+    };
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        required_limits: limits,
+        ..Default::default()
+    }))
+    .unwrap();
+    Gpu::from_device(device, queue, adapter.get_info()).unwrap()
+}
+
+#[test]
+fn passes_split_over_two_grid_rows_cover_every_item_once() {
+    if no_gpu() {
+        return;
+    }
+    // 272 x 256 pixels (1,088 groups of 64) and 160 x 160 RGB texels (76,800 Adam entries,
+    // 1,200 groups): on a device with 1,024 workgroups per dimension (the least psrestir
+    // accepts) the loss, control-variate, gradient and Adam passes run on grids of two rows,
+    // as they do on any device for images or textures past 2048 x 2048 (65,535 x 64
+    // invocations). A pass that reads only the first row's index runs part of its items
+    // twice and never reaches the rest.
+    let (w, h) = (272, 256);
+    let spec = psrestir::TextureSpec {
+        resolution: [160, 160],
+        ..in_memory::texture()
+    };
+    let (lo, hi) = spec.slot.range();
+    let run = |gpu: &Gpu, check_adam: bool| {
+        let mut p = Problem::new(
+            in_memory::scene(),
+            vec![0],
+            std::slice::from_ref(&spec),
+            Filter::Bilinear,
+        )
+        .unwrap();
+        p.render_targets(
+            gpu,
+            in_memory::truth([[200, 40, 40], [40, 40, 200]]),
+            w,
+            h,
+            8,
+            3,
+        )
+        .unwrap();
+        let settings = Settings {
+            primal_spp: 2,
+            primal: psrestir::optim::PrimalMode::ControlVariate,
+            gradient_spp: 1,
+            method: Method::Baseline,
+            ..Settings::new(w, h, vec![0])
+        };
+        let mut o = Optimizer::for_problem(gpu, &p, settings).unwrap();
+        let mut losses = Vec::new();
+        let mut p_ref = o.read_params().unwrap();
+        let n = p_ref.len();
+        let (mut m, mut v) = (vec![0.0; n], vec![0.0; n]);
+        for t in 1..=4u32 {
+            losses.push(o.step().unwrap().loss);
+            if check_adam {
+                // Every texel's Adam step, against the Rust reference from the same gradient.
+                let g = o.read_gradient().unwrap();
+                let lr = o.last_learning_rates()[0];
+                psrestir::optim::adam::step(&mut p_ref, &mut m, &mut v, &g, lr, t, lo, hi);
+                let gpu_p = o.read_params().unwrap();
+                let [gm, gv] = o.read_moments().unwrap();
+                let bad = (0..n)
+                    .filter(|&i| {
+                        (gm[i] - m[i]).abs() > 1e-6 * m[i].abs() + 1e-20
+                            || (gv[i] - v[i]).abs() > 1e-6 * v[i].abs() + 1e-30
+                            || (gpu_p[i] - p_ref[i]).abs() > 1e-6
+                    })
+                    .count();
+                assert_eq!(bad, 0, "step {t}: {bad} of {n} Adam entries differ");
+                // The entries the second row of groups holds have gradients too.
+                assert!(g[n / 2..].iter().any(|x| *x != 0.0), "step {t}");
+                (p_ref, m, v) = (gpu_p, gm, gv);
+            }
+        }
+        let image = o
+            .control_variate_image(0)
+            .unwrap()
+            .expect("control variate");
+        (losses, image)
+    };
+    let (loss_wide, img_wide) = run(&Gpu::new().unwrap(), false);
+    let (loss_narrow, img_narrow) = run(&device_with_workgroups_per_dimension(1024), true);
+    // The first loss is the same render and the same partial sums in the same order: equal
+    // to the bit. Later ones follow textures that differ only by the order of the gradient
+    // pass's float atomics (relative 1e-6 or less); a loss pass that dropped or repeated a
+    // row of groups would be off by a large fraction.
+    assert_eq!(loss_narrow[0], loss_wide[0]);
+    for (a, b) in loss_narrow.iter().zip(&loss_wide) {
+        assert!(
+            (a - b).abs() <= 1e-4 * b.abs(),
+            "losses {loss_narrow:?} vs {loss_wide:?}"
+        );
+    }
+    // The control-variate image after four iterations: the same up to the same rounding.
+    let (a, b) = (&img_narrow.rgb, &img_wide.rgb);
+    assert_eq!(a.len(), (w * h) as usize);
+    let diff: f64 = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (0..3).map(|c| ((x[c] - y[c]) as f64).powi(2)).sum::<f64>())
+        .sum();
+    let norm: f64 = b
+        .iter()
+        .map(|y| (0..3).map(|c| (y[c] as f64).powi(2)).sum::<f64>())
+        .sum();
+    assert!(
+        norm > 0.0 && diff <= 1e-8 * norm,
+        "image difference {diff:.3e} of {norm:.3e}"
+    );
 }
