@@ -1,13 +1,15 @@
 // ReSTIR candidate pass: every camera sample's light-sampled and BSDF-sampled paths are
 // candidates for every texel that their hit point touches. A candidate's value v for a texel
-// is the path-space integrand adjoint x d(BRDF cos L_i)/d(texel) (shared/surface.wgsl,
-// path_value), its target q = luminance(v) (v for scalar textures), and it is offered to the
-// texel's positive reservoir when q > 0, to the negative one when q < 0 (or to one reservoir
-// without positivization) with the resampling weight |q| x MIS weight / density: numerically
-// the baseline's contribution of this sample to the texel.
+// is the path-space integrand adjoint x e, with e = d(BRDF cos L_i)/d(texel) per image
+// channel (shared/surface.wgsl, path_factor); its target q is the luminance of the target
+// adjoint x e (x for scalar textures). The target adjoint is an exponential moving average of
+// the adjoints (cp.smoothing; shared/reservoir.wgsl), which this pass forms for every pixel.
+// A candidate is offered to the texel's positive reservoir when q > 0, to the negative one
+// when q < 0 (or to one reservoir without positivization) with the resampling weight |q| x
+// MIS weight / density, and the reservoir keeps e.
 // When the merge will reuse, each candidate also carries its target under the previous
-// iteration's textures and adjoint (the merge's MIS weights need it): the same path, one
-// more BRDF-with-derivative evaluation per technique here, shared by the path's texels,
+// iteration's textures and target adjoint (the merge's MIS weights need it): the same path,
+// one more BRDF-with-derivative evaluation per technique here, shared by the path's texels,
 // instead of one per texel and reservoir in the merge.
 #import shared/rng
 #import shared/camera
@@ -28,6 +30,12 @@ struct CandidateParams {
     positivize: u32,
     // Whether to compute each candidate's previous-state target (the merge reuses).
     prev_targets: u32,
+    // Weight of the last target adjoint in this one (0: the iteration's adjoint itself).
+    smoothing: f32,
+    // Where this iteration's and the last iteration's target adjoints start in `targets`.
+    target_cur: u32,
+    target_prev: u32,
+    _pad0: u32,
 }
 
 @group(1) @binding(0) var<uniform> cp: CandidateParams;
@@ -36,7 +44,9 @@ struct CandidateParams {
 @group(1) @binding(3) var<storage, read_write> locks: array<atomic<u32>>;
 // CANDIDATE_STAT_* slots (generated from src/optim/estimator/restir.rs).
 @group(1) @binding(4) var<storage, read_write> cstats: array<atomic<u32>, 4>;
-@group(1) @binding(5) var<storage, read> adjoint_prev: array<vec4f>;
+// The target adjoints (shared/reservoir.wgsl), both parities: the last iteration's, and this
+// one's, which this pass forms.
+@group(1) @binding(5) var<storage, read_write> targets: array<vec4f>;
 // Which slots hold each texel's kept reservoirs (shared/reservoir.wgsl).
 @group(1) @binding(6) var<storage, read> headers: array<u32>;
 
@@ -44,9 +54,10 @@ var<private> offered: u32 = 0u;
 var<private> lost: u32 = 0u;
 var<private> dropped: u32 = 0u;
 
-// bg_prev and adj_prev: the path's BRDF derivatives and the pixel's adjoint under the previous
-// iteration's state (unused unless cp.prev_targets).
-fn offer_technique(g: GradientSample, ds: DirectSample, bg: BrdfGrad, bg_prev: BrdfGrad, vertex: PathVertex, adj: vec3f, adj_prev: vec3f, info: u32) {
+// adj: the pixel's adjoint (for the value), adj_t: its target adjoint; bg_prev and adj_t_prev:
+// the path's BRDF derivatives and the pixel's target adjoint under the previous iteration's
+// state (unused unless cp.prev_targets).
+fn offer_technique(g: GradientSample, ds: DirectSample, bg: BrdfGrad, bg_prev: BrdfGrad, vertex: PathVertex, adj: vec3f, adj_t: vec3f, adj_t_prev: vec3f, info: u32) {
     if ds.scale == 0.0 {
         return;
     }
@@ -57,18 +68,20 @@ fn offer_technique(g: GradientSample, ds: DirectSample, bg: BrdfGrad, bg_prev: B
         }
         let p = param_textures[pi];
         let fp = footprint_merged(param_footprint(p, g.sf.uv));
-        let d = slot_derivative(slot, bg, ds.radiance, adj);
+        let ch = p.channels;
+        let d = slot_factor(slot, bg, ds.radiance);
         var d_prev = vec3f(0.0);
-        if cp.prev_targets != 0u && !all(adj_prev == vec3f(0.0)) {
-            d_prev = slot_derivative(slot, bg_prev, ds.radiance, adj_prev);
+        if cp.prev_targets != 0u {
+            d_prev = slot_factor(slot, bg_prev, ds.radiance);
         }
         for (var k = 0u; k < 4u; k++) {
             if fp.weight[k] == 0.0 {
                 continue;
             }
-            let v = fp.weight[k] * d;
-            let q = target_of(v, p.channels);
-            var q_prev = target_of(fp.weight[k] * d_prev, p.channels);
+            let e = fp.weight[k] * d;
+            let v = with_adjoint(e, adj, ch);
+            let q = target_of(with_adjoint(e, adj_t, ch), ch);
+            var q_prev = target_of(with_adjoint(fp.weight[k] * d_prev, adj_t_prev, ch), ch);
             if !(abs(q_prev) < 3.0e38) {
                 q_prev = 0.0;
             }
@@ -76,7 +89,7 @@ fn offer_technique(g: GradientSample, ds: DirectSample, bg: BrdfGrad, bg_prev: B
             if w == 0.0 {
                 continue;
             }
-            if !(w < 3.0e38) || !all(abs(v) < vec3f(3.0e38)) {
+            if !(w < 3.0e38) || !all(abs(v) < vec3f(3.0e38)) || !all(abs(e) < vec3f(3.0e38)) {
                 dropped += 1u;
                 continue;
             }
@@ -84,7 +97,7 @@ fn offer_technique(g: GradientSample, ds: DirectSample, bg: BrdfGrad, bg_prev: B
             let s = select(0u, 1u, cp.positivize != 0u && q < 0.0);
             let r = RESERVOIR_SLOTS * texel + fresh_slot(headers[texel], s);
             offered += 1u;
-            if !reservoir_offer(r, 2u * texel + s, w, rand(), Candidate(info, v, vertex, ds.radiance, q_prev)) {
+            if !reservoir_offer(r, 2u * texel + s, w, rand(), Candidate(info, e, vertex, ds.radiance, q_prev)) {
                 lost += 1u;
             }
         }
@@ -93,15 +106,29 @@ fn offer_technique(g: GradientSample, ds: DirectSample, bg: BrdfGrad, bg_prev: B
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {
-    let a = adjoint_pixel(id.x + id.y * cp.stride, cp.camera, cp.adjoint_offset, cp.inv_spp);
+    let linear = id.x + id.y * cp.stride;
+    // This iteration's target adjoint of the pixel, for every pixel (the merge reads it for
+    // kept paths from pixels that draw nothing now).
+    let xy_px = tile_pixel(linear, cp.camera.width, cp.camera.height);
+    if xy_px.x == NONE {
+        return;
+    }
+    let ai = cp.adjoint_offset + xy_px.y * cp.camera.width + xy_px.x;
+    var adj_t = adjoint[ai].xyz;
+    if cp.smoothing > 0.0 {
+        adj_t = mix(adj_t, targets[cp.target_prev + ai].xyz, cp.smoothing);
+    }
+    targets[cp.target_cur + ai] = vec4f(adj_t, 0.0);
+    adj_t *= cp.inv_spp;
+    let a = adjoint_pixel(linear, cp.camera, cp.adjoint_offset, cp.inv_spp);
     if a.pixel == NONE {
         return;
     }
     techniques = TECH_MIS;
     let info = a.pixel | (cp.camera_index << INFO_CAMERA_SHIFT);
-    var adj_prev = vec3f(0.0);
+    var adj_t_prev = vec3f(0.0);
     if cp.prev_targets != 0u {
-        adj_prev = adjoint_prev[cp.adjoint_offset + a.pixel].xyz * cp.inv_spp;
+        adj_t_prev = targets[cp.target_prev + ai].xyz * cp.inv_spp;
     }
     for (var s = 0u; s < cp.spp; s++) {
         rng_init(cp.seed, s * a.n_pixels + a.pixel, 0u);
@@ -114,7 +141,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         var bsdf_prev = g.bsdf_grad;
         if cp.prev_targets != 0u {
             // The path's derivatives under the previous textures, from the stored (rounded)
-            // directions, as the merge would evaluate them (shared/surface.wgsl, path_value).
+            // directions, as the merge would evaluate them (shared/surface.wgsl, path_factor).
             use_prev_params = true;
             let mat_prev = with_optimized(g.sf.material, g.sf.uv, fixed_unpack(g.sf.material, g.nee_vertex.fixed));
             use_prev_params = false;
@@ -122,8 +149,8 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
             nee_prev = brdf_eval_cos_grad(mat_prev, wo, oct_decode(g.nee_vertex.wi));
             bsdf_prev = brdf_eval_cos_grad(mat_prev, wo, oct_decode(g.bsdf_vertex.wi));
         }
-        offer_technique(g, g.nee, g.nee_grad, nee_prev, g.nee_vertex, a.adj, adj_prev, info);
-        offer_technique(g, g.bsdf, g.bsdf_grad, bsdf_prev, g.bsdf_vertex, a.adj, adj_prev, info | (1u << INFO_TECH_SHIFT));
+        offer_technique(g, g.nee, g.nee_grad, nee_prev, g.nee_vertex, a.adj, adj_t, adj_t_prev, info);
+        offer_technique(g, g.bsdf, g.bsdf_grad, bsdf_prev, g.bsdf_vertex, a.adj, adj_t, adj_t_prev, info | (1u << INFO_TECH_SHIFT));
     }
     atomicAdd(&cstats[CANDIDATE_STAT_OFFERED], offered);
     if lost > 0u {

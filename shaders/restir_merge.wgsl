@@ -14,17 +14,20 @@
 // (pixel, camera-ray hit, incident direction, incident radiance; visibility was tested when it
 // was drawn) stays a valid path with the same value of everything but the BRDF and the
 // adjoint. The shift is the identity in path space (Jacobian 1): a kept sample is evaluated
-// under the current textures and adjoint by one BRDF-with-derivative evaluation from what the
-// reservoir stores of the hit (material, texture coordinates, shading-frame directions): no
-// geometry is read. A fresh sample's target under the previous textures and adjoint (both
+// under the current textures by one BRDF-with-derivative evaluation from what the reservoir
+// stores of the hit (material, texture coordinates, shading-frame directions): no geometry
+// is read. That gives its factor e (shared/reservoir.wgsl); its value is the pixel's adjoint
+// times e, its target the luminance of the pixel's target adjoint times e, and its target
+// under the previous state comes from the stored factor and the previous target adjoint.
+// A fresh sample's target under the previous textures and target adjoint (both
 // double-buffered) comes with it from the candidate pass (RES_Q_PREV), which evaluated the
 // same path there; with the verify flag the merge evaluates it again and compares. Nothing
 // here traces a ray: shared/bvh is not part of this pass (a test checks the composed module).
 // MIS: balance heuristic with confidences over the inputs' own targets.
 // Selection is in place: a texel's four reservoir slots hold its two kept reservoirs and the
 // two fresh ones (shared/reservoir.wgsl); the merged reservoir of sign s is whichever input
-// it selected, where it already lies, with its W (and, for a kept sample, its value under the
-// current state) rewritten, and the texel's header says which slot that is. The two slots
+// it selected, where it already lies, with its W (and, for a kept sample, its factor under
+// the current textures) rewritten, and the texel's header says which slot that is. The two slots
 // the new header leaves free get W = 0 for the next iteration's candidates.
 #import shared/rng
 #import shared/surface
@@ -43,14 +46,16 @@ struct MergeParams {
     inv_spp: f32,
     n_textures: u32,
     stride: u32,
+    // Where this iteration's and the last iteration's target adjoints start in `targets`.
+    target_cur: u32,
+    target_prev: u32,
     _pad0: u32,
-    _pad1: u32,
-    _pad2: u32,
 }
 
 @group(1) @binding(0) var<uniform> mp: MergeParams;
 @group(1) @binding(1) var<storage, read> adjoint: array<vec4f>;
-@group(1) @binding(2) var<storage, read> adjoint_prev: array<vec4f>;
+// The target adjoints of this iteration and the last (shared/reservoir.wgsl).
+@group(1) @binding(2) var<storage, read> targets: array<vec4f>;
 // Reservoir slots (RESERVOIR_WORDS / 4 vec4s each) and headers (each texel's invocation owns
 // its four slots and its header).
 @group(1) @binding(3) var<storage, read_write> slots: array<vec4u>;
@@ -62,7 +67,7 @@ struct MergeParams {
 var<private> evaluations: u32 = 0u;
 var<private> dropped: u32 = 0u;
 
-// A stored path with its W and its value under the state it was formed at.
+// A stored path with its W and its factor (RES_VALUE) under the textures it was formed at.
 struct Stored {
     info: u32,
     w: f32,
@@ -138,25 +143,32 @@ fn tau(q: f32, s: u32) -> f32 {
     return max(select(q, -q, s == 1u), 0.0);
 }
 
-// Value of the stored path for texel `local` of texture `ti`, under the current (prev =
-// false) or previous textures and adjoint.
+// The adjoints of the pixel a stored path (info word) starts at, divided by the spp: the
+// iteration's (values) and the target adjoints of this iteration and the last (targets).
+struct PixelAdjoints {
+    value: vec3f,
+    target_cur: vec3f,
+    target_prev: vec3f,
+}
+
+fn pixel_adjoints(info: u32) -> PixelAdjoints {
+    let cam_index = min((info >> INFO_CAMERA_SHIFT) & INFO_CAMERA_MASK, MAX_CAMERAS - 1u);
+    let a = cam_index * mp.n_pixels + (info & INFO_PIXEL_MASK);
+    return PixelAdjoints(adjoint[a].xyz * mp.inv_spp, targets[mp.target_cur + a].xyz * mp.inv_spp, targets[mp.target_prev + a].xyz * mp.inv_spp);
+}
+
+// Factor of the stored path for texel `local` of texture `ti` (shared/surface.wgsl,
+// path_factor), under the current (prev = false) or previous textures.
 fn evaluate(st: Stored, ti: u32, local: u32, prev: bool) -> vec3f {
     evaluations += 1u;
-    let cam_index = min((st.info >> INFO_CAMERA_SHIFT) & INFO_CAMERA_MASK, MAX_CAMERAS - 1u);
-    let pixel = st.info & INFO_PIXEL_MASK;
-    let a = cam_index * mp.n_pixels + pixel;
-    var adj = adjoint[a].xyz;
-    if prev {
-        adj = adjoint_prev[a].xyz;
-    }
     use_prev_params = prev;
-    let v = path_value(st.vertex, st.radiance, adj * mp.inv_spp, ti, local);
+    let e = path_factor(st.vertex, st.radiance, ti, local);
     use_prev_params = false;
-    if !all(abs(v) < vec3f(3.0e38)) {
+    if !all(abs(e) < vec3f(3.0e38)) {
         dropped += 1u;
         return vec3f(0.0);
     }
-    return v;
+    return e;
 }
 
 // With the verify flag: the largest relative error of a re-evaluation.
@@ -165,22 +177,26 @@ fn record_verified(err: f32) {
     atomicMax(&mstats[MERGE_STAT_VERIFY_MAX_ERROR], bitcast<u32>(min(err, 3.0e38)));
 }
 
-// A kept sample: its target under the previous state (from its stored value) and its value
-// under the current state.
+// A kept sample: its target under the previous state (from its stored factor), and its
+// factor, value and target under the current state.
 struct Evaluated {
     q_prev: f32,
     v: vec3f,
+    q: f32,
+    e: vec3f,
 }
 
 fn evaluate_kept(r: u32, ti: u32, local: u32, ch: u32, verify: bool) -> Evaluated {
     let st = load(r);
     if verify {
-        // The stored value was computed under the previous state: evaluating the stored path
-        // there must give it back.
+        // The stored factor was computed under the previous textures: evaluating the stored
+        // path there must give it back.
         let again = evaluate(st, ti, local, true);
         record_verified(length(again - st.v) / max(length(st.v), 1e-30));
     }
-    return Evaluated(target_of(st.v, ch), evaluate(st, ti, local, false));
+    let pa = pixel_adjoints(st.info);
+    let e = evaluate(st, ti, local, false);
+    return Evaluated(target_of(with_adjoint(st.v, pa.target_prev, ch), ch), with_adjoint(e, pa.value, ch), target_of(with_adjoint(e, pa.target_cur, ch), ch), e);
 }
 
 @compute @workgroup_size(64)
@@ -229,8 +245,8 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     // Kept samples (their values under the previous state are stored), each evaluated under
     // the current state. Plain variables, not arrays indexed by a loop counter: on a CPU
     // device those live in memory.
-    var k0 = Evaluated(0.0, vec3f(0.0));
-    var k1 = Evaluated(0.0, vec3f(0.0));
+    var k0 = Evaluated(0.0, vec3f(0.0), 0.0, vec3f(0.0));
+    var k1 = Evaluated(0.0, vec3f(0.0), 0.0, vec3f(0.0));
     // One loop over the kept inputs that hold a sample, so that neighbouring invocations
     // that need one evaluation run it together whichever sign it is for.
     let n_kept = u32(kept_w.x > 0.0) + u32(kept_w.y > 0.0);
@@ -244,7 +260,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         }
     }
     let k_qprev = vec2f(k0.q_prev, k1.q_prev);
-    let k_qcur = vec2f(target_of(k0.v, ch), target_of(k1.v, ch));
+    let k_qcur = vec2f(k0.q, k1.q);
     // Confidence-weighted balance heuristic over all inputs, empty ones included.
     let m_c = mp.m_fresh;
     let m_k = select(0.0, mp.m_kept, reuse);
@@ -254,12 +270,17 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     for (var s = 0u; s < n_signs; s++) {
         let r_fresh = fresh_r[s];
         let c_ok = fresh_w[s] > 0.0;
-        // A fresh sample's value under the current state and its target under the previous
-        // one are stored.
+        // A fresh sample's factor under the current textures and its target under the
+        // previous state are stored.
+        var c_e = vec3f(0.0);
         var c_v = vec3f(0.0);
+        var c_qcur = 0.0;
         var c_qprev = 0.0;
         if c_ok {
-            c_v = slot_value(r_fresh);
+            c_e = slot_value(r_fresh);
+            let pa = pixel_adjoints(word(r_fresh, RES_INFO));
+            c_v = with_adjoint(c_e, pa.value, ch);
+            c_qcur = target_of(with_adjoint(c_e, pa.target_cur, ch), ch);
             if reuse {
                 c_qprev = bitcast<f32>(word(r_fresh, RES_Q_PREV));
                 if verify {
@@ -268,13 +289,12 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
                     // the larger of the sample's targets under both states, the scale at
                     // which q_prev enters the MIS weights (a target near zero is a sum that
                     // cancels, whose own relative rounding error is unbounded).
-                    let again = target_of(evaluate(load(r_fresh), ti, local, true), ch);
-                    let scale = max(max(abs(again), abs(target_of(c_v, ch))), 1e-30);
+                    let again = target_of(with_adjoint(evaluate(load(r_fresh), ti, local, true), pa.target_prev, ch), ch);
+                    let scale = max(max(abs(again), abs(c_qcur)), 1e-30);
                     record_verified(abs(again - c_qprev) / scale);
                 }
             }
         }
-        let c_qcur = target_of(c_v, ch);
         // Resampling weights m_r(y_r) * tau_s(q_cur(y_r)) * W_r of the fresh input (w0) and
         // the kept ones (wk).
         var w0 = 0.0;
@@ -322,12 +342,14 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         // two merged reservoirs always lie in different slots.
         var r_out = r_fresh;
         var v = c_v;
+        var q = c_qcur;
         if pick != 0u {
             r_out = kept_r[pick - 1u];
             v = select(k0.v, k1.v, pick == 2u);
-            set_value(r_out, v);
+            q = select(k0.q, k1.q, pick == 2u);
+            set_value(r_out, select(k0.e, k1.e, pick == 2u));
         }
-        let w_out = total / tau(target_of(v, ch), s);
+        let w_out = total / tau(q, s);
         set_w(r_out, w_out);
         out_slot[s] = r_out - base;
         g += v * w_out;

@@ -98,12 +98,19 @@ struct RestirArgs {
     /// ReSTIR ablation: one reservoir per texel over |target| instead of two.
     #[arg(long)]
     no_positivization: bool,
+    /// ReSTIR: weight of the last target adjoint in this iteration's (an exponential moving
+    /// average of the adjoints for the resampling targets; 0: this iteration's adjoint).
+    #[arg(long, default_value_t = optim::RestirOptions::default().target_smoothing)]
+    target_smoothing: f32,
 }
 
 impl RestirArgs {
     fn resolve(&self) -> Result<optim::RestirOptions> {
         if !(self.m_cap.is_finite() && self.m_cap > 0.0) {
             bail!("--m-cap must be a positive number");
+        }
+        if !(0.0..1.0).contains(&self.target_smoothing) {
+            bail!("--target-smoothing must be in [0, 1)");
         }
         Ok(optim::RestirOptions {
             m_cap: self.m_cap,
@@ -114,6 +121,7 @@ impl RestirArgs {
             temporal: !self.no_temporal,
             positivization: !self.no_positivization,
             verify_paths: false,
+            target_smoothing: self.target_smoothing,
         })
     }
 }

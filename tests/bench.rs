@@ -132,7 +132,8 @@ fn bench_json_has_every_field_finite_and_in_range() {
     for k in ["iterations_baseline", "iterations_restir"] {
         assert!(number(s, k) >= 1.0, "{k}");
     }
-    // ReSTIR's extra state is exactly the reservoirs and locks.
+    // ReSTIR's extra state per texel is exactly the reservoirs and locks (buffers that scale
+    // with the image, its target adjoints among them, are not counted per texel).
     let extra = number(s, "state_bytes_per_texel") - number(s, "state_bytes_per_texel_baseline");
     assert_eq!(extra, STATE_BYTES_PER_TEXEL as f64);
     // Curves start at the initial state and run to the budget.

@@ -2,8 +2,9 @@
 //! temporal reuse it equals the baseline's sum of the same candidates for a scalar texture;
 //! with reuse (parameters held fixed, or alternating between two states so that every kept
 //! path is shifted across a change of base color and roughness) its mean matches a
-//! high-sample baseline reference; stored paths evaluate to their stored values; the merge
-//! traces no ray; a texel whose gradient changes sign gets gradients of the new sign; and on
+//! high-sample baseline reference; stored paths evaluate to their stored factors; the merge
+//! traces no ray; the target adjoint is the moving average of the adjoints; a texel whose
+//! gradient changes sign gets gradients of the new sign; and on
 //! the bundled default task, shrunk, ReSTIR recovers the texture (and beats the baseline at
 //! the task's former, sparser sampling).
 mod common;
@@ -331,7 +332,7 @@ fn check_unbiased_across_shifts(filter: Filter) {
     assert!(d.verified > 1000, "too few kept paths were checked: {d:?}");
     assert!(
         d.max_relative_error < 1e-4,
-        "a stored path does not evaluate to its stored value: {d:?}"
+        "a stored path does not evaluate to its stored factor: {d:?}"
     );
 }
 
@@ -485,7 +486,7 @@ fn the_merge_pass_traces_no_ray() {
 /// (shaders/shared/surface.wgsl, fixed_pack), packed by which slots are optimized; the merge
 /// evaluates kept paths from them. For every combination of optimized slots on a material
 /// whose base color, metallic and roughness differ, with the textures alternating between
-/// two states, every kept path evaluates to its stored value (the path self-check): a
+/// two states, every kept path evaluates to its stored factor (the path self-check): a
 /// packing that mixed up two inputs would miss by far more than rounding.
 #[test]
 fn stored_paths_keep_the_inputs_no_texture_replaces() {
@@ -528,7 +529,7 @@ fn stored_paths_keep_the_inputs_no_texture_replaces() {
         );
         assert!(
             d.max_relative_error < 1e-4,
-            "{slots:?}: a stored path does not evaluate to its stored value: {d:?}"
+            "{slots:?}: a stored path does not evaluate to its stored factor: {d:?}"
         );
     }
 }
@@ -789,24 +790,44 @@ fn the_shrunk_default_task_recovers_its_texture() {
 #[test]
 fn a_restored_state_continues_like_the_original() {
     let Some(gpu) = gpu() else { return };
-    let make = || {
+    let make = |target_smoothing| {
         optimizer(
             &gpu,
             Slot::BaseColor,
             Filter::Bilinear,
             Method::Restir,
-            RestirOptions::default(),
+            RestirOptions {
+                target_smoothing,
+                ..Default::default()
+            },
             &[0.5; 12],
             &[0.9, 0.2, 0.2, 0.2, 0.9, 0.2, 0.2, 0.2, 0.9, 0.7, 0.7, 0.1],
         )
     };
-    let mut a = make();
+    // With the default target adjoint: the round trip through the GPU buffers (reservoirs,
+    // target adjoints and the rest) is exact.
+    let beta = RestirOptions::default().target_smoothing;
+    let mut a = make(beta);
     for _ in 0..6 {
         a.step().unwrap();
     }
     let state = a.state().unwrap();
     assert!(state.restir.as_ref().unwrap().history > 0);
-    // The round trip through the GPU buffers is exact.
+    let mut b = make(beta);
+    b.restore(&state).unwrap();
+    assert_eq!(b.state().unwrap(), state);
+    // The next gradient is compared with the target adjoint equal to the adjoint (β = 0): for
+    // a fresh reservoir whose target is then |value|, the estimate does not depend on which
+    // candidate it selects, so the order in which invocations take the locks (not
+    // deterministic) hardly moves it. With another target adjoint it depends on the
+    // selection, and two runs from one state differ by the selection's variance (measured:
+    // 0 to 60% of the norm).
+    let make = || make(0.0);
+    let mut a = make();
+    for _ in 0..6 {
+        a.step().unwrap();
+    }
+    let state = a.state().unwrap();
     let mut b = make();
     b.restore(&state).unwrap();
     assert_eq!(b.state().unwrap(), state);
@@ -843,4 +864,60 @@ fn a_restored_state_continues_like_the_original() {
         ac > 0.3 * norm,
         "the reservoirs made no difference ({ac:.3e} of {norm:.3e})"
     );
+}
+
+#[test]
+fn the_target_adjoint_is_a_moving_average_of_the_adjoints() {
+    let Some(gpu) = gpu() else { return };
+    let t = [0.9, 0.2, 0.2, 0.2, 0.9, 0.2, 0.2, 0.2, 0.9, 0.7, 0.7, 0.1];
+    let beta = 0.9f32;
+    let n = (W * W) as usize;
+    // Two adjoints (RGBA per pixel) with every channel of every pixel different.
+    let a1: Vec<f32> = (0..4 * n)
+        .map(|i| ((i * 37 % 101) as f32 - 50.0) * 1e-3)
+        .collect();
+    let a2: Vec<f32> = (0..4 * n)
+        .map(|i| ((i * 53 % 97) as f32 - 48.0) * 2e-3)
+        .collect();
+    for temporal in [true, false] {
+        let opts = RestirOptions {
+            target_smoothing: beta,
+            temporal,
+            ..Default::default()
+        };
+        let mut o = optimizer(
+            &gpu,
+            Slot::BaseColor,
+            Filter::Bilinear,
+            Method::Restir,
+            opts,
+            &[0.5; 12],
+            &t,
+        );
+        o.estimate_gradient_with_adjoint(0, &a1).unwrap();
+        o.estimate_gradient_with_adjoint(1, &a2).unwrap();
+        let targets = o.state().unwrap().restir.unwrap().targets;
+        // Both parities, the even iteration's first.
+        assert_eq!(targets.len(), 2 * 4 * n);
+        let (even, odd) = targets.split_at(4 * n);
+        for p in 0..n {
+            for c in 0..3 {
+                let i = 4 * p + c;
+                // The first iteration has no history: its target adjoint is its adjoint.
+                assert_eq!(even[i], a1[i], "pixel {p} channel {c}");
+                // Then beta of the last plus 1 - beta of the new one (without temporal
+                // reuse, nothing is kept and the target is the adjoint itself).
+                let want = if temporal {
+                    beta * a1[i] + (1.0 - beta) * a2[i]
+                } else {
+                    a2[i]
+                };
+                assert!(
+                    (odd[i] - want).abs() <= 1e-6 * want.abs().max(1e-3),
+                    "temporal {temporal}, pixel {p} channel {c}: {} vs {want}",
+                    odd[i]
+                );
+            }
+        }
+    }
 }

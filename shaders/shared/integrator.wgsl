@@ -170,7 +170,7 @@ fn direct_radiance_states(o: vec3f, d: vec3f, both: bool) -> array<vec3f, 2> {
 // single-sided surface, or hits a material without optimized textures. The outgoing and each
 // sample's incident direction are taken to the shading frame and rounded through the
 // octahedral encoding that ReSTIR stores (about 1e-7), and the derivatives are taken there, so
-// that a stored path (shared/surface.wgsl, path_value) re-evaluates to the same value.
+// that a stored path (shared/surface.wgsl, path_factor) re-evaluates to the same value.
 struct GradientSample {
     valid: bool,
     sf: Surface,

@@ -75,17 +75,32 @@ fn material_param(m: Material, slot: u32) -> u32 {
 // Derivative of adjoint . contribution with respect to one input of the slot, where the
 // contribution is brdf x weight: per channel for base color (xyz), a scalar (x) otherwise.
 fn slot_derivative(slot: u32, bg: BrdfGrad, weight: vec3f, adj: vec3f) -> vec3f {
+    return with_adjoint(slot_factor(slot, bg, weight), adj, select(1u, 3u, slot == 0u));
+}
+
+// The derivative of the contribution brdf x weight with respect to one input of the slot,
+// per image channel, before the adjoint: slot_derivative is with_adjoint of it.
+fn slot_factor(slot: u32, bg: BrdfGrad, weight: vec3f) -> vec3f {
     switch slot {
         case 0u: {
-            return adj * bg.d_base * weight;
+            return bg.d_base * weight;
         }
         case 1u: {
-            return vec3f(dot(adj, bg.d_metallic * weight), 0.0, 0.0);
+            return bg.d_metallic * weight;
         }
         default: {
-            return vec3f(dot(adj, bg.d_roughness * weight), 0.0, 0.0);
+            return bg.d_roughness * weight;
         }
     }
+}
+
+// A slot factor (or a sum of them) under adjoint adj, for a texture of `channels` channels:
+// per channel for base color (xyz), summed over the image channels into x otherwise.
+fn with_adjoint(e: vec3f, adj: vec3f, channels: u32) -> vec3f {
+    if channels == 3u {
+        return adj * e;
+    }
+    return vec3f(dot(adj, e), 0.0, 0.0);
 }
 
 // Filtered value (up to 3 channels; unused channels are 0).

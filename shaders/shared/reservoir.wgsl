@@ -7,9 +7,15 @@
 // camera sample that started it (pixel, camera, technique in RES_INFO), what the BRDF needs of
 // the camera ray's hit (material, texture coordinates, the outgoing and incident directions
 // in its shading frame, octahedral, and the material inputs no optimized texture replaces)
-// and the radiance arriving along the incident direction, with its value under the
-// iteration's textures and adjoint, and the weight sum (fresh reservoirs) or unbiased
-// contribution weight W (merged).
+// and the radiance arriving along the incident direction, with its factor under the
+// iteration's textures (the derivative d(BRDF cos L_i)/d(texel) per image channel: the value
+// is the pixel's adjoint times it, the target the luminance of the target adjoint times it),
+// and the weight sum (fresh reservoirs) or unbiased contribution weight W (merged).
+// Target adjoint: the resampling targets use an exponential moving average of the adjoints,
+// per pixel, a_t = s a_{t-1} + (1 - s) adjoint_t (s: RestirOptions::target_smoothing), which
+// changes less between iterations than a noisy primal's adjoint; the values use the
+// iteration's own adjoint. Any target that is non-zero wherever the value is keeps the
+// estimate unbiased, and a_t is fixed before the gradient samples are drawn.
 // Texel t owns RESERVOIR_SLOTS reservoir slots, 4t to 4t + 3, and a header word that says
 // which slot holds its positive (sign 0) and its negative (sign 1) reservoir: two distinct
 // slots, so two are free for the next iteration's fresh candidates (fresh_slot). The merge
@@ -25,15 +31,16 @@
 // A holder always releases in the same iteration, so the bound is never reached otherwise.
 const LOCK_BOUND: u32 = 4194304u;
 
-// A candidate path and its value for one texel.
+// A candidate path and its factor for one texel.
 struct Candidate {
     // Pixel | camera << INFO_CAMERA_SHIFT | technique << INFO_TECH_SHIFT (0 light, 1 BSDF).
     info: u32,
+    // d(BRDF cos L_i)/d(texel) per image channel, before the adjoint (RES_VALUE).
     value: vec3f,
-    // The path's first vertex as path_value (shared/surface.wgsl) evaluates it.
+    // The path's first vertex as path_factor (shared/surface.wgsl) evaluates it.
     vertex: PathVertex,
     radiance: vec3f,
-    // Target of the path's value for this texel under the previous iteration's textures and
+    // Target of the path for this texel under the previous iteration's textures and target
     // adjoint (0 when the merge will not reuse; RES_Q_PREV).
     q_prev: f32,
 }

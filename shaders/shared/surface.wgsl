@@ -149,13 +149,14 @@ fn oct_decode(e: vec2f) -> vec3f {
     return normalize(v);
 }
 
-// The value of a path's contribution to texel `local` of optimized texture `ti`, as
-// adjoint x d(f)/d(texel) with f = BRDF x cos x L_i (per channel for base color, x for
-// scalars): the path-space integrand of the gradient, before any sampling density. Zero when
-// the path's material does not use the texture or its filter does not reach the texel. Uses
-// the textures that use_prev_params selects. No geometry and no glTF texture is looked at.
-fn path_value(pv: PathVertex, li: vec3f, adj: vec3f, ti: u32, local: u32) -> vec3f {
-    if pv.material >= arrayLength(&materials) || all(adj == vec3f(0.0)) {
+// The factor of a path's contribution to texel `local` of optimized texture `ti` that the
+// adjoint multiplies, d(f)/d(texel) per image channel with f = BRDF x cos x L_i:
+// with_adjoint(path_factor(...), adjoint, channels) is the path-space integrand of the
+// gradient, before any sampling density. Zero when the path's material does not use the
+// texture or its filter does not reach the texel. Uses the textures that use_prev_params
+// selects. No geometry and no glTF texture is looked at.
+fn path_factor(pv: PathVertex, li: vec3f, ti: u32, local: u32) -> vec3f {
+    if pv.material >= arrayLength(&materials) {
         return vec3f(0.0);
     }
     var slot = NONE;
@@ -181,5 +182,5 @@ fn path_value(pv: PathVertex, li: vec3f, adj: vec3f, ti: u32, local: u32) -> vec
     }
     let mat = with_optimized(pv.material, pv.uv, fixed_unpack(pv.material, pv.fixed));
     let bg = brdf_eval_cos_grad(mat, oct_decode(pv.wo), oct_decode(pv.wi));
-    return wf * slot_derivative(slot, bg, li, adj);
+    return wf * slot_factor(slot, bg, li);
 }

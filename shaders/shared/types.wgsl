@@ -121,7 +121,7 @@ struct Hit {
 // (shared/surface.wgsl, fixed_pack), and the outgoing and incident directions in its
 // shading frame (octahedral, shared/surface.wgsl). ReSTIR stores it; the
 // gradient passes evaluate every sample at the decoded directions, so a stored path
-// re-evaluates to the same value (shared/surface.wgsl, path_value).
+// re-evaluates to the same value (shared/surface.wgsl, path_factor).
 struct PathVertex {
     material: u32,
     uv: vec2f,

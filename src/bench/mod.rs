@@ -277,6 +277,7 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         confidence: o.restir.confidence.name().into(),
         eval_spp: o.eval_spp,
         m_cap: o.restir.m_cap,
+        target_smoothing: o.restir.target_smoothing,
         scenes: Vec::new(),
     };
     for task in &loaded {

@@ -354,7 +354,8 @@ pub fn write_report(out: &Path, r: &BenchReport) -> Result<()> {
         "psrestir {} on `{}`; protocol `{:?}`; size scale {}; gradient error after {} ReSTIR \
          iterations (estimator-only: {} more estimates under the converged adjoint), mean of \
          {} seeds, against a reference of {} gradient spp under a {}-spp converged adjoint; \
-         ReSTIR M cap {}, fresh confidence `{}`; {} s of optimization per estimator and \
+         ReSTIR M cap {}, fresh confidence `{}`, target smoothing {}; {} s of optimization \
+         per estimator and \
          scene; image error from {}-spp renders.\n",
         r.version,
         r.adapter,
@@ -367,6 +368,7 @@ pub fn write_report(out: &Path, r: &BenchReport) -> Result<()> {
         r.reference_primal_spp,
         r.m_cap,
         r.confidence,
+        r.target_smoothing,
         r.budget_s,
         r.eval_spp,
     );

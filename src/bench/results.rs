@@ -184,6 +184,8 @@ pub struct BenchReport {
     pub eval_spp: u32,
     /// ReSTIR's confidence cap.
     pub m_cap: f32,
+    /// ReSTIR's target smoothing (the last target adjoint's weight).
+    pub target_smoothing: f32,
     /// Per scene.
     pub scenes: Vec<SceneResult>,
 }

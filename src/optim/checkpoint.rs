@@ -8,7 +8,7 @@ use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-const MAGIC: &[u8; 8] = b"PSRCKPT3";
+const MAGIC: &[u8; 8] = b"PSRCKPT4";
 
 /// One row of metrics.csv.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -59,6 +59,9 @@ struct Stored {
     /// ReSTIR's merge count (the kept samples' confidence).
     #[serde(default)]
     restir_history: u32,
+    /// Floats of ReSTIR's target adjoints (both parities).
+    #[serde(default)]
+    restir_target_floats: Option<usize>,
     /// Floats of the control variate's state; absent for the independent primal.
     #[serde(default)]
     control_variate_floats: Option<usize>,
@@ -90,6 +93,7 @@ impl Checkpoint {
             previous_adjoint_floats: st.previous.as_ref().map(|p| p.adjoint.len()),
             reservoir_words: st.restir.as_ref().map(|r| r.reservoirs.len()),
             restir_history: st.restir.as_ref().map_or(0, |r| r.history),
+            restir_target_floats: st.restir.as_ref().map(|r| r.targets.len()),
             control_variate_floats: st.control_variate.as_ref().map(|c| c.state.len()),
             control_variate_iterations: st.control_variate.as_ref().map_or(0, |c| c.iterations),
             exposure: st.exposure.clone(),
@@ -117,6 +121,7 @@ impl Checkpoint {
         }
         if let Some(r) = &st.restir {
             out.extend_from_slice(bytemuck::cast_slice(&r.reservoirs));
+            out.extend_from_slice(bytemuck::cast_slice(&r.targets));
         }
         if let Some(c) = &st.control_variate {
             out.extend_from_slice(bytemuck::cast_slice(&c.state));
@@ -150,6 +155,7 @@ impl Checkpoint {
         }
         if let Some(r) = stored.reservoir_words {
             sizes.push(Some(r));
+            sizes.push(Some(stored.restir_target_floats.unwrap_or(0)));
         }
         if let Some(c) = stored.control_variate_floats {
             sizes.push(Some(c));
@@ -176,6 +182,7 @@ impl Checkpoint {
         let restir = stored.reservoir_words.map(|r| RestirSnapshot {
             reservoirs: bytemuck::pod_collect_to_vec(take(r)),
             history: stored.restir_history,
+            targets: bytemuck::pod_collect_to_vec(take(stored.restir_target_floats.unwrap_or(0))),
         });
         let control_variate = stored
             .control_variate_floats
@@ -233,6 +240,7 @@ mod tests {
                 restir: Some(RestirSnapshot {
                     reservoirs: (0..24).collect(),
                     history: 5,
+                    targets: vec![0.75; 16],
                 }),
                 control_variate: Some(ControlVariateSnapshot {
                     state: vec![0.25; 32],

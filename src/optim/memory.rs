@@ -62,7 +62,11 @@ pub fn memory_plan(set: &ParamSet, settings: &Settings, n_cams: usize) -> Memory
     for k in 0..n_cams {
         buffers.push((format!("target {k}"), 16 * pixels));
     }
-    buffers.extend(estimator::memory(settings.method, n_texels));
+    buffers.extend(estimator::memory(
+        settings.method,
+        n_texels,
+        pixels * n_cams as u64,
+    ));
     if settings.primal == PrimalMode::ControlVariate {
         buffers.extend(primal::memory(pixels, n_cams as u64));
     }

@@ -443,14 +443,29 @@ mod tests {
                 camera_index,
                 adjoint_offset,
                 positivize,
-                prev_targets
+                prev_targets,
+                smoothing,
+                target_cur,
+                target_prev
             ]
         );
         mirror!(
             "restir_merge",
             "MergeParams",
             crate::optim::restir::MergeParams,
-            [n_texels, n_pixels, seed, flags, m_fresh, m_kept, inv_spp, n_textures, stride]
+            [
+                n_texels,
+                n_pixels,
+                seed,
+                flags,
+                m_fresh,
+                m_kept,
+                inv_spp,
+                n_textures,
+                stride,
+                target_cur,
+                target_prev
+            ]
         );
         mirror!(
             "primal_cv",

@@ -107,10 +107,11 @@ pub(crate) fn build(setup: &Setup) -> Result<Box<dyn Estimator>> {
     })
 }
 
-/// The buffers `method` allocates for `n_texels` texels, by label and size in bytes.
-pub(crate) fn memory(method: Method, n_texels: u64) -> Vec<(String, u64)> {
+/// The buffers `method` allocates for `n_texels` texels and `n_pixels` pixels (all
+/// cameras'), by label and size in bytes.
+pub(crate) fn memory(method: Method, n_texels: u64, n_pixels: u64) -> Vec<(String, u64)> {
     match method {
         Method::Baseline => Vec::new(),
-        Method::Restir => restir::memory(n_texels),
+        Method::Restir => restir::memory(n_texels, n_pixels),
     }
 }

@@ -2,8 +2,10 @@
 //! shaders/restir_merge.wgsl, shaders/shared/reservoir.wgsl).
 //!
 //! Every optimized texel keeps two reservoirs, one over the positive and one over the negative
-//! part of its target q = luminance(v) (v for scalar textures), where v is a path's value for
-//! the texel: adjoint x d(BRDF cos L_i)/d(texel). A reservoir stores a *path* (pixel and camera,
+//! part of its target q = luminance(a x e) (x for scalar textures), where e is a path's factor
+//! for the texel, d(BRDF cos L_i)/d(texel) per image channel, and a the pixel's target
+//! adjoint, a moving average of the adjoints ([`RestirOptions::target_smoothing`]); the
+//! path's value is v = adjoint x e. A reservoir stores a *path* (pixel and camera,
 //! the camera ray's hit, the incident direction and radiance), not the random numbers that made
 //! it: geometry, cameras and lights never change during a texture optimization, so a stored
 //! path stays valid and its value under other textures and another adjoint is one BRDF
@@ -29,13 +31,7 @@ pub(crate) const CANDIDATES_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl
     pass: "restir_candidates",
     group: 1,
     names: &[
-        "cp",
-        "adjoint",
-        "fresh",
-        "locks",
-        "cstats",
-        "adjoint_prev",
-        "headers",
+        "cp", "adjoint", "fresh", "locks", "cstats", "targets", "headers",
     ],
 };
 /// Group 1 of `restir_merge.wgsl`.
@@ -43,13 +39,7 @@ pub(crate) const MERGE_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
     pass: "restir_merge",
     group: 1,
     names: &[
-        "mp",
-        "adjoint",
-        "adjoint_prev",
-        "slots",
-        "headers",
-        "grad",
-        "mstats",
+        "mp", "adjoint", "targets", "slots", "headers", "grad", "mstats",
     ],
 };
 /// Group 0 of `reservoir_test.wgsl`.
@@ -66,7 +56,8 @@ pub mod reservoir {
     pub const INFO: u32 = 0;
     /// Weight sum (fresh reservoirs) or unbiased contribution weight W (merged), f32.
     pub const W: u32 = 1;
-    /// The path's value v (RGB, x for scalars) under the state the reservoir was formed at.
+    /// The path's factor e = d(BRDF cos L_i)/d(texel) per image channel (RGB f32) under the
+    /// textures the reservoir was formed at; its value is the pixel's adjoint times e.
     pub const VALUE: u32 = 2;
     /// Material of the camera ray's hit (index into the scene's materials).
     pub const MATERIAL: u32 = 5;
@@ -78,8 +69,8 @@ pub mod reservoir {
     pub const WO: u32 = 10;
     /// Incident radiance, RGB f32.
     pub const RADIANCE: u32 = 12;
-    /// Fresh reservoirs: the target of the path's value under the previous iteration's
-    /// textures and adjoint (f32), computed by the candidate pass, which has the material
+    /// Fresh reservoirs: the path's target under the previous iteration's textures and
+    /// target adjoint (f32), computed by the candidate pass, which has the material
     /// at hand, so that the merge does not evaluate fresh paths again.
     pub const Q_PREV: u32 = 15;
     /// The material inputs at the hit that no optimized texture replaces, four f32
@@ -116,9 +107,14 @@ pub mod reservoir {
 pub const MAX_CAMERAS: usize = reservoir::CAMERA_MASK as usize + 1;
 
 /// Bytes of ReSTIR state per texel: four reservoir slots (the kept positive and negative
-/// reservoirs and the fresh ones), a header word and a lock word per sign.
+/// reservoirs and the fresh ones), a header word and a lock word per sign. Per pixel of every
+/// camera it also keeps [`STATE_BYTES_PER_PIXEL`].
 pub const STATE_BYTES_PER_TEXEL: u64 =
     reservoir::SLOTS as u64 * reservoir::WORDS as u64 * 4 + 4 + 2 * 4;
+
+/// Bytes of ReSTIR state per pixel of every camera: the target adjoints of both parities
+/// (RGBA f32 each).
+pub const STATE_BYTES_PER_PIXEL: u64 = 2 * 16;
 
 /// Merge flags (`MERGE_FLAG_*`).
 const FLAG_TEMPORAL: u32 = 1;
@@ -213,8 +209,14 @@ pub struct RestirOptions {
     pub positivization: bool,
     /// Self-check of the stored paths: the merge also evaluates every kept path under the
     /// state it was drawn at and records the largest relative difference from its stored
-    /// value ([`MergeDiagnostics`]). Costs one more BRDF evaluation per kept sample.
+    /// factor ([`MergeDiagnostics`]). Costs one more BRDF evaluation per kept sample.
     pub verify_paths: bool,
+    /// Weight of the last iteration's target adjoint in this one's, in [0, 1): the
+    /// resampling targets use an exponential moving average of the adjoints (0: this
+    /// iteration's adjoint, as the values do), so that they change less between iterations
+    /// than a noisy primal's adjoint does. The values, and so the estimate, always use the
+    /// iteration's own adjoint.
+    pub target_smoothing: f32,
 }
 
 impl Default for RestirOptions {
@@ -225,9 +227,13 @@ impl Default for RestirOptions {
             temporal: true,
             positivization: true,
             verify_paths: false,
+            target_smoothing: DEFAULT_TARGET_SMOOTHING,
         }
     }
 }
+
+/// [`RestirOptions::target_smoothing`] by default.
+pub const DEFAULT_TARGET_SMOOTHING: f32 = 0.9;
 
 /// `CandidateParams` in shaders/restir_candidates.wgsl (a test checks the layout).
 /// The fields are documented in the WGSL twin.
@@ -244,6 +250,10 @@ pub struct CandidateParams {
     pub adjoint_offset: u32,
     pub positivize: u32,
     pub prev_targets: u32,
+    pub smoothing: f32,
+    pub target_cur: u32,
+    pub target_prev: u32,
+    pub _pad: u32,
 }
 
 /// `MergeParams` in shaders/restir_merge.wgsl (a test checks the layout).
@@ -261,7 +271,9 @@ pub struct MergeParams {
     pub inv_spp: f32,
     pub n_textures: u32,
     pub stride: u32,
-    pub _pad: [u32; 3],
+    pub target_cur: u32,
+    pub target_prev: u32,
+    pub _pad: u32,
 }
 
 /// The part of a ReSTIR optimizer's state that carries over to the next iteration.
@@ -273,6 +285,10 @@ pub struct RestirSnapshot {
     /// Merges whose samples the kept reservoirs can hold (0 before the first iteration or
     /// without temporal reuse); it sets the kept samples' confidence.
     pub history: u32,
+    /// The target adjoints of both parities of the iteration (RGBA per pixel, the cameras
+    /// one after another, the even iterations' first): the resampling targets' smoothed
+    /// adjoint.
+    pub targets: Vec<f32>,
 }
 
 /// What the merge pass counted since the optimizer was created.
@@ -282,13 +298,14 @@ pub struct MergeDiagnostics {
     pub evaluations: u64,
     /// Kept paths checked with [`RestirOptions::verify_paths`].
     pub verified: u64,
-    /// Largest relative difference between a kept path's stored value and its evaluation
+    /// Largest relative difference between a kept path's stored factor and its evaluation
     /// under the state it was drawn at.
     pub max_relative_error: f32,
 }
 
-/// The buffers ReSTIR allocates for `n_texels` texels, by label and size in bytes.
-pub(crate) fn memory(n_texels: u64) -> Vec<(String, u64)> {
+/// The buffers ReSTIR allocates for `n_texels` texels and `n_pixels` pixels (all cameras'),
+/// by label and size in bytes.
+pub(crate) fn memory(n_texels: u64, n_pixels: u64) -> Vec<(String, u64)> {
     vec![
         (
             "reservoir slots".to_string(),
@@ -296,6 +313,10 @@ pub(crate) fn memory(n_texels: u64) -> Vec<(String, u64)> {
         ),
         ("reservoir headers".to_string(), n_texels * 4),
         ("reservoir locks".to_string(), n_texels * 2 * 4),
+        (
+            "target adjoints".to_string(),
+            STATE_BYTES_PER_PIXEL * n_pixels,
+        ),
     ]
 }
 
@@ -322,6 +343,11 @@ pub(crate) struct Restir {
     merge_grid: (u32, u32),
     candidate_stats: wgpu::Buffer,
     merge_stats: wgpu::Buffer,
+    /// The target adjoints of both parities of the iteration, one after the other
+    /// (shaders/shared/reservoir.wgsl).
+    targets: wgpu::Buffer,
+    /// Pixels (vec4s) of one parity's target adjoints.
+    target_len: u32,
     grid: (u32, u32),
     options: RestirOptions,
     seed: u32,
@@ -354,7 +380,8 @@ impl Restir {
         let merge_pipeline =
             gpu.compute_pipeline("restir_merge", &[&s.scene.layout, &merge_layout])?;
         let n_texels = s.scene.n_texels as u64;
-        let sizes = memory(n_texels);
+        let n_all_pixels = s.adjoint[0].size() / 16;
+        let sizes = memory(n_texels, n_all_pixels);
         let slots = gpu.storage_zeroed(&sizes[0].0, sizes[0].1);
         let headers = gpu.storage(
             &sizes[1].0,
@@ -364,6 +391,8 @@ impl Restir {
         let locks = gpu.storage_zeroed(&sizes[2].0, sizes[2].1);
         let candidate_stats = gpu.storage_zeroed("candidate stats", 16);
         let merge_stats = gpu.storage_zeroed("merge stats", 16);
+        let target_len = n_all_pixels as u32;
+        let targets = gpu.storage_zeroed(&sizes[3].0, sizes[3].1);
         let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
         let merge_grid = grid_2d(n_texels as u32, WORKGROUP, max_dim);
         let spp = s.settings.gradient_spp;
@@ -380,7 +409,9 @@ impl Restir {
             inv_spp: 1.0 / spp as f32,
             n_textures: s.set.textures.len() as u32,
             stride: merge_grid.0 * WORKGROUP,
-            _pad: [0; 3],
+            target_cur: 0,
+            target_prev: 0,
+            _pad: 0,
         };
         let merge_uniform = gpu.uniform("merge params", bytemuck::bytes_of(&merge_params));
         let merge_groups = [0usize, 1].map(|p| {
@@ -391,7 +422,7 @@ impl Restir {
                 &[
                     ("mp", &merge_uniform),
                     ("adjoint", &s.adjoint[p]),
-                    ("adjoint_prev", &s.adjoint[1 - p]),
+                    ("targets", &targets),
                     ("slots", &slots),
                     ("headers", &headers),
                     ("grad", s.grad),
@@ -414,6 +445,10 @@ impl Restir {
                     adjoint_offset: k as u32 * n_pixels,
                     positivize: o.positivization as u32,
                     prev_targets: 0,
+                    smoothing: 0.0,
+                    target_cur: 0,
+                    target_prev: 0,
+                    _pad: 0,
                 };
                 let uniform = gpu.uniform(
                     &format!("candidate params {k}"),
@@ -430,7 +465,7 @@ impl Restir {
                             ("fresh", &slots),
                             ("locks", &locks),
                             ("cstats", &candidate_stats),
-                            ("adjoint_prev", &s.adjoint[1 - p]),
+                            ("targets", &targets),
                             ("headers", &headers),
                         ],
                     )
@@ -455,6 +490,8 @@ impl Restir {
             merge_grid,
             candidate_stats,
             merge_stats,
+            targets,
+            target_len,
             grid: s.grid,
             options: o,
             seed: s.settings.seed,
@@ -482,9 +519,18 @@ impl Estimator for Restir {
         enc.clear_buffer(&self.locks, 0, None);
         let have_prev = self.history > 0;
         let reuse = self.options.temporal && have_prev;
+        let target_cur = parity as u32 * self.target_len;
+        let target_prev = (1 - parity as u32) * self.target_len;
         for (k, cam) in self.cameras.iter_mut().enumerate() {
             cam.params.seed = pass_seed(self.seed, frame.iteration, k as u32, Seeds::GRADIENT);
             cam.params.prev_targets = reuse as u32;
+            cam.params.target_cur = target_cur;
+            cam.params.target_prev = target_prev;
+            cam.params.smoothing = if have_prev {
+                self.options.target_smoothing
+            } else {
+                0.0
+            };
             self.queue
                 .write_buffer(&cam.uniform, 0, bytemuck::bytes_of(&cam.params));
             encode_timed_pass(
@@ -504,6 +550,8 @@ impl Estimator for Restir {
             | if o.verify_paths { FLAG_VERIFY } else { 0 };
         // Every kept reservoir has absorbed the fresh candidates of `history` iterations.
         self.merge_params.m_kept = (self.merge_params.m_fresh * self.history as f32).min(o.m_cap);
+        self.merge_params.target_cur = target_cur;
+        self.merge_params.target_prev = target_prev;
         self.queue.write_buffer(
             &self.merge_uniform,
             0,
@@ -548,6 +596,7 @@ impl Estimator for Restir {
         Ok(Some(RestirSnapshot {
             reservoirs: kept_reservoirs(&slots, &headers[..n_texels]),
             history: self.history,
+            targets: gpu.read_pod(&self.targets)?,
         }))
     }
 
@@ -570,10 +619,21 @@ impl Estimator for Restir {
                         reservoir::WORDS
                     )));
                 }
+                if r.targets.len() as u64 * 4 != self.targets.size() {
+                    return Err(Error::Invalid(format!(
+                        "the saved ReSTIR state has {} target-adjoint floats where this \
+                         optimizer's images need {}",
+                        r.targets.len(),
+                        self.targets.size() / 4
+                    )));
+                }
+                gpu.queue
+                    .write_buffer(&self.targets, 0, bytemuck::cast_slice(&r.targets));
                 self.history = if self.options.temporal { r.history } else { 0 };
                 slots_holding(&r.reservoirs)
             }
             None => {
+                // The first iteration forms the target adjoint from its own adjoint alone.
                 self.history = 0;
                 let words = reservoir::SLOTS as usize * reservoir::WORDS as usize;
                 (
