@@ -100,8 +100,9 @@ struct RestirArgs {
     no_positivization: bool,
     /// ReSTIR: weight of the last target adjoint in this iteration's (an exponential moving
     /// average of the adjoints for the resampling targets; 0: this iteration's adjoint).
-    #[arg(long, default_value_t = optim::RestirOptions::default().target_smoothing)]
-    target_smoothing: f32,
+    /// Default: 0.9 with the independent primal, 0 with the control variate.
+    #[arg(long)]
+    target_smoothing: Option<f32>,
 }
 
 impl RestirArgs {
@@ -109,7 +110,10 @@ impl RestirArgs {
         if !(self.m_cap.is_finite() && self.m_cap > 0.0) {
             bail!("--m-cap must be a positive number");
         }
-        if !(0.0..1.0).contains(&self.target_smoothing) {
+        if self
+            .target_smoothing
+            .is_some_and(|b| !(0.0..1.0).contains(&b))
+        {
             bail!("--target-smoothing must be in [0, 1)");
         }
         Ok(optim::RestirOptions {

@@ -4,7 +4,8 @@
 //! on one device, their steps interleaved, each end where they would alone; textures come out
 //! as a GPU texture equal to the CPU values; injected non-finite values are dropped and
 //! counted, never stored; passes whose grid is split over two rows (past the device's
-//! workgroups per dimension) still cover every pixel and texel once.
+//! workgroups per dimension) still cover every pixel and texel once; invalid ReSTIR options
+//! are refused by name.
 #[path = "../examples/gltf_textures.rs"]
 mod gltf_textures;
 #[path = "../examples/in_memory.rs"]
@@ -552,4 +553,34 @@ fn passes_split_over_two_grid_rows_cover_every_item_once() {
         norm > 0.0 && diff <= 1e-8 * norm,
         "image difference {diff:.3e} of {norm:.3e}"
     );
+}
+
+#[test]
+fn invalid_restir_options_are_refused_by_name() {
+    if no_gpu() {
+        return;
+    }
+    let gpu = Gpu::new().unwrap();
+    let p = problem(&gpu, [[230, 60, 40], [40, 90, 220]]);
+    for (m_cap, target_smoothing, name) in [
+        (0.0, 0.9, "m_cap"),
+        (f32::NAN, 0.9, "m_cap"),
+        (8.0, 1.0, "target_smoothing"),
+        (8.0, -0.1, "target_smoothing"),
+        (8.0, f32::NAN, "target_smoothing"),
+    ] {
+        let s = Settings {
+            restir: psrestir::optim::RestirOptions {
+                m_cap,
+                target_smoothing: Some(target_smoothing),
+                ..Default::default()
+            },
+            ..settings(Method::Restir)
+        };
+        let e = Optimizer::for_problem(&gpu, &p, s)
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(e.contains(name), "{m_cap} {target_smoothing}: {e}");
+    }
 }

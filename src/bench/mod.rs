@@ -329,6 +329,9 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
                 .primal
                 .name()
                 .into(),
+            target_smoothing: o
+                .restir
+                .target_smoothing_for(settings(&prep, task, Method::Restir, o).primal),
             primal_relmse_independent: pp.relmse_independent,
             primal_relmse_control_variate: pp.relmse_control_variate,
             primal_relmse_ratio: pp.relmse_control_variate / pp.relmse_independent,

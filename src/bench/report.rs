@@ -368,7 +368,13 @@ pub fn write_report(out: &Path, r: &BenchReport) -> Result<()> {
         r.reference_primal_spp,
         r.m_cap,
         r.confidence,
-        r.target_smoothing,
+        match r.target_smoothing {
+            Some(b) => b.to_string(),
+            None => format!(
+                "{} (independent primal) or 0 (control variate)",
+                crate::optim::restir::TARGET_SMOOTHING_INDEPENDENT
+            ),
+        },
         r.budget_s,
         r.eval_spp,
     );

@@ -83,6 +83,8 @@ pub struct SceneResult {
     pub ms_per_iteration_ratio: f64,
     /// The primal estimator of the gradient and optimization phases.
     pub primal: String,
+    /// ReSTIR's target smoothing with that primal estimator.
+    pub target_smoothing: f32,
     /// relMSE of an independent primal render (the task's primal spp) against a converged
     /// render, at the state after `warmup` iterations (mean over seeds and cameras).
     pub primal_relmse_independent: f64,
@@ -184,8 +186,9 @@ pub struct BenchReport {
     pub eval_spp: u32,
     /// ReSTIR's confidence cap.
     pub m_cap: f32,
-    /// ReSTIR's target smoothing (the last target adjoint's weight).
-    pub target_smoothing: f32,
+    /// ReSTIR's target smoothing as given (the last target adjoint's weight); absent: by the
+    /// primal estimator (each scene's `target_smoothing`).
+    pub target_smoothing: Option<f32>,
     /// Per scene.
     pub scenes: Vec<SceneResult>,
 }

@@ -215,8 +215,10 @@ pub struct RestirOptions {
     /// resampling targets use an exponential moving average of the adjoints (0: this
     /// iteration's adjoint, as the values do), so that they change less between iterations
     /// than a noisy primal's adjoint does. The values, and so the estimate, always use the
-    /// iteration's own adjoint.
-    pub target_smoothing: f32,
+    /// iteration's own adjoint. `None`: by the primal estimator, [`TARGET_SMOOTHING_INDEPENDENT`]
+    /// with the independent primal and 0 with the control variate, whose image is already a
+    /// recursive average (a second one only adds lag: measured worse on `vase` and `sphere`).
+    pub target_smoothing: Option<f32>,
 }
 
 impl Default for RestirOptions {
@@ -227,13 +229,23 @@ impl Default for RestirOptions {
             temporal: true,
             positivization: true,
             verify_paths: false,
-            target_smoothing: DEFAULT_TARGET_SMOOTHING,
+            target_smoothing: None,
         }
     }
 }
 
-/// [`RestirOptions::target_smoothing`] by default.
-pub const DEFAULT_TARGET_SMOOTHING: f32 = 0.9;
+impl RestirOptions {
+    /// The target smoothing used with the primal estimator `primal`.
+    pub fn target_smoothing_for(&self, primal: crate::optim::PrimalMode) -> f32 {
+        self.target_smoothing.unwrap_or(match primal {
+            crate::optim::PrimalMode::Independent => TARGET_SMOOTHING_INDEPENDENT,
+            crate::optim::PrimalMode::ControlVariate => 0.0,
+        })
+    }
+}
+
+/// [`RestirOptions::target_smoothing`] by default with the independent primal.
+pub const TARGET_SMOOTHING_INDEPENDENT: f32 = 0.9;
 
 /// `CandidateParams` in shaders/restir_candidates.wgsl (a test checks the layout).
 /// The fields are documented in the WGSL twin.
@@ -350,6 +362,8 @@ pub(crate) struct Restir {
     target_len: u32,
     grid: (u32, u32),
     options: RestirOptions,
+    /// The target smoothing in use ([`RestirOptions::target_smoothing_for`]).
+    smoothing: f32,
     seed: u32,
     /// Merges whose samples the kept reservoirs can hold (0: nothing to reuse).
     history: u32,
@@ -361,6 +375,18 @@ impl Restir {
         let gpu = s.gpu;
         let o = s.settings.restir;
         let n_cams = s.cameras.len();
+        if !(o.m_cap.is_finite() && o.m_cap > 0.0) {
+            return Err(Error::Invalid(format!(
+                "ReSTIR's m_cap must be a positive number, not {}",
+                o.m_cap
+            )));
+        }
+        let smoothing = o.target_smoothing_for(s.settings.primal);
+        if !(0.0..1.0).contains(&smoothing) {
+            return Err(Error::Invalid(format!(
+                "ReSTIR's target_smoothing must be in [0, 1), not {smoothing}"
+            )));
+        }
         if n_cams > MAX_CAMERAS {
             return Err(Error::Invalid(format!(
                 "ReSTIR handles at most {MAX_CAMERAS} cameras, the task has {n_cams}"
@@ -494,6 +520,7 @@ impl Restir {
             target_len,
             grid: s.grid,
             options: o,
+            smoothing,
             seed: s.settings.seed,
             history: 0,
             queue: gpu.queue.clone(),
@@ -526,11 +553,7 @@ impl Estimator for Restir {
             cam.params.prev_targets = reuse as u32;
             cam.params.target_cur = target_cur;
             cam.params.target_prev = target_prev;
-            cam.params.smoothing = if have_prev {
-                self.options.target_smoothing
-            } else {
-                0.0
-            };
+            cam.params.smoothing = if have_prev { self.smoothing } else { 0.0 };
             self.queue
                 .write_buffer(&cam.uniform, 0, bytemuck::bytes_of(&cam.params));
             encode_timed_pass(
