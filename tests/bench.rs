@@ -5,7 +5,7 @@
 mod common;
 
 use psrestir::bench::{bench, resolve_scene, BenchOptions};
-use psrestir::optim::restir::STATE_BYTES_PER_TEXEL;
+use psrestir::optim::restir::{STATE_BYTES_PER_TEXEL, TARGET_SMOOTHING_INDEPENDENT};
 use serde_json::Value;
 use std::path::Path;
 
@@ -108,6 +108,14 @@ fn bench_json_has_every_field_finite_and_in_range() {
     // baseline iteration.
     let ms = number(s, "ms_per_iteration_ratio");
     assert!(ms > 0.5 && ms < 100.0, "ms_per_iteration_ratio {ms}");
+    // No smoothing given: the bench task's independent primal takes the default target
+    // smoothing, recorded per scene (the top level says none was given).
+    assert_eq!(s["primal"].as_str(), Some("independent"));
+    assert_eq!(
+        number(s, "target_smoothing") as f32,
+        TARGET_SMOOTHING_INDEPENDENT
+    );
+    assert!(json["target_smoothing"].is_null());
     for k in [
         "texture_rmse_initial",
         "texture_rmse_baseline",
