@@ -140,6 +140,15 @@ fn bench_json_has_every_field_finite_and_in_range() {
     for k in ["iterations_baseline", "iterations_restir"] {
         assert!(number(s, k) >= 1.0, "{k}");
     }
+    // The merge's work, counted around the sampled iterations (the first after iteration 1):
+    // it evaluates kept paths, at most two per texel (one per sign).
+    if number(s, "iterations_restir") >= 2.0 {
+        let e = number(s, "merge_evaluations_per_iteration");
+        assert!(
+            e > 0.0 && e <= 2.0 * number(s, "texels"),
+            "merge_evaluations_per_iteration {e}"
+        );
+    }
     // ReSTIR's extra state per texel is exactly the reservoirs and locks (buffers that scale
     // with the image, its target adjoints among them, are not counted per texel).
     let extra = number(s, "state_bytes_per_texel") - number(s, "state_bytes_per_texel_baseline");

@@ -430,6 +430,7 @@ pub(super) struct OptimizationRun {
     pub(super) iterations: u32,
     pub(super) ms_per_iteration: f64,
     pub(super) passes: Option<PassTimes>,
+    pub(super) merge_evaluations: Option<f64>,
     pub(super) state_bytes_per_texel: f64,
     pub(super) final_image: Image,
 }
@@ -456,6 +457,8 @@ pub(super) fn optimization_phase(
     let mut curve = Vec::new();
     let mut seconds = 0.0;
     let mut passes: Option<(PassTimes, u32)> = None;
+    // Kept paths the merge evaluated, summed over the sampled iterations, and their number.
+    let mut evaluations: Option<(u64, u32)> = None;
     let mut last_image = None;
     let name = match method {
         Method::Baseline => "baseline",
@@ -481,13 +484,28 @@ pub(super) fn optimization_phase(
         }
         // Both estimators follow the task's schedule over the same budget.
         opt.set_progress(seconds / o.budget_s);
+        // The merge's counter, read around the iterations whose pass times are sampled
+        // (outside the timed step).
+        let sampled = opt.iteration % 8 == 1;
+        let before = if sampled {
+            opt.merge_diagnostics()?
+        } else {
+            None
+        };
         let t0 = Instant::now();
         let stats = opt.step()?;
         seconds += t0.elapsed().as_secs_f64();
-        if opt.iteration % 8 == 2 {
+        if sampled {
             if let Some(t) = opt.pass_times()? {
                 let (s, n) = passes.get_or_insert((PassTimes::default(), 0));
                 s.add(&t);
+                *n += 1;
+            }
+            if let (Some(b), Some(a)) = (before, opt.merge_diagnostics()?) {
+                // The GPU counter is 32 bits wide and may wrap over a long run.
+                let d = (a.evaluations as u32).wrapping_sub(b.evaluations as u32);
+                let (s, n) = evaluations.get_or_insert((0, 0));
+                *s += d as u64;
                 *n += 1;
             }
         }
@@ -517,6 +535,7 @@ pub(super) fn optimization_phase(
         ms_per_iteration: 1000.0 * seconds / iterations.max(1) as f64,
         iterations,
         passes: passes.map(|(s, n)| s.divided(n as f64)),
+        merge_evaluations: evaluations.map(|(s, n)| s as f64 / n as f64),
         state_bytes_per_texel: opt.state_bytes_per_texel(),
         curve,
         final_image,
@@ -608,6 +627,7 @@ pub(super) fn optimization_phases(
         iterations_restir: re.iterations,
         passes_baseline: base.passes,
         passes_restir: re.passes,
+        merge_evaluations_per_iteration: re.merge_evaluations,
         state_bytes_per_texel: re.state_bytes_per_texel,
         state_bytes_per_texel_baseline: base.state_bytes_per_texel,
         curve_baseline: with_start(&base.curve),

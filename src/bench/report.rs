@@ -299,8 +299,8 @@ pub fn table(r: &BenchReport) -> String {
 /// The per-pass GPU times (markdown).
 pub fn pass_table(r: &BenchReport) -> String {
     let mut s = String::from(
-        "| scene | estimator | primal | loss | gradient / candidates | merge | Adam | state B/texel |\n\
-         |---|---|---|---|---|---|---|---|\n",
+        "| scene | estimator | primal | loss | gradient / candidates | merge | Adam | state B/texel | merge evaluations/it |\n\
+         |---|---|---|---|---|---|---|---|---|\n",
     );
     for x in &r.scenes {
         let Some(o) = &x.optimization else { continue };
@@ -312,11 +312,15 @@ pub fn pass_table(r: &BenchReport) -> String {
             ),
             ("ReSTIR", &o.passes_restir, o.state_bytes_per_texel),
         ] {
+            let evaluations = match (name, o.merge_evaluations_per_iteration) {
+                ("ReSTIR", Some(e)) => format!("{e:.0}"),
+                _ => "–".into(),
+            };
             match p {
                 Some(p) => {
                     let _ = writeln!(
                         s,
-                        "| {} | {name} | {:.1} | {:.1} | {:.1} | {} | {:.1} | {bytes:.0} |",
+                        "| {} | {name} | {:.1} | {:.1} | {:.1} | {} | {:.1} | {bytes:.0} | {evaluations} |",
                         x.name,
                         p.primal_ms,
                         p.loss_ms,
@@ -332,7 +336,7 @@ pub fn pass_table(r: &BenchReport) -> String {
                 None => {
                     let _ = writeln!(
                         s,
-                        "| {} | {name} | – | – | – | – | – | {bytes:.0} |",
+                        "| {} | {name} | – | – | – | – | – | {bytes:.0} | {evaluations} |",
                         x.name
                     );
                 }
@@ -405,7 +409,7 @@ pub fn write_report(out: &Path, r: &BenchReport) -> Result<()> {
     if r.scenes.iter().any(|x| x.optimization.is_some()) {
         md.push_str("## Equal-time optimization\n\n");
         md.push_str(&optimization_table(r));
-        md.push_str("\n## GPU time per pass (ms, timestamp queries) and state\n\n");
+        md.push_str("\n## GPU time per pass (ms, timestamp queries), state and merge work\n\n");
         md.push_str(&pass_table(r));
     }
     md.push_str("\n## Per scene\n\n");

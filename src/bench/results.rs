@@ -146,6 +146,9 @@ pub struct OptimizationResult {
     pub passes_baseline: Option<PassTimes>,
     /// Mean GPU time per pass of a ReSTIR iteration, when available.
     pub passes_restir: Option<PassTimes>,
+    /// Kept paths ReSTIR's merge evaluated per iteration, over the iterations whose pass
+    /// times are sampled (the merge's work; it traces no ray).
+    pub merge_evaluations_per_iteration: Option<f64>,
     /// Bytes of GPU state per texel of the ReSTIR optimizer (textures, gradient, Adam,
     /// reservoirs, locks).
     pub state_bytes_per_texel: f64,
