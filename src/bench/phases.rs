@@ -457,7 +457,9 @@ pub(super) fn optimization_phase(
     let mut curve = Vec::new();
     let mut seconds = 0.0;
     let mut passes: Option<(PassTimes, u32)> = None;
-    // Kept paths the merge evaluated, summed over the sampled iterations, and their number.
+    // The merge's counter at the last sampled iteration, and the kept paths it evaluated
+    // since the first one with the number of iterations they span.
+    let mut last_count: Option<(u32, u32)> = None;
     let mut evaluations: Option<(u64, u32)> = None;
     let mut last_image = None;
     let name = match method {
@@ -484,29 +486,25 @@ pub(super) fn optimization_phase(
         }
         // Both estimators follow the task's schedule over the same budget.
         opt.set_progress(seconds / o.budget_s);
-        // The merge's counter, read around the iterations whose pass times are sampled
-        // (outside the timed step).
-        let sampled = opt.iteration % 8 == 1;
-        let before = if sampled {
-            opt.merge_diagnostics()?
-        } else {
-            None
-        };
         let t0 = Instant::now();
         let stats = opt.step()?;
         seconds += t0.elapsed().as_secs_f64();
-        if sampled {
+        if opt.iteration % 8 == 2 {
             if let Some(t) = opt.pass_times()? {
                 let (s, n) = passes.get_or_insert((PassTimes::default(), 0));
                 s.add(&t);
                 *n += 1;
             }
-            if let (Some(b), Some(a)) = (before, opt.merge_diagnostics()?) {
-                // The GPU counter is 32 bits wide and may wrap over a long run.
-                let d = (a.evaluations as u32).wrapping_sub(b.evaluations as u32);
-                let (s, n) = evaluations.get_or_insert((0, 0));
-                *s += d as u64;
-                *n += 1;
+            // The merge's counter (32 bits on the GPU: it may wrap over a long run, never
+            // between two samples).
+            if let Some(d) = opt.merge_diagnostics()? {
+                let count = d.evaluations as u32;
+                if let Some((iteration, last)) = last_count {
+                    let (s, n) = evaluations.get_or_insert((0, 0));
+                    *s += count.wrapping_sub(last) as u64;
+                    *n += opt.iteration - iteration;
+                }
+                last_count = Some((opt.iteration, count));
             }
         }
         let values = opt.read_params()?;

@@ -146,8 +146,8 @@ pub struct OptimizationResult {
     pub passes_baseline: Option<PassTimes>,
     /// Mean GPU time per pass of a ReSTIR iteration, when available.
     pub passes_restir: Option<PassTimes>,
-    /// Kept paths ReSTIR's merge evaluated per iteration, over the iterations whose pass
-    /// times are sampled (the merge's work; it traces no ray).
+    /// Kept paths ReSTIR's merge evaluated per iteration, from the second iteration whose pass
+    /// times are sampled to the last (the merge's work; it traces no ray).
     pub merge_evaluations_per_iteration: Option<f64>,
     /// Bytes of GPU state per texel of the ReSTIR optimizer (textures, gradient, Adam,
     /// reservoirs, locks).
