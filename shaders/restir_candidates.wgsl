@@ -114,13 +114,19 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         return;
     }
     let ai = cp.adjoint_offset + xy_px.y * cp.camera.width + xy_px.x;
-    var adj_t = adjoint[ai].xyz;
+    let adj = adjoint[ai].xyz;
+    // The last target adjoint: smoothed into this one, and the previous state's target.
+    var last = vec3f(0.0);
+    if cp.smoothing > 0.0 || cp.prev_targets != 0u {
+        last = targets[cp.target_prev + ai].xyz;
+    }
+    var adj_t = adj;
     if cp.smoothing > 0.0 {
-        adj_t = mix(adj_t, targets[cp.target_prev + ai].xyz, cp.smoothing);
+        adj_t = mix(adj, last, cp.smoothing);
     }
     targets[cp.target_cur + ai] = vec4f(adj_t, 0.0);
     adj_t *= cp.inv_spp;
-    let a = adjoint_pixel(linear, cp.camera, cp.adjoint_offset, cp.inv_spp);
+    let a = adjoint_pixel_at(xy_px, cp.camera, adj, cp.inv_spp);
     if a.pixel == NONE {
         return;
     }
@@ -128,7 +134,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     let info = a.pixel | (cp.camera_index << INFO_CAMERA_SHIFT);
     var adj_t_prev = vec3f(0.0);
     if cp.prev_targets != 0u {
-        adj_t_prev = targets[cp.target_prev + ai].xyz * cp.inv_spp;
+        adj_t_prev = last * cp.inv_spp;
     }
     for (var s = 0u; s < cp.spp; s++) {
         rng_init(cp.seed, s * a.n_pixels + a.pixel, 0u);

@@ -17,19 +17,27 @@ struct AdjointPixel {
 }
 
 fn adjoint_pixel(linear: u32, camera: CameraInfo, adjoint_offset: u32, inv_spp: f32) -> AdjointPixel {
+    let xy_px = tile_pixel(linear, camera.width, camera.height);
+    if xy_px.x == NONE {
+        var a: AdjointPixel;
+        a.pixel = NONE;
+        a.n_pixels = camera.width * camera.height;
+        return a;
+    }
+    return adjoint_pixel_at(xy_px, camera, adjoint[adjoint_offset + xy_px.y * camera.width + xy_px.x].xyz, inv_spp);
+}
+
+// The same for pixel xy_px of the image (tile_pixel, not NONE), whose adjoint `adj` the
+// caller has loaded (before the division by the spp).
+fn adjoint_pixel_at(xy_px: vec2u, camera: CameraInfo, adj: vec3f, inv_spp: f32) -> AdjointPixel {
     var a: AdjointPixel;
     a.pixel = NONE;
     a.n_pixels = camera.width * camera.height;
-    let xy_px = tile_pixel(linear, camera.width, camera.height);
-    if xy_px.x == NONE {
-        return a;
-    }
-    let pixel = xy_px.y * camera.width + xy_px.x;
-    a.adj = adjoint[adjoint_offset + pixel].xyz * inv_spp;
+    a.adj = adj * inv_spp;
     if all(a.adj == vec3f(0.0)) {
         return a;
     }
-    a.pixel = pixel;
+    a.pixel = xy_px.y * camera.width + xy_px.x;
     a.xy = vec2f(xy_px);
     return a;
 }
