@@ -93,6 +93,52 @@ fn bench_json_has_every_field_finite_and_in_range() {
         "gradient_relmse_mean_restir",
         "gradient_relmse_mean_ratio",
     );
+    // Per texture (the task has two): each texture's part of the equal-iteration errors, the
+    // parts adding up to the scene's figures (up to the rounding of a sum in another order),
+    // each part positive (every texture has samples) and its ratio its parts' quotient.
+    let parts = s["gradient_relmse_per_texture"].as_array().unwrap();
+    assert_eq!(parts.len(), 2);
+    assert_ne!(parts[0]["texture"], parts[1]["texture"]);
+    for (part, scene) in [
+        (
+            "estimator_only_baseline",
+            "gradient_relmse_estimator_only_baseline",
+        ),
+        (
+            "estimator_only_restir",
+            "gradient_relmse_estimator_only_restir",
+        ),
+        (
+            "total_baseline_equal_iterations",
+            "gradient_relmse_baseline_equal_iterations",
+        ),
+        ("total_restir", "gradient_relmse_restir"),
+    ] {
+        let sum: f64 = parts.iter().map(|p| number(p, part)).sum();
+        let whole = number(s, scene);
+        assert!(
+            (sum - whole).abs() <= 1e-9 * whole,
+            "{part}: parts add up to {sum}, {scene} is {whole}"
+        );
+    }
+    for p in parts {
+        for (b, r, q) in [
+            (
+                "estimator_only_baseline",
+                "estimator_only_restir",
+                "estimator_only_ratio",
+            ),
+            (
+                "total_baseline_equal_iterations",
+                "total_restir",
+                "total_ratio_equal_iterations",
+            ),
+        ] {
+            let (b, r, q) = (number(p, b), number(p, r), number(p, q));
+            assert!(b > 0.0 && r > 0.0, "{q}: {b} {r}");
+            assert!((q - r / b).abs() <= 1e-9 * q, "{q} vs {r}/{b}");
+        }
+    }
     // The mean of 10 independent baseline estimates has a tenth of one estimate's variance;
     // both errors also hold the 16-spp reference's own, 1/16 of one estimate's variance, so
     // the expected ratio is (1/10 + 1/16) / (1 + 1/16) = 0.15. Below half leaves room for

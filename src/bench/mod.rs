@@ -175,14 +175,31 @@ pub fn scaled(task: &Task, scale: f64) -> Task {
 
 /// relMSE over entries with a non-zero reference: mean of (g - r)^2 / (r^2 + 1e-2).
 pub fn gradient_relmse(g: &[f32], reference: &[f64]) -> f64 {
-    let (mut s, mut n) = (0.0, 0usize);
-    for (a, r) in g.iter().zip(reference) {
-        if *r != 0.0 {
-            s += (*a as f64 - r).powi(2) / (r * r + 1e-2);
-            n += 1;
-        }
-    }
-    s / n.max(1) as f64
+    let whole = 0..g.len();
+    gradient_relmse_parts(g, reference, std::slice::from_ref(&whole))[0]
+}
+
+/// Each range's part of [`gradient_relmse`]: the sum of its terms over the range's entries
+/// (those with a non-zero reference), divided by the number of such entries in the whole
+/// vector, so that the parts of disjoint ranges covering it add up to the whole. With one
+/// range per optimized texture it says which texture the error is in.
+pub fn gradient_relmse_parts(
+    g: &[f32],
+    reference: &[f64],
+    ranges: &[std::ops::Range<usize>],
+) -> Vec<f64> {
+    let term = |i: usize| -> Option<f64> {
+        let (a, r) = (*g.get(i)? as f64, *reference.get(i)?);
+        (r != 0.0).then(|| (a - r).powi(2) / (r * r + 1e-2))
+    };
+    let n = (0..g.len().min(reference.len()))
+        .filter(|&i| term(i).is_some())
+        .count()
+        .max(1) as f64;
+    ranges
+        .iter()
+        .map(|range| range.clone().filter_map(term).sum::<f64>() / n)
+        .collect()
 }
 
 pub use crate::optim::loss::image_relmse;
@@ -324,6 +341,22 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
             gradient_relmse_mean_restir: g.mean_restir,
             gradient_relmse_mean_ratio: g.mean_restir / g.mean_baseline,
             successive_estimates: o.successive,
+            gradient_relmse_per_texture: prep
+                .set
+                .textures
+                .iter()
+                .zip(&g.per_texture)
+                .map(|(t, p)| TextureGradientErrors {
+                    texture: t.name(),
+                    estimator_only_baseline: p.only_baseline,
+                    estimator_only_restir: p.only_restir,
+                    estimator_only_ratio: p.only_restir / p.only_baseline,
+                    total_baseline_equal_iterations: p.total_baseline_equal_iterations,
+                    total_restir: p.total_restir,
+                    total_ratio_equal_iterations: p.total_restir
+                        / p.total_baseline_equal_iterations,
+                })
+                .collect(),
             ms_per_iteration_ratio: g.ms_ratio,
             primal: settings(&prep, task, Method::Restir, o)
                 .primal

@@ -144,6 +144,19 @@ pub(super) struct GradientPhase {
     pub(super) mean_restir: f64,
     pub(super) ms_ratio: f64,
     pub(super) snapshot: GradientSnapshot,
+    /// Per optimized texture, its parts of the equal-iteration errors (they add up to the
+    /// figures above).
+    pub(super) per_texture: Vec<TextureParts>,
+}
+
+/// One texture's parts of the gradient errors at equal iterations (mean over seeds; see
+/// [`gradient_relmse_parts`]).
+#[derive(Clone, Copy, Default)]
+pub(super) struct TextureParts {
+    pub(super) total_baseline_equal_iterations: f64,
+    pub(super) total_restir: f64,
+    pub(super) only_baseline: f64,
+    pub(super) only_restir: f64,
 }
 
 fn add_to(sum: &mut [f64], g: &[f32]) {
@@ -201,6 +214,26 @@ pub(super) fn gradient_phase(
             restir: Vec::new(),
             baseline_spp: spp,
         },
+        per_texture: vec![TextureParts::default(); prep.set.textures.len()],
+    };
+    // Where each optimized texture lies in a gradient.
+    let ranges: Vec<_> = prep
+        .set
+        .textures
+        .iter()
+        .map(|t| t.offset as usize..t.offset as usize + t.len())
+        .collect();
+    // Adds each texture's part of g's error, divided by the number of seeds.
+    let add_parts = |g: &[f32],
+                     reference: &[f64],
+                     field: fn(&mut TextureParts) -> &mut f64,
+                     parts: &mut [TextureParts]| {
+        for (p, e) in parts
+            .iter_mut()
+            .zip(gradient_relmse_parts(g, reference, &ranges))
+        {
+            *field(p) += e / n;
+        }
     };
     let mut eq_spp = None;
     for rep in 0..repeats {
@@ -342,7 +375,20 @@ pub(super) fn gradient_phase(
             ))
         };
         out.total_restir += gradient_relmse(&g_restir_total, &reference) / n;
-        out.total_baseline_equal_iterations += total(spp, 0xea)? / n;
+        let b_total = baseline_at(spp, 0xea, &adjoint_total)?;
+        out.total_baseline_equal_iterations += gradient_relmse(&b_total, &reference) / n;
+        add_parts(
+            &g_restir_total,
+            &reference,
+            |p| &mut p.total_restir,
+            &mut out.per_texture,
+        );
+        add_parts(
+            &b_total,
+            &reference,
+            |p| &mut p.total_baseline_equal_iterations,
+            &mut out.per_texture,
+        );
         out.total_baseline +=
             interpolate_in_inverse_spp(k, s0, total(s0, 0xe9)?, total(s0 + 1, 0xeb)?) / n;
 
@@ -392,6 +438,18 @@ pub(super) fn gradient_phase(
         };
         out.only_restir += gradient_relmse(&g_restir_only, &reference) / n;
         out.only_baseline += gradient_relmse(&b_only, &reference) / n;
+        add_parts(
+            &g_restir_only,
+            &reference,
+            |p| &mut p.only_restir,
+            &mut out.per_texture,
+        );
+        add_parts(
+            &b_only,
+            &reference,
+            |p| &mut p.only_baseline,
+            &mut out.per_texture,
+        );
         out.only_baseline_equal_time +=
             interpolate_in_inverse_spp(k, s0, only(s0, 0xe9)?, only(s0 + 1, 0xeb)?) / n;
         out.baseline_spp_equal_time = k;

@@ -78,6 +78,10 @@ pub struct SceneResult {
     pub gradient_relmse_mean_ratio: f64,
     /// How many estimates those means average.
     pub successive_estimates: u32,
+    /// Per optimized texture, its parts of the equal-iteration gradient errors above (each
+    /// texture's terms over the count of all entries, so that the parts add up to the
+    /// scene's figures): which texture the error is in.
+    pub gradient_relmse_per_texture: Vec<TextureGradientErrors>,
     /// Mean wall-clock ms of a ReSTIR and a baseline iteration in the gradient phase (at the
     /// task's spp, GPU work finished), and their ratio.
     pub ms_per_iteration_ratio: f64,
@@ -100,6 +104,26 @@ pub struct SceneResult {
     /// The equal-time optimization (absent with `--gradient-only`).
     #[serde(flatten)]
     pub optimization: Option<OptimizationResult>,
+}
+
+/// One optimized texture's parts of a scene's gradient errors at equal iterations (mean over
+/// seeds).
+#[derive(Clone, Debug, Serialize)]
+pub struct TextureGradientErrors {
+    /// `material_slot`.
+    pub texture: String,
+    /// Part of `gradient_relmse_estimator_only_baseline`.
+    pub estimator_only_baseline: f64,
+    /// Part of `gradient_relmse_estimator_only_restir`.
+    pub estimator_only_restir: f64,
+    /// restir / baseline of the two parts.
+    pub estimator_only_ratio: f64,
+    /// Part of `gradient_relmse_baseline_equal_iterations`.
+    pub total_baseline_equal_iterations: f64,
+    /// Part of `gradient_relmse_restir`.
+    pub total_restir: f64,
+    /// restir / baseline of the two parts.
+    pub total_ratio_equal_iterations: f64,
 }
 
 /// The equal-time optimization of one scene.
