@@ -223,11 +223,14 @@ pub(super) fn gradient_phase(
         .iter()
         .map(|t| t.offset as usize..t.offset as usize + t.len())
         .collect();
-    // Adds each texture's part of g's error, divided by the number of seeds.
-    let add_parts = |g: &[f32],
-                     reference: &[f64],
-                     field: fn(&mut TextureParts) -> &mut f64,
-                     parts: &mut [TextureParts]| {
+    // Adds g's error to `whole` and each texture's part of it to `field` of its parts, each
+    // divided by the number of seeds.
+    let add_errors = |g: &[f32],
+                      reference: &[f64],
+                      whole: &mut f64,
+                      field: fn(&mut TextureParts) -> &mut f64,
+                      parts: &mut [TextureParts]| {
+        *whole += gradient_relmse(g, reference) / n;
         for (p, e) in parts
             .iter_mut()
             .zip(gradient_relmse_parts(g, reference, &ranges))
@@ -374,20 +377,20 @@ pub(super) fn gradient_phase(
                 &reference,
             ))
         };
-        out.total_restir += gradient_relmse(&g_restir_total, &reference) / n;
-        let b_total = baseline_at(spp, 0xea, &adjoint_total)?;
-        out.total_baseline_equal_iterations += gradient_relmse(&b_total, &reference) / n;
-        add_parts(
+        let parts = &mut out.per_texture;
+        add_errors(
             &g_restir_total,
             &reference,
+            &mut out.total_restir,
             |p| &mut p.total_restir,
-            &mut out.per_texture,
+            parts,
         );
-        add_parts(
-            &b_total,
+        add_errors(
+            &baseline_at(spp, 0xea, &adjoint_total)?,
             &reference,
+            &mut out.total_baseline_equal_iterations,
             |p| &mut p.total_baseline_equal_iterations,
-            &mut out.per_texture,
+            parts,
         );
         out.total_baseline +=
             interpolate_in_inverse_spp(k, s0, total(s0, 0xe9)?, total(s0 + 1, 0xeb)?) / n;
@@ -436,19 +439,20 @@ pub(super) fn gradient_phase(
                 &reference,
             ))
         };
-        out.only_restir += gradient_relmse(&g_restir_only, &reference) / n;
-        out.only_baseline += gradient_relmse(&b_only, &reference) / n;
-        add_parts(
+        let parts = &mut out.per_texture;
+        add_errors(
             &g_restir_only,
             &reference,
+            &mut out.only_restir,
             |p| &mut p.only_restir,
-            &mut out.per_texture,
+            parts,
         );
-        add_parts(
+        add_errors(
             &b_only,
             &reference,
+            &mut out.only_baseline,
             |p| &mut p.only_baseline,
-            &mut out.per_texture,
+            parts,
         );
         out.only_baseline_equal_time +=
             interpolate_in_inverse_spp(k, s0, only(s0, 0xe9)?, only(s0 + 1, 0xeb)?) / n;
