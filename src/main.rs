@@ -106,17 +106,9 @@ struct RestirArgs {
 }
 
 impl RestirArgs {
+    /// The options, refused here (before any scene is loaded) when invalid.
     fn resolve(&self) -> Result<optim::RestirOptions> {
-        if !(self.m_cap.is_finite() && self.m_cap > 0.0) {
-            bail!("--m-cap must be a positive number");
-        }
-        if self
-            .target_smoothing
-            .is_some_and(|b| !(0.0..1.0).contains(&b))
-        {
-            bail!("--target-smoothing must be in [0, 1)");
-        }
-        Ok(optim::RestirOptions {
+        let o = optim::RestirOptions {
             m_cap: self.m_cap,
             confidence: match self.confidence {
                 ConfidenceArg::Samples => optim::Confidence::Samples,
@@ -126,7 +118,9 @@ impl RestirArgs {
             positivization: !self.no_positivization,
             verify_paths: false,
             target_smoothing: self.target_smoothing,
-        })
+        };
+        o.validate()?;
+        Ok(o)
     }
 }
 

@@ -315,6 +315,8 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
             let (r, f) = optimization_phases(gpu, task, &prep, o, &progress)?;
             (Some(r), Some(f))
         };
+        // The primal estimator of both phases (the task's, or the bench's --primal).
+        let primal = settings(&prep, task, Method::Restir, o).primal;
         let result = SceneResult {
             name: name.clone(),
             task: task.path.display().to_string(),
@@ -358,13 +360,8 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
                 })
                 .collect(),
             ms_per_iteration_ratio: g.ms_ratio,
-            primal: settings(&prep, task, Method::Restir, o)
-                .primal
-                .name()
-                .into(),
-            target_smoothing: o
-                .restir
-                .target_smoothing_for(settings(&prep, task, Method::Restir, o).primal),
+            primal: primal.name().into(),
+            target_smoothing: o.restir.target_smoothing_for(primal),
             primal_relmse_independent: pp.relmse_independent,
             primal_relmse_control_variate: pp.relmse_control_variate,
             primal_relmse_ratio: pp.relmse_control_variate / pp.relmse_independent,

@@ -235,6 +235,23 @@ impl Default for RestirOptions {
 }
 
 impl RestirOptions {
+    /// An error naming the option when `m_cap` is not a positive number or a given
+    /// `target_smoothing` is outside [0, 1).
+    pub fn validate(&self) -> Result<()> {
+        if !(self.m_cap.is_finite() && self.m_cap > 0.0) {
+            return Err(Error::Invalid(format!(
+                "ReSTIR's m_cap (--m-cap) must be a positive number, not {}",
+                self.m_cap
+            )));
+        }
+        if let Some(b) = self.target_smoothing.filter(|b| !(0.0..1.0).contains(b)) {
+            return Err(Error::Invalid(format!(
+                "ReSTIR's target_smoothing (--target-smoothing) must be in [0, 1), not {b}"
+            )));
+        }
+        Ok(())
+    }
+
     /// The target smoothing used with the primal estimator `primal`.
     pub fn target_smoothing_for(&self, primal: crate::optim::PrimalMode) -> f32 {
         self.target_smoothing.unwrap_or(match primal {
@@ -375,18 +392,8 @@ impl Restir {
         let gpu = s.gpu;
         let o = s.settings.restir;
         let n_cams = s.cameras.len();
-        if !(o.m_cap.is_finite() && o.m_cap > 0.0) {
-            return Err(Error::Invalid(format!(
-                "ReSTIR's m_cap must be a positive number, not {}",
-                o.m_cap
-            )));
-        }
+        o.validate()?;
         let smoothing = o.target_smoothing_for(s.settings.primal);
-        if !(0.0..1.0).contains(&smoothing) {
-            return Err(Error::Invalid(format!(
-                "ReSTIR's target_smoothing must be in [0, 1), not {smoothing}"
-            )));
-        }
         if n_cams > MAX_CAMERAS {
             return Err(Error::Invalid(format!(
                 "ReSTIR handles at most {MAX_CAMERAS} cameras, the task has {n_cams}"
