@@ -5,12 +5,16 @@
 
 // A sampled light as seen from a shading point. radiance: incident radiance for area and
 // environment lights, irradiance-like intensity/d^2 for delta lights. pdf: solid-angle density
-// including the light choice; for delta lights the choice probability alone.
+// including the light choice; for delta lights the choice probability alone. dist: distance to
+// the sampled point (3e38 for directions at infinity). n: the emitter's unit geometric normal at
+// the sampled point for area lights (zero for the others), so that the shadow ray can end just
+// off the emitter's surface.
 struct LightSample {
     wi: vec3f,
     dist: f32,
     radiance: vec3f,
     pdf: f32,
+    n: vec3f,
     is_delta: bool,
 }
 
@@ -145,7 +149,7 @@ fn range_window(dist: f32, range: f32) -> f32 {
 }
 
 fn sample_light(p: vec3f, u_pick: f32, u: vec2f) -> LightSample {
-    var s = LightSample(vec3f(0.0, 0.0, 1.0), 0.0, vec3f(0.0), 0.0, true);
+    var s = LightSample(vec3f(0.0, 0.0, 1.0), 0.0, vec3f(0.0), 0.0, vec3f(0.0), true);
     if scene.n_lights == 0u {
         return s;
     }
@@ -189,7 +193,8 @@ fn sample_light(p: vec3f, u_pick: f32, u: vec2f) -> LightSample {
             let dist = sqrt(d2);
             s.wi = to / dist;
             s.dist = dist;
-            let cos_l = dot(c / area2, -s.wi);
+            s.n = c / area2;
+            let cos_l = dot(s.n, -s.wi);
             s.radiance = emitted(light.tri, b.x, b.y, cos_l > 0.0);
             s.pdf = light.pmf * d2 / (0.5 * area2 * max(abs(cos_l), 1e-12));
             s.is_delta = false;
