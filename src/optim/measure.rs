@@ -6,6 +6,14 @@ use crate::gpu::encode_timed_pass;
 use crate::{Error, Result};
 
 impl Optimizer {
+    /// Restrict the gradient samples to light sampling or BSDF sampling (for area and
+    /// environment lights; delta lights always use light sampling), or return to MIS: a
+    /// diagnostic for the tests, which check that the techniques agree in expectation. The
+    /// baseline estimator only; the others refuse.
+    pub fn set_gradient_techniques(&mut self, techniques: crate::render::Techniques) -> Result<()> {
+        self.estimator.set_techniques(techniques)
+    }
+
     /// `grad` (laid out like the parameters) written to the gradient buffer, transformed on
     /// the GPU by the passes `encode` records, and read back: how the tests check a pass that
     /// acts on the gradient before Adam against its CPU twin. `what` names the caller in

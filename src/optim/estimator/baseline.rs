@@ -153,4 +153,11 @@ impl Estimator for Baseline {
     fn state_bytes(&self) -> u64 {
         0
     }
+
+    fn set_techniques(&mut self, techniques: Techniques) -> Result<()> {
+        for cam in &mut self.cameras {
+            cam.params.techniques = techniques.bits();
+        }
+        Ok(())
+    }
 }

@@ -13,7 +13,7 @@ pub mod restir;
 use super::{FaultCounts, PassTimer, Settings};
 use crate::gpu::Gpu;
 use crate::render::layout::GpuCameraInfo;
-use crate::render::GpuScene;
+use crate::render::{GpuScene, Techniques};
 use crate::Result;
 pub use restir::{Confidence, RestirOptions, RestirSnapshot};
 
@@ -93,6 +93,14 @@ pub(crate) trait Estimator {
     ) -> Result<()>;
     /// Bytes of GPU state the estimator keeps besides the optimizer's.
     fn state_bytes(&self) -> u64;
+    /// Which techniques the gradient samples use for area and environment lights (MIS unless
+    /// set): a diagnostic, so that the tests can check that light-sampled and BSDF-sampled
+    /// gradients agree. Estimators that cannot restrict their samples refuse.
+    fn set_techniques(&mut self, techniques: Techniques) -> Result<()> {
+        Err(crate::Error::Invalid(format!(
+            "this estimator samples with MIS only; {techniques:?} is for the baseline"
+        )))
+    }
     /// What ReSTIR's merge counted (None for other estimators).
     fn restir_diagnostics(&self, _gpu: &Gpu) -> Result<Option<restir::MergeDiagnostics>> {
         Ok(None)
