@@ -318,10 +318,27 @@ fn fnv1a(h: &mut u64, bytes: &[u8]) {
     *h = h.wrapping_mul(0x0000_0100_0000_01b3);
 }
 
-/// The key of a task's rendered targets: the task file and everything the ground-truth scene
-/// at `truth` is made of (its JSON, buffers and images, the environment map, the camera file).
+/// The key of a task's rendered targets: the task file, everything the ground-truth scene
+/// at `truth` is made of (its JSON, buffers and images, the environment map, the camera file),
+/// and the renderer that drew them (its WGSL sources): targets that an older renderer drew,
+/// such as the one whose light sampling of emissive triangles was too dark, are drawn again.
 fn targets_key(task: &Task, truth: &Path) -> Result<u64> {
+    targets_key_with(task, truth, renderer_fingerprint())
+}
+
+/// A hash of every WGSL source the passes are built from.
+fn renderer_fingerprint() -> u64 {
     let mut h = 0xcbf2_9ce4_8422_2325u64;
+    for (name, source) in crate::gpu::shaders::SOURCES {
+        fnv1a(&mut h, name.as_bytes());
+        fnv1a(&mut h, source.as_bytes());
+    }
+    h
+}
+
+fn targets_key_with(task: &Task, truth: &Path, renderer: u64) -> Result<u64> {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    fnv1a(&mut h, &renderer.to_le_bytes());
     let text = std::fs::read(&task.path).unwrap_or_default();
     fnv1a(&mut h, &text);
     // The task as parsed too, for tasks built in code (their file may not exist).
@@ -406,4 +423,28 @@ fn task_scene(task: &Task, path: &Path) -> Result<(Scene, Vec<usize>, FrameImage
 /// `<index>_<name>` of a camera, safe in file names.
 pub(crate) fn camera_file_name(scene: &Scene, cam: usize) -> String {
     format!("{cam}_{}", image_io::file_safe(&scene.cameras[cam].name))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_targets_key_changes_with_the_renderer() {
+        let task = Task::load(Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/scenes/default/task.toml"
+        )))
+        .unwrap();
+        let truth = task.target.scene.clone().unwrap();
+        let now = targets_key(&task, &truth).unwrap();
+        assert_eq!(now, targets_key(&task, &truth).unwrap());
+        assert_eq!(
+            now,
+            targets_key_with(&task, &truth, renderer_fingerprint()).unwrap()
+        );
+        // Any other renderer (here: a fingerprint with one bit flipped) keys other targets.
+        let other = targets_key_with(&task, &truth, renderer_fingerprint() ^ 1).unwrap();
+        assert_ne!(now, other);
+    }
 }
