@@ -1,7 +1,7 @@
 // Baseline gradient pass: every camera sample differentiates its light-sampled and
 // BSDF-sampled contributions with respect to the material inputs at its hit point, weights
 // them by the adjoint of its pixel, and adds the result into the texels that the filter
-// touches (the parameter-space estimator of DESIGN.md section 2). Float additions use a
+// touches (the parameter-space estimator of docs/method.md). Float additions use a
 // bounded compare-and-swap loop on 32-bit atomics; an update that exhausts the bound is
 // counted in stats[1], never silently lost.
 #import shared/rng

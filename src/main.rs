@@ -267,6 +267,10 @@ enum Command {
         /// Samples per pixel of the renders that measure image error.
         #[arg(long, default_value_t = 64)]
         eval_spp: u32,
+        /// Also write the report to the checkout in the current folder: docs/results.md,
+        /// and the headline table in README.md (between its `bench:headline` markers).
+        #[arg(long)]
+        report: bool,
         #[command(flatten)]
         restir: RestirArgs,
     },
@@ -607,8 +611,17 @@ fn run(cli: Cli) -> Result<()> {
             gradient_only,
             primal,
             eval_spp,
+            report: to_docs,
             restir,
         } => {
+            if to_docs {
+                // Before the hours of measuring: the checkout must be where the report goes.
+                let readme = std::fs::read_to_string("README.md").context(
+                    "--report: README.md in the current folder (run it in the checkout)",
+                )?;
+                psrestir::bench::report::replace_headline(&readme, "")
+                    .map_err(|m| anyhow::anyhow!("--report: README.md: {m}"))?;
+            }
             let names: Vec<String> = if scenes.is_empty() {
                 assets::bench_scenes::BENCH_SCENES
                     .iter()
@@ -646,6 +659,15 @@ fn run(cli: Cli) -> Result<()> {
             let report = psrestir::bench::bench(&gpu, &tasks, &opts)?;
             println!("{}", psrestir::bench::report::table(&report));
             println!("wrote {}", out.join("report.md").display());
+            if to_docs {
+                let command: Vec<String> = std::env::args().skip(1).collect();
+                psrestir::bench::report::write_docs(
+                    std::path::Path::new("."),
+                    &report,
+                    &format!("psrestir {}", command.join(" ")),
+                )?;
+                println!("wrote docs/results.md and the headline table in README.md");
+            }
         }
         Command::Adapter => {
             let gpu = Gpu::new()?;

@@ -1,5 +1,5 @@
-//! `psrestir bench`: the paper's measurements (DESIGN.md section 6) of the baseline and the
-//! ReSTIR estimator, one after the other on the same device, per scene:
+//! `psrestir bench`: the paper's measurements (docs/method.md, "How results are measured") of
+//! the baseline and the ReSTIR estimator, one after the other on the same device, per scene:
 //!
 //! 1. gradient error: after `warmup` ReSTIR iterations, the relMSE of ReSTIR's next gradient
 //!    and of baseline gradients at the same parameter state, at equal iterations (the task's

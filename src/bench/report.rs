@@ -384,6 +384,92 @@ pub fn write_report(out: &Path, r: &BenchReport) -> Result<()> {
     let json =
         serde_json::to_string_pretty(r).map_err(|e| Error::Invalid(format!("bench.json: {e}")))?;
     write_atomic(&out.join("bench.json"), json.as_bytes())?;
+    write_atomic(&out.join("report.md"), report_markdown(r).as_bytes())
+}
+
+/// The headline (markdown): per scene, the reconstruction at equal time, image relMSE and
+/// observed-texel RMSE at the end of each estimator's budget, with the adapter it ran on.
+pub fn headline_table(r: &BenchReport) -> String {
+    let mut s = String::new();
+    s.push_str(
+        "| scene | image relMSE: baseline | ReSTIR | ratio | texture RMSE (observed texels): \
+         initial | baseline | ReSTIR | ratio |\n|---|---|---|---|---|---|---|---|\n",
+    );
+    for x in &r.scenes {
+        let Some(o) = &x.optimization else { continue };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | **{}** | {:.4} | {:.4} | {:.4} | **{}** |",
+            x.name,
+            sci(o.image_relmse_baseline),
+            sci(o.image_relmse_restir),
+            ratio(o.image_relmse_ratio),
+            o.texture_rmse_observed_initial,
+            o.texture_rmse_observed_baseline,
+            o.texture_rmse_observed_restir,
+            ratio(o.texture_rmse_observed_restir / o.texture_rmse_observed_baseline),
+        );
+    }
+    let _ = write!(
+        s,
+        "\npsrestir {} on `{}`, {} s of optimization per estimator and scene, protocol `{:?}`, \
+         size scale {}.\n",
+        r.version, r.adapter, r.budget_s, r.protocol, r.scale
+    );
+    s
+}
+
+/// The block of README.md between these markers is the bench's headline table.
+pub const HEADLINE_BEGIN: &str = "<!-- bench:headline -->";
+/// End of the headline block.
+pub const HEADLINE_END: &str = "<!-- /bench:headline -->";
+
+/// `text` with what lies between the headline markers replaced by `table`.
+pub fn replace_headline(text: &str, table: &str) -> std::result::Result<String, String> {
+    let a = text
+        .find(HEADLINE_BEGIN)
+        .ok_or_else(|| format!("no `{HEADLINE_BEGIN}` marker"))?;
+    let b = text[a..]
+        .find(HEADLINE_END)
+        .map(|i| a + i)
+        .ok_or_else(|| format!("no `{HEADLINE_END}` marker after `{HEADLINE_BEGIN}`"))?;
+    Ok(format!(
+        "{}{HEADLINE_BEGIN}\n{}{}",
+        &text[..a],
+        table,
+        &text[b..]
+    ))
+}
+
+/// `psrestir bench --report`: the checkout's `docs/results.md` (the whole report, with the
+/// command that wrote it) and the headline table in its `README.md`, under `root`.
+pub fn write_docs(root: &Path, r: &BenchReport, command: &str) -> Result<()> {
+    let readme = root.join("README.md");
+    let text = std::fs::read_to_string(&readme).map_err(|e| Error::file(&readme, e.to_string()))?;
+    let new = replace_headline(&text, &headline_table(r)).map_err(|m| Error::file(&readme, m))?;
+    let docs = root.join("docs");
+    if !docs.is_dir() {
+        return Err(Error::file(
+            &docs,
+            "no such folder (run --report in the checkout)".to_string(),
+        ));
+    }
+    let md = report_markdown(r).replacen(
+        "# psrestir benchmark\n\n",
+        &format!(
+            "# Results\n\nWritten by `{command}`; do not edit by hand (run it again). The \
+             measurements are described in [method.md](method.md#how-results-are-measured), \
+             the studies behind the defaults in [studies.md](studies.md). The per-scene \
+             images are in the bench's output folder.\n\n"
+        ),
+        1,
+    );
+    write_atomic(&docs.join("results.md"), md.as_bytes())?;
+    write_atomic(&readme, new.as_bytes())
+}
+
+/// `report.md`: every table of the run, with what they measure.
+pub fn report_markdown(r: &BenchReport) -> String {
     let mut md = String::new();
     let _ = writeln!(md, "# psrestir benchmark\n");
     let _ = writeln!(
@@ -469,5 +555,31 @@ pub fn write_report(out: &Path, r: &BenchReport) -> Result<()> {
             }
         );
     }
-    write_atomic(&out.join("report.md"), md.as_bytes())
+    md
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_headline_block_is_replaced_between_its_markers_only() {
+        let text = format!("intro\n{HEADLINE_BEGIN}\nold table\n{HEADLINE_END}\nafter\n");
+        let new = replace_headline(&text, "| new |\n").unwrap();
+        assert_eq!(
+            new,
+            format!("intro\n{HEADLINE_BEGIN}\n| new |\n{HEADLINE_END}\nafter\n")
+        );
+        // Again: the same result (the block does not grow).
+        assert_eq!(replace_headline(&new, "| new |\n").unwrap(), new);
+        assert!(replace_headline("no markers", "x").is_err());
+        assert!(replace_headline(&format!("{HEADLINE_END} {HEADLINE_BEGIN}"), "x").is_err());
+    }
+
+    #[test]
+    fn the_readme_has_the_headline_markers() {
+        let readme =
+            std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
+        replace_headline(&readme, "x").unwrap();
+    }
 }
