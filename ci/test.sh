@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# The checks CI runs: formatting, then the whole test suite on lavapipe.
+# The checks CI runs: formatting, the whole test suite on lavapipe, the doc examples and the
+# API documentation.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash ci/setup.sh
@@ -11,3 +12,5 @@ fi
 cargo test --all-targets
 # Doc examples (not part of --all-targets).
 cargo test --doc
+# The API documentation builds without warnings (broken or private intra-doc links).
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --quiet

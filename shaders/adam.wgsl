@@ -2,6 +2,7 @@
 // gradients leave their parameter unchanged and are counted; huge ones are clamped. With
 // mask set (sparse Adam, Mitsuba 3's mask_updates), an entry whose gradient is exactly zero
 // keeps its value and moments.
+#import gen/abi
 
 // Mirrored by AdamParams in src/optim/adam.rs.
 struct AdamParams {
@@ -41,7 +42,7 @@ fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) grou
         return;
     }
     if !(abs(g_in) < 3.0e38) {
-        atomicAdd(&adam_stats[0], 1u);
+        atomicAdd(&adam_stats[ADAM_STAT_SKIPPED], 1u);
         return;
     }
     // Beyond 1e18, g * g would overflow the second moment to infinity (a finite but huge

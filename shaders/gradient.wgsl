@@ -3,7 +3,7 @@
 // them by the adjoint of its pixel, and adds the result into the texels that the filter
 // touches (the parameter-space estimator of docs/method.md). Float additions use a
 // bounded compare-and-swap loop on 32-bit atomics; an update that exhausts the bound is
-// counted in stats[1], never silently lost.
+// counted (GRADIENT_STAT_LOST), never silently lost.
 #import shared/rng
 #import shared/camera
 #import shared/adjoint_pixel
@@ -97,11 +97,11 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
             scatter(g.m, g.sf.uv, g.bsdf_grad, g.bsdf.radiance * g.bsdf.scale, a.adj);
         }
     }
-    atomicAdd(&gstats[0], gp.spp);
+    atomicAdd(&gstats[GRADIENT_STAT_SAMPLES], gp.spp);
     if lost_updates > 0u {
-        atomicAdd(&gstats[1], lost_updates);
+        atomicAdd(&gstats[GRADIENT_STAT_LOST], lost_updates);
     }
     if dropped_values > 0u {
-        atomicAdd(&gstats[2], dropped_values);
+        atomicAdd(&gstats[GRADIENT_STAT_DROPPED], dropped_values);
     }
 }

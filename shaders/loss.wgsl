@@ -76,7 +76,7 @@ fn main(@builtin(local_invocation_index) li: u32, @builtin(workgroup_id) wg: vec
             adj = vec3f(0.0);
             term = 0.0;
             d_exposure = 0.0;
-            atomicAdd(&loss_stats[0], 1u);
+            atomicAdd(&loss_stats[LOSS_STAT_DROPPED], 1u);
         }
         adjoint[lp.adjoint_offset + i] = vec4f(adj, lp.exposure);
         l = vec2f(term, d_exposure);

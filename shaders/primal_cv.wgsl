@@ -48,7 +48,6 @@ const CV_VAR_H: u32 = 4u;
 const CV_COV: u32 = 5u;
 const CV_VAR_IMAGE: u32 = 6u;
 const CV_WEIGHT: u32 = 7u;
-const CV_VEC4S: u32 = 8u;
 
 @group(0) @binding(0) var<uniform> cp: PrimalCvParams;
 // F_t (rgb sum, sample count in w) in; I_t (rgb, 1) out.

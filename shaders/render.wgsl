@@ -60,10 +60,10 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     if rp.two_states != 0u {
         accum_prev[pixel] += vec4f(sum_prev, f32(rp.spp));
     }
-    atomicAdd(&stats[0], rp.spp);
-    atomicAdd(&stats[1], shadow_rays);
-    atomicAdd(&stats[2], bsdf_rays);
+    atomicAdd(&stats[RENDER_STAT_CAMERA_RAYS], rp.spp);
+    atomicAdd(&stats[RENDER_STAT_SHADOW_RAYS], shadow_rays);
+    atomicAdd(&stats[RENDER_STAT_BSDF_RAYS], bsdf_rays);
     if dropped > 0u {
-        atomicAdd(&stats[3], dropped);
+        atomicAdd(&stats[RENDER_STAT_DROPPED], dropped);
     }
 }

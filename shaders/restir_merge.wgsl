@@ -32,7 +32,7 @@
 #import shared/rng
 #import shared/surface
 #import shared/reservoir_slots
-#import gen/restir_layout
+#import gen/abi
 
 // Mirrored by MergeParams in src/optim/estimator/restir.rs. flags: MERGE_FLAG_* (generated).
 struct MergeParams {

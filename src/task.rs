@@ -491,13 +491,18 @@ impl Task {
     }
 
     fn check(&self) -> Result<()> {
-        let size_ok = |v: u32| (1..=8192).contains(&v);
-        if !size_ok(self.width) {
-            return Err(self.bad("width", "must be between 1 and 8192"));
-        }
-        if !size_ok(self.height) {
-            return Err(self.bad("height", "must be between 1 and 8192"));
-        }
+        // The optimizer's settings as this task gives them (the estimator's options come
+        // from the command line or the library, and are checked there).
+        let mut settings = crate::optim::run::task_settings(
+            self,
+            &[],
+            crate::optim::Method::Baseline,
+            Default::default(),
+        );
+        settings.exposure_learning_rate = Some(self.optimizer.exposure_learning_rate);
+        settings
+            .validate()
+            .map_err(|(key, msg)| self.bad(&key, msg))?;
         if !(self.env_scale.is_finite() && self.env_scale >= 0.0) {
             return Err(self.bad("env_scale", "must be a finite number >= 0"));
         }
@@ -529,25 +534,10 @@ impl Task {
                 ));
             }
         }
-        if o.primal_spp == 0 || o.primal_spp > 4096 {
-            return Err(self.bad("optimizer.primal_spp", "must be between 1 and 4096"));
-        }
-        if !(0.0..=1.0).contains(&o.cv_max_weight) {
-            return Err(self.bad("optimizer.cv_max_weight", "must be between 0 and 1"));
-        }
-        if o.gradient_spp == 0 || o.gradient_spp > 4096 {
-            return Err(self.bad("optimizer.gradient_spp", "must be between 1 and 4096"));
-        }
         if !(o.checkpoint_every_s.is_finite() && o.checkpoint_every_s >= 0.0) {
             return Err(self.bad(
                 "optimizer.checkpoint_every_s",
                 "must be a number of seconds >= 0",
-            ));
-        }
-        if !(o.exposure_learning_rate.is_finite() && o.exposure_learning_rate >= 0.0) {
-            return Err(self.bad(
-                "optimizer.exposure_learning_rate",
-                "must be a finite number >= 0",
             ));
         }
         if let Some(e) = &self.target.exposure {
@@ -565,24 +555,6 @@ impl Task {
         for (i, l) in self.lights.iter().enumerate() {
             l.check()
                 .map_err(|(key, msg)| self.bad(&format!("light[{i}].{key}"), msg))?;
-        }
-        o.schedule
-            .check()
-            .map_err(|(key, msg)| self.bad(&format!("optimizer.schedule.{key}"), msg))?;
-        if o.multiscale_levels > crate::optim::multiscale::MAX_LEVELS {
-            return Err(self.bad(
-                "optimizer.multiscale_levels",
-                format!(
-                    "must be between 0 and {}",
-                    crate::optim::multiscale::MAX_LEVELS
-                ),
-            ));
-        }
-        if !(o.smoothness.is_finite() && (0.0..=1.0e6).contains(&o.smoothness)) {
-            return Err(self.bad(
-                "optimizer.smoothness",
-                "must be a number between 0 (off) and 1e6",
-            ));
         }
         if o.eval_spp == 0 || o.eval_spp > 4096 {
             return Err(self.bad("optimizer.eval_spp", "must be between 1 and 4096"));

@@ -40,7 +40,7 @@ fn plane_under_point_spot_and_directional_lights_matches_the_closed_form() {
         let mut scene = plane_scene(material(base.to_array(), metallic, roughness), 5.0);
         scene.lights.push(PunctualLight {
             name: name.into(),
-            kind: kind.clone(),
+            kind,
             position: light_pos,
             direction,
             intensity,
@@ -244,22 +244,8 @@ fn plane_under_a_rectangular_area_light_matches_the_quadrature() {
     );
     let r = Renderer::new(&gpu, &scene).unwrap();
     for t in [Techniques::Mis, Techniques::NeeOnly, Techniques::BsdfOnly] {
-        let render = |seed| {
-            r.render(
-                &RenderSettings {
-                    width: w,
-                    height: w,
-                    spp: if t == Techniques::BsdfOnly { 512 } else { 64 },
-                    seed,
-                    camera: 0,
-                    techniques: t,
-                },
-                |_| {},
-            )
-            .unwrap()
-            .image
-            .rgb
-        };
+        let spp = if t == Techniques::BsdfOnly { 512 } else { 64 };
+        let render = |seed| render_rgb(&r, w, spp, seed, t);
         let (a1, a2) = (render(1), render(2));
         let block = 4usize;
         let mut worst = 0.0f64;

@@ -12,7 +12,7 @@ mod common;
 use common::*;
 use glam::{Quat, Vec3};
 use psrestir::assets::authoring::{png_bytes, GltfBuilder};
-use psrestir::render::{RenderSettings, Renderer, Techniques};
+use psrestir::render::{Renderer, Techniques};
 use psrestir::scene::{load, EnvMap, Scene};
 use serde_json::json;
 
@@ -111,22 +111,7 @@ struct Case {
 
 fn run_case(gpu: &psrestir::Gpu, c: &Case) {
     let r = Renderer::new(gpu, &c.scene).unwrap();
-    let render = |t: Techniques, seed: u32| {
-        r.render(
-            &RenderSettings {
-                width: W,
-                height: W,
-                spp: c.spp,
-                seed,
-                camera: 0,
-                techniques: t,
-            },
-            |_| {},
-        )
-        .unwrap()
-        .image
-        .rgb
-    };
+    let render = |t: Techniques, seed: u32| render_rgb(&r, W, c.spp, seed, t);
     let nee = [
         render(Techniques::NeeOnly, 1),
         render(Techniques::NeeOnly, 2),

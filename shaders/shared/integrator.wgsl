@@ -6,10 +6,6 @@
 #import shared/bvh
 #import shared/surface
 
-const TECH_NEE: u32 = 1u;
-const TECH_BSDF: u32 = 2u;
-const TECH_MIS: u32 = 3u;
-
 // Which techniques contribute to area and environment lights (delta lights always use NEE).
 var<private> techniques: u32 = TECH_MIS;
 var<private> shadow_rays: u32 = 0u;

@@ -1,5 +1,5 @@
 #import shared/types
-#import gen/restir_layout
+#import gen/abi
 #import shared/reservoir_slots
 
 // Streaming reservoir updates for parameter-space ReSTIR. A reservoir holds one path (the

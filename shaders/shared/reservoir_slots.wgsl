@@ -1,8 +1,8 @@
 // Where a texel's reservoirs lie: RESERVOIR_SLOTS slots per texel and a header word per texel
-// (the layout is generated from src/optim/estimator/restir.rs, gen/restir_layout). The header
+// (the layout is generated from src/gpu/abi.rs, gen/abi). The header
 // names two distinct slots, those of the positive (sign 0) and the negative (sign 1)
 // reservoir; the other two are free for the next iteration's fresh candidates.
-#import gen/restir_layout
+#import gen/abi
 
 // The slot of sign s's reservoir in header h.
 fn header_slot(h: u32, s: u32) -> u32 {

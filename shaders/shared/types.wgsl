@@ -1,4 +1,5 @@
 // GPU structs shared by every pass, mirrored in src/render/layout.rs (Gpu* types).
+#import gen/abi
 
 const PI: f32 = 3.14159265358979;
 const INV_PI: f32 = 0.318309886183791;
@@ -53,12 +54,6 @@ struct Material {
     // Per slot (base color, metallic-roughness, emissive) a 2x3 UV transform, two rows each.
     uv_xf: array<vec4f, 6>,
 }
-
-const LIGHT_POINT: u32 = 0u;
-const LIGHT_SPOT: u32 = 1u;
-const LIGHT_DIRECTIONAL: u32 = 2u;
-const LIGHT_AREA: u32 = 3u;
-const LIGHT_ENV: u32 = 4u;
 
 // intensity: color x intensity (cd for point/spot, lux for directional). direction: where the
 // light points (spot, directional). tri: the emissive triangle of an area light.

@@ -155,7 +155,7 @@ pub struct GroupDecl {
     pub names: &'static [&'static str],
 }
 
-/// Kind of a binding in a [`Gpu::layout`].
+/// Kind of a binding in a pass layout (`Gpu::layout`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Binding {
     /// `var<uniform>`.

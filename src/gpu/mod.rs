@@ -3,6 +3,7 @@
 //! On Linux the Vulkan backend is chosen explicitly: without it wgpu may pick a GL adapter with
 //! far fewer features and say nothing.
 
+pub mod abi;
 mod binding;
 pub mod shaders;
 pub use binding::{Binding, GroupDecl};

@@ -17,10 +17,7 @@ use std::borrow::Cow;
 pub type Generator = fn() -> String;
 
 /// WGSL written by Rust: (name under `gen/`, generator).
-pub const GENERATED: &[(&str, Generator)] = &[(
-    "gen/restir_layout",
-    crate::optim::estimator::restir::layout_wgsl,
-)];
+pub const GENERATED: &[(&str, Generator)] = &[("gen/abi", crate::gpu::abi::wgsl)];
 
 macro_rules! sources {
     ($($name:literal),* $(,)?) => {
@@ -63,16 +60,6 @@ pub const SOURCES: &[(&str, &str)] = sources!(
     "multiscale_gradient",
     "smoothness",
 );
-
-/// WGSL `const` declarations of `u32` values, with a header naming the Rust file they come
-/// from.
-pub fn wgsl_constants(origin: &str, consts: &[(&str, u32)]) -> String {
-    let mut s = format!("// Generated from {origin}; edit the Rust side.\n");
-    for (name, v) in consts {
-        s.push_str(&format!("const {name}: u32 = {v}u;\n"));
-    }
-    s
-}
 
 /// The passes (top-level WGSL files with an entry point `main`).
 pub fn passes() -> impl Iterator<Item = &'static str> {

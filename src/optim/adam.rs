@@ -1,4 +1,10 @@
-//! Adam: the constants, and a CPU reference of shaders/adam.wgsl.
+//! Adam: the constants, the pass of shaders/adam.wgsl (`AdamPass`, one dispatch per
+//! optimized texture), and its CPU reference.
+use crate::gpu::{encode_timed_pass, grid_2d, Gpu};
+use crate::optim::{PassKind, PassTimer};
+use crate::render::params::ParamSet;
+use crate::render::WORKGROUP;
+use crate::Result;
 
 /// First-moment decay.
 pub const BETA1: f32 = 0.9;
@@ -68,4 +74,95 @@ pub struct AdamParams {
     pub hi: f32,
     pub mask: u32,
     pub _pad: u32,
+}
+
+/// Group 0 of `adam.wgsl`.
+pub(crate) const ADAM_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
+    pass: "adam",
+    group: 0,
+    names: &["ap", "grad", "params", "moment1", "moment2", "adam_stats"],
+};
+
+/// The Adam pass: per optimized texture a uniform, its bind group and its parameters.
+pub(crate) struct AdamPass {
+    pipeline: wgpu::ComputePipeline,
+    textures: Vec<(wgpu::Buffer, wgpu::BindGroup, AdamParams)>,
+}
+
+/// What the Adam pass binds.
+pub(crate) struct AdamBuffers<'a> {
+    pub grad: &'a wgpu::Buffer,
+    pub params: &'a wgpu::Buffer,
+    pub moments: &'a [wgpu::Buffer; 2],
+    pub stats: &'a wgpu::Buffer,
+}
+
+impl AdamPass {
+    pub(crate) fn new(gpu: &Gpu, set: &ParamSet, mask: bool, b: AdamBuffers) -> Result<AdamPass> {
+        let layout = gpu.pass_layout("adam", 0)?;
+        let pipeline = gpu.compute_pipeline("adam", &[&layout])?;
+        let textures = set
+            .textures
+            .iter()
+            .map(|t| {
+                let (lo, hi) = t.slot.range();
+                let p = AdamParams {
+                    offset: t.offset,
+                    count: t.len() as u32,
+                    lr: t.learning_rate,
+                    beta1: BETA1,
+                    beta2: BETA2,
+                    eps: EPS,
+                    bias1: 1.0,
+                    bias2: 1.0,
+                    lo,
+                    hi,
+                    mask: mask as u32,
+                    _pad: 0,
+                };
+                let u = gpu.uniform(&format!("adam params {}", t.name()), bytemuck::bytes_of(&p));
+                let g = gpu.bind(
+                    &ADAM_GROUP,
+                    "adam",
+                    &layout,
+                    &[
+                        ("ap", &u),
+                        ("grad", b.grad),
+                        ("params", b.params),
+                        ("moment1", &b.moments[0]),
+                        ("moment2", &b.moments[1]),
+                        ("adam_stats", b.stats),
+                    ],
+                );
+                (u, g, p)
+            })
+            .collect();
+        Ok(AdamPass { pipeline, textures })
+    }
+
+    /// Record step `t` (from 1) of every texture at its learning rate times `factor`;
+    /// returns the learning rates used, one per texture.
+    pub(crate) fn encode(
+        &mut self,
+        gpu: &Gpu,
+        enc: &mut wgpu::CommandEncoder,
+        set: &ParamSet,
+        factor: f32,
+        t: u32,
+        timer: &mut PassTimer,
+    ) -> Vec<f32> {
+        let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
+        let mut rates = Vec::with_capacity(self.textures.len());
+        for ((u, g, p), tex) in self.textures.iter_mut().zip(&set.textures) {
+            p.lr = tex.learning_rate * factor;
+            rates.push(p.lr);
+            p.bias1 = 1.0 - BETA1.powi(t as i32);
+            p.bias2 = 1.0 - BETA2.powi(t as i32);
+            gpu.queue.write_buffer(u, 0, bytemuck::bytes_of(p));
+            let grid = grid_2d(p.count, WORKGROUP, max_dim);
+            let timing = timer.next(PassKind::Adam);
+            encode_timed_pass(enc, "adam", &self.pipeline, &[g], grid, timing);
+        }
+        rates
+    }
 }

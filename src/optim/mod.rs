@@ -30,6 +30,7 @@ pub use settings::*;
 pub use state::*;
 pub use timing::*;
 
+use crate::gpu::abi::stat;
 use crate::gpu::{encode_timed_pass, grid_2d, Gpu};
 use crate::image_io::Image;
 use crate::render::layout::*;
@@ -59,12 +60,6 @@ pub(crate) const LOSS_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
         "exposure_partial",
         "adjoint_prev",
     ],
-};
-/// Group 0 of `adam.wgsl`.
-pub(crate) const ADAM_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
-    pass: "adam",
-    group: 0,
-    names: &["ap", "grad", "params", "moment1", "moment2", "adam_stats"],
 };
 
 /// The primal render and loss of one camera.
@@ -113,8 +108,7 @@ pub struct Optimizer {
     grid: (u32, u32),
     loss_grid: (u32, u32),
     loss_pipeline: wgpu::ComputePipeline,
-    adam_pipeline: wgpu::ComputePipeline,
-    adam: Vec<(wgpu::Buffer, wgpu::BindGroup, adam::AdamParams)>,
+    adam: adam::AdamPass,
     accum: wgpu::Buffer,
     /// The primal samples under the previous textures (control variate).
     accum_prev: wgpu::Buffer,
@@ -152,6 +146,9 @@ impl Optimizer {
         targets: &[Image],
     ) -> Result<Optimizer> {
         let (w, h) = (settings.width, settings.height);
+        settings
+            .validate()
+            .map_err(|(key, msg)| Error::Invalid(format!("settings: `{key}` {msg}")))?;
         if targets.len() != settings.cameras.len() {
             return Err(Error::Invalid(format!(
                 "{} targets for {} cameras",
@@ -178,35 +175,11 @@ impl Optimizer {
         let params = ParamBuffers::new(gpu, &set);
         let renderer = Renderer::with_param_buffers(gpu, scene, &set, &params)?;
         let loss_layout = gpu.pass_layout("loss", 0)?;
-        let adam_layout = gpu.pass_layout("adam", 0)?;
         let loss_pipeline = gpu.compute_pipeline("loss", &[&loss_layout])?;
-        let adam_pipeline = gpu.compute_pipeline("adam", &[&adam_layout])?;
 
         let n_pixels = w * h;
         let n_cams = targets.len() as u32;
         let n_params = set.values.len() as u64;
-        if settings.primal == PrimalMode::ControlVariate && settings.primal_spp == 0 {
-            return Err(Error::Invalid("primal_spp must be at least 1".into()));
-        }
-        if settings.multiscale_levels > multiscale::MAX_LEVELS {
-            return Err(Error::Invalid(format!(
-                "multiscale_levels must be between 0 and {}, not {}",
-                multiscale::MAX_LEVELS,
-                settings.multiscale_levels
-            )));
-        }
-        if !(settings.smoothness.is_finite() && (0.0..=1.0e6).contains(&settings.smoothness)) {
-            return Err(Error::Invalid(format!(
-                "smoothness must be a number between 0 (off) and 1e6, not {}",
-                settings.smoothness
-            )));
-        }
-        if !(0.0..=1.0).contains(&settings.cv_max_weight) {
-            return Err(Error::Invalid(format!(
-                "cv_max_weight must be between 0 and 1, not {}",
-                settings.cv_max_weight
-            )));
-        }
         let accum = gpu.storage_zeroed("primal accum", n_pixels as u64 * 16);
         let accum_prev = gpu.storage_zeroed("primal accum_prev", n_pixels as u64 * 16);
         let control_variate = match settings.primal {
@@ -336,39 +309,17 @@ impl Optimizer {
                 target_buf,
             });
         }
-        let mut adam = Vec::new();
-        for t in &set.textures {
-            let (lo, hi) = t.slot.range();
-            let p = adam::AdamParams {
-                offset: t.offset,
-                count: t.len() as u32,
-                lr: t.learning_rate,
-                beta1: adam::BETA1,
-                beta2: adam::BETA2,
-                eps: adam::EPS,
-                bias1: 1.0,
-                bias2: 1.0,
-                lo,
-                hi,
-                mask: settings.adam_mask as u32,
-                _pad: 0,
-            };
-            let u = gpu.uniform(&format!("adam params {}", t.name()), bytemuck::bytes_of(&p));
-            let g = gpu.bind(
-                &ADAM_GROUP,
-                "adam",
-                &adam_layout,
-                &[
-                    ("ap", &u),
-                    ("grad", &grad),
-                    ("params", &params.values),
-                    ("moment1", &moments[0]),
-                    ("moment2", &moments[1]),
-                    ("adam_stats", &stats.adam),
-                ],
-            );
-            adam.push((u, g, p));
-        }
+        let adam = adam::AdamPass::new(
+            gpu,
+            &set,
+            settings.adam_mask,
+            adam::AdamBuffers {
+                grad: &grad,
+                params: &params.values,
+                moments: &moments,
+                stats: &stats.adam,
+            },
+        )?;
         // Primal, control variate and loss per camera, the estimator's passes (at most two
         // per camera), smoothness, multiscale and Adam per texture.
         let timer = PassTimer::new(gpu, 6 * n_cams + 2 + 3 * set.textures.len() as u32);
@@ -397,7 +348,6 @@ impl Optimizer {
             grid,
             loss_grid,
             loss_pipeline,
-            adam_pipeline,
             adam,
             accum,
             accum_prev,
@@ -509,27 +459,14 @@ impl Optimizer {
             });
         self.encode_gradient(&mut enc, self.iteration, true);
         let t = self.iteration + 1;
-        let max_dim = self
-            .gpu
-            .device
-            .limits()
-            .max_compute_workgroups_per_dimension;
         if let Some(s) = &self.smoothness {
             s.encode(&mut enc, &mut self.timer);
         }
         self.encode_multiscale(&mut enc, self.iteration);
         let factor = self.settings.schedule.factor(self.iteration, self.progress);
-        self.last_learning_rates.clear();
-        for ((u, g, p), tex) in self.adam.iter_mut().zip(&self.set.textures) {
-            p.lr = tex.learning_rate * factor;
-            self.last_learning_rates.push(p.lr);
-            p.bias1 = 1.0 - adam::BETA1.powi(t as i32);
-            p.bias2 = 1.0 - adam::BETA2.powi(t as i32);
-            self.gpu.queue.write_buffer(u, 0, bytemuck::bytes_of(p));
-            let grid = grid_2d(p.count, WORKGROUP, max_dim);
-            let timing = self.timer.next(PassKind::Adam);
-            encode_timed_pass(&mut enc, "adam", &self.adam_pipeline, &[g], grid, timing);
-        }
+        self.last_learning_rates =
+            self.adam
+                .encode(&self.gpu, &mut enc, &self.set, factor, t, &mut self.timer);
         self.timer.resolve(&mut enc);
         self.gpu.queue.submit([enc.finish()]);
         self.finish_iteration(true);
@@ -653,9 +590,9 @@ impl Optimizer {
         let a: Vec<u32> = self.gpu.read_pod(&self.stats.adam)?;
         let l: Vec<u32> = self.gpu.read_pod(&self.stats.loss)?;
         let mut f = FaultCounts {
-            skipped_adam: a[0],
-            dropped_primal: p[3],
-            dropped_pixels: l[0],
+            skipped_adam: a[stat::ADAM_SKIPPED as usize],
+            dropped_primal: p[stat::RENDER_DROPPED as usize],
+            dropped_pixels: l[stat::LOSS_DROPPED as usize],
             ..Default::default()
         };
         self.estimator.faults(&self.gpu, &mut f)?;

@@ -2,7 +2,7 @@
 //! texel's gradient becomes a weighted mean over levels 0..=L of the gradient averaged over
 //! its 2^l x 2^l block (the texel's own with weight [`FINE_WEIGHT`], each block with 1). For
 //! plain gradient descent this is descent on a pyramid of textures that are added up; the
-//! fixed points are those of the plain gradient. [`reference`] is the CPU
+//! fixed points are those of the plain gradient. [`reference()`] is the CPU
 //! twin that the tests compare against.
 
 use bytemuck::{Pod, Zeroable};
@@ -145,7 +145,7 @@ impl super::Optimizer {
 
     /// The multiscale pass of `iteration` on the GPU applied to `grad` (laid out like the
     /// parameters): it is written to the gradient buffer, transformed and read back. For
-    /// tests against [`reference`]; an error when the settings have no multiscale levels.
+    /// tests against [`reference()`]; an error when the settings have no multiscale levels.
     pub fn apply_multiscale(&mut self, grad: &[f32], iteration: u32) -> Result<Vec<f32>> {
         if self.settings.multiscale_levels == 0 {
             return Err(crate::error::Error::Invalid(

@@ -11,7 +11,7 @@
 //! Either way the image is an unbiased estimate of the current render, with random numbers
 //! independent of the gradient samples, so the adjoint of an L2 or relMSE loss (affine in the
 //! image) stays unbiased. The loss *value* is biased upwards by the image's variance (its mean
-//! is L(E[I]) + Var(I) x the loss's weights), as with any noisy render; the control variate
+//! is L(E\[I\]) + Var(I) x the loss's weights), as with any noisy render; the control variate
 //! lowers that bias with the variance.
 use crate::gpu::Gpu;
 use crate::optim::{PassKind, PassTimer};
@@ -83,8 +83,8 @@ pub const BETA2: f32 = 0.999;
 pub const DEFAULT_MAX_WEIGHT: f32 = 0.9;
 /// Iterations before the weight is used (the statistics need one update first).
 pub const WARMUP: u32 = 1;
-/// vec4s of state per pixel (`CV_VEC4S` in the shader).
-pub const STATE_VEC4S: u64 = 8;
+/// vec4s of state per pixel (`CV_VEC4S`).
+pub const STATE_VEC4S: u64 = crate::gpu::abi::CV_VEC4S as u64;
 
 /// The control variate's state that carries over to the next iteration (for checkpoints).
 #[derive(Clone, Debug, PartialEq)]

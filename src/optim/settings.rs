@@ -31,7 +31,7 @@ pub struct Settings {
     /// ReSTIR options (used when `method` is ReSTIR).
     pub restir: RestirOptions,
     /// Learning-rate schedule: a factor of every texture's learning rate over the run (see
-    /// [`Optimizer::set_progress`]).
+    /// [`Optimizer::set_progress`](super::Optimizer::set_progress)).
     pub schedule: Schedule,
     /// Masked (sparse) Adam: entries whose gradient is exactly zero in an iteration keep
     /// their value and moments, as Mitsuba 3's `mask_updates`.
@@ -43,7 +43,7 @@ pub struct Settings {
     /// `smoothness * mean squared difference of observed neighbouring texels` is added to
     /// the image loss's before the multiscale gradient and Adam.
     pub smoothness: f32,
-    /// Optimize the per-camera exposures (see [`Optimizer::set_exposure`]) with Adam on
+    /// Optimize the per-camera exposures (see [`Optimizer::set_exposure`](super::Optimizer::set_exposure)) with Adam on
     /// their logarithms, at this learning rate; None: exposures stay fixed.
     pub exposure_learning_rate: Option<f32>,
 }
@@ -71,9 +71,57 @@ impl Settings {
             exposure_learning_rate: None,
         }
     }
+
+    /// Every range check of the settings, in one place: the task loader and
+    /// [`Optimizer::new`](super::Optimizer::new)(super::Optimizer::new) both call it. An error names the task-file
+    /// key (`width`, `optimizer.primal_spp`, ...) and what is wrong.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        let bad = |key: &str, msg: &str| Err((key.to_string(), msg.to_string()));
+        let size_ok = |v: u32| (1..=8192).contains(&v);
+        let spp_ok = |v: u32| (1..=4096).contains(&v);
+        if !size_ok(self.width) {
+            return bad("width", "must be between 1 and 8192");
+        }
+        if !size_ok(self.height) {
+            return bad("height", "must be between 1 and 8192");
+        }
+        if !spp_ok(self.primal_spp) {
+            return bad("optimizer.primal_spp", "must be between 1 and 4096");
+        }
+        if !spp_ok(self.gradient_spp) {
+            return bad("optimizer.gradient_spp", "must be between 1 and 4096");
+        }
+        if !(0.0..=1.0).contains(&self.cv_max_weight) {
+            return bad("optimizer.cv_max_weight", "must be between 0 and 1");
+        }
+        if let Err((key, msg)) = self.schedule.check() {
+            return Err((format!("optimizer.schedule.{key}"), msg));
+        }
+        if self.multiscale_levels > super::multiscale::MAX_LEVELS {
+            let msg = format!("must be between 0 and {}", super::multiscale::MAX_LEVELS);
+            return bad("optimizer.multiscale_levels", &msg);
+        }
+        if !(self.smoothness.is_finite() && (0.0..=1.0e6).contains(&self.smoothness)) {
+            return bad(
+                "optimizer.smoothness",
+                "must be a number between 0 (off) and 1e6",
+            );
+        }
+        if let Some(lr) = self.exposure_learning_rate {
+            if !(lr.is_finite() && lr >= 0.0) {
+                return bad(
+                    "optimizer.exposure_learning_rate",
+                    "must be a finite number >= 0",
+                );
+            }
+        }
+        self.restir
+            .validate()
+            .map_err(|e| ("restir".to_string(), e.to_string()))
+    }
 }
 
-/// When [`Optimizer::run`] returns: after `iterations` more iterations, after `time_budget`,
+/// When [`Optimizer::run`](super::Optimizer::run) returns: after `iterations` more iterations, after `time_budget`,
 /// or at whichever comes first. At least one must be given.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Stop {
@@ -100,10 +148,10 @@ impl Stop {
     }
 }
 
-/// What the callback of [`Optimizer::run`] sees after each iteration.
+/// What the callback of [`Optimizer::run`](super::Optimizer::run) sees after each iteration.
 #[derive(Clone, Copy, Debug)]
 pub struct Progress {
-    /// Iterations done in total ([`Optimizer::iteration`]).
+    /// Iterations done in total ([`Optimizer::iteration`](super::Optimizer::iteration)).
     pub iteration: u32,
     /// Iterations done in this call.
     pub in_this_run: u32,
@@ -111,4 +159,54 @@ pub struct Progress {
     pub loss: f64,
     /// Time since the call began.
     pub elapsed: std::time::Duration,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn validate_names_the_key_of_every_bad_setting() {
+        let ok = Settings::new(64, 64, vec![0]);
+        assert_eq!(ok.validate(), Ok(()));
+        type Spoil = Box<dyn Fn(&mut Settings)>;
+        let cases: Vec<(&str, Spoil)> = vec![
+            ("width", Box::new(|s| s.width = 0)),
+            ("height", Box::new(|s| s.height = 9000)),
+            ("optimizer.primal_spp", Box::new(|s| s.primal_spp = 0)),
+            ("optimizer.gradient_spp", Box::new(|s| s.gradient_spp = 0)),
+            (
+                "optimizer.gradient_spp",
+                Box::new(|s| s.gradient_spp = 5000),
+            ),
+            (
+                "optimizer.cv_max_weight",
+                Box::new(|s| s.cv_max_weight = 1.5),
+            ),
+            (
+                "optimizer.multiscale_levels",
+                Box::new(|s| s.multiscale_levels = 9),
+            ),
+            (
+                "optimizer.smoothness",
+                Box::new(|s| s.smoothness = f32::NAN),
+            ),
+            (
+                "optimizer.exposure_learning_rate",
+                Box::new(|s| s.exposure_learning_rate = Some(-1.0)),
+            ),
+            (
+                "optimizer.schedule.final",
+                Box::new(|s| s.schedule.final_factor = 0.0),
+            ),
+            ("restir", Box::new(|s| s.restir.m_cap = 0.0)),
+        ];
+        for (key, spoil) in cases {
+            let mut s = ok.clone();
+            spoil(&mut s);
+            let (k, msg) = s.validate().unwrap_err();
+            assert_eq!(k, key, "{msg}");
+            assert!(!msg.is_empty());
+        }
+    }
 }

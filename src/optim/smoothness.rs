@@ -6,7 +6,7 @@
 //! determine every texel. Monte Carlo gradient noise then random-walks the texture in the
 //! directions the image leaves free (the speckle of the bundled tasks), and nothing pulls it
 //! back. The prior does. It is a mean, like the image loss, so `lambda` weighs the two terms
-//! about alike on textures and images of any size. [`reference`] is the CPU twin that the
+//! about alike on textures and images of any size. [`reference()`] is the CPU twin that the
 //! tests compare against.
 
 use bytemuck::{Pod, Zeroable};
@@ -208,7 +208,7 @@ impl super::Optimizer {
     }
 
     /// The gradient `grad` (laid out like the parameters) plus the prior's derivative at the
-    /// current parameters, computed on the GPU. For tests against [`reference`]; an error
+    /// current parameters, computed on the GPU. For tests against [`reference()`]; an error
     /// when the settings have no smoothness weight.
     pub fn apply_smoothness(&mut self, grad: &[f32]) -> Result<Vec<f32>> {
         if self.settings.smoothness <= 0.0 {

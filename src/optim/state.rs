@@ -45,7 +45,7 @@ pub struct PreviousState {
 pub struct OptimizerState {
     /// Iterations done.
     pub iteration: u32,
-    /// Texture values, laid out like [`ParamSet::values`].
+    /// Texture values, laid out like [`ParamSet::values`](crate::render::params::ParamSet::values).
     pub params: Vec<f32>,
     /// Adam first moments.
     pub m1: Vec<f32>,

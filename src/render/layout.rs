@@ -55,16 +55,16 @@ pub struct GpuMaterial {
     pub uv_xf: [[f32; 4]; 6],
 }
 
-/// Light kinds, as `LIGHT_*` in types.wgsl.
-pub const LIGHT_POINT: u32 = 0;
+/// Light kinds (`crate::gpu::abi::light`, WGSL `LIGHT_*`).
+pub const LIGHT_POINT: u32 = crate::gpu::abi::light::POINT;
 /// Spot light.
-pub const LIGHT_SPOT: u32 = 1;
+pub const LIGHT_SPOT: u32 = crate::gpu::abi::light::SPOT;
 /// Directional light.
-pub const LIGHT_DIRECTIONAL: u32 = 2;
+pub const LIGHT_DIRECTIONAL: u32 = crate::gpu::abi::light::DIRECTIONAL;
 /// Emissive triangle.
-pub const LIGHT_AREA: u32 = 3;
+pub const LIGHT_AREA: u32 = crate::gpu::abi::light::AREA;
 /// Environment map.
-pub const LIGHT_ENV: u32 = 4;
+pub const LIGHT_ENV: u32 = crate::gpu::abi::light::ENV;
 
 /// `Light` in types.wgsl.
 #[repr(C)]
@@ -167,7 +167,7 @@ mod tests {
             crate::render::RENDER_GROUP,
             crate::render::TRACE_RAYS_GROUP,
             crate::optim::LOSS_GROUP,
-            crate::optim::ADAM_GROUP,
+            crate::optim::adam::ADAM_GROUP,
             crate::optim::primal::PRIMAL_CV_GROUP,
             crate::optim::observed::OBSERVED_GROUP,
             crate::optim::multiscale::MULTISCALE_GROUP,

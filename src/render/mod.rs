@@ -9,6 +9,7 @@ pub mod params;
 
 pub use gpu_scene::{wrap_trial, AccelerationStructure, GpuScene};
 
+use crate::gpu::abi::{stat, technique};
 use crate::gpu::{encode_pass, encode_timed_pass, grid_2d, Gpu};
 use crate::image_io::Image;
 use crate::scene::Scene;
@@ -52,9 +53,9 @@ impl Techniques {
     /// The value of `techniques` in the shaders.
     pub fn bits(self) -> u32 {
         match self {
-            Techniques::NeeOnly => 1,
-            Techniques::BsdfOnly => 2,
-            Techniques::Mis => 3,
+            Techniques::NeeOnly => technique::NEE,
+            Techniques::BsdfOnly => technique::BSDF,
+            Techniques::Mis => technique::MIS,
         }
     }
 }
@@ -333,10 +334,10 @@ impl Renderer {
         };
         Ok(RenderOutput {
             image,
-            camera_rays: counts[0] as u64,
-            shadow_rays: counts[1] as u64,
-            bsdf_rays: counts[2] as u64,
-            dropped: counts[3] as u64,
+            camera_rays: counts[stat::RENDER_CAMERA_RAYS as usize] as u64,
+            shadow_rays: counts[stat::RENDER_SHADOW_RAYS as usize] as u64,
+            bsdf_rays: counts[stat::RENDER_BSDF_RAYS as usize] as u64,
+            dropped: counts[stat::RENDER_DROPPED as usize] as u64,
             seconds,
         })
     }

@@ -4,6 +4,7 @@
 
 use glam::{Vec2, Vec3, Vec4};
 use psrestir::gpu::Gpu;
+use psrestir::render::{RenderSettings, Renderer, Techniques};
 use psrestir::scene::{Camera, Material, PunctualKind, PunctualLight, Scene, Triangle};
 use std::f32::consts::PI;
 
@@ -254,4 +255,22 @@ pub fn crc32(bytes: &[u8]) -> u32 {
         }
     }
     !c
+}
+
+/// A square render of camera 0 with the given techniques: its pixels.
+pub fn render_rgb(r: &Renderer, size: u32, spp: u32, seed: u32, t: Techniques) -> Vec<[f32; 3]> {
+    r.render(
+        &RenderSettings {
+            width: size,
+            height: size,
+            spp,
+            seed,
+            camera: 0,
+            techniques: t,
+        },
+        |_| {},
+    )
+    .unwrap()
+    .image
+    .rgb
 }

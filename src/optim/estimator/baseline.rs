@@ -37,8 +37,8 @@ pub struct GradientParams {
 }
 
 /// `gstats` slots of shaders/gradient.wgsl.
-const STAT_LOST: usize = 1;
-const STAT_DROPPED: usize = 2;
+const STAT_LOST: usize = crate::gpu::abi::stat::GRADIENT_LOST as usize;
+const STAT_DROPPED: usize = crate::gpu::abi::stat::GRADIENT_DROPPED as usize;
 
 struct Camera {
     uniform: wgpu::Buffer,

@@ -1,6 +1,6 @@
 //! Gradient estimators. Each one lives in its own module and owns its pipelines, bind groups,
 //! buffers, GPU struct mirrors, memory plan, checkpoint state and fault counters; the
-//! optimizer calls it through [`Estimator`] once per iteration, after the primal render and
+//! optimizer calls it through the `Estimator` trait once per iteration, after the primal render and
 //! the loss have written every camera's adjoint.
 //!
 //! - [`baseline`]: plain Monte Carlo, every sample adds its derivative to the texels it

@@ -49,62 +49,10 @@ pub(crate) const RESERVOIR_TEST_GROUP: crate::gpu::GroupDecl = crate::gpu::Group
     names: &["tp", "weights", "fresh", "locks", "failures"],
 };
 
-/// Word offsets within a reservoir, and the packing of its info word. The WGSL constants
-/// (`RES_*`, `INFO_*`, `RESERVOIR_WORDS` in `gen/restir_layout`) are generated from these.
-pub mod reservoir {
-    /// Pixel | camera << CAMERA_SHIFT | technique << TECH_SHIFT.
-    pub const INFO: u32 = 0;
-    /// Weight sum (fresh reservoirs) or unbiased contribution weight W (merged), f32.
-    pub const W: u32 = 1;
-    /// The path's factor e = d(BRDF cos L_i)/d(texel) per image channel (RGB f32) under the
-    /// textures the reservoir was formed at; its value is the pixel's adjoint times e.
-    pub const VALUE: u32 = 2;
-    /// Material of the camera ray's hit (index into the scene's materials).
-    pub const MATERIAL: u32 = 5;
-    /// Texture coordinates (UV0) of the hit, f32.
-    pub const UV: u32 = 6;
-    /// Incident direction in the hit's shading frame, octahedral, two f32.
-    pub const WI: u32 = 8;
-    /// Outgoing (towards the camera) direction in the shading frame, octahedral, two f32.
-    pub const WO: u32 = 10;
-    /// Incident radiance, RGB f32.
-    pub const RADIANCE: u32 = 12;
-    /// Fresh reservoirs: the path's target under the previous iteration's textures and
-    /// target adjoint (f32), computed by the candidate pass, which has the material
-    /// at hand, so that the merge does not evaluate fresh paths again.
-    pub const Q_PREV: u32 = 15;
-    /// The material inputs at the hit that no optimized texture replaces, four f32
-    /// (shaders/shared/surface.wgsl, fixed_pack): re-evaluating the path samples no glTF
-    /// texture.
-    pub const FIXED: u32 = 16;
-    /// Words per reservoir (a multiple of 4: the merge reads a reservoir as vec4s).
-    pub const WORDS: u32 = 20;
-    const _: () = assert!(WORDS % 4 == 0);
-    /// Bits of the pixel index (images up to 8192 x 8192 = 2^26 pixels).
-    pub const CAMERA_SHIFT: u32 = 26;
-    /// Camera index mask after the shift.
-    pub const CAMERA_MASK: u32 = 7;
-    /// Pixel index mask.
-    pub const PIXEL_MASK: u32 = (1 << CAMERA_SHIFT) - 1;
-    /// The technique bit: 0 light sampling, 1 BSDF sampling.
-    pub const TECH_SHIFT: u32 = 29;
-    /// Reservoir slots per texel: its two kept reservoirs and the two fresh ones.
-    pub const SLOTS: u32 = 4;
-    /// Bits of a slot index in a texel's header (sign 0's slot, then sign 1's).
-    pub const HEADER_SLOT_BITS: u32 = 2;
-    /// Slot index mask after the shift.
-    pub const HEADER_SLOT_MASK: u32 = (1 << HEADER_SLOT_BITS) - 1;
-    /// The header of a texel whose reservoirs lie in slots 0 (sign 0) and 1 (sign 1).
-    pub const HEADER_FIRST_TWO: u32 = 1 << HEADER_SLOT_BITS;
-
-    /// The slot of sign `sign`'s reservoir in header `h`.
-    pub fn header_slot(h: u32, sign: u32) -> u32 {
-        (h >> (HEADER_SLOT_BITS * sign)) & HEADER_SLOT_MASK
-    }
-}
+pub use crate::gpu::abi::reservoir;
 
 /// Cameras a ReSTIR optimizer can use (the camera index has three bits in a reservoir).
-pub const MAX_CAMERAS: usize = reservoir::CAMERA_MASK as usize + 1;
+pub const MAX_CAMERAS: usize = crate::gpu::abi::MAX_CAMERAS as usize;
 
 /// Bytes of ReSTIR state per texel: four reservoir slots (the kept positive and negative
 /// reservoirs and the fresh ones), a header word and a lock word per sign. Per pixel of every
@@ -116,63 +64,16 @@ pub const STATE_BYTES_PER_TEXEL: u64 =
 /// (RGBA f32 each).
 pub const STATE_BYTES_PER_PIXEL: u64 = 2 * 16;
 
-/// Merge flags (`MERGE_FLAG_*`).
-const FLAG_TEMPORAL: u32 = 1;
-const FLAG_POSITIVIZE: u32 = 2;
-const FLAG_HAVE_PREV: u32 = 4;
-const FLAG_VERIFY: u32 = 8;
-
-/// Counter slots of the merge pass (`MERGE_STAT_*`).
-const MERGE_STAT_EVALUATIONS: usize = 0;
-const MERGE_STAT_DROPPED: usize = 1;
-const MERGE_STAT_VERIFIED: usize = 2;
-const MERGE_STAT_VERIFY_MAX_ERROR: usize = 3;
-
-/// Counter slots of the candidate pass (`CANDIDATE_STAT_*`).
-const CANDIDATE_STAT_OFFERED: usize = 0;
-const CANDIDATE_STAT_LOST: usize = 1;
-const CANDIDATE_STAT_DROPPED: usize = 2;
-
-/// The WGSL of `gen/restir_layout`: the reservoir layout, flags and counter slots above.
-pub fn layout_wgsl() -> String {
-    use reservoir::*;
-    let consts: &[(&str, u32)] = &[
-        ("RESERVOIR_WORDS", WORDS),
-        ("RES_INFO", INFO),
-        ("RES_W", W),
-        ("RES_VALUE", VALUE),
-        ("RES_MATERIAL", MATERIAL),
-        ("RES_UV", UV),
-        ("RES_WI", WI),
-        ("RES_WO", WO),
-        ("RES_RADIANCE", RADIANCE),
-        ("RES_Q_PREV", Q_PREV),
-        ("RES_FIXED", FIXED),
-        ("RESERVOIR_SLOTS", SLOTS),
-        ("HEADER_SLOT_BITS", HEADER_SLOT_BITS),
-        ("HEADER_SLOT_MASK", HEADER_SLOT_MASK),
-        ("INFO_CAMERA_SHIFT", CAMERA_SHIFT),
-        ("INFO_CAMERA_MASK", CAMERA_MASK),
-        ("INFO_PIXEL_MASK", PIXEL_MASK),
-        ("INFO_TECH_SHIFT", TECH_SHIFT),
-        ("MAX_CAMERAS", MAX_CAMERAS as u32),
-        ("MERGE_FLAG_TEMPORAL", FLAG_TEMPORAL),
-        ("MERGE_FLAG_POSITIVIZE", FLAG_POSITIVIZE),
-        ("MERGE_FLAG_HAVE_PREV", FLAG_HAVE_PREV),
-        ("MERGE_FLAG_VERIFY", FLAG_VERIFY),
-        ("MERGE_STAT_EVALUATIONS", MERGE_STAT_EVALUATIONS as u32),
-        ("MERGE_STAT_DROPPED", MERGE_STAT_DROPPED as u32),
-        ("MERGE_STAT_VERIFIED", MERGE_STAT_VERIFIED as u32),
-        (
-            "MERGE_STAT_VERIFY_MAX_ERROR",
-            MERGE_STAT_VERIFY_MAX_ERROR as u32,
-        ),
-        ("CANDIDATE_STAT_OFFERED", CANDIDATE_STAT_OFFERED as u32),
-        ("CANDIDATE_STAT_LOST", CANDIDATE_STAT_LOST as u32),
-        ("CANDIDATE_STAT_DROPPED", CANDIDATE_STAT_DROPPED as u32),
-    ];
-    crate::gpu::shaders::wgsl_constants("src/optim/estimator/restir.rs", consts)
-}
+use crate::gpu::abi::merge_flag::{
+    HAVE_PREV as FLAG_HAVE_PREV, POSITIVIZE as FLAG_POSITIVIZE, TEMPORAL as FLAG_TEMPORAL,
+    VERIFY as FLAG_VERIFY,
+};
+const MERGE_STAT_EVALUATIONS: usize = crate::gpu::abi::stat::MERGE_EVALUATIONS as usize;
+const MERGE_STAT_DROPPED: usize = crate::gpu::abi::stat::MERGE_DROPPED as usize;
+const MERGE_STAT_VERIFIED: usize = crate::gpu::abi::stat::MERGE_VERIFIED as usize;
+const MERGE_STAT_VERIFY_MAX_ERROR: usize = crate::gpu::abi::stat::MERGE_VERIFY_MAX_ERROR as usize;
+const CANDIDATE_STAT_LOST: usize = crate::gpu::abi::stat::CANDIDATE_LOST as usize;
+const CANDIDATE_STAT_DROPPED: usize = crate::gpu::abi::stat::CANDIDATE_DROPPED as usize;
 
 /// Confidence of the fresh candidates in the merge (the kept sample's is min(M, M-cap)).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -392,7 +293,6 @@ impl Restir {
         let gpu = s.gpu;
         let o = s.settings.restir;
         let n_cams = s.cameras.len();
-        o.validate()?;
         let smoothing = o.target_smoothing_for(s.settings.primal);
         if n_cams > MAX_CAMERAS {
             return Err(Error::Invalid(format!(
