@@ -20,11 +20,13 @@
 //!
 //! The report (`bench.json`, `report.md`, plots and gradient images) is written by
 //! [`report`].
+mod gradient;
 mod phases;
 pub mod report;
 mod results;
 
-use phases::{gradient_phase, optimization_phases, primal_phase, settings};
+use gradient::gradient_phase;
+use phases::{optimization_phases, primal_phase, settings};
 pub use results::*;
 
 use crate::gpu::Gpu;

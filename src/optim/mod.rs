@@ -3,6 +3,7 @@
 //! submission per iteration.
 
 pub mod adam;
+mod cameras;
 pub mod checkpoint;
 pub mod estimator;
 pub mod export;
@@ -13,6 +14,7 @@ pub mod plot;
 pub mod primal;
 pub mod problem;
 pub mod run;
+mod run_metrics;
 pub mod schedule;
 pub mod smoothness;
 pub mod texture_export;
@@ -37,8 +39,8 @@ use crate::render::layout::*;
 use crate::render::params::{ParamBuffers, ParamSet};
 use crate::render::{camera_info, Renderer, Techniques, WORKGROUP};
 use crate::scene::Scene;
-use crate::vocab::Loss;
 use crate::{Error, Result};
+use cameras::{camera_passes, check_inputs, CameraPasses, CameraSetup, Stats};
 pub use estimator::restir::{self, MergeDiagnostics};
 use estimator::Estimator;
 pub use estimator::{Confidence, Method, RestirOptions, RestirSnapshot};
@@ -61,25 +63,6 @@ pub(crate) const LOSS_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
         "adjoint_prev",
     ],
 };
-
-/// The primal render and loss of one camera.
-struct CameraPasses {
-    render_uniform: wgpu::Buffer,
-    render_params: GpuRenderParams,
-    render_group: wgpu::BindGroup,
-    loss_uniform: wgpu::Buffer,
-    loss_params: loss::LossParams,
-    target_buf: wgpu::Buffer,
-    /// Per parity of the iteration (the adjoint buffers alternate).
-    loss_groups: [wgpu::BindGroup; 2],
-}
-
-/// Counters of the passes the optimizer runs itself.
-struct Stats {
-    primal: wgpu::Buffer,
-    adam: wgpu::Buffer,
-    loss: wgpu::Buffer,
-}
 
 /// The optimizer: a scene on the GPU with its optimized textures, targets, and the passes.
 pub struct Optimizer {
@@ -146,31 +129,7 @@ impl Optimizer {
         targets: &[Image],
     ) -> Result<Optimizer> {
         let (w, h) = (settings.width, settings.height);
-        settings
-            .validate()
-            .map_err(|(key, msg)| Error::Invalid(format!("settings: `{key}` {msg}")))?;
-        if targets.len() != settings.cameras.len() {
-            return Err(Error::Invalid(format!(
-                "{} targets for {} cameras",
-                targets.len(),
-                settings.cameras.len()
-            )));
-        }
-        if settings.method == Method::Restir && targets.len() > restir::MAX_CAMERAS {
-            return Err(Error::Invalid(format!(
-                "ReSTIR handles at most {} cameras, the task has {}",
-                restir::MAX_CAMERAS,
-                targets.len()
-            )));
-        }
-        for t in targets {
-            if (t.width, t.height) != (w, h) {
-                return Err(Error::Invalid(format!(
-                    "target is {}x{}, the task renders {w}x{h}",
-                    t.width, t.height
-                )));
-            }
-        }
+        check_inputs(&settings, targets)?;
         memory_plan(&set, &settings, targets.len()).check(gpu)?;
         let params = ParamBuffers::new(gpu, &set);
         let renderer = Renderer::with_param_buffers(gpu, scene, &set, &params)?;
@@ -216,7 +175,6 @@ impl Optimizer {
         let grid = renderer.tile_grid(w, h);
         let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
         let loss_grid = grid_2d(n_pixels, WORKGROUP, max_dim);
-        let norm = 1.0 / (n_pixels as f32 * 3.0 * n_cams as f32);
 
         let mut camera_infos = Vec::new();
         for &cam in &settings.cameras {
@@ -237,78 +195,23 @@ impl Optimizer {
             grid,
         })?;
 
-        let mut cams = Vec::new();
-        for (k, (camera, target)) in camera_infos.iter().zip(targets).enumerate() {
-            let render_params = GpuRenderParams {
-                camera: *camera,
-                spp: settings.primal_spp,
-                techniques: Techniques::Mis.bits(),
-                stride: grid.0 * WORKGROUP,
-                two_states: control_variate.is_some() as u32,
-                ..Default::default()
-            };
-            let loss_params = loss::LossParams {
-                n_pixels,
-                kind: match settings.loss {
-                    Loss::L2 => 0,
-                    Loss::Relmse => 1,
-                },
-                norm,
-                partial_offset: k as u32 * n_loss_groups,
-                adjoint_offset: k as u32 * n_pixels,
-                exposure: 1.0,
-                _pad: [0; 2],
-            };
-            // Mask weight 1 everywhere until set_masks.
-            let target_data: Vec<[f32; 4]> =
-                target.rgb.iter().map(|p| [p[0], p[1], p[2], 1.0]).collect();
-            let target_buf = gpu.storage(
-                &format!("target {k}"),
-                bytemuck::cast_slice(&target_data),
-                wgpu::BufferUsages::empty(),
-            );
-            let render_uniform = gpu.uniform(
-                &format!("primal params {k}"),
-                bytemuck::bytes_of(&render_params),
-            );
-            let loss_uniform = gpu.uniform(
-                &format!("loss params {k}"),
-                bytemuck::bytes_of(&loss_params),
-            );
-            cams.push(CameraPasses {
-                render_group: renderer.bind_render_group(
-                    "primal",
-                    &[
-                        ("rp", &render_uniform),
-                        ("accum", &accum),
-                        ("stats", &stats.primal),
-                        ("accum_prev", &accum_prev),
-                    ],
-                ),
-                loss_groups: [0usize, 1].map(|p| {
-                    gpu.bind(
-                        &LOSS_GROUP,
-                        "loss",
-                        &loss_layout,
-                        &[
-                            ("lp", &loss_uniform),
-                            ("accum", &accum),
-                            ("target_image", &target_buf),
-                            ("adjoint", &adjoint[p]),
-                            ("loss_partial", &loss_partial),
-                            ("loss_stats", &stats.loss),
-                            ("exposure_partial", &exposure_partial),
-                            ("adjoint_prev", &adjoint[1 - p]),
-                        ],
-                    )
-                }),
-                render_uniform,
-                render_params,
-                loss_uniform,
-                loss_params,
-                target_buf,
-            });
-        }
+        let cams = camera_passes(&CameraSetup {
+            gpu,
+            renderer: &renderer,
+            settings: &settings,
+            camera_infos: &camera_infos,
+            targets,
+            grid,
+            two_states: control_variate.is_some(),
+            n_loss_groups,
+            loss_layout: &loss_layout,
+            accum: &accum,
+            accum_prev: &accum_prev,
+            stats: &stats,
+            adjoint: &adjoint,
+            loss_partial: &loss_partial,
+            exposure_partial: &exposure_partial,
+        });
         let adam = adam::AdamPass::new(
             gpu,
             &set,

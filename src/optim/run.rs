@@ -2,6 +2,9 @@
 //! metrics and checkpoints, and the outputs.
 use super::checkpoint::{Checkpoint, Header, MetricRow};
 use super::problem::camera_file_name;
+use super::run_metrics::{
+    log_exposures, log_observed, progress_bar, progress_message, Metrics, PassMean,
+};
 use super::{FaultCounts, Optimizer, PassTimes, Problem, Settings};
 use crate::gpu::Gpu;
 use crate::image_io::{self, Image};
@@ -227,52 +230,16 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     std::fs::create_dir_all(&out).map_err(|e| Error::file(&out, e.to_string()))?;
     remove_stale_temporaries(&out);
     let ckpt_path = out.join("checkpoint.bin");
-    // --resume without a checkpoint starts from the beginning, so that one command both
-    // starts and restarts a job.
-    let checkpoint = if opts.resume && ckpt_path.exists() {
-        Some(Checkpoint::load(&ckpt_path)?)
-    } else {
-        if opts.resume {
-            log::warn!(
-                "--resume: no checkpoint in {} yet: starting from the beginning",
-                out.display()
-            );
-        }
-        None
-    };
+    let checkpoint = open_checkpoint(&out, &ckpt_path, opts.resume)?;
     let prep = Problem::from_task(gpu, task, &out, opts.resume)?;
     let settings = task_settings(task, &prep.cameras, opts.method, opts.restir);
     let initial_rmse = prep.reference.as_ref().map(|r| rmse(&prep.set.values, r));
     let mut opt = Optimizer::for_problem(gpu, &prep, settings)?;
     let layout = layout_string(&prep.set);
-    let mut rows: Vec<MetricRow> = Vec::new();
-    let mut elapsed_before = 0.0;
-    if let Some(c) = checkpoint {
-        if c.header.layout != layout || c.state.params.len() != prep.set.values.len() {
-            return Err(Error::file(
-                &ckpt_path,
-                format!(
-                    "checkpoint holds textures {} but the task has {layout}",
-                    c.header.layout
-                ),
-            ));
-        }
-        if c.state.restir.is_some() != (opt.settings().method == super::Method::Restir) {
-            return Err(Error::file(
-                &ckpt_path,
-                "the checkpoint was written by the other gradient estimator (baseline vs ReSTIR); resume with the same --method",
-            ));
-        }
-        opt.restore(&c.state)?;
-        elapsed_before = c.header.elapsed_s;
-        rows = c.header.metrics;
-        rows.retain(|r| r.iteration <= opt.iteration);
-        log::info!(
-            "resuming at iteration {} ({:.1} s done)",
-            opt.iteration,
-            elapsed_before
-        );
-    }
+    let (mut rows, elapsed_before) = match checkpoint {
+        Some(c) => resume(&mut opt, c, &ckpt_path, &layout, prep.set.values.len())?,
+        None => (Vec::new(), 0.0),
+    };
     let max_iter = opts.iterations.or(task.optimizer.iterations);
     let budget = opts.time_budget_s.or(task.optimizer.time_budget_s);
     let save_checkpoint = |opt: &Optimizer, rows: &[MetricRow], elapsed: f64| -> Result<()> {
@@ -288,55 +255,22 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         write_metrics(&out.join("metrics.csv"), rows)
     };
 
-    let bar = if opts.progress {
-        let b = match max_iter {
-            Some(n) => indicatif::ProgressBar::new(n as u64),
-            None => indicatif::ProgressBar::new(budget.map(|b| b.ceil() as u64).unwrap_or(0)),
-        };
-        b.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{prefix} [{bar:30}] {pos}/{len} {msg} ETA {eta}",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
-        b.set_prefix(if max_iter.is_some() {
-            "iteration"
-        } else {
-            "seconds"
-        });
-        b.set_position(if max_iter.is_some() {
-            opt.iteration as u64
-        } else {
-            elapsed_before as u64
-        });
-        Some(b)
-    } else {
-        None
-    };
+    let bar = opts
+        .progress
+        .then(|| progress_bar(max_iter, budget, opt.iteration, elapsed_before));
+    // Texture errors every iteration, or every k-th for textures over 2^20 values.
     let rmse_every = (prep.set.values.len() / (1 << 20)).max(1) as u32;
     let observed = opt.observed_texels()?.to_vec();
-    let (n_observed, n_texels) = super::observed::observed_count(&observed);
-    log::info!(
-        "{n_observed} of {n_texels} texels are observed by the cameras ({:.1}%); the others get \
-         no gradient and keep their initial values (observed_*.png)",
-        100.0 * n_observed as f64 / n_texels.max(1) as f64
-    );
+    log_observed(&observed);
     save_observed(&out, &prep.set, &observed)?;
-    let texture_errors = |values: &[f32]| -> (Option<f64>, Option<f64>) {
-        match &prep.reference {
-            Some(r) => (
-                Some(rmse(values, r)),
-                Some(super::observed::rmse_observed(
-                    &prep.set, values, r, &observed,
-                )),
-            ),
-            None => (None, None),
-        }
-    };
     let eval_every = task.optimizer.eval_every;
-    let eval_spp = task.optimizer.eval_spp;
-    let eval = |opt: &Optimizer| -> Result<f64> {
-        Ok(evaluate(opt, &prep.targets, eval_spp, task.seed)?.0)
+    let metrics = Metrics {
+        prep: &prep,
+        observed: &observed,
+        eval_spp: task.optimizer.eval_spp,
+        eval_every,
+        rmse_every,
+        seed: task.seed,
     };
     let session_start = Instant::now();
     // Seconds of this session spent on evaluation renders (not counted as optimization).
@@ -345,29 +279,14 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     if rows.is_empty() {
         // The start: texture and image errors of the initial textures.
         let t0 = Instant::now();
-        let (texture_rmse, texture_rmse_observed) = texture_errors(&prep.set.values);
-        let image_relmse = if eval_every > 0 {
-            Some(eval(&opt)?)
-        } else {
-            None
-        };
+        rows.push(metrics.start_row(&opt)?);
         excluded += t0.elapsed().as_secs_f64();
-        rows.push(MetricRow {
-            iteration: 0,
-            elapsed_s: 0.0,
-            loss: None,
-            texture_rmse,
-            texture_rmse_observed,
-            image_relmse,
-            learning_rate: None,
-        });
     }
     let mut last_loss = rows.last().and_then(|r| r.loss).unwrap_or(f64::NAN);
     let ckpt_every = task.optimizer.checkpoint_every;
     let ckpt_every_s = task.optimizer.checkpoint_every_s;
     let mut last_ckpt = Instant::now();
-    let mut pass_sum: Option<PassTimes> = None;
-    let mut timed = 0u32;
+    let mut pass_times = PassMean::default();
     let interrupted = || {
         opts.interrupt
             .as_ref()
@@ -393,51 +312,21 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         last_loss = stats.loss;
         // Timestamps are read back on every 8th iteration only: one readback less per
         // iteration, and the mean is as good.
-        let sample_times = (opt.iteration - start_iter) % 8 == 1;
-        if let Some(t) = if sample_times {
-            opt.pass_times()?
-        } else {
-            None
-        } {
-            timed += 1;
-            pass_sum.get_or_insert_with(PassTimes::default).add(&t);
+        if (opt.iteration - start_iter) % 8 == 1 {
+            pass_times.add(opt.pass_times()?);
         }
         let elapsed = elapsed_now(excluded);
         let t0 = Instant::now();
-        let (texture_rmse, texture_rmse_observed) = if opt.iteration % rmse_every == 0 {
-            texture_errors(&opt.read_params()?)
-        } else {
-            (None, None)
-        };
-        let image_relmse = if eval_every > 0 && opt.iteration % eval_every == 0 {
-            Some(eval(&opt)?)
-        } else {
-            None
-        };
+        let row = metrics.row(&opt, stats.loss, elapsed)?;
         excluded += t0.elapsed().as_secs_f64();
-        rows.push(MetricRow {
-            iteration: opt.iteration,
-            elapsed_s: elapsed,
-            loss: Some(stats.loss),
-            texture_rmse,
-            texture_rmse_observed,
-            image_relmse,
-            learning_rate: opt.last_learning_rates().first().map(|&l| l as f64),
-        });
+        rows.push(row);
         if let Some(b) = &bar {
             b.set_position(if max_iter.is_some() {
                 opt.iteration as u64
             } else {
                 elapsed as u64
             });
-            let mut msg = format!("loss {:.3e}", stats.loss);
-            if let Some(r) = texture_rmse_observed {
-                msg.push_str(&format!(" texture RMSE {r:.4}"));
-            }
-            if let Some(e) = rows.iter().rev().find_map(|r| r.image_relmse) {
-                msg.push_str(&format!(" image relMSE {e:.3e}"));
-            }
-            b.set_message(msg);
+            b.set_message(progress_message(&rows));
         }
         let by_iterations = ckpt_every > 0 && opt.iteration % ckpt_every == 0;
         let by_time = ckpt_every_s > 0.0 && last_ckpt.elapsed().as_secs_f64() >= ckpt_every_s;
@@ -449,38 +338,16 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
-    // The end gets an evaluation and texture errors if its iteration had none.
-    if let Some(last) = rows.last_mut() {
-        if eval_every > 0 && last.image_relmse.is_none() {
-            last.image_relmse = Some(eval(&opt)?);
-        }
-        if last.texture_rmse.is_none() {
-            (last.texture_rmse, last.texture_rmse_observed) = texture_errors(&opt.read_params()?);
-        }
-    }
+    metrics.complete_last(&mut rows, &opt)?;
     let session_s = session_start.elapsed().as_secs_f64() - excluded;
     let elapsed = elapsed_before + session_s;
     let done = opt.iteration - start_iter;
     save_checkpoint(&opt, &rows, elapsed)?;
     let values = opt.read_params()?;
-    let final_rmse = prep.reference.as_ref().map(|r| rmse(&values, r));
-    let final_rmse_observed = prep
-        .reference
-        .as_ref()
-        .map(|r| super::observed::rmse_observed(&prep.set, &values, r, &observed));
-    let initial_rmse_observed = prep
-        .reference
-        .as_ref()
-        .map(|r| super::observed::rmse_observed(&prep.set, &prep.set.values, r, &observed));
+    let (final_rmse, final_rmse_observed, initial_rmse_observed) = metrics.final_errors(&values);
     write_outputs(&out, task, &prep, &opt, &values, &rows)?;
     if task.optimizer.optimize_exposure || task.target.exposure.is_some() {
-        let list: Vec<String> = prep
-            .cameras
-            .iter()
-            .zip(opt.exposure())
-            .map(|(&c, e)| format!("{} {e:.4}", prep.scene.cameras[c].name))
-            .collect();
-        log::info!("exposures: {}", list.join(", "));
+        log_exposures(&prep, &opt);
     }
     let faults = opt.faults()?;
     if faults != FaultCounts::default() {
@@ -501,11 +368,60 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         },
         out,
         faults,
-        pass_times: pass_sum
-            .filter(|_| timed > 0)
-            .map(|s| s.divided(timed as f64)),
+        pass_times: pass_times.mean(),
         interrupted: was_interrupted,
     })
+}
+
+/// The checkpoint to resume from: with `resume` and one in the output folder. `--resume`
+/// without a checkpoint starts from the beginning, so that one command both starts and
+/// restarts a job.
+fn open_checkpoint(out: &Path, ckpt_path: &Path, resume: bool) -> Result<Option<Checkpoint>> {
+    if resume && ckpt_path.exists() {
+        return Ok(Some(Checkpoint::load(ckpt_path)?));
+    }
+    if resume {
+        log::warn!(
+            "--resume: no checkpoint in {} yet: starting from the beginning",
+            out.display()
+        );
+    }
+    Ok(None)
+}
+
+/// Restore `opt` from a checkpoint of the same textures and estimator: the metrics so far and
+/// the seconds of optimization done.
+fn resume(
+    opt: &mut Optimizer,
+    c: Checkpoint,
+    ckpt_path: &Path,
+    layout: &str,
+    n_params: usize,
+) -> Result<(Vec<MetricRow>, f64)> {
+    if c.header.layout != layout || c.state.params.len() != n_params {
+        return Err(Error::file(
+            ckpt_path,
+            format!(
+                "checkpoint holds textures {} but the task has {layout}",
+                c.header.layout
+            ),
+        ));
+    }
+    if c.state.restir.is_some() != (opt.settings().method == super::Method::Restir) {
+        return Err(Error::file(
+            ckpt_path,
+            "the checkpoint was written by the other gradient estimator (baseline vs ReSTIR); resume with the same --method",
+        ));
+    }
+    opt.restore(&c.state)?;
+    let mut rows = c.header.metrics;
+    rows.retain(|r| r.iteration <= opt.iteration);
+    log::info!(
+        "resuming at iteration {} ({:.1} s done)",
+        opt.iteration,
+        c.header.elapsed_s
+    );
+    Ok((rows, c.header.elapsed_s))
 }
 
 fn write_outputs(

@@ -184,6 +184,248 @@ fn build_acceleration_structure(
     AccelerationStructure { blas, tlas }
 }
 
+/// Every image in one RGBA8 buffer: each image's offset (in texels) and the texels.
+fn pack_textures(scene: &Scene) -> (Vec<u32>, Vec<u32>) {
+    let mut image_offsets = Vec::new();
+    let mut texels: Vec<u32> = Vec::new();
+    for img in &scene.images {
+        image_offsets.push(texels.len() as u32);
+        texels.extend(img.rgba.iter().map(|p| u32::from_le_bytes(*p)));
+    }
+    (image_offsets, texels)
+}
+
+/// The GPU form of every material, its textures at `image_offsets` (no optimized texture
+/// bound yet).
+fn gpu_materials(scene: &Scene, image_offsets: &[u32]) -> Vec<GpuMaterial> {
+    let tex_ref = |slot: &Option<TextureSlot>, srgb: bool| -> GpuTexRef {
+        match slot {
+            None => GpuTexRef::NONE,
+            Some(s) => {
+                let img = &scene.images[s.image];
+                GpuTexRef {
+                    offset: image_offsets[s.image],
+                    width: img.width,
+                    height: img.height,
+                    flags: wrap_bits(s.wrap_s)
+                        | (wrap_bits(s.wrap_t) << 2)
+                        | if srgb { 16 } else { 0 }
+                        | if s.nearest { 32 } else { 0 },
+                }
+            }
+        }
+    };
+    let xf = |slot: &Option<TextureSlot>| -> [[f32; 4]; 2] {
+        let t = slot
+            .as_ref()
+            .map(|s| s.transform)
+            .unwrap_or([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+        [
+            [t[0][0], t[0][1], t[0][2], 0.0],
+            [t[1][0], t[1][1], t[1][2], 0.0],
+        ]
+    };
+    scene
+        .materials
+        .iter()
+        .map(|m| {
+            let [a, b] = xf(&m.base_color_texture);
+            let [c, d] = xf(&m.metallic_roughness_texture);
+            let [e, f] = xf(&m.emissive_texture);
+            GpuMaterial {
+                base_color: m.base_color.to_array(),
+                emissive: m.emissive.to_array(),
+                metallic: m.metallic,
+                roughness: m.roughness,
+                double_sided: m.double_sided as u32,
+                param_base_color: u32::MAX,
+                param_metallic: u32::MAX,
+                param_roughness: u32::MAX,
+                _pad: [0; 3],
+                base_color_tex: tex_ref(&m.base_color_texture, true),
+                mr_tex: tex_ref(&m.metallic_roughness_texture, false),
+                emissive_tex: tex_ref(&m.emissive_texture, true),
+                uv_xf: [a, b, c, d, e, f],
+            }
+        })
+        .collect()
+}
+
+/// Bind the optimized textures of `param_set` to their materials: the parameter textures'
+/// table and the texels they hold in all.
+fn bind_optimized(
+    materials: &mut [GpuMaterial],
+    scene: &Scene,
+    param_set: &ParamSet,
+) -> Result<(Vec<GpuParamTex>, u32)> {
+    let mut param_textures = Vec::new();
+    let mut texel_offset = 0u32;
+    for (i, t) in param_set.textures.iter().enumerate() {
+        let m = materials.get_mut(t.material as usize).ok_or_else(|| {
+            Error::Invalid(format!(
+                "optimized texture {i} refers to material {} of {}",
+                t.material,
+                scene.materials.len()
+            ))
+        })?;
+        let slot = match t.slot {
+            crate::vocab::Slot::BaseColor => &mut m.param_base_color,
+            crate::vocab::Slot::Metallic => &mut m.param_metallic,
+            crate::vocab::Slot::Roughness => &mut m.param_roughness,
+        };
+        *slot = i as u32;
+        param_textures.push(GpuParamTex {
+            offset: t.offset,
+            width: t.width,
+            height: t.height,
+            channels: t.channels(),
+            filtering: match t.filter {
+                crate::vocab::Filter::Nearest => 0,
+                crate::vocab::Filter::Bilinear => 1,
+            },
+            texel_offset,
+            _pad: [0; 2],
+        });
+        texel_offset += t.width * t.height;
+    }
+    Ok((param_textures, texel_offset))
+}
+
+/// The lights (punctual, one per emissive triangle, the environment), each chosen with
+/// probability proportional to a power estimate; each triangle's light (or none), the
+/// environment's sampling table, and the scene's info with the light counts.
+fn gpu_lights(
+    scene: &Scene,
+    bvh: &bvh::Bvh,
+    gpu_index: &[u32],
+) -> (Vec<GpuLight>, Vec<u32>, Vec<f32>, GpuSceneInfo) {
+    let n_tris = scene.triangles.len();
+    let (_, radius) = scene.bounding_sphere();
+    use std::f64::consts::PI;
+    let mut lights: Vec<GpuLight> = Vec::new();
+    let mut power: Vec<f64> = Vec::new();
+    for l in &scene.lights {
+        let mut g = GpuLight {
+            position: l.position.to_array(),
+            direction: l.direction.to_array(),
+            intensity: l.intensity.to_array(),
+            range: l.range,
+            ..Default::default()
+        };
+        let lum = luminance(l.intensity);
+        match l.kind {
+            PunctualKind::Point => {
+                g.kind = LIGHT_POINT;
+                power.push(4.0 * PI * lum);
+            }
+            PunctualKind::Spot {
+                inner_cone,
+                outer_cone,
+            } => {
+                g.kind = LIGHT_SPOT;
+                let scale = 1.0 / (inner_cone.cos() - outer_cone.cos()).max(1e-3);
+                g.spot_scale = scale;
+                g.spot_offset = -outer_cone.cos() * scale;
+                power.push(2.0 * PI * (1.0 - outer_cone.cos() as f64).max(1e-3) * lum);
+            }
+            PunctualKind::Directional => {
+                g.kind = LIGHT_DIRECTIONAL;
+                power.push(PI * (radius as f64).powi(2) * lum);
+            }
+        }
+        lights.push(g);
+    }
+    let mut tri_light = vec![u32::MAX; n_tris];
+    for (i, t) in scene.triangles.iter().enumerate() {
+        let m = &scene.materials[t.material as usize];
+        let lum = luminance(m.emissive);
+        let area = t.area();
+        if lum > 0.0 && area > 0.0 {
+            tri_light[i] = lights.len() as u32;
+            lights.push(GpuLight {
+                kind: LIGHT_AREA,
+                tri: gpu_index[i],
+                ..Default::default()
+            });
+            let sides = if m.double_sided { 2.0 } else { 1.0 };
+            power.push(PI * lum * area as f64 * sides);
+        }
+    }
+    let mut env_table = vec![0f32; 4];
+    let mut info = GpuSceneInfo {
+        n_nodes: bvh.nodes.len() as u32,
+        n_tris: n_tris as u32,
+        env_light: u32::MAX,
+        scene_radius: radius,
+        ..Default::default()
+    };
+    if let Some(env) = &scene.env {
+        let (table, marginal, conditional) = env.gpu_table();
+        env_table = table;
+        info.env_width = env.width;
+        info.env_height = env.height;
+        info.env_marginal = marginal;
+        info.env_conditional = conditional;
+        info.env_scale = env.scale;
+        let p = env.power(radius);
+        if p > 0.0 {
+            info.env_light = lights.len() as u32;
+            lights.push(GpuLight {
+                kind: LIGHT_ENV,
+                ..Default::default()
+            });
+            power.push(p);
+        }
+    }
+    let total: f64 = power.iter().map(|&p| p.max(0.0)).sum();
+    if total <= 0.0 {
+        log::warn!(
+            "{}: the scene has no light with positive power (no punctual light, emissive \
+             triangle of non-zero area or environment): every render is black",
+            scene.source.display()
+        );
+    }
+    let mut acc = 0f64;
+    for (l, p) in lights.iter_mut().zip(&power) {
+        let pmf = if total > 0.0 { p.max(0.0) / total } else { 0.0 };
+        acc += pmf;
+        l.pmf = pmf as f32;
+        l.cdf = acc as f32;
+    }
+    if let Some(last) = lights.last_mut() {
+        last.cdf = 1.0;
+    }
+    info.n_lights = lights.len() as u32;
+    (lights, tri_light, env_table, info)
+}
+
+/// Positions (vec4 per vertex) and shading attributes of the triangles, in BVH order.
+fn bvh_triangles(
+    scene: &Scene,
+    bvh: &bvh::Bvh,
+    tri_light: &[u32],
+) -> (Vec<[f32; 4]>, Vec<GpuTriShading>) {
+    let n_tris = scene.triangles.len();
+    let mut positions: Vec<[f32; 4]> = Vec::with_capacity(n_tris * 3);
+    let mut shading: Vec<GpuTriShading> = Vec::with_capacity(n_tris);
+    for &i in &bvh.order {
+        let t = &scene.triangles[i as usize];
+        for p in t.p {
+            positions.push([p.x, p.y, p.z, 0.0]);
+        }
+        shading.push(GpuTriShading {
+            n0: t.n[0].extend(0.0).to_array(),
+            n1: t.n[1].extend(0.0).to_array(),
+            n2: t.n[2].extend(0.0).to_array(),
+            uv01: [t.uv[0].x, t.uv[0].y, t.uv[1].x, t.uv[1].y],
+            uv2: t.uv[2].to_array(),
+            material: t.material,
+            light: tri_light[i as usize],
+        });
+    }
+    (positions, shading)
+}
+
 impl GpuScene {
     /// Upload a scene: BVH, triangles, materials, textures, lights and environment, and bind
     /// the optimized textures that replace material inputs (`param_set` lays them out,
@@ -215,97 +457,10 @@ impl GpuScene {
             gpu_index[i as usize] = k as u32;
         }
 
-        // Textures: one packed RGBA8 buffer.
-        let mut image_offsets = Vec::new();
-        let mut texels: Vec<u32> = Vec::new();
-        for img in &scene.images {
-            image_offsets.push(texels.len() as u32);
-            texels.extend(img.rgba.iter().map(|p| u32::from_le_bytes(*p)));
-        }
+        let (image_offsets, texels) = pack_textures(scene);
         check("the texture buffer", texels.len() * 4)?;
-        let tex_ref = |slot: &Option<TextureSlot>, srgb: bool| -> GpuTexRef {
-            match slot {
-                None => GpuTexRef::NONE,
-                Some(s) => {
-                    let img = &scene.images[s.image];
-                    GpuTexRef {
-                        offset: image_offsets[s.image],
-                        width: img.width,
-                        height: img.height,
-                        flags: wrap_bits(s.wrap_s)
-                            | (wrap_bits(s.wrap_t) << 2)
-                            | if srgb { 16 } else { 0 }
-                            | if s.nearest { 32 } else { 0 },
-                    }
-                }
-            }
-        };
-        let xf = |slot: &Option<TextureSlot>| -> [[f32; 4]; 2] {
-            let t = slot
-                .as_ref()
-                .map(|s| s.transform)
-                .unwrap_or([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
-            [
-                [t[0][0], t[0][1], t[0][2], 0.0],
-                [t[1][0], t[1][1], t[1][2], 0.0],
-            ]
-        };
-        let materials: Vec<GpuMaterial> = scene
-            .materials
-            .iter()
-            .map(|m| {
-                let [a, b] = xf(&m.base_color_texture);
-                let [c, d] = xf(&m.metallic_roughness_texture);
-                let [e, f] = xf(&m.emissive_texture);
-                GpuMaterial {
-                    base_color: m.base_color.to_array(),
-                    emissive: m.emissive.to_array(),
-                    metallic: m.metallic,
-                    roughness: m.roughness,
-                    double_sided: m.double_sided as u32,
-                    param_base_color: u32::MAX,
-                    param_metallic: u32::MAX,
-                    param_roughness: u32::MAX,
-                    _pad: [0; 3],
-                    base_color_tex: tex_ref(&m.base_color_texture, true),
-                    mr_tex: tex_ref(&m.metallic_roughness_texture, false),
-                    emissive_tex: tex_ref(&m.emissive_texture, true),
-                    uv_xf: [a, b, c, d, e, f],
-                }
-            })
-            .collect();
-
-        let mut materials = materials;
-        let mut param_textures = Vec::new();
-        let mut texel_offset = 0u32;
-        for (i, t) in param_set.textures.iter().enumerate() {
-            let m = materials.get_mut(t.material as usize).ok_or_else(|| {
-                Error::Invalid(format!(
-                    "optimized texture {i} refers to material {} of {}",
-                    t.material,
-                    scene.materials.len()
-                ))
-            })?;
-            let slot = match t.slot {
-                crate::vocab::Slot::BaseColor => &mut m.param_base_color,
-                crate::vocab::Slot::Metallic => &mut m.param_metallic,
-                crate::vocab::Slot::Roughness => &mut m.param_roughness,
-            };
-            *slot = i as u32;
-            param_textures.push(GpuParamTex {
-                offset: t.offset,
-                width: t.width,
-                height: t.height,
-                channels: t.channels(),
-                filtering: match t.filter {
-                    crate::vocab::Filter::Nearest => 0,
-                    crate::vocab::Filter::Bilinear => 1,
-                },
-                texel_offset,
-                _pad: [0; 2],
-            });
-            texel_offset += t.width * t.height;
-        }
+        let mut materials = gpu_materials(scene, &image_offsets);
+        let (param_textures, texel_offset) = bind_optimized(&mut materials, scene, param_set)?;
         check("the optimized textures", param_set.values.len() * 4)?;
         if params.values.size() < param_set.values.len() as u64 * 4 {
             return Err(Error::Invalid(format!(
@@ -315,123 +470,10 @@ impl GpuScene {
             )));
         }
 
-        // Lights, with selection probability proportional to a power estimate.
-        let (_, radius) = scene.bounding_sphere();
-        use std::f64::consts::PI;
-        let mut lights: Vec<GpuLight> = Vec::new();
-        let mut power: Vec<f64> = Vec::new();
-        for l in &scene.lights {
-            let mut g = GpuLight {
-                position: l.position.to_array(),
-                direction: l.direction.to_array(),
-                intensity: l.intensity.to_array(),
-                range: l.range,
-                ..Default::default()
-            };
-            let lum = luminance(l.intensity);
-            match l.kind {
-                PunctualKind::Point => {
-                    g.kind = LIGHT_POINT;
-                    power.push(4.0 * PI * lum);
-                }
-                PunctualKind::Spot {
-                    inner_cone,
-                    outer_cone,
-                } => {
-                    g.kind = LIGHT_SPOT;
-                    let scale = 1.0 / (inner_cone.cos() - outer_cone.cos()).max(1e-3);
-                    g.spot_scale = scale;
-                    g.spot_offset = -outer_cone.cos() * scale;
-                    power.push(2.0 * PI * (1.0 - outer_cone.cos() as f64).max(1e-3) * lum);
-                }
-                PunctualKind::Directional => {
-                    g.kind = LIGHT_DIRECTIONAL;
-                    power.push(PI * (radius as f64).powi(2) * lum);
-                }
-            }
-            lights.push(g);
-        }
-        let mut tri_light = vec![u32::MAX; tris.len()];
-        for (i, t) in scene.triangles.iter().enumerate() {
-            let m = &scene.materials[t.material as usize];
-            let lum = luminance(m.emissive);
-            let area = t.area();
-            if lum > 0.0 && area > 0.0 {
-                tri_light[i] = lights.len() as u32;
-                lights.push(GpuLight {
-                    kind: LIGHT_AREA,
-                    tri: gpu_index[i],
-                    ..Default::default()
-                });
-                let sides = if m.double_sided { 2.0 } else { 1.0 };
-                power.push(PI * lum * area as f64 * sides);
-            }
-        }
-        let mut env_table = vec![0f32; 4];
-        let mut info = GpuSceneInfo {
-            n_nodes: bvh.nodes.len() as u32,
-            n_tris: tris.len() as u32,
-            env_light: u32::MAX,
-            scene_radius: radius,
-            ..Default::default()
-        };
-        if let Some(env) = &scene.env {
-            let (table, marginal, conditional) = env.gpu_table();
-            env_table = table;
-            info.env_width = env.width;
-            info.env_height = env.height;
-            info.env_marginal = marginal;
-            info.env_conditional = conditional;
-            info.env_scale = env.scale;
-            let p = env.power(radius);
-            if p > 0.0 {
-                info.env_light = lights.len() as u32;
-                lights.push(GpuLight {
-                    kind: LIGHT_ENV,
-                    ..Default::default()
-                });
-                power.push(p);
-            }
-        }
-        let total: f64 = power.iter().map(|&p| p.max(0.0)).sum();
-        if total <= 0.0 {
-            log::warn!(
-                "{}: the scene has no light with positive power (no punctual light, emissive \
-                 triangle of non-zero area or environment): every render is black",
-                scene.source.display()
-            );
-        }
-        let mut acc = 0f64;
-        for (l, p) in lights.iter_mut().zip(&power) {
-            let pmf = if total > 0.0 { p.max(0.0) / total } else { 0.0 };
-            acc += pmf;
-            l.pmf = pmf as f32;
-            l.cdf = acc as f32;
-        }
-        if let Some(last) = lights.last_mut() {
-            last.cdf = 1.0;
-        }
-        info.n_lights = lights.len() as u32;
+        let (lights, tri_light, env_table, info) = gpu_lights(scene, &bvh, &gpu_index);
         check("the environment map", env_table.len() * 4)?;
 
-        // Triangles in BVH order.
-        let mut positions: Vec<[f32; 4]> = Vec::with_capacity(tris.len() * 3);
-        let mut shading: Vec<GpuTriShading> = Vec::with_capacity(tris.len());
-        for &i in &bvh.order {
-            let t = &scene.triangles[i as usize];
-            for p in t.p {
-                positions.push([p.x, p.y, p.z, 0.0]);
-            }
-            shading.push(GpuTriShading {
-                n0: t.n[0].extend(0.0).to_array(),
-                n1: t.n[1].extend(0.0).to_array(),
-                n2: t.n[2].extend(0.0).to_array(),
-                uv01: [t.uv[0].x, t.uv[0].y, t.uv[1].x, t.uv[1].y],
-                uv2: t.uv[2].to_array(),
-                material: t.material,
-                light: tri_light[i as usize],
-            });
-        }
+        let (positions, shading) = bvh_triangles(scene, &bvh, &tri_light);
         check("the triangle positions", positions.len() * 16)?;
         check("the triangle attributes", shading.len() * 80)?;
         check("the BVH", bvh.nodes.len() * 32)?;

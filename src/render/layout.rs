@@ -262,9 +262,9 @@ mod tests {
         };
     }
 
-    // Every Rust mirror of a GPU struct, field by field against naga's layout of the WGSL.
+    // The scene's GPU structs, field by field against naga's layout of the WGSL.
     #[test]
-    fn mirrors_match_wgsl_field_by_field() {
+    fn scene_mirrors_match_wgsl_field_by_field() {
         mirror!(
             "render",
             "TriShading",
@@ -375,6 +375,11 @@ mod tests {
             GpuTraceParams,
             [n_rays, brute_force, stride]
         );
+    }
+
+    // The uniforms of the passes, field by field against naga's layout of the WGSL.
+    #[test]
+    fn pass_uniform_mirrors_match_wgsl_field_by_field() {
         mirror!(
             "gradient",
             "GradientParams",

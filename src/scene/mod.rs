@@ -4,6 +4,7 @@
 pub mod bvh;
 pub mod capture;
 pub mod env;
+mod files;
 pub mod images;
 mod load;
 

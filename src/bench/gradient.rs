@@ -1,0 +1,423 @@
+//! The benchmark's gradient-error phase (see the module above): ReSTIR's warm-up, the
+//! equal-time baseline spp, the reference gradient, and the total, estimator-only and
+//! successive-estimate errors of both estimators.
+use super::phases::{settings, time_steps};
+use super::*;
+
+/// The mean of `spp` gradient samples per pixel under `adjoint`, at `r`'s textures (`r` is a
+/// baseline optimizer of at most 64 spp).
+fn reference_gradient(r: &mut Optimizer, spp: u32, adjoint: &[f32]) -> Result<Vec<f64>> {
+    let estimates = spp.div_ceil(r.settings().gradient_spp).max(1);
+    let mut reference = vec![0f64; r.read_params()?.len()];
+    for it in 0..estimates {
+        let g = r.estimate_gradient_with_adjoint(it, adjoint)?;
+        for (acc, v) in reference.iter_mut().zip(&g) {
+            *acc += *v as f64 / estimates as f64;
+        }
+    }
+    Ok(reference)
+}
+
+/// Gradient error (phase 1): the scene's gradient fields and the gradients of the first seed
+/// for the images.
+pub(super) struct GradientPhase {
+    pub(super) baseline_spp_equal_time: f64,
+    pub(super) total_baseline: f64,
+    pub(super) total_restir: f64,
+    pub(super) total_baseline_equal_iterations: f64,
+    pub(super) only_baseline: f64,
+    pub(super) only_restir: f64,
+    pub(super) only_baseline_equal_time: f64,
+    pub(super) mean_baseline: f64,
+    pub(super) mean_restir: f64,
+    pub(super) ms_ratio: f64,
+    pub(super) snapshot: GradientSnapshot,
+    /// Per optimized texture, its parts of the equal-iteration errors (they add up to the
+    /// figures above).
+    pub(super) per_texture: Vec<TextureParts>,
+}
+
+/// One texture's parts of the gradient errors at equal iterations (mean over seeds; see
+/// [`gradient_relmse_parts`]).
+#[derive(Clone, Copy, Default)]
+pub(super) struct TextureParts {
+    pub(super) total_baseline_equal_iterations: f64,
+    pub(super) total_restir: f64,
+    pub(super) only_baseline: f64,
+    pub(super) only_restir: f64,
+}
+
+fn add_to(sum: &mut [f64], g: &[f32]) {
+    for (s, &v) in sum.iter_mut().zip(g) {
+        *s += v as f64;
+    }
+}
+
+/// The baseline's error at `k` spp (fractional) from its errors at whole spp `s0` and
+/// `s0 + 1` around it, linear in 1/spp (Monte Carlo variance falls as 1/spp).
+pub(super) fn interpolate_in_inverse_spp(k: f64, s0: u32, e0: f64, e1: f64) -> f64 {
+    let s0 = s0 as f64;
+    if k <= s0 {
+        return e0;
+    }
+    let a = (1.0 / s0 - 1.0 / k) / (1.0 / s0 - 1.0 / (s0 + 1.0));
+    e0 + a * (e1 - e0)
+}
+
+/// A function that builds an optimizer for the bench: (estimator, gradient spp, seed).
+type NewOptimizer<'a> = dyn Fn(Method, u32, u32) -> Result<Optimizer> + 'a;
+
+/// The baseline's gradient spp that takes the time of one ReSTIR iteration, and ReSTIR's
+/// ms per iteration over the baseline's at `spp`. ReSTIR's time is `ms_restir` when its
+/// warm-up timed it, else measured here; the baseline is timed at `spp` and 4 `spp` over
+/// `(untimed, timed)` iterations like ReSTIR's.
+fn equal_time_spp(
+    new: &NewOptimizer,
+    task: &Task,
+    spp: u32,
+    seed: u32,
+    (untimed, timed): (u32, u32),
+    ms_restir: Option<f64>,
+) -> Result<(f64, f64)> {
+    let (untimed, timed) = match ms_restir {
+        Some(_) => (untimed, timed),
+        None => (1, 3),
+    };
+    let timed = timed.max(3);
+    let ms_restir = match ms_restir {
+        Some(ms) => ms,
+        None => {
+            let mut r = new(Method::Restir, spp, seed)?;
+            time_steps(&mut r, untimed, timed)?
+        }
+    };
+    // Three more gradient spp per pixel cost time: if they measure as free, the
+    // timing was disturbed (another process on the device or the CPU), and the
+    // equal-time spp would come out absurd (it is clamped at 1024, whose
+    // estimates would then take hours). Timed up to three times, then an error.
+    let mut tries = 0;
+    let (t1, t4) = loop {
+        let mut b1 = new(Method::Baseline, spp, seed ^ 0x71)?;
+        let t1 = time_steps(&mut b1, untimed, timed)?;
+        drop(b1);
+        let mut b4 = new(Method::Baseline, 4 * spp, seed ^ 0x72)?;
+        let t4 = time_steps(&mut b4, untimed, timed)?;
+        drop(b4);
+        tries += 1;
+        if t4 > t1 {
+            break (t1, t4);
+        }
+        log::warn!(
+            "{}: the baseline timed {t4:.1} ms/it at {} spp and {t1:.1} at {spp}: \
+             timing again",
+            task.path.display(),
+            4 * spp
+        );
+        if tries == 3 {
+            return Err(Error::Invalid(format!(
+                "bench: {}: the baseline's iterations at {} gradient spp timed no \
+                 slower than at {spp} ({t4:.1} against {t1:.1} ms) three times: \
+                 something else is using the device or the CPU; run the bench \
+                 alone",
+                task.path.display(),
+                4 * spp
+            )));
+        }
+    };
+    let per_spp = (t4 - t1) / (3 * spp) as f64;
+    let k = (spp as f64 + (ms_restir - t1) / per_spp).clamp(1.0, 1024.0);
+    log::info!(
+        "{}: ReSTIR {ms_restir:.1} ms/it, baseline {t1:.1} ms/it at {spp} spp \
+         (+{per_spp:.1} ms per spp): {k:.2} spp at equal time",
+        task.path.display()
+    );
+    Ok((k, ms_restir / t1))
+}
+
+/// Which errors [`GradientPhase::add`] adds to.
+#[derive(Clone, Copy)]
+enum Errors {
+    /// Under the adjoint of a task-spp primal render.
+    Total,
+    /// Under the converged adjoint.
+    EstimatorOnly,
+}
+
+impl GradientPhase {
+    /// Add one seed's errors of ReSTIR's and the baseline's gradients, `[restir, baseline]`
+    /// (the baseline at the task's spp): the whole and each texture's part (its `range`),
+    /// each divided by the number of seeds `n`.
+    fn add(
+        &mut self,
+        which: Errors,
+        [restir, baseline]: [&Vec<f32>; 2],
+        reference: &[f64],
+        ranges: &[std::ops::Range<usize>],
+        n: f64,
+    ) {
+        let (r, b) = (
+            gradient_relmse(restir, reference) / n,
+            gradient_relmse(baseline, reference) / n,
+        );
+        let parts = gradient_relmse_parts(restir, reference, ranges)
+            .into_iter()
+            .zip(gradient_relmse_parts(baseline, reference, ranges));
+        let (whole_r, whole_b) = match which {
+            Errors::Total => (
+                &mut self.total_restir,
+                &mut self.total_baseline_equal_iterations,
+            ),
+            Errors::EstimatorOnly => (&mut self.only_restir, &mut self.only_baseline),
+        };
+        *whole_r += r;
+        *whole_b += b;
+        for (p, (er, eb)) in self.per_texture.iter_mut().zip(parts) {
+            let (pr, pb) = match which {
+                Errors::Total => (&mut p.total_restir, &mut p.total_baseline_equal_iterations),
+                Errors::EstimatorOnly => (&mut p.only_restir, &mut p.only_baseline),
+            };
+            *pr += er / n;
+            *pb += eb / n;
+        }
+    }
+
+    /// Nothing measured yet, at the task's `spp` with `n_textures` textures.
+    fn new(spp: u32, n_textures: usize) -> GradientPhase {
+        GradientPhase {
+            baseline_spp_equal_time: spp as f64,
+            total_baseline: 0.0,
+            total_restir: 0.0,
+            total_baseline_equal_iterations: 0.0,
+            only_baseline: 0.0,
+            only_restir: 0.0,
+            only_baseline_equal_time: 0.0,
+            mean_baseline: 0.0,
+            mean_restir: 0.0,
+            ms_ratio: f64::NAN,
+            snapshot: GradientSnapshot {
+                reference: Vec::new(),
+                baseline: Vec::new(),
+                restir: Vec::new(),
+                baseline_spp: spp,
+            },
+            per_texture: vec![TextureParts::default(); n_textures],
+        }
+    }
+}
+
+/// ReSTIR's warm-up: `warmup` steps, the first quarter untimed, the rest timed. Returns
+/// (untimed, timed, ms per timed step).
+fn warm_up(re: &mut Optimizer, warmup: u32) -> Result<(u32, u32, Option<f64>)> {
+    let untimed = (warmup / 4).max(1).min(warmup);
+    for _ in 0..untimed {
+        re.step()?;
+    }
+    let t0 = Instant::now();
+    for _ in untimed..warmup {
+        re.step()?;
+    }
+    let timed = warmup - untimed;
+    let ms = (timed > 0).then(|| 1000.0 * t0.elapsed().as_secs_f64() / timed as f64);
+    Ok((untimed, timed, ms))
+}
+
+/// The converged adjoint at the texture values `state`, and the reference gradient under it.
+fn reference_at(
+    new: &NewOptimizer,
+    o: &BenchOptions,
+    state: &[f32],
+    seed: u32,
+) -> Result<(Vec<f32>, Vec<f64>)> {
+    let mut r = new(
+        Method::Baseline,
+        o.reference_spp.clamp(1, 64),
+        seed ^ 0x5eed,
+    )?;
+    r.write_params(state)?;
+    let (converged, _) = r.converged_adjoint(o.reference_primal_spp, seed ^ 0xad)?;
+    let reference = reference_gradient(&mut r, o.reference_spp, &converged)?;
+    Ok((converged, reference))
+}
+
+/// An optimizer adds up successive estimates. ReSTIR's share samples (the kept ones), so
+/// their errors are correlated and their mean gains less than a mean of independent
+/// estimates would: the mean of `o.successive` ReSTIR estimates under `converged`, from
+/// `first` (already drawn) on, and the mean of as many independent baseline estimates
+/// (from a baseline that `baseline(salt)` builds at ReSTIR's state).
+fn successive_means(
+    mut re: Optimizer,
+    baseline: &dyn Fn(u32) -> Result<Optimizer>,
+    converged: &[f32],
+    it: u32,
+    o: &BenchOptions,
+    first: &[f32],
+) -> Result<(Vec<f32>, Vec<f32>)> {
+    let successive = o.successive;
+    let mut mean_restir = first.iter().map(|&v| v as f64).collect::<Vec<_>>();
+    for j in 1..successive {
+        let g = re.estimate_gradient_with_adjoint(it + o.settle + j, converged)?;
+        add_to(&mut mean_restir, &g);
+    }
+    drop(re);
+    let mut mean_baseline = vec![0.0; first.len()];
+    let mut b = baseline(0xec)?;
+    for j in 0..successive {
+        let g = b.estimate_gradient_with_adjoint(it + 1 + j, converged)?;
+        add_to(&mut mean_baseline, &g);
+    }
+    let mean = |sum: Vec<f64>| -> Vec<f32> {
+        sum.iter()
+            .map(|&v| (v / successive as f64) as f32)
+            .collect()
+    };
+    Ok((mean(mean_restir), mean(mean_baseline)))
+}
+
+pub(super) fn gradient_phase(
+    gpu: &Gpu,
+    task: &Task,
+    prep: &Problem,
+    o: &BenchOptions,
+    progress: &Progress,
+) -> Result<GradientPhase> {
+    let spp = task.optimizer.gradient_spp.max(1);
+    let new = |method: Method, gradient_spp: u32, seed: u32| -> Result<Optimizer> {
+        Optimizer::for_problem(
+            gpu,
+            prep,
+            Settings {
+                gradient_spp,
+                seed,
+                ..settings(prep, task, method, o)
+            },
+        )
+    };
+    let repeats = o.repeats.max(1);
+    let n = repeats as f64;
+    let mut out = GradientPhase::new(spp, prep.set.textures.len());
+    // Where each optimized texture lies in a gradient.
+    let ranges: Vec<_> = prep
+        .set
+        .textures
+        .iter()
+        .map(|t| t.offset as usize..t.offset as usize + t.len())
+        .collect();
+    let mut eq_spp = None;
+    for rep in 0..repeats {
+        progress.message(format!("gradient error, seed {}/{repeats}", rep + 1));
+        let seed = task.seed.wrapping_add(1000 * (rep + 1));
+        // ReSTIR from the initial textures; the later warm-up steps time an iteration.
+        let mut re = new(Method::Restir, spp, seed)?;
+        let (untimed, timed, ms_restir) = warm_up(&mut re, o.warmup)?;
+        let state = re.read_params()?;
+        let kept = re.state()?;
+
+        // The baseline's cost per gradient spp, measured once: iterations at spp and 4 spp,
+        // timed over the same iterations as ReSTIR's (the same number of untimed ones first,
+        // then as many timed, at least 3). The equal-time spp rests on ReSTIR's overhead, a
+        // difference of two iteration times that is small beside either (5-15 ms of 0.3-1 s
+        // with the paper's 32-spp primal): timed over 3 iterations at 1 and 4 spp against
+        // ReSTIR's 15, it moved by up to 0.6 spp between runs.
+        let k = match eq_spp {
+            Some(k) => k,
+            None => {
+                let (k, ms_ratio) =
+                    equal_time_spp(&new, task, spp, seed, (untimed, timed), ms_restir)?;
+                out.ms_ratio = ms_ratio;
+                eq_spp = Some(k);
+                k
+            }
+        };
+        let s0 = (k.floor() as u32).max(1);
+
+        // The converged adjoint at the state, and the reference gradient under it.
+        progress.message(format!(
+            "gradient error, seed {}/{repeats}: reference",
+            rep + 1
+        ));
+        let (converged, reference) = reference_at(&new, o, &state, seed)?;
+
+        // Total: ReSTIR's next gradient with its own primal render, and the baseline's at the
+        // task's spp and around the equal-time spp under the adjoint of that same render
+        // (common random numbers). Every figure is still an estimator under the adjoint of
+        // one task-spp primal render, so each expected error is what a user gets; sharing
+        // the render takes the primal's noise out of the comparison, which with one render
+        // per estimate and seed dominated it (`sphere`, paper protocol, a render of its own
+        // for each: the baseline's total error at 1 / 2 / 3 gradient spp was 17.2 / 1.3 /
+        // about 7e-8, not falling with the spp, against 3.7e-8 estimator-only at 1 spp).
+        // The baseline continues from ReSTIR's state without the reservoirs: the same
+        // textures (and, with the control-variate primal, the same carried image and
+        // statistics).
+        let it = re.iteration;
+        let (g_restir_total, _) = re.estimate_gradient(it)?;
+        let adjoint_total = re.read_adjoint(it)?;
+        re.restore(&kept)?;
+        // A baseline at ReSTIR's state without the reservoirs.
+        let baseline = |spp: u32, salt: u32| -> Result<Optimizer> {
+            let mut b = new(Method::Baseline, spp, seed ^ salt)?;
+            b.restore(&crate::optim::OptimizerState {
+                restir: None,
+                ..kept.clone()
+            })?;
+            Ok(b)
+        };
+        let baseline_at = |spp: u32, salt: u32, adjoint: &[f32]| -> Result<Vec<f32>> {
+            baseline(spp, salt)?.estimate_gradient_with_adjoint(it + 1, adjoint)
+        };
+        let total = |spp, salt| -> Result<f64> {
+            Ok(gradient_relmse(
+                &baseline_at(spp, salt, &adjoint_total)?,
+                &reference,
+            ))
+        };
+        let g_baseline_total = baseline_at(spp, 0xea, &adjoint_total)?;
+        let errors = [&g_restir_total, &g_baseline_total];
+        out.add(Errors::Total, errors, &reference, &ranges, n);
+        out.total_baseline +=
+            interpolate_in_inverse_spp(k, s0, total(s0, 0xe9)?, total(s0 + 1, 0xeb)?) / n;
+
+        // Estimator-only: both under the converged adjoint. ReSTIR first draws `settle` more
+        // estimates under it at the same textures, so that its reservoirs hold samples
+        // chosen for the integrand it is measured on. Measured right after the warm-up, its
+        // reservoirs were filled under the noisy adjoints of its own primal renders, and the
+        // switch of adjoint, not the reuse, dominated the error. The textures stay where they
+        // are: under one fixed adjoint, Adam pushes every texel the same way at every step
+        // (on `vase`, 20 such steps made both estimators' errors 5-8x larger).
+        for j in 0..o.settle {
+            re.estimate_gradient_with_adjoint(it + j, &converged)?;
+        }
+        let g_restir_only = re.estimate_gradient_with_adjoint(it + o.settle, &converged)?;
+        let (mean_restir, mean_baseline) = successive_means(
+            re,
+            &|salt| baseline(spp, salt),
+            &converged,
+            it,
+            o,
+            &g_restir_only,
+        )?;
+        out.mean_restir += gradient_relmse(&mean_restir, &reference) / n;
+        out.mean_baseline += gradient_relmse(&mean_baseline, &reference) / n;
+        let b_only = baseline_at(spp, 0xea, &converged)?;
+        let only = |spp, salt| -> Result<f64> {
+            Ok(gradient_relmse(
+                &baseline_at(spp, salt, &converged)?,
+                &reference,
+            ))
+        };
+        let errors = [&g_restir_only, &b_only];
+        out.add(Errors::EstimatorOnly, errors, &reference, &ranges, n);
+        out.only_baseline_equal_time +=
+            interpolate_in_inverse_spp(k, s0, only(s0, 0xe9)?, only(s0 + 1, 0xeb)?) / n;
+        out.baseline_spp_equal_time = k;
+        if rep == 0 {
+            out.snapshot = GradientSnapshot {
+                reference: reference.iter().map(|&v| v as f32).collect(),
+                baseline: b_only,
+                restir: g_restir_only,
+                baseline_spp: spp,
+            };
+        }
+        progress.done();
+    }
+    Ok(out)
+}

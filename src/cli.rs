@@ -1,0 +1,308 @@
+//! The `psrestir` command line: its commands and their arguments (clap).
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+use psrestir::optim;
+use std::path::PathBuf;
+
+#[derive(Parser)]
+#[command(
+    name = "psrestir",
+    version,
+    about = "Inverse texture optimization with parameter-space ReSTIR gradients, on wgpu"
+)]
+pub(crate) struct Cli {
+    #[command(subcommand)]
+    pub(crate) command: Command,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum TechniqueArg {
+    /// Light and BSDF sampling combined by MIS (power heuristic).
+    Mis,
+    /// Light sampling (next-event estimation) only.
+    Nee,
+    /// BSDF sampling only (delta lights still use light sampling).
+    Bsdf,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum MethodArg {
+    /// Parameter-space ReSTIR: per-texel reservoirs reused across iterations.
+    Restir,
+    /// Plain Monte Carlo: every sample adds its derivative to the texels it touches.
+    Baseline,
+}
+
+/// Choice of gradient estimator, shared by the commands that estimate gradients.
+#[derive(clap::Args)]
+pub(crate) struct EstimatorArgs {
+    /// Gradient estimator.
+    #[arg(long, value_enum, default_value = "restir")]
+    pub(crate) method: MethodArg,
+    #[command(flatten)]
+    pub(crate) restir: RestirArgs,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum ConfidenceArg {
+    /// Gradient samples per pixel (the reference code's convention).
+    Samples,
+    /// Candidates per pixel and texel: 2 techniques x gradient spp x cameras.
+    Candidates,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum PrimalArg {
+    /// An independent render at the primal spp.
+    Independent,
+    /// The recursive control variate: the render carried over from the last iteration.
+    ControlVariate,
+}
+
+impl PrimalArg {
+    pub(crate) fn mode(self) -> optim::PrimalMode {
+        match self {
+            PrimalArg::Independent => optim::PrimalMode::Independent,
+            PrimalArg::ControlVariate => optim::PrimalMode::ControlVariate,
+        }
+    }
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum ProtocolArg {
+    /// Each task's own sampling settings.
+    Default,
+    /// The paper's: primal 32 spp, gradient 1 spp, nearest filtering.
+    Paper,
+}
+
+#[derive(clap::Args)]
+pub(crate) struct RestirArgs {
+    /// ReSTIR: cap on the confidence of the kept sample.
+    #[arg(long, default_value_t = optim::RestirOptions::default().m_cap)]
+    pub(crate) m_cap: f32,
+    /// ReSTIR: confidence of the fresh candidates in the merge.
+    #[arg(long, value_enum, default_value = "samples")]
+    pub(crate) confidence: ConfidenceArg,
+    /// ReSTIR ablation: resample within each iteration only.
+    #[arg(long)]
+    pub(crate) no_temporal: bool,
+    /// ReSTIR ablation: one reservoir per texel over |target| instead of two.
+    #[arg(long)]
+    pub(crate) no_positivization: bool,
+    /// ReSTIR: weight of the last target adjoint in this iteration's (an exponential moving
+    /// average of the adjoints for the resampling targets; 0: this iteration's adjoint).
+    /// Default: 0.9 with the independent primal, 0 with the control variate.
+    #[arg(long)]
+    pub(crate) target_smoothing: Option<f32>,
+}
+
+impl RestirArgs {
+    /// The options, refused here (before any scene is loaded) when invalid.
+    pub(crate) fn resolve(&self) -> Result<optim::RestirOptions> {
+        let o = optim::RestirOptions {
+            m_cap: self.m_cap,
+            confidence: match self.confidence {
+                ConfidenceArg::Samples => optim::Confidence::Samples,
+                ConfidenceArg::Candidates => optim::Confidence::Candidates,
+            },
+            temporal: !self.no_temporal,
+            positivization: !self.no_positivization,
+            verify_paths: false,
+            target_smoothing: self.target_smoothing,
+        };
+        o.validate()?;
+        Ok(o)
+    }
+}
+
+impl EstimatorArgs {
+    pub(crate) fn resolve(&self) -> Result<(optim::Method, optim::RestirOptions)> {
+        let method = match self.method {
+            MethodArg::Restir => optim::Method::Restir,
+            MethodArg::Baseline => optim::Method::Baseline,
+        };
+        Ok((method, self.restir.resolve()?))
+    }
+}
+
+/// The bundled default task.
+pub(crate) const DEFAULT_TASK: &str = "scenes/default/task.toml";
+
+/// The arguments of `psrestir render`.
+#[derive(clap::Args)]
+pub(crate) struct RenderArgs {
+    /// The scene (.gltf or .glb).
+    pub(crate) scene: PathBuf,
+    /// Camera, by name or index (default: the first).
+    #[arg(long)]
+    pub(crate) camera: Option<String>,
+    /// Samples per pixel.
+    #[arg(long, default_value_t = 64)]
+    pub(crate) spp: u32,
+    /// Image size WxH (default: 512 wide, height from the camera's aspect ratio).
+    #[arg(long, value_parser = parse_size)]
+    pub(crate) size: Option<(u32, u32)>,
+    /// Environment light: an equirectangular .exr or .hdr image.
+    #[arg(long)]
+    pub(crate) env: Option<PathBuf>,
+    /// Multiplier for the environment light.
+    #[arg(long, default_value_t = 1.0)]
+    pub(crate) env_scale: f32,
+    /// Random seed.
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u32,
+    /// Sampling techniques for area and environment lights.
+    #[arg(long, value_enum, default_value = "mis")]
+    pub(crate) technique: TechniqueArg,
+    /// Output image: .exr (linear) or .png (sRGB).
+    #[arg(short, long)]
+    pub(crate) output: PathBuf,
+    /// A camera file from a capture tool (NeRF-style transforms.json, or a COLMAP text
+    /// model: its folder, cameras.txt or images.txt); render its frame `--frame`.
+    #[arg(long)]
+    pub(crate) cameras: Option<PathBuf>,
+    /// The frame of `--cameras` to render (index, or the image's name).
+    #[arg(long, default_value = "0")]
+    pub(crate) frame: String,
+}
+
+/// The arguments of `psrestir optimize`.
+#[derive(clap::Args)]
+pub(crate) struct OptimizeArgs {
+    /// The task file (TOML); the bundled default task when absent.
+    pub(crate) task: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) estimator: EstimatorArgs,
+    /// Iterations (overrides the task).
+    #[arg(long)]
+    pub(crate) iterations: Option<u32>,
+    /// Wall-clock budget in seconds (overrides the task).
+    #[arg(long)]
+    pub(crate) time_budget: Option<f64>,
+    /// Output folder (overrides the task).
+    #[arg(long)]
+    pub(crate) out: Option<PathBuf>,
+    /// Continue from the checkpoint in the output folder.
+    #[arg(long)]
+    pub(crate) resume: bool,
+    /// Primal estimator (overrides the task).
+    #[arg(long, value_enum)]
+    pub(crate) primal: Option<PrimalArg>,
+    /// Levels of the multiscale gradient, 0 (off) to 4 (overrides the task).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=4))]
+    pub(crate) multiscale_levels: Option<u32>,
+    /// Weight of the smoothness prior, 0 (off) or more (overrides the task).
+    #[arg(long)]
+    pub(crate) smoothness: Option<f32>,
+}
+
+/// The arguments of `psrestir bench`.
+#[derive(clap::Args)]
+pub(crate) struct BenchArgs {
+    /// Scenes: names of bundled benchmark scenes (vase, lattice, dish, sphere), task
+    /// files, or folders holding task.toml (default: every bundled benchmark scene).
+    pub(crate) scenes: Vec<String>,
+    /// Seconds of optimization per estimator and scene.
+    #[arg(long, default_value_t = 60.0)]
+    pub(crate) budget_s: f64,
+    /// Output folder.
+    #[arg(long, default_value = "out/bench")]
+    pub(crate) out: PathBuf,
+    /// Multiply image and texture sizes (e.g. 4 for GPU-size runs, 0.5 for a quick look).
+    #[arg(long, default_value_t = 1.0)]
+    pub(crate) scale: f64,
+    /// ReSTIR iterations before the gradient error is measured.
+    #[arg(long, default_value_t = 20)]
+    pub(crate) warmup: u32,
+    /// ReSTIR estimates under the converged adjoint, at the textures after the warm-up,
+    /// before its estimator-only gradient error is measured.
+    #[arg(long, default_value_t = 20)]
+    pub(crate) settle: u32,
+    /// Successive estimates averaged for the error of their mean (estimator-only).
+    #[arg(long, default_value_t = 10)]
+    pub(crate) successive: u32,
+    /// Seeds the gradient error is averaged over.
+    #[arg(long, default_value_t = 3)]
+    pub(crate) repeats: u32,
+    /// Gradient samples per pixel of the reference gradient.
+    #[arg(long, default_value_t = 256)]
+    pub(crate) reference_spp: u32,
+    /// Samples per pixel of the primal render of the converged adjoint (the reference and
+    /// the estimator-only errors are computed under it).
+    #[arg(long, default_value_t = 256)]
+    pub(crate) reference_primal_spp: u32,
+    /// Sampling settings: the tasks' own, or the paper's (primal 32 spp, gradient 1 spp,
+    /// nearest filtering).
+    #[arg(long, value_enum, default_value = "default")]
+    pub(crate) protocol: ProtocolArg,
+    /// Measure the gradient error only (skip the equal-time optimization).
+    #[arg(long)]
+    pub(crate) gradient_only: bool,
+    /// Primal estimator of every run (default: each task's own).
+    #[arg(long, value_enum)]
+    pub(crate) primal: Option<PrimalArg>,
+    /// Samples per pixel of the renders that measure image error.
+    #[arg(long, default_value_t = 64)]
+    pub(crate) eval_spp: u32,
+    /// Also write the report to the checkout in the current folder: docs/results.md,
+    /// and the headline table in README.md (between its `bench:headline` markers).
+    #[arg(long)]
+    pub(crate) report: bool,
+    #[command(flatten)]
+    pub(crate) restir: RestirArgs,
+}
+
+#[derive(Subcommand)]
+pub(crate) enum Command {
+    /// Render a glTF scene with direct lighting.
+    Render(RenderArgs),
+    /// Recover textures from target images by gradient descent.
+    Optimize(OptimizeArgs),
+    /// Write one gradient estimate at the task's initial textures, as images in texel space.
+    Gradient {
+        /// The task file (TOML).
+        task: PathBuf,
+        #[command(flatten)]
+        estimator: EstimatorArgs,
+        /// Output folder.
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+    /// Print what a scene holds: triangles, materials, textures, cameras, lights.
+    Info {
+        /// The scene (.gltf or .glb).
+        scene: PathBuf,
+    },
+    /// Benchmark baseline against ReSTIR (equal-time gradient error, equal-time optimization,
+    /// cost) on the bundled benchmark scenes or given tasks; writes bench.json, report.md and
+    /// plots.
+    Bench(BenchArgs),
+    /// Print the GPU adapter psrestir would use, its features and limits.
+    Adapter,
+    /// Regenerate the bundled scenes (scenes/default and scenes/bench/*).
+    #[command(hide = true)]
+    MakeScenes {
+        /// Output folder.
+        #[arg(default_value = "scenes")]
+        dir: PathBuf,
+    },
+}
+
+pub(crate) fn parse_size(s: &str) -> std::result::Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("`{s}` is not WxH, e.g. 256x256"))?;
+    let w: u32 = w
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad width in `{s}`"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .map_err(|_| format!("bad height in `{s}`"))?;
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(format!("size `{s}` out of range (1..16384)"));
+    }
+    Ok((w, h))
+}

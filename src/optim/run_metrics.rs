@@ -1,0 +1,190 @@
+//! What `psrestir optimize` reports while it runs: the rows of `metrics.csv` (texture and
+//! image errors, measured outside the timed optimization), the mean pass times, the progress
+//! bar and the log lines about observed texels and exposures.
+use super::checkpoint::MetricRow;
+use super::run::{evaluate, rmse};
+use super::{Optimizer, PassTimes, Problem};
+use crate::Result;
+
+/// The mean of the sampled iterations' pass times.
+#[derive(Default)]
+pub(super) struct PassMean {
+    sum: Option<PassTimes>,
+    n: u32,
+}
+
+impl PassMean {
+    pub(super) fn add(&mut self, t: Option<PassTimes>) {
+        if let Some(t) = t {
+            self.n += 1;
+            self.sum.get_or_insert_with(PassTimes::default).add(&t);
+        }
+    }
+
+    pub(super) fn mean(&self) -> Option<PassTimes> {
+        self.sum
+            .filter(|_| self.n > 0)
+            .map(|s| s.divided(self.n as f64))
+    }
+}
+
+/// What each iteration's row of `metrics.csv` measures, outside the timed optimization.
+pub(super) struct Metrics<'a> {
+    pub(super) prep: &'a Problem,
+    pub(super) observed: &'a [bool],
+    pub(super) eval_spp: u32,
+    pub(super) eval_every: u32,
+    pub(super) rmse_every: u32,
+    pub(super) seed: u32,
+}
+
+impl Metrics<'_> {
+    /// Texture RMSE over all texels and over the observed ones (with a ground truth).
+    pub(super) fn texture_errors(&self, values: &[f32]) -> (Option<f64>, Option<f64>) {
+        match &self.prep.reference {
+            Some(r) => (
+                Some(rmse(values, r)),
+                Some(super::observed::rmse_observed(
+                    &self.prep.set,
+                    values,
+                    r,
+                    self.observed,
+                )),
+            ),
+            None => (None, None),
+        }
+    }
+
+    /// Image relMSE of an evaluation render against the targets.
+    pub(super) fn eval(&self, opt: &Optimizer) -> Result<f64> {
+        Ok(evaluate(opt, &self.prep.targets, self.eval_spp, self.seed)?.0)
+    }
+
+    /// The row of the iteration `opt` just finished, with texture and image errors where
+    /// their period falls.
+    pub(super) fn row(&self, opt: &Optimizer, loss: f64, elapsed: f64) -> Result<MetricRow> {
+        let (texture_rmse, texture_rmse_observed) = if opt.iteration % self.rmse_every == 0 {
+            self.texture_errors(&opt.read_params()?)
+        } else {
+            (None, None)
+        };
+        let image_relmse = if self.eval_every > 0 && opt.iteration % self.eval_every == 0 {
+            Some(self.eval(opt)?)
+        } else {
+            None
+        };
+        Ok(MetricRow {
+            iteration: opt.iteration,
+            elapsed_s: elapsed,
+            loss: Some(loss),
+            texture_rmse,
+            texture_rmse_observed,
+            image_relmse,
+            learning_rate: opt.last_learning_rates().first().map(|&l| l as f64),
+        })
+    }
+    /// The errors of the first row, at the initial textures.
+    pub(super) fn start_row(&self, opt: &Optimizer) -> Result<MetricRow> {
+        let (texture_rmse, texture_rmse_observed) = self.texture_errors(&self.prep.set.values);
+        let image_relmse = (self.eval_every > 0).then(|| self.eval(opt)).transpose()?;
+        Ok(MetricRow {
+            iteration: 0,
+            elapsed_s: 0.0,
+            loss: None,
+            texture_rmse,
+            texture_rmse_observed,
+            image_relmse,
+            learning_rate: None,
+        })
+    }
+
+    /// The end gets an evaluation and texture errors if its iteration had none.
+    pub(super) fn complete_last(&self, rows: &mut [MetricRow], opt: &Optimizer) -> Result<()> {
+        if let Some(last) = rows.last_mut() {
+            if self.eval_every > 0 && last.image_relmse.is_none() {
+                last.image_relmse = Some(self.eval(opt)?);
+            }
+            if last.texture_rmse.is_none() {
+                (last.texture_rmse, last.texture_rmse_observed) =
+                    self.texture_errors(&opt.read_params()?);
+            }
+        }
+        Ok(())
+    }
+
+    /// Texture RMSE of `values` over all texels and over the observed ones, and the observed
+    /// texels' initial RMSE (with a ground truth).
+    pub(super) fn final_errors(&self, values: &[f32]) -> (Option<f64>, Option<f64>, Option<f64>) {
+        let p = self.prep;
+        let observed =
+            |v: &[f32], r: &[f32]| super::observed::rmse_observed(&p.set, v, r, self.observed);
+        (
+            p.reference.as_ref().map(|r| rmse(values, r)),
+            p.reference.as_ref().map(|r| observed(values, r)),
+            p.reference.as_ref().map(|r| observed(&p.set.values, r)),
+        )
+    }
+}
+
+/// Say how many texels the cameras observe.
+pub(super) fn log_observed(observed: &[bool]) {
+    let (n_observed, n_texels) = super::observed::observed_count(observed);
+    log::info!(
+        "{n_observed} of {n_texels} texels are observed by the cameras ({:.1}%); the others get \
+         no gradient and keep their initial values (observed_*.png)",
+        100.0 * n_observed as f64 / n_texels.max(1) as f64
+    );
+}
+
+/// A progress bar over the iterations, or over the seconds of the budget when there is no
+/// iteration count, at `iteration` / `elapsed` already done.
+pub(super) fn progress_bar(
+    max_iter: Option<u32>,
+    budget: Option<f64>,
+    iteration: u32,
+    elapsed: f64,
+) -> indicatif::ProgressBar {
+    let b = match max_iter {
+        Some(n) => indicatif::ProgressBar::new(n as u64),
+        None => indicatif::ProgressBar::new(budget.map(|b| b.ceil() as u64).unwrap_or(0)),
+    };
+    b.set_style(
+        indicatif::ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} {msg} ETA {eta}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    b.set_prefix(if max_iter.is_some() {
+        "iteration"
+    } else {
+        "seconds"
+    });
+    b.set_position(if max_iter.is_some() {
+        iteration as u64
+    } else {
+        elapsed as u64
+    });
+    b
+}
+
+/// The progress bar's message: the last loss, texture RMSE and image relMSE.
+pub(super) fn progress_message(rows: &[MetricRow]) -> String {
+    let last = rows.last();
+    let mut msg = format!("loss {:.3e}", last.and_then(|r| r.loss).unwrap_or(f64::NAN));
+    if let Some(r) = last.and_then(|r| r.texture_rmse_observed) {
+        msg.push_str(&format!(" texture RMSE {r:.4}"));
+    }
+    if let Some(e) = rows.iter().rev().find_map(|r| r.image_relmse) {
+        msg.push_str(&format!(" image relMSE {e:.3e}"));
+    }
+    msg
+}
+
+/// Log the cameras' exposures.
+pub(super) fn log_exposures(prep: &Problem, opt: &Optimizer) {
+    let list: Vec<String> = prep
+        .cameras
+        .iter()
+        .zip(opt.exposure())
+        .map(|(&c, e)| format!("{} {e:.4}", prep.scene.cameras[c].name))
+        .collect();
+    log::info!("exposures: {}", list.join(", "));
+}
