@@ -73,11 +73,10 @@ fn nee_sample(sf: Surface, mat: SurfaceMaterial, u_pick: f32, u: vec2f) -> Direc
 
 // Whether nothing lies between the shading point and the sampled light point. The segment runs
 // from the offset origin to the light point itself, moved off an emitter's surface towards the
-// shading point by the same relative offset, so that neither end hits its own surface. (Tracing
-// `dist` along wi from the offset origin, as before, ended past an emitter's plane whenever the
-// origin's offset exceeded the margin dist x 1e-4 along the plane's normal: floor points farther
-// than about 2 units from the origin under a light 3.2 units up found the light itself in the
-// way, and light sampling was 3.7x too dark.)
+// shading point by the same relative offset, so that neither end hits its own surface. (A ray
+// of length `dist` along wi from the offset origin would end past an emitter's plane wherever
+// the origin's offset exceeds its margin along the plane's normal, and find the emitter itself
+// in the way; tests/techniques.rs and tests/analytic.rs catch that.)
 fn unoccluded(sf: Surface, ls: LightSample) -> bool {
     let o = offset_origin(sf, ls.wi);
     if ls.dist >= 3.0e38 {
