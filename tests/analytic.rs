@@ -9,7 +9,7 @@ mod common;
 
 use common::*;
 use glam::{Vec2, Vec3};
-use psrestir::render::{RenderSettings, Renderer, Techniques};
+use psrestir::render::{Renderer, Techniques};
 use psrestir::scene::{EnvMap, PunctualKind, PunctualLight, Wrap};
 
 const W: u32 = 64;
@@ -48,19 +48,7 @@ fn plane_under_point_spot_and_directional_lights_matches_the_closed_form() {
         });
         let spp = 64;
         let r = Renderer::new(&gpu, &scene).unwrap();
-        let out = r
-            .render(
-                &RenderSettings {
-                    width: W,
-                    height: W,
-                    spp,
-                    seed: 3,
-                    camera: 0,
-                    techniques: Techniques::Mis,
-                },
-                |_| {},
-            )
-            .unwrap();
+        let out = render_image(&r, W, spp, 3, Techniques::Mis);
         // Reference (KHR_lights_punctual): point and spot lights give intensity / d^2 along
         // the direction to them, the spot times the squared ramp of cos(angle to its axis)
         // from the outer to the inner cone; a directional light gives its intensity along
@@ -104,7 +92,7 @@ fn plane_under_point_spot_and_directional_lights_matches_the_closed_form() {
                 }
                 let (m, sd) = mean_sd(&subs);
                 lit += (m > 1e-3) as usize;
-                let got = lum(out.image.at(x, y));
+                let got = lum(out.at(x, y));
                 let tol = 5.0 * sd / (spp as f64).sqrt() + 2e-3 * m + 1e-6;
                 worst = worst.max((got - m).abs() / tol);
                 assert!(
@@ -245,7 +233,7 @@ fn plane_under_a_rectangular_area_light_matches_the_quadrature() {
     let r = Renderer::new(&gpu, &scene).unwrap();
     for t in [Techniques::Mis, Techniques::NeeOnly, Techniques::BsdfOnly] {
         let spp = if t == Techniques::BsdfOnly { 512 } else { 64 };
-        let render = |seed| render_rgb(&r, w, spp, seed, t);
+        let render = |seed| render_image(&r, w, spp, seed, t).rgb;
         let (a1, a2) = (render(1), render(2));
         let block = 4usize;
         let mut worst = 0.0f64;
@@ -295,19 +283,7 @@ fn plane_under_a_constant_environment_matches_the_albedo_integral() {
     let spp = 64;
     let r = Renderer::new(&gpu, &scene).unwrap();
     for techniques in [Techniques::Mis, Techniques::NeeOnly, Techniques::BsdfOnly] {
-        let out = r
-            .render(
-                &RenderSettings {
-                    width: W,
-                    height: W,
-                    spp,
-                    seed: 5,
-                    camera: 0,
-                    techniques,
-                },
-                |_| {},
-            )
-            .unwrap();
+        let out = render_image(&r, W, spp, 5, techniques);
         // The albedo depends on the view elevation only: tabulate it over cos(theta_o).
         let table: Vec<f64> = (0..=32)
             .map(|k| {
@@ -329,7 +305,7 @@ fn plane_under_a_constant_environment_matches_the_albedo_integral() {
             for x in 0..W {
                 let (_, d) = camera_dir(cam, W, W, Vec2::new(x as f32 + 0.5, y as f32 + 0.5));
                 let want = env as f64 * albedo(-d.y);
-                residual.push(lum(out.image.at(x, y)) - want);
+                residual.push(lum(out.at(x, y)) - want);
                 reference.push(want);
             }
         }
@@ -352,7 +328,6 @@ fn plane_under_a_constant_environment_matches_the_albedo_integral() {
         );
         // White furnace sanity: a plane never reflects more than it receives.
         assert!(out
-            .image
             .rgb
             .iter()
             .all(|p| p.iter().all(|&v| v.is_finite() && v >= 0.0)));

@@ -111,7 +111,7 @@ struct Case {
 
 fn run_case(gpu: &psrestir::Gpu, c: &Case) {
     let r = Renderer::new(gpu, &c.scene).unwrap();
-    let render = |t: Techniques, seed: u32| render_rgb(&r, W, c.spp, seed, t);
+    let render = |t: Techniques, seed: u32| render_image(&r, W, c.spp, seed, t).rgb;
     let nee = [
         render(Techniques::NeeOnly, 1),
         render(Techniques::NeeOnly, 2),
@@ -483,9 +483,9 @@ fn the_bundled_scenes_area_light_agrees_across_techniques() {
 /// soft shadow.
 #[test]
 fn light_and_bsdf_sampled_gradients_agree() {
-    use psrestir::optim::{Method, Optimizer, PrimalMode, Settings};
+    use psrestir::optim::{Method, Optimizer, Settings};
     use psrestir::render::params::ParamSet;
-    use psrestir::task::{Filter, Init, Loss, Slot, TextureSpec};
+    use psrestir::task::{Filter, Init, Slot, TextureSpec};
     let Some(gpu) = gpu() else { return };
     let mut scene = shadow_scene();
     scene.lights.clear();
@@ -508,22 +508,10 @@ fn light_and_bsdf_sampled_gradients_agree() {
         let set = ParamSet::from_specs(&scene, &[spec], Filter::Nearest, std::path::Path::new("t"))
             .unwrap();
         let settings = Settings {
-            width: w,
-            height: w,
-            cameras: vec![0],
-            primal_spp: 4,
-            primal: PrimalMode::Independent,
-            cv_max_weight: psrestir::optim::primal::DEFAULT_MAX_WEIGHT,
             gradient_spp: 32,
-            loss: Loss::L2,
             seed: 11,
             method: Method::Baseline,
-            restir: Default::default(),
-            schedule: Default::default(),
-            adam_mask: false,
-            multiscale_levels: 0,
-            smoothness: 0.0,
-            exposure_learning_rate: None,
+            ..Settings::new(w, w, vec![0])
         };
         // Target: darker than the current textures, so every observed texel has a gradient.
         let blank = psrestir::Image::new(w, w);

@@ -4,6 +4,7 @@
 
 use glam::{Vec2, Vec3, Vec4};
 use psrestir::gpu::Gpu;
+use psrestir::image_io::Image;
 use psrestir::render::{RenderSettings, Renderer, Techniques};
 use psrestir::scene::{Camera, Material, PunctualKind, PunctualLight, Scene, Triangle};
 use std::f32::consts::PI;
@@ -257,8 +258,8 @@ pub fn crc32(bytes: &[u8]) -> u32 {
     !c
 }
 
-/// A square render of camera 0 with the given techniques: its pixels.
-pub fn render_rgb(r: &Renderer, size: u32, spp: u32, seed: u32, t: Techniques) -> Vec<[f32; 3]> {
+/// A square render of camera 0 with the given techniques.
+pub fn render_image(r: &Renderer, size: u32, spp: u32, seed: u32, t: Techniques) -> Image {
     r.render(
         &RenderSettings {
             width: size,
@@ -272,5 +273,4 @@ pub fn render_rgb(r: &Renderer, size: u32, spp: u32, seed: u32, t: Techniques) -
     )
     .unwrap()
     .image
-    .rgb
 }
