@@ -6,7 +6,7 @@
 //! Defaults: the bundled scene (`scenes/default/scene.gltf`), `out/gltf_textures`, 100
 //! iterations. The file's materials are the ground truth; the sphere's base color starts
 //! gray at 64x32 texels and is recovered from the camera `main` at 64x64.
-use psrestir::optim::run::save_textures;
+use psrestir::job::run::save_textures;
 use psrestir::{Filter, Gpu, Init, Optimizer, Problem, Settings, Slot, Stop, TextureSpec};
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
@@ -50,7 +50,7 @@ pub fn run(scene_path: &Path, out: &Path, iterations: u32) -> psrestir::Result<O
         ..Settings::new(64, 64, vec![main])
     };
     let mut opt = Optimizer::for_problem(&gpu, &problem, settings)?;
-    let rmse = |v: &[f32]| psrestir::optim::run::rmse(v, &reference);
+    let rmse = |v: &[f32]| psrestir::job::run::rmse(v, &reference);
     let before = rmse(&opt.texture_values(0)?);
     opt.run(Stop::iterations(iterations), |p| {
         if p.iteration % 25 == 0 {

@@ -58,15 +58,18 @@
 //! ```
 //!
 //! The `psrestir` binary is built on the same API: task files ([`Task`]) are turned into
-//! problems with [`Problem::from_task`], and [`optim::run::run`] adds progress, metrics,
+//! problems with [`Problem::from_task`], and [`job::run::run`] adds progress, metrics,
 //! checkpoints and outputs. `examples/` holds two complete programs.
 #![warn(missing_docs)]
 
 pub mod assets;
 pub mod bench;
+#[cfg(test)]
+mod contract_tests;
 pub mod error;
 pub mod gpu;
 pub mod image_io;
+pub mod job;
 pub mod optim;
 pub mod render;
 pub mod scene;
@@ -76,9 +79,8 @@ pub mod vocab;
 pub use error::{Error, Result};
 pub use gpu::Gpu;
 pub use image_io::Image;
-pub use optim::{
-    Method, Optimizer, OptimizerState, Problem, Progress, RestirOptions, Settings, Stop,
-};
+pub use job::Problem;
+pub use optim::{Method, Optimizer, OptimizerState, Progress, RestirOptions, Settings, Stop};
 pub use scene::Scene;
 pub use task::{Filter, Init, Loss, Slot, Task, TextureSpec};
 

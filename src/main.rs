@@ -7,7 +7,7 @@ use cli::*;
 use indicatif::{ProgressBar, ProgressStyle};
 use psrestir::assets;
 use psrestir::gpu::Gpu;
-use psrestir::optim::{self, run::RunOptions};
+use psrestir::job::{self, run::RunOptions};
 use psrestir::render::{RenderSettings, Renderer, Techniques};
 use psrestir::scene::{self, EnvMap};
 use psrestir::task::Task;
@@ -51,7 +51,7 @@ fn run(cli: Cli) -> Result<()> {
             let task_path = task;
             let task = Task::load(&task_path)?;
             let gpu = Gpu::new()?;
-            let written = optim::run::write_gradient(&gpu, &task, &output, method, restir)
+            let written = job::run::write_gradient(&gpu, &task, &output, method, restir)
                 .with_context(|| format!("estimating the gradient of {}", task_path.display()))?;
             for p in written {
                 println!("wrote {}", p.display());
@@ -306,7 +306,7 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
         eprintln!("\ninterrupted: writing the checkpoint and outputs (Ctrl-C again to quit now)");
     })
     .context("installing the Ctrl-C handler")?;
-    let summary = optim::run::run(
+    let summary = job::run::run(
         &gpu,
         &task,
         &RunOptions {

@@ -493,7 +493,7 @@ impl Task {
     fn check(&self) -> Result<()> {
         // The optimizer's settings as this task gives them (the estimator's options come
         // from the command line or the library, and are checked there).
-        let mut settings = crate::optim::run::task_settings(
+        let mut settings = task_settings(
             self,
             &[],
             crate::optim::Method::Baseline,
@@ -588,6 +588,36 @@ impl Task {
                     .unwrap_or_else(|| "task".into()),
             )
         })
+    }
+}
+
+/// The optimizer settings a task asks for, with the given estimator.
+pub fn task_settings(
+    task: &Task,
+    cameras: &[usize],
+    method: crate::optim::Method,
+    restir: crate::optim::RestirOptions,
+) -> crate::optim::Settings {
+    crate::optim::Settings {
+        width: task.width,
+        height: task.height,
+        cameras: cameras.to_vec(),
+        primal_spp: task.optimizer.primal_spp,
+        primal: task.optimizer.primal,
+        cv_max_weight: task.optimizer.cv_max_weight,
+        gradient_spp: task.optimizer.gradient_spp,
+        loss: task.optimizer.loss,
+        seed: task.seed,
+        method,
+        restir,
+        schedule: task.optimizer.schedule.clone(),
+        adam_mask: task.optimizer.adam_mask,
+        multiscale_levels: task.optimizer.multiscale_levels,
+        smoothness: task.optimizer.smoothness,
+        exposure_learning_rate: task
+            .optimizer
+            .optimize_exposure
+            .then_some(task.optimizer.exposure_learning_rate),
     }
 }
 

@@ -301,9 +301,13 @@ fn non_finite_values_are_dropped_and_counted_never_stored() {
         assert!(o.read_gradient().unwrap().iter().all(|g| g.is_finite()));
         let state = o.state().unwrap();
         assert!(state.m1.iter().chain(&state.m2).all(|v| v.is_finite()));
-        if let Some(r) = &state.restir {
+        let reservoirs = state
+            .estimator
+            .array(psrestir::optim::restir::state_names::RESERVOIRS);
+        assert_eq!(reservoirs.is_some(), method == Method::Restir);
+        if let Some(r) = reservoirs {
             // Weight, confidence and value words of every reservoir.
-            for res in r.reservoirs.chunks_exact(12) {
+            for res in r.chunks_exact(12) {
                 for w in [3, 4, 5, 6, 7] {
                     let x = f32::from_bits(res[w]);
                     assert!(x.is_finite(), "{method:?}: reservoir word {w} is {x}");

@@ -24,7 +24,7 @@ mod common;
 use common::crc32;
 use psrestir::assets::authoring::glb_bytes;
 use psrestir::image_io::decode as images;
-use psrestir::optim::Problem;
+use psrestir::job::Problem;
 use psrestir::scene::{self, bvh, EnvMap};
 use psrestir::task::Task;
 use serde_json::Value;

@@ -8,7 +8,7 @@ use common::*;
 use glam::{Mat3, Mat4, Quat, Vec3};
 use psrestir::assets::authoring::{png_bytes, GltfBuilder};
 use psrestir::image_io::{srgb_to_linear, Image};
-use psrestir::optim::run::{run, RunOptions};
+use psrestir::job::run::{run, RunOptions};
 use psrestir::optim::schedule::Schedule;
 use psrestir::optim::{Method, Optimizer, Settings};
 use psrestir::render::params::ParamSet;

@@ -387,7 +387,7 @@ fn shift_trial(gpu: &psrestir::gpu::Gpu, filter: Filter, seed: u32) -> ShiftTria
         se,
         ref_mean,
         ref_se,
-        diagnostics: re.merge_diagnostics().unwrap().unwrap(),
+        diagnostics: psrestir::optim::MergeDiagnostics::of(&re).unwrap().unwrap(),
     }
 }
 
@@ -478,7 +478,7 @@ fn the_merge_pass_traces_no_ray() {
     for _ in 0..4 {
         re.step().unwrap();
     }
-    let d = re.merge_diagnostics().unwrap().unwrap();
+    let d = psrestir::optim::MergeDiagnostics::of(&re).unwrap().unwrap();
     assert!(d.evaluations > 0, "{d:?}");
 }
 
@@ -521,7 +521,7 @@ fn stored_paths_keep_the_inputs_no_texture_replaces() {
             re.write_params(if it % 2 == 0 { &a } else { &b }).unwrap();
             re.step().unwrap();
         }
-        let d = re.merge_diagnostics().unwrap().unwrap();
+        let d = psrestir::optim::MergeDiagnostics::of(&re).unwrap().unwrap();
         eprintln!("{slots:?}: {d:?}");
         assert!(
             d.verified > 100,
@@ -698,7 +698,7 @@ fn restir_beats_the_baseline_on_the_default_scene_at_low_sampling() {
     task.optimizer.smoothness = 0.03;
     let iterations = 60;
     let dir = tempfile::tempdir().unwrap();
-    let prep = psrestir::optim::Problem::from_task(&gpu, &task, dir.path(), false).unwrap();
+    let prep = psrestir::job::Problem::from_task(&gpu, &task, dir.path(), false).unwrap();
     let truth = prep.reference.clone().unwrap();
     let mut final_rmse = [0f64; 2];
     let seeds = [1u32, 2, 3];
@@ -706,7 +706,7 @@ fn restir_beats_the_baseline_on_the_default_scene_at_low_sampling() {
         for &seed in &seeds {
             let settings = Settings {
                 seed,
-                ..psrestir::optim::run::task_settings(
+                ..psrestir::task::task_settings(
                     &task,
                     &prep.cameras,
                     method,
@@ -719,11 +719,11 @@ fn restir_beats_the_baseline_on_the_default_scene_at_low_sampling() {
             for _ in 0..iterations {
                 opt.step().unwrap();
             }
-            final_rmse[m] += psrestir::optim::run::rmse(&opt.read_params().unwrap(), &truth)
-                / seeds.len() as f64;
+            final_rmse[m] +=
+                psrestir::job::run::rmse(&opt.read_params().unwrap(), &truth) / seeds.len() as f64;
         }
     }
-    let initial = psrestir::optim::run::rmse(&prep.set.values, &truth);
+    let initial = psrestir::job::run::rmse(&prep.set.values, &truth);
     eprintln!("texture RMSE after {iterations} iterations: initial {initial:.4}, ReSTIR {:.4}, baseline {:.4}", final_rmse[0], final_rmse[1]);
     assert!(
         final_rmse[0] < final_rmse[1],
@@ -748,9 +748,9 @@ fn the_shrunk_default_task_recovers_its_texture() {
     let mut task = shrunk_default_task(64, 512);
     task.textures[0].resolution = [128, 64];
     let dir = tempfile::tempdir().unwrap();
-    let prep = psrestir::optim::Problem::from_task(&gpu, &task, dir.path(), false).unwrap();
+    let prep = psrestir::job::Problem::from_task(&gpu, &task, dir.path(), false).unwrap();
     let truth = prep.reference.clone().unwrap();
-    let settings = psrestir::optim::run::task_settings(
+    let settings = psrestir::task::task_settings(
         &task,
         &prep.cameras,
         Method::Restir,
@@ -812,7 +812,8 @@ fn a_restored_state_continues_like_the_original() {
         a.step().unwrap();
     }
     let state = a.state().unwrap();
-    assert!(state.restir.as_ref().unwrap().history > 0);
+    let names = psrestir::optim::restir::state_names::HISTORY;
+    assert!(state.estimator.counter(names).unwrap() > 0);
     let mut b = make(beta);
     b.restore(&state).unwrap();
     assert_eq!(b.state().unwrap(), state);
@@ -837,7 +838,7 @@ fn a_restored_state_continues_like_the_original() {
     // A state without reservoirs: the next gradient starts from empty ones.
     let mut c = make();
     c.restore(&psrestir::optim::OptimizerState {
-        restir: None,
+        estimator: psrestir::optim::EstimatorState::new(Method::Restir),
         ..state.clone()
     })
     .unwrap();
@@ -905,7 +906,10 @@ fn the_target_adjoint_is_a_moving_average_of_the_adjoints() {
         );
         o.estimate_gradient_with_adjoint(0, &a1).unwrap();
         o.estimate_gradient_with_adjoint(1, &a2).unwrap();
-        let targets = o.state().unwrap().restir.unwrap().targets;
+        let state = o.state().unwrap();
+        let names = psrestir::optim::restir::state_names::TARGETS;
+        let targets: Vec<f32> =
+            bytemuck::cast_slice(state.estimator.array(names).unwrap()).to_vec();
         // Both parities, the even iteration's first.
         assert_eq!(targets.len(), 2 * 4 * n);
         let (even, odd) = targets.split_at(4 * n);

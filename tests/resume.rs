@@ -427,7 +427,10 @@ fn ctrl_c_writes_the_checkpoint_and_outputs_then_resumes() {
     assert!(done > 0 && done < iterations as u32, "{done} iterations");
     let ckpt = psrestir::optim::checkpoint::Checkpoint::load(&out.join("checkpoint.bin")).unwrap();
     assert_eq!(ckpt.state.iteration, done);
-    assert!(ckpt.state.restir.is_some(), "the ReSTIR state is saved");
+    assert!(
+        ckpt.state.estimator.array("reservoirs").is_some(),
+        "the ReSTIR state is saved"
+    );
     for f in ["optimized.glb", "plot.png", "plane_base_color.exr"] {
         assert!(out.join(f).exists(), "{f} missing");
     }

@@ -356,7 +356,7 @@ pub(super) fn gradient_phase(
         let baseline = |spp: u32, salt: u32| -> Result<Optimizer> {
             let mut b = new(Method::Baseline, spp, seed ^ salt)?;
             b.restore(&crate::optim::OptimizerState {
-                restir: None,
+                estimator: crate::optim::EstimatorState::new(Method::Baseline),
                 ..kept.clone()
             })?;
             Ok(b)

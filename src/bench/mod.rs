@@ -31,10 +31,11 @@ pub use results::*;
 
 use crate::gpu::Gpu;
 use crate::image_io::Image;
+use crate::job::run::rmse;
+use crate::job::Problem;
 use crate::optim::observed::rmse_observed;
-use crate::optim::run::{rmse, task_settings};
-use crate::optim::Problem;
 use crate::optim::{Method, Optimizer, PassTimes, RestirOptions, Settings};
+use crate::task::task_settings;
 use crate::task::Task;
 use crate::{Error, Result};
 use serde::Serialize;

@@ -125,7 +125,7 @@ pub(super) fn evaluate(
     task: &Task,
     spp: u32,
 ) -> Result<(f64, Image)> {
-    let (e, mut images) = crate::optim::run::evaluate(opt, &prep.targets, spp, task.seed)?;
+    let (e, mut images) = crate::job::run::evaluate(opt, &prep.targets, spp, task.seed)?;
     if images.is_empty() {
         return Err(Error::Invalid("the task has no camera".into()));
     }
@@ -205,7 +205,7 @@ pub(super) fn optimization_phase(
             }
             // The merge's counter (32 bits on the GPU: it may wrap over a long run, never
             // between two samples).
-            if let Some(d) = opt.merge_diagnostics()? {
+            if let Some(d) = crate::optim::MergeDiagnostics::of(&opt)? {
                 let count = d.evaluations as u32;
                 if let Some((iteration, last)) = last_count {
                     let (s, n) = evaluations.get_or_insert((0, 0));

@@ -2,9 +2,9 @@
 //! plot, the gradients side by side and the final renders side by side.
 use super::{BenchReport, CurvePoint, FinalImages, GradientSnapshot, SceneResult};
 use crate::image_io::write_atomic;
+use crate::job::run::{false_color, gradient_scalars};
+use crate::job::Problem;
 use crate::optim::plot::{captioned_row, plot, save_png, Panel, Series};
-use crate::optim::run::{false_color, gradient_scalars};
-use crate::optim::Problem;
 use crate::{Error, Result};
 use image::{Rgb, RgbImage};
 use std::fmt::Write as _;

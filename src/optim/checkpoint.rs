@@ -3,12 +3,12 @@
 //! drawn at, the metrics so far; the random numbers are a pure function of seed and
 //! iteration, so the iteration is the RNG state). Written atomically: a temporary file, then a
 //! rename.
-use super::{ControlVariateSnapshot, ExposureState, OptimizerState, PreviousState, RestirSnapshot};
+use super::{ControlVariateSnapshot, EstimatorState, ExposureState, OptimizerState, PreviousState};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-const MAGIC: &[u8; 8] = b"PSRCKPT4";
+const MAGIC: &[u8; 8] = b"PSRCKPT5";
 
 /// One row of metrics.csv.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -54,14 +54,9 @@ struct Stored {
     /// Floats of the previous adjoint images, when the previous state is saved (then the
     /// previous textures, n_params floats, come first).
     previous_adjoint_floats: Option<usize>,
-    /// Words of ReSTIR reservoirs; absent for the baseline.
-    reservoir_words: Option<usize>,
-    /// ReSTIR's merge count (the kept samples' confidence).
-    #[serde(default)]
-    restir_history: u32,
-    /// Floats of ReSTIR's target adjoints (both parities).
-    #[serde(default)]
-    restir_target_floats: Option<usize>,
+    /// The gradient estimator's state: its method, counters, and its arrays' names and
+    /// lengths in words (their data follows the previous state's, in this order).
+    estimator: StoredEstimator,
     /// Floats of the control variate's state; absent for the independent primal.
     #[serde(default)]
     control_variate_floats: Option<usize>,
@@ -71,6 +66,14 @@ struct Stored {
     /// Per-camera exposures and their optimizer state.
     #[serde(default)]
     exposure: ExposureState,
+}
+
+/// [`EstimatorState`] without its arrays' data.
+#[derive(Serialize, Deserialize)]
+struct StoredEstimator {
+    method: String,
+    counters: Vec<(String, u32)>,
+    arrays: Vec<(String, usize)>,
 }
 
 /// A whole checkpoint.
@@ -91,9 +94,13 @@ impl Checkpoint {
             iteration: st.iteration,
             n_params: st.params.len(),
             previous_adjoint_floats: st.previous.as_ref().map(|p| p.adjoint.len()),
-            reservoir_words: st.restir.as_ref().map(|r| r.reservoirs.len()),
-            restir_history: st.restir.as_ref().map_or(0, |r| r.history),
-            restir_target_floats: st.restir.as_ref().map(|r| r.targets.len()),
+            estimator: StoredEstimator {
+                method: st.estimator.method.clone(),
+                counters: st.estimator.counters.clone(),
+                arrays: (st.estimator.arrays.iter())
+                    .map(|(name, a)| (name.clone(), a.len()))
+                    .collect(),
+            },
             control_variate_floats: st.control_variate.as_ref().map(|c| c.state.len()),
             control_variate_iterations: st.control_variate.as_ref().map_or(0, |c| c.iterations),
             exposure: st.exposure.clone(),
@@ -119,9 +126,8 @@ impl Checkpoint {
             out.extend_from_slice(bytemuck::cast_slice(&p.params));
             out.extend_from_slice(bytemuck::cast_slice(&p.adjoint));
         }
-        if let Some(r) = &st.restir {
-            out.extend_from_slice(bytemuck::cast_slice(&r.reservoirs));
-            out.extend_from_slice(bytemuck::cast_slice(&r.targets));
+        for (_, a) in &st.estimator.arrays {
+            out.extend_from_slice(bytemuck::cast_slice(a));
         }
         if let Some(c) = &st.control_variate {
             out.extend_from_slice(bytemuck::cast_slice(&c.state));
@@ -153,9 +159,8 @@ impl Checkpoint {
             sizes.push(Some(n));
             sizes.push(Some(a));
         }
-        if let Some(r) = stored.reservoir_words {
-            sizes.push(Some(r));
-            sizes.push(Some(stored.restir_target_floats.unwrap_or(0)));
+        for (_, len) in &stored.estimator.arrays {
+            sizes.push(Some(*len));
         }
         if let Some(c) = stored.control_variate_floats {
             sizes.push(Some(c));
@@ -179,11 +184,13 @@ impl Checkpoint {
             params: bytemuck::pod_collect_to_vec(take(n)),
             adjoint: bytemuck::pod_collect_to_vec(take(a)),
         });
-        let restir = stored.reservoir_words.map(|r| RestirSnapshot {
-            reservoirs: bytemuck::pod_collect_to_vec(take(r)),
-            history: stored.restir_history,
-            targets: bytemuck::pod_collect_to_vec(take(stored.restir_target_floats.unwrap_or(0))),
-        });
+        let estimator = EstimatorState {
+            method: stored.estimator.method,
+            counters: stored.estimator.counters,
+            arrays: (stored.estimator.arrays.into_iter())
+                .map(|(name, len)| (name, bytemuck::pod_collect_to_vec(take(len))))
+                .collect(),
+        };
         let control_variate = stored
             .control_variate_floats
             .map(|c| ControlVariateSnapshot {
@@ -198,7 +205,7 @@ impl Checkpoint {
                 m1,
                 m2,
                 previous,
-                restir,
+                estimator,
                 control_variate,
                 exposure: stored.exposure,
             },
@@ -237,11 +244,14 @@ mod tests {
                     params: vec![0.9, 1.9, 2.9],
                     adjoint: vec![0.5; 8],
                 }),
-                restir: Some(RestirSnapshot {
-                    reservoirs: (0..24).collect(),
-                    history: 5,
-                    targets: vec![0.75; 16],
-                }),
+                estimator: EstimatorState {
+                    method: "restir".into(),
+                    counters: vec![("history".into(), 5)],
+                    arrays: vec![
+                        ("reservoirs".into(), (0..24).collect()),
+                        ("targets".into(), vec![7; 16]),
+                    ],
+                },
                 control_variate: Some(ControlVariateSnapshot {
                     state: vec![0.25; 32],
                     iterations: 9,
@@ -256,7 +266,7 @@ mod tests {
         };
         // Without reservoirs (the baseline) as well.
         let mut base = c.clone();
-        base.state.restir = None;
+        base.state.estimator = EstimatorState::new(crate::optim::Method::Baseline);
         base.state.previous = None;
         base.state.control_variate = None;
         base.save(&p).unwrap();

@@ -1,5 +1,10 @@
-//! Image losses on the CPU: the reference for shaders/loss.wgsl and for tests.
+//! Image losses: the loss pass on the GPU (`LossPass`, shaders/loss.wgsl, its uniform
+//! [`LossParams`]) and the CPU reference for it and for tests.
+use crate::gpu::{encode_timed_pass, grid_2d, Gpu, GroupDecl};
+use crate::image_io::Image;
+use crate::render::WORKGROUP;
 use crate::vocab::Loss;
+use crate::Result;
 
 /// Epsilon of relMSE: (I - G)^2 / (G^2 + REL_EPS).
 pub const REL_EPS: f32 = 0.01;
@@ -89,6 +94,190 @@ pub struct LossParams {
     pub adjoint_offset: u32,
     pub exposure: f32,
     pub _pad: [u32; 2],
+}
+
+/// Group 0 of `loss.wgsl`.
+pub(crate) const LOSS_GROUP: GroupDecl = GroupDecl {
+    pass: "loss",
+    group: 0,
+    names: &[
+        "lp",
+        "accum",
+        "target_image",
+        "adjoint",
+        "loss_partial",
+        "loss_stats",
+        "exposure_partial",
+        "adjoint_prev",
+    ],
+};
+
+/// The loss pass of every camera (shaders/loss.wgsl): the loss of the primal render (times
+/// the camera's exposure) against the target with its mask, the adjoint image dL/dI into the
+/// iteration's adjoint buffer, and per workgroup the partial sums of the loss and of
+/// dL/d(exposure).
+pub(crate) struct LossPass {
+    pipeline: wgpu::ComputePipeline,
+    grid: (u32, u32),
+    /// Workgroups of one camera's pass.
+    n_groups: u32,
+    /// Per workgroup and camera: the loss's partial sums.
+    partial: wgpu::Buffer,
+    /// Per workgroup and camera: dL/d(exposure)'s partial sums.
+    exposure_partial: wgpu::Buffer,
+    /// LOSS_* counters.
+    pub(crate) stats: wgpu::Buffer,
+    cams: Vec<LossCamera>,
+}
+
+/// One camera's loss pass.
+struct LossCamera {
+    uniform: wgpu::Buffer,
+    params: LossParams,
+    /// The target (RGB) with the mask's weight in A.
+    target: wgpu::Buffer,
+    /// Per parity of the iteration (the adjoint buffers alternate).
+    groups: [wgpu::BindGroup; 2],
+}
+
+impl LossPass {
+    /// The pass of `targets` (one per camera, each `width` x `height`), reading the primal
+    /// render from `accum` and writing `adjoint[iteration % 2]`.
+    pub(crate) fn new(
+        gpu: &Gpu,
+        kind: Loss,
+        (width, height): (u32, u32),
+        targets: &[Image],
+        accum: &wgpu::Buffer,
+        adjoint: &[wgpu::Buffer; 2],
+    ) -> Result<LossPass> {
+        let layout = gpu.pass_layout("loss", 0)?;
+        let pipeline = gpu.compute_pipeline("loss", &[&layout])?;
+        let n_pixels = width * height;
+        let n_cams = targets.len() as u32;
+        let n_groups = n_pixels.div_ceil(WORKGROUP);
+        let partial = gpu.storage_zeroed("loss partial sums", (n_groups * n_cams) as u64 * 4);
+        let exposure_partial =
+            gpu.storage_zeroed("exposure partial sums", (n_groups * n_cams) as u64 * 4);
+        let stats = gpu.storage_zeroed("loss stats", 16);
+        let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
+        let norm = 1.0 / (n_pixels as f32 * 3.0 * n_cams as f32);
+        let cams = targets
+            .iter()
+            .enumerate()
+            .map(|(k, target)| {
+                let params = LossParams {
+                    n_pixels,
+                    kind: match kind {
+                        Loss::L2 => 0,
+                        Loss::Relmse => 1,
+                    },
+                    norm,
+                    partial_offset: k as u32 * n_groups,
+                    adjoint_offset: k as u32 * n_pixels,
+                    exposure: 1.0,
+                    _pad: [0; 2],
+                };
+                // Mask weight 1 everywhere until set_targets says otherwise.
+                let data: Vec<[f32; 4]> =
+                    target.rgb.iter().map(|p| [p[0], p[1], p[2], 1.0]).collect();
+                let target = gpu.storage(
+                    &format!("target {k}"),
+                    bytemuck::cast_slice(&data),
+                    wgpu::BufferUsages::empty(),
+                );
+                let uniform = gpu.uniform(&format!("loss params {k}"), bytemuck::bytes_of(&params));
+                let groups = [0usize, 1].map(|p| {
+                    gpu.bind(
+                        &LOSS_GROUP,
+                        "loss",
+                        &layout,
+                        &[
+                            ("lp", &uniform),
+                            ("accum", accum),
+                            ("target_image", &target),
+                            ("adjoint", &adjoint[p]),
+                            ("loss_partial", &partial),
+                            ("loss_stats", &stats),
+                            ("exposure_partial", &exposure_partial),
+                            ("adjoint_prev", &adjoint[1 - p]),
+                        ],
+                    )
+                });
+                LossCamera {
+                    uniform,
+                    params,
+                    target,
+                    groups,
+                }
+            })
+            .collect();
+        Ok(LossPass {
+            pipeline,
+            grid: grid_2d(n_pixels, WORKGROUP, max_dim),
+            n_groups,
+            partial,
+            exposure_partial,
+            stats,
+            cams,
+        })
+    }
+
+    /// Record camera `k`'s pass for an iteration of adjoint parity `parity`.
+    pub(crate) fn encode(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        k: usize,
+        parity: usize,
+        timing: Option<(&wgpu::QuerySet, u32)>,
+    ) {
+        let groups = [&self.cams[k].groups[parity]];
+        encode_timed_pass(enc, "loss", &self.pipeline, &groups, self.grid, timing);
+    }
+
+    /// The loss of the last pass of every camera (the sum of its partial sums).
+    pub(crate) fn read_loss(&self, gpu: &Gpu) -> Result<f64> {
+        let partial: Vec<f32> = gpu.read_pod(&self.partial)?;
+        Ok(partial.iter().map(|&v| v as f64).sum())
+    }
+
+    /// dL/d(exposure) of each camera from the last passes.
+    pub(crate) fn read_exposure_gradients(&self, gpu: &Gpu) -> Result<Vec<f64>> {
+        let partial: Vec<f32> = gpu.read_pod(&self.exposure_partial)?;
+        let n = self.n_groups as usize;
+        Ok((0..self.cams.len())
+            .map(|k| partial[k * n..(k + 1) * n].iter().map(|&v| v as f64).sum())
+            .collect())
+    }
+
+    /// Upload camera `k`'s target pixels (RGB and the mask's weight in A).
+    pub(crate) fn write_target(&self, gpu: &Gpu, k: usize, data: &[[f32; 4]]) {
+        let target = &self.cams[k].target;
+        gpu.queue
+            .write_buffer(target, 0, bytemuck::cast_slice(data));
+    }
+
+    /// Set every camera's normalization (1 / the sum of the weights of all channels).
+    pub(crate) fn set_norm(&mut self, gpu: &Gpu, norm: f32) {
+        for k in 0..self.cams.len() {
+            self.cams[k].params.norm = norm;
+            self.upload(gpu, k);
+        }
+    }
+
+    /// Set each camera's exposure.
+    pub(crate) fn set_exposures(&mut self, gpu: &Gpu, values: &[f32]) {
+        for (k, &e) in values.iter().enumerate().take(self.cams.len()) {
+            self.cams[k].params.exposure = e;
+            self.upload(gpu, k);
+        }
+    }
+
+    fn upload(&self, gpu: &Gpu, k: usize) {
+        let cam = &self.cams[k];
+        gpu.queue
+            .write_buffer(&cam.uniform, 0, bytemuck::bytes_of(&cam.params));
+    }
 }
 
 /// Image relMSE: mean over pixels and channels of (x - t)^2 / (t^2 + 1e-2).

@@ -2,7 +2,6 @@
 //! tests): an estimate under this iteration's or a given adjoint, and a converged adjoint.
 
 use super::{pass_seed, Optimizer, Seeds};
-use crate::gpu::encode_timed_pass;
 use crate::{Error, Result};
 
 impl Optimizer {
@@ -141,9 +140,7 @@ impl Optimizer {
                     .encode_render(&mut enc, "primal", &cam.render_group, self.grid, None);
                 done += cam.render_params.spp;
                 if done >= spp {
-                    let groups = [&cam.loss_groups[parity]];
-                    let pipe = &self.loss_pipeline;
-                    encode_timed_pass(&mut enc, "loss", pipe, &groups, self.loss_grid, None);
+                    self.loss.encode(&mut enc, k, parity, None);
                 }
                 self.gpu.queue.submit([enc.finish()]);
                 self.gpu.wait("converged primal")?;

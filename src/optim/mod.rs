@@ -12,9 +12,6 @@ pub mod multiscale;
 pub mod observed;
 pub mod plot;
 pub mod primal;
-pub mod problem;
-pub mod run;
-mod run_metrics;
 pub mod schedule;
 pub mod smoothness;
 pub mod texture_export;
@@ -33,36 +30,19 @@ pub use state::*;
 pub use timing::*;
 
 use crate::gpu::abi::stat;
-use crate::gpu::{encode_timed_pass, grid_2d, Gpu};
+use crate::gpu::Gpu;
 use crate::image_io::Image;
 use crate::render::layout::*;
 use crate::render::params::{ParamBuffers, ParamSet};
-use crate::render::{camera_info, Renderer, Techniques, WORKGROUP};
+use crate::render::{camera_info, Renderer, Techniques};
 use crate::scene::Scene;
 use crate::{Error, Result};
 use cameras::{camera_passes, check_inputs, CameraPasses, CameraSetup, Stats};
 pub use estimator::restir::{self, MergeDiagnostics};
 use estimator::Estimator;
-pub use estimator::{Confidence, Method, RestirOptions, RestirSnapshot};
+pub use estimator::{Confidence, EstimatorState, Method, RestirOptions};
 pub use primal::{ControlVariateSnapshot, PrimalMode};
-pub use problem::Problem;
 pub use schedule::{Schedule, ScheduleKind};
-
-/// Group 0 of `loss.wgsl`.
-pub(crate) const LOSS_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
-    pass: "loss",
-    group: 0,
-    names: &[
-        "lp",
-        "accum",
-        "target_image",
-        "adjoint",
-        "loss_partial",
-        "loss_stats",
-        "exposure_partial",
-        "adjoint_prev",
-    ],
-};
 
 /// The optimizer: a scene on the GPU with its optimized textures, targets, and the passes.
 pub struct Optimizer {
@@ -79,18 +59,12 @@ pub struct Optimizer {
     adjoint: [wgpu::Buffer; 2],
     moments: [wgpu::Buffer; 2],
     stats: Stats,
-    loss_partial: wgpu::Buffer,
-    /// Partial sums of dL/d(exposure) per workgroup and camera.
-    exposure_partial: wgpu::Buffer,
+    loss: loss::LossPass,
     /// The targets (CPU copies, for re-uploading them with masks).
     targets: Vec<Image>,
     /// Exposures and their optimizer state.
     exposure: ExposureState,
-    /// Workgroups of one camera's loss pass.
-    n_loss_groups: u32,
     grid: (u32, u32),
-    loss_grid: (u32, u32),
-    loss_pipeline: wgpu::ComputePipeline,
     adam: adam::AdamPass,
     accum: wgpu::Buffer,
     /// The primal samples under the previous textures (control variate).
@@ -133,8 +107,6 @@ impl Optimizer {
         memory_plan(&set, &settings, targets.len()).check(gpu)?;
         let params = ParamBuffers::new(gpu, &set);
         let renderer = Renderer::with_param_buffers(gpu, scene, &set, &params)?;
-        let loss_layout = gpu.pass_layout("loss", 0)?;
-        let loss_pipeline = gpu.compute_pipeline("loss", &[&loss_layout])?;
 
         let n_pixels = w * h;
         let n_cams = targets.len() as u32;
@@ -165,16 +137,9 @@ impl Optimizer {
         let stats = Stats {
             primal: gpu.storage_zeroed("primal stats", 16),
             adam: gpu.storage_zeroed("adam stats", 16),
-            loss: gpu.storage_zeroed("loss stats", 16),
         };
-        let n_loss_groups = n_pixels.div_ceil(WORKGROUP);
-        let loss_partial =
-            gpu.storage_zeroed("loss partial sums", (n_loss_groups * n_cams) as u64 * 4);
-        let exposure_partial =
-            gpu.storage_zeroed("exposure partial sums", (n_loss_groups * n_cams) as u64 * 4);
+        let loss = loss::LossPass::new(gpu, settings.loss, (w, h), targets, &accum, &adjoint)?;
         let grid = renderer.tile_grid(w, h);
-        let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
-        let loss_grid = grid_2d(n_pixels, WORKGROUP, max_dim);
 
         let mut camera_infos = Vec::new();
         for &cam in &settings.cameras {
@@ -200,17 +165,11 @@ impl Optimizer {
             renderer: &renderer,
             settings: &settings,
             camera_infos: &camera_infos,
-            targets,
             grid,
             two_states: control_variate.is_some(),
-            n_loss_groups,
-            loss_layout: &loss_layout,
             accum: &accum,
             accum_prev: &accum_prev,
             stats: &stats,
-            adjoint: &adjoint,
-            loss_partial: &loss_partial,
-            exposure_partial: &exposure_partial,
         });
         let adam = adam::AdamPass::new(
             gpu,
@@ -238,8 +197,7 @@ impl Optimizer {
             adjoint,
             moments,
             stats,
-            loss_partial,
-            exposure_partial,
+            loss,
             targets: targets.to_vec(),
             exposure: ExposureState {
                 values: vec![1.0; targets.len()],
@@ -247,10 +205,7 @@ impl Optimizer {
                 m2: vec![0.0; targets.len()],
                 steps: 0,
             },
-            n_loss_groups,
             grid,
-            loss_grid,
-            loss_pipeline,
             adam,
             accum,
             accum_prev,
@@ -305,9 +260,8 @@ impl Optimizer {
             if let Some(cv) = &mut self.control_variate {
                 cv.encode(enc, k, &mut self.timer);
             }
-            let groups = [&cam.loss_groups[parity]];
             let t = self.timer.next(PassKind::Loss);
-            encode_timed_pass(enc, "loss", &self.loss_pipeline, &groups, self.loss_grid, t);
+            self.loss.encode(enc, k, parity, t);
         }
     }
 
@@ -346,8 +300,7 @@ impl Optimizer {
     }
 
     fn read_loss(&self) -> Result<f64> {
-        let partial: Vec<f32> = self.gpu.read_pod(&self.loss_partial)?;
-        Ok(partial.iter().map(|&v| v as f64).sum())
+        self.loss.read_loss(&self.gpu)
     }
 
     /// One iteration: render, loss, gradient, Adam. Returns the loss of the render.
@@ -403,34 +356,6 @@ impl Optimizer {
     /// timestamp queries.
     pub fn pass_times(&self) -> Result<Option<PassTimes>> {
         self.timer.read(&self.gpu)
-    }
-
-    /// An optimizer for `problem`: its scene, textures and targets, with the sampling options
-    /// of `settings` (whose cameras, width and height are taken from the problem).
-    pub fn for_problem(gpu: &Gpu, problem: &Problem, settings: Settings) -> Result<Optimizer> {
-        let first = problem.targets.first().ok_or_else(|| {
-            Error::Invalid("the problem has no targets: set or render them first".into())
-        })?;
-        let settings = Settings {
-            width: first.width,
-            height: first.height,
-            cameras: problem.cameras.clone(),
-            ..settings
-        };
-        let mut opt = Optimizer::new(
-            gpu,
-            &problem.scene,
-            problem.set.clone(),
-            settings,
-            &problem.targets,
-        )?;
-        if problem.masks.iter().any(Option::is_some) {
-            opt.set_masks(&problem.masks)?;
-        }
-        if problem.exposure.iter().any(|&e| e != 1.0) {
-            opt.set_exposure(&problem.exposure)?;
-        }
-        Ok(opt)
     }
 
     /// Run iterations until `stop`, calling `on_iteration` after each; the callback returns
@@ -491,7 +416,7 @@ impl Optimizer {
     pub fn faults(&self) -> Result<FaultCounts> {
         let p: Vec<u32> = self.gpu.read_pod(&self.stats.primal)?;
         let a: Vec<u32> = self.gpu.read_pod(&self.stats.adam)?;
-        let l: Vec<u32> = self.gpu.read_pod(&self.stats.loss)?;
+        let l: Vec<u32> = self.gpu.read_pod(&self.loss.stats)?;
         let mut f = FaultCounts {
             skipped_adam: a[stat::ADAM_SKIPPED as usize],
             dropped_primal: p[stat::RENDER_DROPPED as usize],
@@ -517,9 +442,10 @@ impl Optimizer {
         }))
     }
 
-    /// What ReSTIR's merge pass counted (None for the baseline).
-    pub fn merge_diagnostics(&self) -> Result<Option<MergeDiagnostics>> {
-        self.estimator.restir_diagnostics(&self.gpu)
+    /// What the gradient estimator counted since the optimizer was made, by name (see
+    /// [`MergeDiagnostics::of`] for ReSTIR's).
+    pub fn estimator_diagnostics(&self) -> Result<estimator::Diagnostics> {
+        self.estimator.diagnostics(&self.gpu)
     }
 
     /// Render camera `k` of the task (index into `settings.cameras`) at the current textures.

@@ -1,6 +1,6 @@
 //! What an iteration reports, and the optimizer's state as checkpoints save it.
 
-use super::{ControlVariateSnapshot, Optimizer, RestirSnapshot};
+use super::{ControlVariateSnapshot, EstimatorState, Optimizer};
 use crate::{Error, Result};
 
 /// What one iteration reports.
@@ -54,8 +54,8 @@ pub struct OptimizerState {
     /// The last iteration's textures and adjoint, when the estimator or the primal uses
     /// them.
     pub previous: Option<PreviousState>,
-    /// The ReSTIR estimator's reservoirs; `None` for the baseline.
-    pub restir: Option<RestirSnapshot>,
+    /// The gradient estimator's state (what it keeps across iterations, if anything).
+    pub estimator: EstimatorState,
     /// The control-variate primal's state; `None` for the independent primal.
     pub control_variate: Option<ControlVariateSnapshot>,
     /// Per-camera exposures and, when they are optimized, their Adam moments.
@@ -162,7 +162,7 @@ impl Optimizer {
             m1,
             m2,
             previous,
-            restir: self.estimator.snapshot(&self.gpu, self.iteration)?,
+            estimator: self.estimator.snapshot(&self.gpu, self.iteration)?,
             control_variate: match &self.control_variate {
                 Some(cv) => Some(cv.snapshot(&self.gpu)?),
                 None => None,
@@ -178,7 +178,8 @@ impl Optimizer {
         self.write_params(&state.params)?;
         self.write_moments(&[state.m1.clone(), state.m2.clone()])?;
         let last = (state.iteration as usize + 1) % 2;
-        let mut snapshot = state.restir.as_ref();
+        state.estimator.check_method(self.settings.method)?;
+        let mut snapshot = Some(&state.estimator);
         let mut cv_snapshot = state.control_variate.as_ref();
         match &state.previous {
             Some(p) => {

@@ -39,9 +39,7 @@ impl Optimizer {
                     .collect(),
             };
             total += data.iter().map(|p| p[3] as f64).sum::<f64>();
-            self.gpu
-                .queue
-                .write_buffer(&self.cams[k].target_buf, 0, bytemuck::cast_slice(&data));
+            self.loss.write_target(&self.gpu, k, &data);
         }
         // Also catches a NaN total.
         #[allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -49,12 +47,7 @@ impl Optimizer {
             return Err(Error::Invalid("the masks leave no pixel to compare".into()));
         }
         let norm = (1.0 / (3.0 * total)) as f32;
-        for cam in &mut self.cams {
-            cam.loss_params.norm = norm;
-            self.gpu
-                .queue
-                .write_buffer(&cam.loss_uniform, 0, bytemuck::bytes_of(&cam.loss_params));
-        }
+        self.loss.set_norm(&self.gpu, norm);
         self.gpu.check("set masks")
     }
 
@@ -80,23 +73,16 @@ impl Optimizer {
     }
 
     pub(super) fn upload_exposure(&mut self) {
-        for (cam, &e) in self.cams.iter_mut().zip(&self.exposure.values) {
-            cam.loss_params.exposure = e;
-            self.gpu
-                .queue
-                .write_buffer(&cam.loss_uniform, 0, bytemuck::bytes_of(&cam.loss_params));
-        }
+        self.loss.set_exposures(&self.gpu, &self.exposure.values);
     }
 
     /// One Adam step of the exposures' logarithms from this iteration's dL/d(exposure).
     pub(super) fn step_exposure(&mut self, lr: f32) -> Result<()> {
-        let partial: Vec<f32> = self.gpu.read_pod(&self.exposure_partial)?;
-        let n = self.n_loss_groups as usize;
+        let gradients = self.loss.read_exposure_gradients(&self.gpu)?;
         let e = &mut self.exposure;
         e.steps += 1;
         let t = e.steps as i32;
-        for k in 0..e.values.len() {
-            let d: f64 = partial[k * n..(k + 1) * n].iter().map(|&v| v as f64).sum();
+        for (k, d) in gradients.into_iter().enumerate() {
             // d/d(log e) = e d/de.
             let g = (d * e.values[k] as f64) as f32;
             if !g.is_finite() {

@@ -3,7 +3,7 @@
 //! material at its hit point and adds them, weighted by its pixel's adjoint, into the texels
 //! that the texture filter touches. Float additions are bounded compare-and-swap loops on
 //! 32-bit atomics; an exhausted bound is counted, never silently lost.
-use super::{Estimator, Frame, RestirSnapshot, Setup};
+use super::{Estimator, EstimatorState, Frame, Method, Setup};
 use crate::gpu::encode_timed_pass;
 use crate::gpu::Gpu;
 use crate::optim::{pass_seed, FaultCounts, PassKind, PassTimer, Seeds};
@@ -142,12 +142,12 @@ impl Estimator for Baseline {
         Ok(())
     }
 
-    fn snapshot(&self, _gpu: &Gpu, _iteration: u32) -> Result<Option<RestirSnapshot>> {
-        Ok(None)
+    fn snapshot(&self, _gpu: &Gpu, _iteration: u32) -> Result<EstimatorState> {
+        Ok(EstimatorState::new(Method::Baseline))
     }
 
-    fn restore(&mut self, _: &Gpu, _: Option<&RestirSnapshot>, _: u32) -> Result<()> {
-        Ok(())
+    fn restore(&mut self, _: &Gpu, state: Option<&EstimatorState>, _: u32) -> Result<()> {
+        state.map_or(Ok(()), |s| s.check_method(Method::Baseline))
     }
 
     fn state_bytes(&self) -> u64 {

@@ -16,7 +16,7 @@ use crate::gpu::Gpu;
 use crate::render::layout::GpuCameraInfo;
 use crate::render::{GpuScene, Techniques};
 use crate::Result;
-pub use restir::{Confidence, RestirOptions, RestirSnapshot};
+pub use restir::{Confidence, RestirOptions};
 
 /// The gradient estimator.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -37,6 +37,60 @@ impl Method {
         }
     }
 }
+
+/// The part of an estimator's state that carries over to the next iteration, as the optimizer
+/// and its checkpoints hold it without knowing the estimator: the method that wrote it (its
+/// [`Method::name`]), named counters and named arrays of 32-bit words. Each estimator says
+/// what its names mean and checks them when it restores.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct EstimatorState {
+    /// The [`Method::name`] of the estimator that wrote it.
+    pub method: String,
+    /// Named counters.
+    pub counters: Vec<(String, u32)>,
+    /// Named arrays of 32-bit words (floats are stored as their bits).
+    pub arrays: Vec<(String, Vec<u32>)>,
+}
+
+impl EstimatorState {
+    /// An empty state written by `method`.
+    pub fn new(method: Method) -> EstimatorState {
+        EstimatorState {
+            method: method.name().to_string(),
+            ..Default::default()
+        }
+    }
+
+    /// The counter `name`, if the state has it.
+    pub fn counter(&self, name: &str) -> Option<u32> {
+        self.counters.iter().find(|(n, _)| n == name).map(|c| c.1)
+    }
+
+    /// The array `name`, if the state has it.
+    pub fn array(&self, name: &str) -> Option<&[u32]> {
+        self.arrays
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|a| a.1.as_slice())
+    }
+
+    /// An error unless the state was written by `method`.
+    pub fn check_method(&self, method: Method) -> Result<()> {
+        if self.method == method.name() {
+            return Ok(());
+        }
+        Err(crate::Error::Invalid(format!(
+            "the saved state was written by the {} gradient estimator, not by {}; resume with \
+             the same --method",
+            self.method,
+            method.name()
+        )))
+    }
+}
+
+/// Named values an estimator counted since it was made (for diagnostics and tests; see
+/// [`restir::MergeDiagnostics`]).
+pub type Diagnostics = Vec<(&'static str, f64)>;
 
 /// What an estimator is built from: the optimizer's scene, images and shared buffers.
 pub(crate) struct Setup<'a> {
@@ -84,14 +138,11 @@ pub(crate) trait Estimator {
     fn faults(&self, gpu: &Gpu, f: &mut FaultCounts) -> Result<()>;
     /// The state that carries over to the next iteration (for checkpoints), taken after
     /// `iteration` iterations.
-    fn snapshot(&self, gpu: &Gpu, iteration: u32) -> Result<Option<RestirSnapshot>>;
-    /// Restore a snapshot taken after `iteration` iterations (None: start afresh).
-    fn restore(
-        &mut self,
-        gpu: &Gpu,
-        snapshot: Option<&RestirSnapshot>,
-        iteration: u32,
-    ) -> Result<()>;
+    fn snapshot(&self, gpu: &Gpu, iteration: u32) -> Result<EstimatorState>;
+    /// Restore a snapshot taken after `iteration` iterations (None, or a state without
+    /// arrays: start afresh). An error when it was written by another estimator or for other
+    /// textures or images.
+    fn restore(&mut self, gpu: &Gpu, state: Option<&EstimatorState>, iteration: u32) -> Result<()>;
     /// Bytes of GPU state the estimator keeps besides the optimizer's.
     fn state_bytes(&self) -> u64;
     /// Which techniques the gradient samples use for area and environment lights (MIS unless
@@ -102,9 +153,9 @@ pub(crate) trait Estimator {
             "this estimator samples with MIS only; {techniques:?} is for the baseline"
         )))
     }
-    /// What ReSTIR's merge counted (None for other estimators).
-    fn restir_diagnostics(&self, _gpu: &Gpu) -> Result<Option<restir::MergeDiagnostics>> {
-        Ok(None)
+    /// What the estimator counted since it was made (empty unless it counts something).
+    fn diagnostics(&self, _gpu: &Gpu) -> Result<Diagnostics> {
+        Ok(Vec::new())
     }
 }
 
@@ -114,6 +165,14 @@ pub(crate) fn build(setup: &Setup) -> Result<Box<dyn Estimator>> {
         Method::Baseline => Box::new(baseline::Baseline::new(setup)?),
         Method::Restir => Box::new(restir::Restir::new(setup)?),
     })
+}
+
+/// The most cameras `method` can use in one optimization (None: no limit of its own).
+pub(crate) fn max_cameras(method: Method) -> Option<usize> {
+    match method {
+        Method::Baseline => None,
+        Method::Restir => Some(restir::MAX_CAMERAS),
+    }
 }
 
 /// The buffers `method` allocates for `n_texels` texels and `n_pixels` pixels (all

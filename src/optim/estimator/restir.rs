@@ -17,7 +17,7 @@
 //!    kept from the last iteration by generalized RIS (balance heuristic with confidences,
 //!    identity shift in path space, sign routing), writes the merged reservoirs and the
 //!    gradient sum over signs of v(y) W. It traces no ray.
-use super::{Estimator, Frame, Setup};
+use super::{Diagnostics, Estimator, EstimatorState, Frame, Method, Setup};
 use crate::gpu::encode_timed_pass;
 use crate::gpu::{grid_2d, Gpu};
 use crate::optim::{pass_seed, FaultCounts, PassKind, PassTimer, Seeds};
@@ -203,19 +203,19 @@ pub struct MergeParams {
     pub _pad: u32,
 }
 
-/// The part of a ReSTIR optimizer's state that carries over to the next iteration.
-#[derive(Clone, Debug, PartialEq)]
-pub struct RestirSnapshot {
-    /// The reservoirs kept from the last iteration (two per texel,
-    /// [`reservoir::WORDS`] words each).
-    pub reservoirs: Vec<u32>,
-    /// Merges whose samples the kept reservoirs can hold (0 before the first iteration or
-    /// without temporal reuse); it sets the kept samples' confidence.
-    pub history: u32,
-    /// The target adjoints of both parities of the iteration (RGBA per pixel, the cameras
-    /// one after another, the even iterations' first): the resampling targets' smoothed
-    /// adjoint.
-    pub targets: Vec<f32>,
+/// Names in the ReSTIR estimator's [`EstimatorState`]: the kept reservoirs (two per texel,
+/// sign 0 then sign 1, [`reservoir::WORDS`] words each), the target adjoints of both parities
+/// (RGBA f32 per pixel, the cameras one after another, the even iterations' first: the
+/// resampling targets' smoothed adjoint), and the merges whose samples the kept reservoirs can
+/// hold (0 before the first iteration or without temporal reuse; it sets the kept samples'
+/// confidence).
+pub mod state_names {
+    /// Array: the kept reservoirs.
+    pub const RESERVOIRS: &str = "reservoirs";
+    /// Array: the target adjoints.
+    pub const TARGETS: &str = "targets";
+    /// Counter: the merges so far.
+    pub const HISTORY: &str = "history";
 }
 
 /// What the merge pass counted since the optimizer was created.
@@ -228,6 +228,40 @@ pub struct MergeDiagnostics {
     /// Largest relative difference between a kept path's stored factor and its evaluation
     /// under the state it was drawn at.
     pub max_relative_error: f32,
+}
+
+impl MergeDiagnostics {
+    const EVALUATIONS: &'static str = "merge evaluations";
+    const VERIFIED: &'static str = "merge verified";
+    const MAX_RELATIVE_ERROR: &'static str = "merge max relative error";
+
+    fn named(&self) -> Diagnostics {
+        vec![
+            (Self::EVALUATIONS, self.evaluations as f64),
+            (Self::VERIFIED, self.verified as f64),
+            (Self::MAX_RELATIVE_ERROR, f64::from(self.max_relative_error)),
+        ]
+    }
+
+    /// What the ReSTIR merge of `optimizer` counted (None when it runs another estimator).
+    pub fn of(optimizer: &crate::optim::Optimizer) -> Result<Option<MergeDiagnostics>> {
+        let d = optimizer.estimator_diagnostics()?;
+        let get = |name: &str| d.iter().find(|(n, _)| *n == name).map(|v| v.1);
+        Ok(
+            match (
+                get(Self::EVALUATIONS),
+                get(Self::VERIFIED),
+                get(Self::MAX_RELATIVE_ERROR),
+            ) {
+                (Some(e), Some(v), Some(m)) => Some(MergeDiagnostics {
+                    evaluations: e as u64,
+                    verified: v as u64,
+                    max_relative_error: m as f32,
+                }),
+                _ => None,
+            },
+        )
+    }
 }
 
 /// The buffers ReSTIR allocates for `n_texels` texels and `n_pixels` pixels (all cameras'),
@@ -432,7 +466,7 @@ impl Restir {
     }
 
     /// What the merge pass counted so far.
-    pub(crate) fn diagnostics(&self, gpu: &Gpu) -> Result<MergeDiagnostics> {
+    pub(crate) fn merge_diagnostics(&self, gpu: &Gpu) -> Result<MergeDiagnostics> {
         let m: Vec<u32> = gpu.read_pod(&self.merge_stats)?;
         Ok(MergeDiagnostics {
             evaluations: m[MERGE_STAT_EVALUATIONS] as u64,
@@ -515,49 +549,68 @@ impl Estimator for Restir {
         Ok(())
     }
 
-    fn snapshot(&self, gpu: &Gpu, _iteration: u32) -> Result<Option<RestirSnapshot>> {
+    fn snapshot(&self, gpu: &Gpu, _iteration: u32) -> Result<EstimatorState> {
         // The kept reservoirs, sign 0 then sign 1 of each texel, wherever they lie.
         let slots: Vec<u32> = gpu.read_pod(&self.slots)?;
         let headers: Vec<u32> = gpu.read_pod(&self.headers)?;
         let n_texels = self.merge_params.n_texels as usize;
-        Ok(Some(RestirSnapshot {
-            reservoirs: kept_reservoirs(&slots, &headers[..n_texels]),
-            history: self.history,
-            targets: gpu.read_pod(&self.targets)?,
-        }))
+        let mut state = EstimatorState::new(Method::Restir);
+        state.counters = vec![(state_names::HISTORY.into(), self.history)];
+        state.arrays = vec![
+            (
+                state_names::RESERVOIRS.into(),
+                kept_reservoirs(&slots, &headers[..n_texels]),
+            ),
+            (state_names::TARGETS.into(), gpu.read_pod(&self.targets)?),
+        ];
+        Ok(state)
     }
 
     fn restore(
         &mut self,
         gpu: &Gpu,
-        snapshot: Option<&RestirSnapshot>,
+        state: Option<&EstimatorState>,
         _iteration: u32,
     ) -> Result<()> {
         let n_texels = u64::from(self.merge_params.n_texels);
-        let (slots, headers) = match snapshot {
+        if let Some(r) = state {
+            r.check_method(Method::Restir)?;
+        }
+        let (slots, headers) = match state.filter(|r| !r.arrays.is_empty()) {
             Some(r) => {
+                let missing =
+                    |name: &str| Error::Invalid(format!("the saved ReSTIR state has no {name}"));
+                let reservoirs = r
+                    .array(state_names::RESERVOIRS)
+                    .ok_or_else(|| missing(state_names::RESERVOIRS))?;
+                let targets = r
+                    .array(state_names::TARGETS)
+                    .ok_or_else(|| missing(state_names::TARGETS))?;
+                let history = r
+                    .counter(state_names::HISTORY)
+                    .ok_or_else(|| missing(state_names::HISTORY))?;
                 let expected = n_texels * 2 * reservoir::WORDS as u64;
-                if r.reservoirs.len() as u64 != expected {
+                if reservoirs.len() as u64 != expected {
                     return Err(Error::Invalid(format!(
                         "the saved ReSTIR state has {} words where this optimizer keeps {expected} \
                          ({n_texels} texels x 2 reservoirs x {} words): it was saved for other \
                          textures, or by a version of psrestir with another reservoir layout",
-                        r.reservoirs.len(),
+                        reservoirs.len(),
                         reservoir::WORDS
                     )));
                 }
-                if r.targets.len() as u64 * 4 != self.targets.size() {
+                if targets.len() as u64 * 4 != self.targets.size() {
                     return Err(Error::Invalid(format!(
                         "the saved ReSTIR state has {} target-adjoint floats where this \
                          optimizer's images need {}",
-                        r.targets.len(),
+                        targets.len(),
                         self.targets.size() / 4
                     )));
                 }
                 gpu.queue
-                    .write_buffer(&self.targets, 0, bytemuck::cast_slice(&r.targets));
-                self.history = if self.options.temporal { r.history } else { 0 };
-                slots_holding(&r.reservoirs)
+                    .write_buffer(&self.targets, 0, bytemuck::cast_slice(targets));
+                self.history = if self.options.temporal { history } else { 0 };
+                slots_holding(reservoirs)
             }
             None => {
                 // The first iteration forms the target adjoint from its own adjoint alone.
@@ -580,8 +633,8 @@ impl Estimator for Restir {
         self.slots.size() + self.headers.size() + self.locks.size()
     }
 
-    fn restir_diagnostics(&self, gpu: &Gpu) -> Result<Option<MergeDiagnostics>> {
-        self.diagnostics(gpu).map(Some)
+    fn diagnostics(&self, gpu: &Gpu) -> Result<Diagnostics> {
+        Ok(self.merge_diagnostics(gpu)?.named())
     }
 }
 

@@ -1,14 +1,16 @@
 //! A whole optimization run from a task file: targets, the iteration loop with progress,
 //! metrics and checkpoints, and the outputs.
-use super::checkpoint::{Checkpoint, Header, MetricRow};
-use super::problem::camera_file_name;
-use super::run_metrics::{
+use super::metrics::{
     log_exposures, log_observed, progress_bar, progress_message, Metrics, PassMean,
 };
-use super::{FaultCounts, Optimizer, PassTimes, Problem, Settings};
+use super::problem::camera_file_name;
+use super::Problem;
 use crate::gpu::Gpu;
 use crate::image_io::{self, Image};
+use crate::optim::checkpoint::{Checkpoint, Header, MetricRow};
+use crate::optim::{FaultCounts, Optimizer, PassTimes};
 use crate::render::params::ParamSet;
+use crate::task::task_settings;
 use crate::task::Task;
 use crate::vocab::Slot;
 use crate::{Error, Result};
@@ -29,9 +31,9 @@ pub struct RunOptions {
     /// Show a progress bar.
     pub progress: bool,
     /// Gradient estimator.
-    pub method: super::Method,
+    pub method: crate::optim::Method,
     /// ReSTIR options.
-    pub restir: super::RestirOptions,
+    pub restir: crate::optim::RestirOptions,
     /// Set (e.g. from a Ctrl-C handler) to stop after the iteration under way: the run then
     /// writes its checkpoint and outputs as at a normal end and returns with `interrupted`.
     pub interrupt: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
@@ -66,36 +68,6 @@ pub struct RunSummary {
     pub interrupted: bool,
 }
 
-/// The optimizer settings a task asks for, with the given estimator.
-pub fn task_settings(
-    task: &Task,
-    cameras: &[usize],
-    method: super::Method,
-    restir: super::RestirOptions,
-) -> Settings {
-    Settings {
-        width: task.width,
-        height: task.height,
-        cameras: cameras.to_vec(),
-        primal_spp: task.optimizer.primal_spp,
-        primal: task.optimizer.primal,
-        cv_max_weight: task.optimizer.cv_max_weight,
-        gradient_spp: task.optimizer.gradient_spp,
-        loss: task.optimizer.loss,
-        seed: task.seed,
-        method,
-        restir,
-        schedule: task.optimizer.schedule.clone(),
-        adam_mask: task.optimizer.adam_mask,
-        multiscale_levels: task.optimizer.multiscale_levels,
-        smoothness: task.optimizer.smoothness,
-        exposure_learning_rate: task
-            .optimizer
-            .optimize_exposure
-            .then_some(task.optimizer.exposure_learning_rate),
-    }
-}
-
 /// A render as it is compared with its target: times the camera's exposure.
 fn exposed(mut img: Image, exposure: f32) -> Image {
     for p in &mut img.rgb {
@@ -120,11 +92,11 @@ pub fn evaluate(
             opt.render(
                 k,
                 spp,
-                super::pass_seed(seed, u32::MAX - 2, k as u32, super::Seeds::EVAL),
+                crate::optim::pass_seed(seed, u32::MAX - 2, k as u32, crate::optim::Seeds::EVAL),
             )?,
             opt.exposure()[k],
         );
-        sum += super::loss::image_relmse(&img, target);
+        sum += crate::optim::loss::image_relmse(&img, target);
         images.push(img);
     }
     Ok((sum / targets.len().max(1) as f64, images))
@@ -407,12 +379,10 @@ fn resume(
             ),
         ));
     }
-    if c.state.restir.is_some() != (opt.settings().method == super::Method::Restir) {
-        return Err(Error::file(
-            ckpt_path,
-            "the checkpoint was written by the other gradient estimator (baseline vs ReSTIR); resume with the same --method",
-        ));
-    }
+    c.state
+        .estimator
+        .check_method(opt.settings().method)
+        .map_err(|e| Error::file(ckpt_path, e.to_string()))?;
     opt.restore(&c.state)?;
     let mut rows = c.header.metrics;
     rows.retain(|r| r.iteration <= opt.iteration);
@@ -439,7 +409,7 @@ fn write_outputs(
         let img = opt.render(
             k,
             task.target.spp.min(64),
-            super::pass_seed(task.seed, u32::MAX - 1, k as u32, super::Seeds::EVAL),
+            crate::optim::pass_seed(task.seed, u32::MAX - 1, k as u32, crate::optim::Seeds::EVAL),
         )?;
         let img = exposed(img, opt.exposure()[k]);
         img.save(&out.join(format!("final_{}.exr", camera_file_name(&prep.scene, cam))))?;
@@ -448,7 +418,7 @@ fn write_outputs(
             camera_file_name(&prep.scene, cam)
         )))?;
     }
-    super::export::write_glb(
+    crate::optim::export::write_glb(
         &task.resolve(&task.scene),
         &out.join("optimized.glb"),
         &prep.scene,
@@ -461,7 +431,7 @@ fn write_outputs(
 /// with the learning-rate schedule on the right axis), and the texture RMSE (all and
 /// observed texels) when the ground truth is known.
 pub fn plot_metrics(path: &Path, task: &Task, rows: &[MetricRow], truth: bool) -> Result<()> {
-    use super::plot::{Panel, Series};
+    use crate::optim::plot::{Panel, Series};
     let series = |name: &str, color, f: &dyn Fn(&MetricRow) -> Option<f64>| Series {
         name: name.into(),
         color,
@@ -503,7 +473,7 @@ pub fn plot_metrics(path: &Path, task: &Task, rows: &[MetricRow], truth: bool) -
             secondary: None,
         });
     }
-    super::plot::plot(path, "seconds of optimization", &panels)
+    crate::optim::plot::plot(path, "seconds of optimization", &panels)
 }
 
 /// `observed_TEXTURE.png` per texture: white where a camera sample reaches the texel, black
@@ -535,8 +505,8 @@ pub fn write_gradient(
     gpu: &Gpu,
     task: &Task,
     dir: &Path,
-    method: super::Method,
-    restir: super::RestirOptions,
+    method: crate::optim::Method,
+    restir: crate::optim::RestirOptions,
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
     let prep = Problem::from_task(gpu, task, dir, false)?;

@@ -1,9 +1,10 @@
 //! What `psrestir optimize` reports while it runs: the rows of `metrics.csv` (texture and
 //! image errors, measured outside the timed optimization), the mean pass times, the progress
 //! bar and the log lines about observed texels and exposures.
-use super::checkpoint::MetricRow;
 use super::run::{evaluate, rmse};
-use super::{Optimizer, PassTimes, Problem};
+use super::Problem;
+use crate::optim::checkpoint::MetricRow;
+use crate::optim::{Optimizer, PassTimes};
 use crate::Result;
 
 /// The mean of the sampled iterations' pass times.
@@ -44,7 +45,7 @@ impl Metrics<'_> {
         match &self.prep.reference {
             Some(r) => (
                 Some(rmse(values, r)),
-                Some(super::observed::rmse_observed(
+                Some(crate::optim::observed::rmse_observed(
                     &self.prep.set,
                     values,
                     r,
@@ -116,8 +117,9 @@ impl Metrics<'_> {
     /// texels' initial RMSE (with a ground truth).
     pub(super) fn final_errors(&self, values: &[f32]) -> (Option<f64>, Option<f64>, Option<f64>) {
         let p = self.prep;
-        let observed =
-            |v: &[f32], r: &[f32]| super::observed::rmse_observed(&p.set, v, r, self.observed);
+        let observed = |v: &[f32], r: &[f32]| {
+            crate::optim::observed::rmse_observed(&p.set, v, r, self.observed)
+        };
         (
             p.reference.as_ref().map(|r| rmse(values, r)),
             p.reference.as_ref().map(|r| observed(values, r)),
@@ -128,7 +130,7 @@ impl Metrics<'_> {
 
 /// Say how many texels the cameras observe.
 pub(super) fn log_observed(observed: &[bool]) {
-    let (n_observed, n_texels) = super::observed::observed_count(observed);
+    let (n_observed, n_texels) = crate::optim::observed::observed_count(observed);
     log::info!(
         "{n_observed} of {n_texels} texels are observed by the cameras ({:.1}%); the others get \
          no gradient and keep their initial values (observed_*.png)",

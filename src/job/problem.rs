@@ -1,9 +1,9 @@
 //! An optimization problem in memory: the scene, the cameras, the textures to recover and one
 //! target image per camera. A task file describes one ([`Problem::from_task`]); an application
 //! can also build one from data it already holds ([`Problem::new`]).
-use super::pass_seed;
 use crate::gpu::Gpu;
 use crate::image_io::{self, Image};
+use crate::optim::pass_seed;
 use crate::render::params::ParamSet;
 use crate::render::{RenderSettings, Renderer, Techniques};
 use crate::scene::{self, EnvMap, Scene};
@@ -13,7 +13,7 @@ use crate::{Error, Result};
 use std::path::Path;
 
 /// Scenes, targets and textures of an optimization, ready for an
-/// [`Optimizer`](super::Optimizer).
+/// [`Optimizer`](crate::optim::Optimizer).
 #[derive(Clone, Debug)]
 pub struct Problem {
     /// The scene to optimize (its geometry, lights and cameras are known and fixed).
@@ -423,6 +423,40 @@ fn task_scene(task: &Task, path: &Path) -> Result<(Scene, Vec<usize>, FrameImage
 /// `<index>_<name>` of a camera, safe in file names.
 pub(crate) fn camera_file_name(scene: &Scene, cam: usize) -> String {
     format!("{cam}_{}", image_io::file_safe(&scene.cameras[cam].name))
+}
+
+impl crate::optim::Optimizer {
+    /// An optimizer for `problem`: its scene, textures and targets, with the sampling options
+    /// of `settings` (whose cameras, width and height are taken from the problem).
+    pub fn for_problem(
+        gpu: &Gpu,
+        problem: &Problem,
+        settings: crate::optim::Settings,
+    ) -> Result<crate::optim::Optimizer> {
+        let first = problem.targets.first().ok_or_else(|| {
+            crate::Error::Invalid("the problem has no targets: set or render them first".into())
+        })?;
+        let settings = crate::optim::Settings {
+            width: first.width,
+            height: first.height,
+            cameras: problem.cameras.clone(),
+            ..settings
+        };
+        let mut opt = crate::optim::Optimizer::new(
+            gpu,
+            &problem.scene,
+            problem.set.clone(),
+            settings,
+            &problem.targets,
+        )?;
+        if problem.masks.iter().any(Option::is_some) {
+            opt.set_masks(&problem.masks)?;
+        }
+        if problem.exposure.iter().any(|&e| e != 1.0) {
+            opt.set_exposure(&problem.exposure)?;
+        }
+        Ok(opt)
+    }
 }
 
 #[cfg(test)]

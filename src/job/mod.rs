@@ -1,0 +1,8 @@
+//! Running a task: the [`Problem`] a task file describes (scene, textures, cameras, targets),
+//! and [`run::run`], the optimization with progress, metrics, checkpoints and outputs. It sits
+//! above [`crate::optim`] (the optimizer knows nothing of task files) and [`crate::task`].
+mod metrics;
+pub mod problem;
+pub mod run;
+
+pub use problem::Problem;
