@@ -95,6 +95,10 @@ pub(crate) struct RestirArgs {
     /// Default: 0.9 with the independent primal, 0 with the control variate.
     #[arg(long)]
     pub(crate) target_smoothing: Option<f32>,
+    /// ReSTIR: the kept sample's confidence cap follows the learning-rate schedule (reuse
+    /// early, fresh samples late).
+    #[arg(long)]
+    pub(crate) m_cap_schedule: bool,
 }
 
 impl RestirArgs {
@@ -110,6 +114,7 @@ impl RestirArgs {
             positivization: !self.no_positivization,
             verify_paths: false,
             target_smoothing: self.target_smoothing,
+            m_cap_follows_schedule: self.m_cap_schedule,
         };
         o.validate()?;
         Ok(o)
@@ -195,6 +200,18 @@ pub(crate) struct OptimizeArgs {
     /// Weight of the smoothness prior, 0 (off) or more (overrides the task).
     #[arg(long)]
     pub(crate) smoothness: Option<f32>,
+    /// Multiply every texture's learning rate by this (overrides the task's rates).
+    #[arg(long)]
+    pub(crate) lr_scale: Option<f32>,
+    /// Adam's first-moment decay (overrides the task).
+    #[arg(long)]
+    pub(crate) adam_beta1: Option<f32>,
+    /// Adam's second-moment decay (overrides the task).
+    #[arg(long)]
+    pub(crate) adam_beta2: Option<f32>,
+    /// Adam's epsilon (overrides the task).
+    #[arg(long)]
+    pub(crate) adam_eps: Option<f32>,
 }
 
 /// The arguments of `psrestir bench`.
@@ -239,6 +256,19 @@ pub(crate) struct BenchArgs {
     /// Measure the gradient error only (skip the equal-time optimization).
     #[arg(long)]
     pub(crate) gradient_only: bool,
+    /// Measure the equal-time optimization only (skip the primal and gradient-error phases).
+    #[arg(long)]
+    pub(crate) end_to_end_only: bool,
+    /// Switch off the tasks' priors (multiscale gradient, smoothness prior).
+    #[arg(long)]
+    pub(crate) no_priors: bool,
+    /// Choose each estimator's learning rate, Adam decays and (ReSTIR) M cap, its schedule and
+    /// the target smoothing by a small search on another seed (cached in the output folder).
+    #[arg(long)]
+    pub(crate) tune: bool,
+    /// Seconds of each tuning trial (default: a third of --budget).
+    #[arg(long)]
+    pub(crate) tune_budget: Option<f64>,
     /// Primal estimator of every run (default: each task's own).
     #[arg(long, value_enum)]
     pub(crate) primal: Option<PrimalArg>,

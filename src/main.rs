@@ -276,9 +276,25 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
         primal,
         multiscale_levels,
         smoothness,
+        lr_scale,
+        adam_beta1,
+        adam_beta2,
+        adam_eps,
     } = args;
     let path = task.unwrap_or_else(|| PathBuf::from(DEFAULT_TASK));
     let mut task = Task::load(&path)?;
+    if let Some(f) = lr_scale {
+        if !(f.is_finite() && f > 0.0) {
+            bail!("--lr-scale must be a positive number");
+        }
+        for t in &mut task.textures {
+            t.learning_rate *= f;
+        }
+    }
+    let adam = &mut task.optimizer.adam;
+    adam.beta1 = adam_beta1.unwrap_or(adam.beta1);
+    adam.beta2 = adam_beta2.unwrap_or(adam.beta2);
+    adam.eps = adam_eps.unwrap_or(adam.eps);
     if let Some(p) = primal {
         task.optimizer.primal = p.mode();
     }
@@ -369,11 +385,20 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         reference_primal_spp,
         protocol,
         gradient_only,
+        end_to_end_only,
+        no_priors,
+        tune,
+        tune_budget,
         primal,
         eval_spp,
         report: to_docs,
         restir,
     } = args;
+    if let Some(b) = tune_budget {
+        if !(b.is_finite() && b > 0.0) {
+            bail!("--tune-budget must be a positive number of seconds");
+        }
+    }
     if to_docs {
         // Before the hours of measuring: the checkout must be where the report goes.
         let readme = std::fs::read_to_string("README.md")
@@ -407,6 +432,10 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
             ProtocolArg::Paper => psrestir::bench::Protocol::Paper,
         },
         gradient_only,
+        end_to_end_only,
+        no_priors,
+        tune,
+        tune_budget_s: tune_budget,
         primal: primal.map(PrimalArg::mode),
         eval_spp,
         restir: restir.resolve()?,

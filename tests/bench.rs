@@ -228,6 +228,89 @@ fn bench_json_has_every_field_finite_and_in_range() {
 }
 
 #[test]
+fn bench_tunes_each_estimator_and_reports_the_reconstruction_first() {
+    let Some(gpu) = common::gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let task = resolve_scene("sphere").unwrap();
+    let opts = BenchOptions {
+        budget_s: 0.6,
+        scale: 0.25,
+        eval_spp: 4,
+        curve_points: 3,
+        out: dir.path().to_path_buf(),
+        progress: false,
+        no_priors: true,
+        tune: true,
+        tune_budget_s: Some(0.2),
+        end_to_end_only: true,
+        ..Default::default()
+    };
+    bench(&gpu, &[task.clone()], &opts).unwrap();
+    let read = || -> Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("bench.json")).unwrap())
+            .unwrap()
+    };
+    let json = read();
+    assert_eq!(json["no_priors"].as_bool(), Some(true));
+    assert_eq!(json["tuned"].as_bool(), Some(true));
+    let s = &json["scenes"][0];
+    // The gradient phase did not run: its figures are absent (NaN is written as null).
+    assert!(s["gradient_relmse_restir"].is_null());
+    for (method, trials) in [("baseline", 6), ("restir", 11)] {
+        let t = &s[format!("tuned_{method}")];
+        let scores: Vec<f64> = t["trials"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| number(x, "score"))
+            .collect();
+        // Every coordinate's candidates were tried (baseline: the start, 2 learning rates,
+        // 2 β1, 1 β2; ReSTIR also 2 M caps, the scheduled cap and 2 target smoothings).
+        assert_eq!(scores.len(), trials, "{method}");
+        assert!(
+            scores.iter().all(|x| x.is_finite() && *x > 0.0),
+            "{method}: {scores:?}"
+        );
+        // The chosen score is one of the trials', no worse than the start's.
+        let best = number(t, "score");
+        assert!(
+            scores.contains(&best) && best <= scores[0],
+            "{method}: {best} {scores:?}"
+        );
+        assert!(!s[format!("settings_{method}")].as_str().unwrap().is_empty());
+        let min = number(s, &format!("texture_rmse_observed_min_{method}"));
+        let end = number(s, &format!("texture_rmse_observed_{method}"));
+        assert!(min > 0.0 && min <= end, "{method}: lowest {min}, end {end}");
+    }
+    // The chosen learning rate is the one the run used: its curve's factor times the task's
+    // rate is the schedule's; the settings strings name what was chosen.
+    let lr = number(&s["tuned_restir"]["best"], "learning_rate_scale");
+    assert!(s["settings_restir"]
+        .as_str()
+        .unwrap()
+        .contains(&format!("lr ×{lr}")));
+    let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
+    let recon = md
+        .find("## Reconstruction at equal time")
+        .expect("no reconstruction section");
+    let primal = md.find("## Primal image error").unwrap();
+    assert!(
+        recon < primal,
+        "the reconstruction is not the report's first section"
+    );
+    assert!(md.contains("priors (multiscale gradient, smoothness) are off"));
+    // A second run with the same options reads the search from its cache.
+    let cached = dir.path().join("sphere").join("tune_restir.json");
+    let before = std::fs::metadata(&cached).unwrap().modified().unwrap();
+    bench(&gpu, &[task], &opts).unwrap();
+    assert_eq!(
+        std::fs::metadata(&cached).unwrap().modified().unwrap(),
+        before
+    );
+    assert_eq!(read()["scenes"][0]["tuned_restir"], s["tuned_restir"]);
+}
+
+#[test]
 fn bench_rejects_unknown_scenes_and_bad_options_clearly() {
     let e = resolve_scene("no_such_scene").unwrap_err().to_string();
     assert!(

@@ -56,6 +56,7 @@ fn check_gradient_with(
         method: psrestir::optim::Method::Baseline,
         restir: Default::default(),
         schedule: Default::default(),
+        adam: Default::default(),
         adam_mask: false,
         multiscale_levels: 0,
         smoothness: 0.0,

@@ -44,17 +44,8 @@ fn plane() -> Scene {
     s
 }
 
-fn setup(
-    gpu: &psrestir::gpu::Gpu,
-    slot: Slot,
-    lr: f32,
-    res: u32,
-    truth: &[f32],
-) -> (Optimizer, Vec<f32>) {
-    setup_with(gpu, slot, lr, res, truth, Filter::Bilinear, |_| {})
-}
-
-/// `setup` with a texture filter and a change of the settings.
+/// The plane scene optimizing `slot` towards `truth`, with a texture filter and a change of
+/// the settings.
 fn setup_with(
     gpu: &psrestir::gpu::Gpu,
     slot: Slot,
@@ -86,6 +77,7 @@ fn setup_with(
         method: psrestir::optim::Method::Baseline,
         restir: Default::default(),
         schedule: Default::default(),
+        adam: Default::default(),
         adam_mask: false,
         multiscale_levels: 0,
         smoothness: 0.0,
@@ -114,43 +106,60 @@ fn adam_steps_on_the_gpu_equal_the_rust_reference() {
         .map(|i| (i % 7) as f32 / 7.0 + 0.05)
         .collect();
     let lr = 0.05;
-    let (mut opt, init) = setup(&gpu, Slot::BaseColor, lr, 4, &truth);
-    let n = init.len();
-    let (mut p, mut m, mut v) = (init.clone(), vec![0.0; n], vec![0.0; n]);
-    for t in 1..=3u32 {
-        opt.step().unwrap();
-        // The gradient this step computed (it stays in the gradient buffer), fed to the
-        // reference.
-        let g = opt.read_gradient().unwrap();
-        assert!(g.iter().any(|x| *x != 0.0));
-        adam::step(&mut p, &mut m, &mut v, &g, lr, t, 0.0, 1.0);
-        let gpu_p = opt.read_params().unwrap();
-        let [gm, gv] = opt.read_moments().unwrap();
-        for i in 0..n {
-            // Same inputs, same formula: only the last bits of sqrt and division may differ.
-            assert!(
-                (gm[i] - m[i]).abs() <= 1e-6 * m[i].abs() + 1e-20,
-                "step {t}, m[{i}]: {} vs {}",
-                gm[i],
-                m[i]
-            );
-            assert!(
-                (gv[i] - v[i]).abs() <= 1e-6 * v[i].abs() + 1e-30,
-                "step {t}, v[{i}]: {} vs {}",
-                gv[i],
-                v[i]
-            );
-            assert!(
-                (gpu_p[i] - p[i]).abs() <= 1e-6,
-                "step {t}, param {i}: {} vs {}",
-                gpu_p[i],
-                p[i]
-            );
+    // The default decays, and others (as `bench --tune` may choose): a large epsilon makes
+    // the step depend on the gradient's size, which the default hardly does.
+    let other = adam::AdamOptions {
+        beta1: 0.5,
+        beta2: 0.99,
+        eps: 1e-3,
+    };
+    for o in [adam::AdamOptions::default(), other] {
+        let (mut opt, init) = setup_with(
+            &gpu,
+            Slot::BaseColor,
+            lr,
+            4,
+            &truth,
+            Filter::Bilinear,
+            |s| s.adam = o,
+        );
+        let n = init.len();
+        let (mut p, mut m, mut v) = (init.clone(), vec![0.0; n], vec![0.0; n]);
+        for t in 1..=3u32 {
+            opt.step().unwrap();
+            // The gradient this step computed (it stays in the gradient buffer), fed to the
+            // reference.
+            let g = opt.read_gradient().unwrap();
+            assert!(g.iter().any(|x| *x != 0.0));
+            adam::step_with(&o, &mut p, &mut m, &mut v, &g, lr, t, (0.0, 1.0), false);
+            let gpu_p = opt.read_params().unwrap();
+            let [gm, gv] = opt.read_moments().unwrap();
+            for i in 0..n {
+                // Same inputs, same formula: only the last bits of sqrt and division may differ.
+                assert!(
+                    (gm[i] - m[i]).abs() <= 1e-6 * m[i].abs() + 1e-20,
+                    "{o:?} step {t}, m[{i}]: {} vs {}",
+                    gm[i],
+                    m[i]
+                );
+                assert!(
+                    (gv[i] - v[i]).abs() <= 1e-6 * v[i].abs() + 1e-30,
+                    "{o:?} step {t}, v[{i}]: {} vs {}",
+                    gv[i],
+                    v[i]
+                );
+                assert!(
+                    (gpu_p[i] - p[i]).abs() <= 1e-6,
+                    "{o:?} step {t}, param {i}: {} vs {}",
+                    gpu_p[i],
+                    p[i]
+                );
+            }
+            // Continue from the GPU's state so that rounding does not accumulate.
+            p = gpu_p;
+            m = gm;
+            v = gv;
         }
-        // Continue from the GPU's state so that rounding does not accumulate.
-        p = gpu_p;
-        m = gm;
-        v = gv;
     }
 }
 

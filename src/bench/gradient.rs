@@ -181,6 +181,25 @@ impl GradientPhase {
         }
     }
 
+    /// Not measured (`--end-to-end-only`): every error NaN, no gradient images.
+    pub(super) fn not_measured(prep: &Problem) -> GradientPhase {
+        let mut g = GradientPhase::new(0, prep.set.textures.len());
+        for v in [
+            &mut g.baseline_spp_equal_time,
+            &mut g.total_baseline,
+            &mut g.total_restir,
+            &mut g.total_baseline_equal_iterations,
+            &mut g.only_baseline,
+            &mut g.only_restir,
+            &mut g.only_baseline_equal_time,
+            &mut g.mean_baseline,
+            &mut g.mean_restir,
+        ] {
+            *v = f64::NAN;
+        }
+        g
+    }
+
     /// Nothing measured yet, at the task's `spp` with `n_textures` textures.
     fn new(spp: u32, n_textures: usize) -> GradientPhase {
         GradientPhase {

@@ -24,9 +24,10 @@ mod gradient;
 mod phases;
 pub mod report;
 mod results;
+pub mod tune;
 
 use gradient::gradient_phase;
-use phases::{optimization_phases, primal_phase, settings};
+use phases::{optimization_phases, primal_phase, settings, PrimalPhase};
 pub use results::*;
 
 use crate::gpu::Gpu;
@@ -107,6 +108,14 @@ pub struct BenchOptions {
     pub out: PathBuf,
     /// Show a progress bar.
     pub progress: bool,
+    /// Switch off the tasks' priors (multiscale gradient, smoothness prior).
+    pub no_priors: bool,
+    /// Each estimator's settings chosen by a search on another seed ([`tune`]).
+    pub tune: bool,
+    /// Seconds of each tuning trial (None: a third of `budget_s`).
+    pub tune_budget_s: Option<f64>,
+    /// The equal-time optimization only (no primal or gradient-error phases).
+    pub end_to_end_only: bool,
 }
 
 impl Default for BenchOptions {
@@ -128,6 +137,10 @@ impl Default for BenchOptions {
             restir: RestirOptions::default(),
             out: PathBuf::from("out/bench"),
             progress: true,
+            no_priors: false,
+            tune: false,
+            tune_budget_s: None,
+            end_to_end_only: false,
         }
     }
 }
@@ -278,10 +291,24 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
     // Load every task first, so that a bad one fails before hours of measuring.
     let mut loaded = Vec::new();
     for p in tasks {
-        loaded.push(o.protocol.apply(&scaled(&Task::load(p)?, o.scale)));
+        let mut t = o.protocol.apply(&scaled(&Task::load(p)?, o.scale));
+        if o.no_priors {
+            t.optimizer.multiscale_levels = 0;
+            t.optimizer.smoothness = 0.0;
+        }
+        loaded.push(t);
+    }
+    if o.gradient_only && o.end_to_end_only {
+        return Err(Error::Invalid(
+            "bench: --gradient-only and --end-to-end-only leave nothing to measure".into(),
+        ));
     }
     std::fs::create_dir_all(&o.out).map_err(|e| Error::file(&o.out, e.to_string()))?;
-    let per_scene = o.repeats.max(1) as u64 + if o.gradient_only { 2 } else { 4 };
+    let per_scene = if o.end_to_end_only {
+        3
+    } else {
+        o.repeats.max(1) as u64 + if o.gradient_only { 2 } else { 4 }
+    };
     let progress = Progress::new(o.progress, loaded.len() as u64 * per_scene);
     let mut report = BenchReport {
         version: env!("CARGO_PKG_VERSION").into(),
@@ -298,6 +325,8 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         eval_spp: o.eval_spp,
         m_cap: o.restir.m_cap,
         target_smoothing: o.restir.target_smoothing,
+        no_priors: o.no_priors,
+        tuned: o.tune,
         scenes: Vec::new(),
     };
     for task in &loaded {
@@ -310,12 +339,47 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         progress.message(format!("{name}: rendering targets"));
         let prep = Problem::from_task(gpu, task, &dir, false)?;
         progress.done();
-        let pp = primal_phase(gpu, task, &prep, o, &progress)?;
-        let g = gradient_phase(gpu, task, &prep, o, &progress)?;
+        let (pp, g) = if o.end_to_end_only {
+            (
+                PrimalPhase::not_measured(),
+                gradient::GradientPhase::not_measured(&prep),
+            )
+        } else {
+            (
+                primal_phase(gpu, task, &prep, o, &progress)?,
+                gradient_phase(gpu, task, &prep, o, &progress)?,
+            )
+        };
         let (optimization, finals) = if o.gradient_only {
             (None, None)
         } else {
-            let (r, f) = optimization_phases(gpu, task, &prep, o, &progress)?;
+            let tuned = if o.tune {
+                let budget = o.tune_budget_s.unwrap_or(o.budget_s / 3.0);
+                let key = format!(
+                    "{} {}x{} {:?} scale {} priors {} primal {:?} restir {:?} tuning {budget} s, psrestir {}",
+                    task.path.display(),
+                    task.width,
+                    task.height,
+                    o.protocol,
+                    o.scale,
+                    !o.no_priors,
+                    o.primal,
+                    o.restir,
+                    env!("CARGO_PKG_VERSION"),
+                );
+                let mut t = Vec::new();
+                for method in [Method::Baseline, Method::Restir] {
+                    let s = settings(&prep, task, method, o);
+                    t.push(Some(tune::tune(
+                        gpu, &prep, &s, budget, &key, &dir, &progress,
+                    )?));
+                }
+                progress.done();
+                [t[0].take(), t[1].take()]
+            } else {
+                [None, None]
+            };
+            let (r, f) = optimization_phases(gpu, task, &prep, o, tuned, &progress)?;
             (Some(r), Some(f))
         };
         // The primal estimator of both phases (the task's, or the bench's --primal).

@@ -21,6 +21,18 @@ pub(super) struct PrimalPhase {
     pub(super) ms_control_variate: Option<f64>,
 }
 
+impl PrimalPhase {
+    /// Not measured (`--end-to-end-only`).
+    pub(super) fn not_measured() -> PrimalPhase {
+        PrimalPhase {
+            relmse_independent: f64::NAN,
+            relmse_control_variate: f64::NAN,
+            ms_independent: None,
+            ms_control_variate: None,
+        }
+    }
+}
+
 pub(super) fn primal_phase(
     gpu: &Gpu,
     task: &Task,
@@ -149,9 +161,17 @@ pub(super) fn optimization_phase(
     prep: &Problem,
     o: &BenchOptions,
     method: Method,
+    tuned: Option<&tune::Tunable>,
     progress: &Progress,
 ) -> Result<OptimizationRun> {
-    let mut opt = Optimizer::for_problem(gpu, prep, settings(prep, task, method, o))?;
+    let mut s = settings(prep, task, method, o);
+    if let Some(t) = tuned {
+        t.apply(&mut s);
+    }
+    let mut opt = Optimizer::for_problem(gpu, prep, s)?;
+    if let Some(t) = tuned {
+        t.apply_learning_rate(&mut opt, prep);
+    }
     let truth = prep.reference.as_deref();
     let texture_rmse = |v: &[f32]| truth.map(|r| rmse(v, r)).unwrap_or(f64::NAN);
     let observed = opt.observed_texels()?.to_vec();
@@ -254,6 +274,7 @@ pub(super) fn optimization_phases(
     task: &Task,
     prep: &Problem,
     o: &BenchOptions,
+    tuned: [Option<tune::Tuned>; 2],
     progress: &Progress,
 ) -> Result<(OptimizationResult, FinalImages)> {
     let init = Optimizer::for_problem(gpu, prep, settings(prep, task, Method::Baseline, o))?;
@@ -279,8 +300,37 @@ pub(super) fn optimization_phases(
         learning_rate_factor: None,
         image_relmse: Some(image_initial),
     };
-    let base = optimization_phase(gpu, task, prep, o, Method::Baseline, progress)?;
-    let re = optimization_phase(gpu, task, prep, o, Method::Restir, progress)?;
+    let [tuned_baseline, tuned_restir] = tuned;
+    let best = |t: &Option<tune::Tuned>| t.as_ref().map(|t| t.best);
+    let (tb_best, tr_best) = (best(&tuned_baseline), best(&tuned_restir));
+    let base = optimization_phase(
+        gpu,
+        task,
+        prep,
+        o,
+        Method::Baseline,
+        tb_best.as_ref(),
+        progress,
+    )?;
+    let re = optimization_phase(
+        gpu,
+        task,
+        prep,
+        o,
+        Method::Restir,
+        tr_best.as_ref(),
+        progress,
+    )?;
+    let describe = |method: Method, t: Option<tune::Tunable>| {
+        t.unwrap_or_else(|| tune::Tunable::untuned(&settings(prep, task, method, o)))
+            .describe(method)
+    };
+    let min_observed = |r: &OptimizationRun| {
+        r.curve
+            .iter()
+            .map(|p| p.texture_rmse_observed)
+            .fold(texture_observed_initial, f64::min)
+    };
     let last = |r: &OptimizationRun| -> (f64, f64, f64) {
         let t = r
             .curve
@@ -336,6 +386,12 @@ pub(super) fn optimization_phases(
         merge_evaluations_per_iteration: re.merge_evaluations,
         state_bytes_per_texel: re.state_bytes_per_texel,
         state_bytes_per_texel_baseline: base.state_bytes_per_texel,
+        texture_rmse_observed_min_baseline: min_observed(&base),
+        texture_rmse_observed_min_restir: min_observed(&re),
+        settings_baseline: describe(Method::Baseline, tb_best),
+        settings_restir: describe(Method::Restir, tr_best),
+        tuned_baseline,
+        tuned_restir,
         curve_baseline: with_start(&base.curve),
         curve_restir: with_start(&re.curve),
     };

@@ -120,6 +120,10 @@ pub fn write_scene_files(
 /// `gradients.png`: the reference and both estimators' gradients under the converged
 /// adjoint, side by side.
 fn write_gradients(dir: &Path, prep: &Problem, g: &GradientSnapshot) -> Result<()> {
+    if g.reference.is_empty() {
+        // Not measured (--end-to-end-only).
+        return Ok(());
+    }
     // Gradients: one row per texture, scaled by the reference's 99th percentile magnitude.
     let mut rows = Vec::new();
     for i in 0..prep.set.textures.len() {
@@ -308,9 +312,123 @@ pub fn optimization_table(r: &BenchReport) -> String {
     s
 }
 
+/// Each estimator's settings in the run (tuned or the task's) and, with `--tune`, the
+/// search's score on its own seed.
+pub fn settings_table(r: &BenchReport) -> String {
+    let mut s = String::from(
+        "| scene | baseline settings | tuning score | ReSTIR settings | tuning score |\n\
+         |---|---|---|---|---|\n",
+    );
+    for x in &r.scenes {
+        let Some(o) = &x.optimization else { continue };
+        let score = |t: &Option<super::tune::Tuned>| {
+            t.as_ref().map_or("–".to_string(), |t| {
+                format!("{:.4} ({} trials)", t.score, t.trials.len())
+            })
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} |",
+            x.name,
+            o.settings_baseline,
+            score(&o.tuned_baseline),
+            o.settings_restir,
+            score(&o.tuned_restir)
+        );
+    }
+    s
+}
+
+/// Observed-texel RMSE along each run (at a quarter, half, three quarters and the end of
+/// the budget), its lowest value and how far the end lies above it.
+pub fn curve_table(r: &BenchReport) -> String {
+    let mut s = String::from(
+        "| scene | estimator | ¼ | ½ | ¾ | end | lowest | end / lowest |\n\
+         |---|---|---|---|---|---|---|---|\n",
+    );
+    for x in &r.scenes {
+        let Some(o) = &x.optimization else { continue };
+        for (name, curve, min) in [
+            (
+                "baseline",
+                &o.curve_baseline,
+                o.texture_rmse_observed_min_baseline,
+            ),
+            (
+                "ReSTIR",
+                &o.curve_restir,
+                o.texture_rmse_observed_min_restir,
+            ),
+        ] {
+            let at = |f: f64| {
+                curve
+                    .iter()
+                    .take_while(|p| p.seconds <= f * r.budget_s)
+                    .last()
+                    .map_or(f64::NAN, |p| p.texture_rmse_observed)
+            };
+            let end = curve.last().map_or(f64::NAN, |p| p.texture_rmse_observed);
+            let _ = writeln!(
+                s,
+                "| {} | {name} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {} |",
+                x.name,
+                at(0.25),
+                at(0.5),
+                at(0.75),
+                end,
+                min,
+                ratio(end / min)
+            );
+        }
+    }
+    s
+}
+
+/// The reconstruction at equal time, the headline section of `report.md`.
+fn reconstruction_markdown(r: &BenchReport) -> String {
+    let mut md = String::from("## Reconstruction at equal time\n\n");
+    md.push_str(&optimization_table(r));
+    let _ = writeln!(
+        md,
+        "\nBoth estimators optimize each scene from the same start for {} s of step time \
+         (evaluation renders not counted); image relMSE from {}-spp renders of every camera \
+         against its target, texture RMSE against the ground truth over the texels a camera \
+         sees. Ratios are ReSTIR / baseline. {} {}\n",
+        r.budget_s,
+        r.eval_spp,
+        if r.no_priors {
+            "The tasks' priors (multiscale gradient, smoothness) are off (`--no-priors`)."
+        } else {
+            "With the tasks' priors (multiscale gradient, smoothness prior)."
+        },
+        if r.tuned {
+            "Each estimator runs at its own settings, chosen by `--tune` on another seed:"
+        } else {
+            "Both run at the tasks' settings:"
+        }
+    );
+    md.push_str(&settings_table(r));
+    md.push_str("\n### Observed-texel RMSE along the run\n\n");
+    md.push_str(&curve_table(r));
+    md.push_str(
+        "\nA run that ends well above its lowest value drifted: its steps moved texels the \
+         images hardly determine. Curves per scene: `<scene>/error_vs_time.png`.\n\n",
+    );
+    md
+}
+
 /// Both tables, as `psrestir bench` prints them.
 pub fn table(r: &BenchReport) -> String {
-    let mut s = primal_table(r);
+    let mut s = String::new();
+    if r.scenes.iter().any(|x| x.optimization.is_some()) {
+        s.push_str(&optimization_table(r));
+        s.push('\n');
+        s.push_str(&settings_table(r));
+        s.push('\n');
+        s.push_str(&curve_table(r));
+        s.push('\n');
+    }
+    s.push_str(&primal_table(r));
     s.push('\n');
     s.push_str(&gradient_table(r));
     if r.scenes
@@ -322,10 +440,6 @@ pub fn table(r: &BenchReport) -> String {
     }
     s.push('\n');
     s.push_str(&successive_table(r));
-    if r.scenes.iter().any(|x| x.optimization.is_some()) {
-        s.push('\n');
-        s.push_str(&optimization_table(r));
-    }
     s
 }
 
@@ -413,8 +527,22 @@ pub fn headline_table(r: &BenchReport) -> String {
     let _ = write!(
         s,
         "\npsrestir {} on `{}`, {} s of optimization per estimator and scene, protocol `{:?}`, \
-         size scale {}.\n",
-        r.version, r.adapter, r.budget_s, r.protocol, r.scale
+         size scale {}, {}, {}.\n",
+        r.version,
+        r.adapter,
+        r.budget_s,
+        r.protocol,
+        r.scale,
+        if r.no_priors {
+            "no priors"
+        } else {
+            "the tasks' priors"
+        },
+        if r.tuned {
+            "each estimator at its tuned settings"
+        } else {
+            "the tasks' settings"
+        }
     );
     s
 }
@@ -501,6 +629,9 @@ pub fn report_markdown(r: &BenchReport) -> String {
         r.budget_s,
         r.eval_spp,
     );
+    if r.scenes.iter().any(|x| x.optimization.is_some()) {
+        md.push_str(&reconstruction_markdown(r));
+    }
     md.push_str("## Primal image error\n\n");
     md.push_str(&primal_table(r));
     md.push_str(
@@ -532,9 +663,7 @@ pub fn report_markdown(r: &BenchReport) -> String {
          of n independent baseline estimates.\n\n",
     );
     if r.scenes.iter().any(|x| x.optimization.is_some()) {
-        md.push_str("## Equal-time optimization\n\n");
-        md.push_str(&optimization_table(r));
-        md.push_str("\n## GPU time per pass (ms, timestamp queries), state and merge work\n\n");
+        md.push_str("## GPU time per pass (ms, timestamp queries), state and merge work\n\n");
         md.push_str(&pass_table(r));
     }
     md.push_str("\n## Per scene\n\n");

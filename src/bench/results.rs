@@ -178,6 +178,19 @@ pub struct OptimizationResult {
     pub state_bytes_per_texel: f64,
     /// The same for the baseline optimizer.
     pub state_bytes_per_texel_baseline: f64,
+    /// Lowest observed-texel RMSE of the baseline's run (a run that ends well above it
+    /// drifted: it has a floor).
+    pub texture_rmse_observed_min_baseline: f64,
+    /// Lowest observed-texel RMSE of ReSTIR's run.
+    pub texture_rmse_observed_min_restir: f64,
+    /// The baseline's settings in this run (tuned by `--tune`, else the task's).
+    pub settings_baseline: String,
+    /// ReSTIR's settings in this run.
+    pub settings_restir: String,
+    /// The search that chose the baseline's settings (`--tune`).
+    pub tuned_baseline: Option<super::tune::Tuned>,
+    /// The search that chose ReSTIR's settings.
+    pub tuned_restir: Option<super::tune::Tuned>,
     /// Optimization curve of the baseline.
     pub curve_baseline: Vec<CurvePoint>,
     /// Optimization curve of ReSTIR.
@@ -216,6 +229,10 @@ pub struct BenchReport {
     /// ReSTIR's target smoothing as given (the last target adjoint's weight); absent: by the
     /// primal estimator (each scene's `target_smoothing`).
     pub target_smoothing: Option<f32>,
+    /// The tasks' priors (multiscale gradient, smoothness) were switched off (`--no-priors`).
+    pub no_priors: bool,
+    /// Each estimator ran at settings chosen by `--tune`.
+    pub tuned: bool,
     /// Per scene.
     pub scenes: Vec<SceneResult>,
 }

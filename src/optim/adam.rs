@@ -13,6 +13,45 @@ pub const BETA2: f32 = 0.999;
 /// Denominator epsilon.
 pub const EPS: f32 = 1e-8;
 
+/// Adam's decays and epsilon (the task file's `[optimizer.adam]`; `bench --tune` searches
+/// them per estimator).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AdamOptions {
+    /// First-moment decay, in [0, 1).
+    pub beta1: f32,
+    /// Second-moment decay, in [0, 1).
+    pub beta2: f32,
+    /// Denominator epsilon, > 0.
+    pub eps: f32,
+}
+
+impl Default for AdamOptions {
+    fn default() -> Self {
+        AdamOptions {
+            beta1: BETA1,
+            beta2: BETA2,
+            eps: EPS,
+        }
+    }
+}
+
+impl AdamOptions {
+    /// An error naming the field (`beta1`, `beta2`, `eps`) that is out of range.
+    pub fn check(&self) -> std::result::Result<(), (&'static str, &'static str)> {
+        if !(0.0..1.0).contains(&self.beta1) {
+            return Err(("beta1", "must be in [0, 1)"));
+        }
+        if !(0.0..1.0).contains(&self.beta2) {
+            return Err(("beta2", "must be in [0, 1)"));
+        }
+        if !(self.eps.is_finite() && self.eps > 0.0) {
+            return Err(("eps", "must be a positive number"));
+        }
+        Ok(())
+    }
+}
+
 /// One Adam step at step number `t` (from 1) with clamping to `[lo, hi]`, on the CPU.
 #[allow(clippy::too_many_arguments)]
 pub fn step(
@@ -42,16 +81,33 @@ pub fn step_masked(
     hi: f32,
     mask: bool,
 ) {
-    let bias1 = 1.0 - BETA1.powi(t as i32);
-    let bias2 = 1.0 - BETA2.powi(t as i32);
+    let o = AdamOptions::default();
+    step_with(&o, params, m, v, grad, lr, t, (lo, hi), mask)
+}
+
+/// [`step_masked`] with the decays and epsilon of `o`.
+#[allow(clippy::too_many_arguments)]
+pub fn step_with(
+    o: &AdamOptions,
+    params: &mut [f32],
+    m: &mut [f32],
+    v: &mut [f32],
+    grad: &[f32],
+    lr: f32,
+    t: u32,
+    (lo, hi): (f32, f32),
+    mask: bool,
+) {
+    let bias1 = 1.0 - o.beta1.powi(t as i32);
+    let bias2 = 1.0 - o.beta2.powi(t as i32);
     for i in 0..params.len() {
         let g = grad[i];
         if !g.is_finite() || (mask && g == 0.0) {
             continue;
         }
-        m[i] = BETA1 * m[i] + (1.0 - BETA1) * g;
-        v[i] = BETA2 * v[i] + (1.0 - BETA2) * g * g;
-        let s = lr * (m[i] / bias1) / ((v[i] / bias2).sqrt() + EPS);
+        m[i] = o.beta1 * m[i] + (1.0 - o.beta1) * g;
+        v[i] = o.beta2 * v[i] + (1.0 - o.beta2) * g * g;
+        let s = lr * (m[i] / bias1) / ((v[i] / bias2).sqrt() + o.eps);
         params[i] = (params[i] - s).clamp(lo, hi);
     }
 }
@@ -98,7 +154,13 @@ pub(crate) struct AdamBuffers<'a> {
 }
 
 impl AdamPass {
-    pub(crate) fn new(gpu: &Gpu, set: &ParamSet, mask: bool, b: AdamBuffers) -> Result<AdamPass> {
+    pub(crate) fn new(
+        gpu: &Gpu,
+        set: &ParamSet,
+        options: AdamOptions,
+        mask: bool,
+        b: AdamBuffers,
+    ) -> Result<AdamPass> {
         let layout = gpu.pass_layout("adam", 0)?;
         let pipeline = gpu.compute_pipeline("adam", &[&layout])?;
         let textures = set
@@ -110,9 +172,9 @@ impl AdamPass {
                     offset: t.offset,
                     count: t.len() as u32,
                     lr: t.learning_rate,
-                    beta1: BETA1,
-                    beta2: BETA2,
-                    eps: EPS,
+                    beta1: options.beta1,
+                    beta2: options.beta2,
+                    eps: options.eps,
                     bias1: 1.0,
                     bias2: 1.0,
                     lo,
@@ -156,8 +218,8 @@ impl AdamPass {
         for ((u, g, p), tex) in self.textures.iter_mut().zip(&set.textures) {
             p.lr = tex.learning_rate * factor;
             rates.push(p.lr);
-            p.bias1 = 1.0 - BETA1.powi(t as i32);
-            p.bias2 = 1.0 - BETA2.powi(t as i32);
+            p.bias1 = 1.0 - p.beta1.powi(t as i32);
+            p.bias2 = 1.0 - p.beta2.powi(t as i32);
             gpu.queue.write_buffer(u, 0, bytemuck::bytes_of(p));
             let grid = grid_2d(p.count, WORKGROUP, max_dim);
             let timing = timer.next(PassKind::Adam);

@@ -174,6 +174,7 @@ impl Optimizer {
         let adam = adam::AdamPass::new(
             gpu,
             &set,
+            settings.adam,
             settings.adam_mask,
             adam::AdamBuffers {
                 grad: &grad,
@@ -276,6 +277,7 @@ impl Optimizer {
         let frame = estimator::Frame {
             iteration,
             scene_group: &self.renderer.scene.bind_group,
+            schedule_factor: self.settings.schedule.factor(iteration, self.progress),
         };
         self.estimator.encode(enc, &frame, &mut self.timer);
         if self.uses_previous_state() {

@@ -33,6 +33,8 @@ pub struct Settings {
     /// Learning-rate schedule: a factor of every texture's learning rate over the run (see
     /// [`Optimizer::set_progress`](super::Optimizer::set_progress)).
     pub schedule: Schedule,
+    /// Adam's decays and epsilon.
+    pub adam: super::adam::AdamOptions,
     /// Masked (sparse) Adam: entries whose gradient is exactly zero in an iteration keep
     /// their value and moments, as Mitsuba 3's `mask_updates`.
     pub adam_mask: bool,
@@ -65,6 +67,7 @@ impl Settings {
             method: Method::Restir,
             restir: RestirOptions::default(),
             schedule: Schedule::constant(),
+            adam: Default::default(),
             adam_mask: false,
             multiscale_levels: 0,
             smoothness: 0.0,
@@ -96,6 +99,9 @@ impl Settings {
         }
         if let Err((key, msg)) = self.schedule.check() {
             return Err((format!("optimizer.schedule.{key}"), msg));
+        }
+        if let Err((key, msg)) = self.adam.check() {
+            return bad(&format!("optimizer.adam.{key}"), msg);
         }
         if self.multiscale_levels > super::multiscale::MAX_LEVELS {
             let msg = format!("must be between 0 and {}", super::multiscale::MAX_LEVELS);

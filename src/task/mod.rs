@@ -186,6 +186,9 @@ pub struct OptimizerSpec {
     /// Sparse Adam: entries with an exactly zero gradient keep their value and moments.
     #[serde(default)]
     pub adam_mask: bool,
+    /// Adam's decays and epsilon (`[optimizer.adam]`: `beta1`, `beta2`, `eps`).
+    #[serde(default)]
+    pub adam: crate::optim::adam::AdamOptions,
     /// Levels of the multiscale gradient (0: off, at most 4): before Adam, each observed
     /// texel's gradient is averaged with the mean gradients of its 2^l x 2^l blocks.
     #[serde(default)]
@@ -611,6 +614,7 @@ pub fn task_settings(
         method,
         restir,
         schedule: task.optimizer.schedule.clone(),
+        adam: task.optimizer.adam,
         adam_mask: task.optimizer.adam_mask,
         multiscale_levels: task.optimizer.multiscale_levels,
         smoothness: task.optimizer.smoothness,

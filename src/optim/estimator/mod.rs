@@ -115,6 +115,8 @@ pub(crate) struct Frame<'a> {
     pub iteration: u32,
     /// The scene bind group (group 0).
     pub scene_group: &'a wgpu::BindGroup,
+    /// The learning-rate schedule's factor at this iteration (1 without a schedule).
+    pub schedule_factor: f32,
 }
 
 impl Frame<'_> {

@@ -117,6 +117,11 @@ pub struct RestirOptions {
     /// with the independent primal and 0 with the control variate, whose image is already a
     /// recursive average (a second one only adds lag: measured worse on `vase` and `sphere`).
     pub target_smoothing: Option<f32>,
+    /// Reuse on a schedule: the kept samples' confidence cap is `m_cap` times the
+    /// learning-rate schedule's factor at the iteration (so with a decaying schedule early
+    /// iterations reuse fully and late ones average mostly fresh samples); without a schedule
+    /// it changes nothing.
+    pub m_cap_follows_schedule: bool,
 }
 
 impl Default for RestirOptions {
@@ -128,6 +133,7 @@ impl Default for RestirOptions {
             positivization: true,
             verify_paths: false,
             target_smoothing: None,
+            m_cap_follows_schedule: false,
         }
     }
 }
@@ -510,7 +516,12 @@ impl Estimator for Restir {
             | if have_prev { FLAG_HAVE_PREV } else { 0 }
             | if o.verify_paths { FLAG_VERIFY } else { 0 };
         // Every kept reservoir has absorbed the fresh candidates of `history` iterations.
-        self.merge_params.m_kept = (self.merge_params.m_fresh * self.history as f32).min(o.m_cap);
+        let cap = if o.m_cap_follows_schedule {
+            o.m_cap * frame.schedule_factor
+        } else {
+            o.m_cap
+        };
+        self.merge_params.m_kept = (self.merge_params.m_fresh * self.history as f32).min(cap);
         self.merge_params.target_cur = target_cur;
         self.merge_params.target_prev = target_prev;
         self.queue.write_buffer(

@@ -1,0 +1,277 @@
+//! `bench --tune`: each estimator's own settings, chosen by a small search on a seed that is
+//! not the reported one, so that neither runs on settings made for the other.
+//!
+//! Coordinate search from the task's settings, one pass, in this order: the learning rate
+//! (x0.5, x2), Adam's β1 (0.5, 0) and β2 (0.99), and for ReSTIR the M cap (2, 32), whether
+//! the cap follows the learning-rate schedule, and the target smoothing (0, 0.9). Each trial
+//! optimizes for the tuning budget from the initial textures with the seed
+//! [`TUNE_SEED_OFFSET`] away from the task's; its score is the observed-texel RMSE at the
+//! end (the headline's measure). A value is kept only when it lowers the score by more than
+//! [`MIN_GAIN`] (noise between trials of one seed is about that). Adam's ε is not searched: it
+//! matters only where it is comparable to the gradients' size, which differs by orders of
+//! magnitude between scenes (settable with the task's `[optimizer.adam]`).
+use super::*;
+use crate::optim::adam::AdamOptions;
+use crate::optim::Stop;
+use serde::Deserialize;
+
+/// The tuning runs use the task's seed plus this.
+pub const TUNE_SEED_OFFSET: u32 = 7919;
+
+/// Relative improvement a trial needs over the best so far to replace it.
+pub const MIN_GAIN: f64 = 0.01;
+
+/// Settings of one estimator that the search chooses.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Tunable {
+    /// Factor of every texture's learning rate.
+    pub learning_rate_scale: f32,
+    /// Adam's decays and epsilon.
+    pub adam: AdamOptions,
+    /// ReSTIR's M cap.
+    pub m_cap: f32,
+    /// ReSTIR: the M cap follows the learning-rate schedule.
+    pub m_cap_follows_schedule: bool,
+    /// ReSTIR's target smoothing (None: by the primal estimator).
+    pub target_smoothing: Option<f32>,
+}
+
+impl Tunable {
+    /// The task's and the bench options' settings.
+    pub fn untuned(settings: &Settings) -> Tunable {
+        Tunable {
+            learning_rate_scale: 1.0,
+            adam: settings.adam,
+            m_cap: settings.restir.m_cap,
+            m_cap_follows_schedule: settings.restir.m_cap_follows_schedule,
+            target_smoothing: settings.restir.target_smoothing,
+        }
+    }
+
+    /// Put these settings into `settings`.
+    pub fn apply(&self, settings: &mut Settings) {
+        settings.adam = self.adam;
+        settings.restir.m_cap = self.m_cap;
+        settings.restir.m_cap_follows_schedule = self.m_cap_follows_schedule;
+        settings.restir.target_smoothing = self.target_smoothing;
+    }
+
+    /// Scale the learning rates of `opt`'s textures (made from `prep`).
+    pub fn apply_learning_rate(&self, opt: &mut Optimizer, prep: &Problem) {
+        for (t, p) in opt.set.textures.iter_mut().zip(&prep.set.textures) {
+            t.learning_rate = p.learning_rate * self.learning_rate_scale;
+        }
+    }
+
+    /// A short description, e.g. `lr x2, β1 0.5, M cap 2 (scheduled)`.
+    pub fn describe(&self, method: Method) -> String {
+        let mut s = format!(
+            "lr ×{}, β1 {}, β2 {}",
+            self.learning_rate_scale, self.adam.beta1, self.adam.beta2
+        );
+        if method == Method::Restir {
+            let _ = write!(
+                s,
+                ", M cap {}{}, target smoothing {}",
+                self.m_cap,
+                if self.m_cap_follows_schedule {
+                    " (follows the schedule)"
+                } else {
+                    ""
+                },
+                self.target_smoothing
+                    .map_or("by primal".to_string(), |b| b.to_string())
+            );
+        }
+        s
+    }
+}
+
+use std::fmt::Write as _;
+
+/// One trial of the search.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Trial {
+    /// The settings tried.
+    pub settings: Tunable,
+    /// Observed-texel RMSE at the end of the tuning budget.
+    pub score: f64,
+}
+
+/// What the search chose for one estimator, and its trials (`tune_<method>.json` in the
+/// scene's output folder).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Tuned {
+    /// What the cached result was made for (task, sizes, priors, budget, version): a cache
+    /// with another key is searched again.
+    pub key: String,
+    /// The chosen settings.
+    pub best: Tunable,
+    /// Their score.
+    pub score: f64,
+    /// Every trial, in order.
+    pub trials: Vec<Trial>,
+}
+
+/// The candidates of each coordinate, in search order.
+fn coordinates(method: Method) -> Vec<Box<dyn Fn(&Tunable) -> Vec<Tunable>>> {
+    let mut c: Vec<Box<dyn Fn(&Tunable) -> Vec<Tunable>>> = vec![
+        Box::new(|b: &Tunable| {
+            [0.5, 2.0]
+                .map(|f| Tunable {
+                    learning_rate_scale: b.learning_rate_scale * f,
+                    ..*b
+                })
+                .to_vec()
+        }),
+        Box::new(|b: &Tunable| {
+            [0.5, 0.0]
+                .map(|beta1| Tunable {
+                    adam: AdamOptions { beta1, ..b.adam },
+                    ..*b
+                })
+                .to_vec()
+        }),
+        Box::new(|b: &Tunable| {
+            vec![Tunable {
+                adam: AdamOptions {
+                    beta2: 0.99,
+                    ..b.adam
+                },
+                ..*b
+            }]
+        }),
+    ];
+    if method == Method::Restir {
+        c.push(Box::new(|b: &Tunable| {
+            [2.0, 32.0].map(|m_cap| Tunable { m_cap, ..*b }).to_vec()
+        }));
+        c.push(Box::new(|b: &Tunable| {
+            vec![Tunable {
+                m_cap_follows_schedule: !b.m_cap_follows_schedule,
+                ..*b
+            }]
+        }));
+        c.push(Box::new(|b: &Tunable| {
+            [0.0, crate::optim::restir::TARGET_SMOOTHING_INDEPENDENT]
+                .map(|s| Tunable {
+                    target_smoothing: Some(s),
+                    ..*b
+                })
+                .to_vec()
+        }));
+    }
+    c
+}
+
+/// Observed-texel RMSE after optimizing `prep` for `budget_s` with `settings` and `t`, from
+/// the initial textures, with the tuning seed.
+fn trial(
+    gpu: &Gpu,
+    prep: &Problem,
+    settings: &Settings,
+    t: &Tunable,
+    budget_s: f64,
+) -> Result<f64> {
+    let mut s = settings.clone();
+    t.apply(&mut s);
+    s.seed = s.seed.wrapping_add(TUNE_SEED_OFFSET);
+    let mut opt = Optimizer::for_problem(gpu, prep, s)?;
+    t.apply_learning_rate(&mut opt, prep);
+    let stop = Stop {
+        iterations: None,
+        time_budget: Some(std::time::Duration::from_secs_f64(budget_s)),
+    };
+    opt.run(stop, |_| std::ops::ControlFlow::Continue(()))?;
+    let observed = opt.observed_texels()?.to_vec();
+    let values = opt.read_params()?;
+    let score = match prep.reference.as_deref() {
+        Some(r) => rmse_observed(&prep.set, &values, r, &observed),
+        None => f64::NAN,
+    };
+    Ok(if score.is_finite() {
+        score
+    } else {
+        f64::INFINITY
+    })
+}
+
+/// The settings of `method` chosen by the search (or read from `dir`'s cache when it was made
+/// for the same `key`), printed.
+pub(super) fn tune(
+    gpu: &Gpu,
+    prep: &Problem,
+    settings: &Settings,
+    budget_s: f64,
+    key: &str,
+    dir: &Path,
+    progress: &Progress,
+) -> Result<Tuned> {
+    let method = settings.method;
+    let path = dir.join(format!("tune_{}.json", method.name()));
+    if let Ok(text) = std::fs::read_to_string(&path) {
+        if let Ok(t) = serde_json::from_str::<Tuned>(&text) {
+            if t.key == key {
+                progress.message(format!(
+                    "{}: tuned settings from {}: {}",
+                    method.name(),
+                    path.display(),
+                    t.best.describe(method)
+                ));
+                return Ok(t);
+            }
+        }
+    }
+    if prep.reference.is_none() {
+        return Err(Error::Invalid(
+            "bench --tune needs the scene's ground-truth textures (its target scene)".into(),
+        ));
+    }
+    let mut best = Tunable::untuned(settings);
+    progress.message(format!(
+        "{}: tuning, {}",
+        method.name(),
+        best.describe(method)
+    ));
+    let mut best_score = trial(gpu, prep, settings, &best, budget_s)?;
+    let mut trials = vec![Trial {
+        settings: best,
+        score: best_score,
+    }];
+    for coordinate in coordinates(method) {
+        let base = best;
+        for candidate in coordinate(&base) {
+            let score = trial(gpu, prep, settings, &candidate, budget_s)?;
+            progress.message(format!(
+                "{}: tuning, {} → {score:.4} (best {best_score:.4})",
+                method.name(),
+                candidate.describe(method)
+            ));
+            trials.push(Trial {
+                settings: candidate,
+                score,
+            });
+            if score < best_score * (1.0 - MIN_GAIN) {
+                best = candidate;
+                best_score = score;
+            }
+        }
+    }
+    let tuned = Tuned {
+        key: key.to_string(),
+        best,
+        score: best_score,
+        trials,
+    };
+    let json = serde_json::to_string_pretty(&tuned)
+        .map_err(|e| Error::Invalid(format!("{}: {e}", path.display())))?;
+    crate::image_io::write_atomic(&path, json.as_bytes())?;
+    println!(
+        "{}: tuned {}: {} (observed-texel RMSE {best_score:.4} on the tuning seed, {} trials)",
+        dir.file_name().unwrap_or_default().to_string_lossy(),
+        method.name(),
+        best.describe(method),
+        tuned.trials.len()
+    );
+    Ok(tuned)
+}
