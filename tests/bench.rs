@@ -245,7 +245,7 @@ fn bench_tunes_each_estimator_and_reports_the_reconstruction_first() {
         end_to_end_only: true,
         ..Default::default()
     };
-    bench(&gpu, &[task.clone()], &opts).unwrap();
+    bench(&gpu, std::slice::from_ref(&task), &opts).unwrap();
     let read = || -> Value {
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("bench.json")).unwrap())
             .unwrap()

@@ -113,9 +113,12 @@ pub struct Tuned {
     pub trials: Vec<Trial>,
 }
 
+/// One coordinate of the search: its candidates around the best settings so far.
+type Coordinate = Box<dyn Fn(&Tunable) -> Vec<Tunable>>;
+
 /// The candidates of each coordinate, in search order.
-fn coordinates(method: Method) -> Vec<Box<dyn Fn(&Tunable) -> Vec<Tunable>>> {
-    let mut c: Vec<Box<dyn Fn(&Tunable) -> Vec<Tunable>>> = vec![
+fn coordinates(method: Method) -> Vec<Coordinate> {
+    let mut c: Vec<Coordinate> = vec![
         Box::new(|b: &Tunable| {
             [0.5, 2.0]
                 .map(|f| Tunable {
