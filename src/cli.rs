@@ -27,18 +27,18 @@ pub(crate) enum TechniqueArg {
 
 #[derive(Clone, Copy, clap::ValueEnum)]
 pub(crate) enum MethodArg {
-    /// Parameter-space ReSTIR: per-texel reservoirs reused across iterations.
-    Restir,
     /// Plain Monte Carlo: every sample adds its derivative to the texels it touches.
     Baseline,
+    /// Parameter-space ReSTIR: per-texel reservoirs reused across iterations.
+    Restir,
 }
 
 /// Choice of gradient estimator, shared by the commands that estimate gradients.
 #[derive(clap::Args)]
 pub(crate) struct EstimatorArgs {
-    /// Gradient estimator.
-    #[arg(long, value_enum, default_value = "restir")]
-    pub(crate) method: MethodArg,
+    /// Gradient estimator (default: the task's `optimizer.method`, else baseline).
+    #[arg(long, value_enum)]
+    pub(crate) method: Option<MethodArg>,
     #[command(flatten)]
     pub(crate) restir: RestirArgs,
 }
@@ -122,10 +122,15 @@ impl RestirArgs {
 }
 
 impl EstimatorArgs {
-    pub(crate) fn resolve(&self) -> Result<(optim::Method, optim::RestirOptions)> {
+    /// The estimator (`task_method` unless `--method` is given) and ReSTIR's options.
+    pub(crate) fn resolve(
+        &self,
+        task_method: optim::Method,
+    ) -> Result<(optim::Method, optim::RestirOptions)> {
         let method = match self.method {
-            MethodArg::Restir => optim::Method::Restir,
-            MethodArg::Baseline => optim::Method::Baseline,
+            Some(MethodArg::Restir) => optim::Method::Restir,
+            Some(MethodArg::Baseline) => optim::Method::Baseline,
+            None => task_method,
         };
         Ok((method, self.restir.resolve()?))
     }

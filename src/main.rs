@@ -47,9 +47,9 @@ fn run(cli: Cli) -> Result<()> {
             estimator,
             output,
         } => {
-            let (method, restir) = estimator.resolve()?;
             let task_path = task;
             let task = Task::load(&task_path)?;
+            let (method, restir) = estimator.resolve(task.optimizer.method)?;
             let gpu = Gpu::new()?;
             let written = job::run::write_gradient(&gpu, &task, &output, method, restir)
                 .with_context(|| format!("estimating the gradient of {}", task_path.display()))?;
@@ -309,7 +309,7 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
             bail!("--time-budget must be a positive number of seconds");
         }
     }
-    let (method, restir) = estimator.resolve()?;
+    let (method, restir) = estimator.resolve(task.optimizer.method)?;
     let gpu = Gpu::new()?;
     // Ctrl-C (or SIGTERM) finishes the iteration under way, then writes the checkpoint
     // and the outputs; a second one exits at once.

@@ -265,8 +265,13 @@ fn bench_tunes_each_estimator_and_reports_the_reconstruction_first() {
             .map(|x| number(x, "score"))
             .collect();
         // Every coordinate's candidates were tried (baseline: the start, 2 learning rates,
-        // 2 β1, 1 β2; ReSTIR also 2 M caps, the scheduled cap and 2 target smoothings).
-        assert_eq!(scores.len(), trials, "{method}");
+        // 2 β1, 1 β2; ReSTIR also 2 M caps, the scheduled cap and 2 target smoothings), and
+        // at most 3 more learning rates in the direction that improved.
+        assert!(
+            (trials..=trials + 3).contains(&scores.len()),
+            "{method}: {} trials",
+            scores.len()
+        );
         assert!(
             scores.iter().all(|x| x.is_finite() && *x > 0.0),
             "{method}: {scores:?}"
@@ -282,8 +287,7 @@ fn bench_tunes_each_estimator_and_reports_the_reconstruction_first() {
         let end = number(s, &format!("texture_rmse_observed_{method}"));
         assert!(min > 0.0 && min <= end, "{method}: lowest {min}, end {end}");
     }
-    // The chosen learning rate is the one the run used: its curve's factor times the task's
-    // rate is the schedule's; the settings strings name what was chosen.
+    // The settings strings name what was chosen.
     let lr = number(&s["tuned_restir"]["best"], "learning_rate_scale");
     assert!(s["settings_restir"]
         .as_str()
@@ -293,11 +297,12 @@ fn bench_tunes_each_estimator_and_reports_the_reconstruction_first() {
     let recon = md
         .find("## Reconstruction at equal time")
         .expect("no reconstruction section");
-    let primal = md.find("## Primal image error").unwrap();
     assert!(
-        recon < primal,
+        md[..recon].matches("\n## ").count() == 0,
         "the reconstruction is not the report's first section"
     );
+    // The phases that did not run have no section.
+    assert!(!md.contains("## Primal image error") && !md.contains("## Gradient error"));
     assert!(md.contains("priors (multiscale gradient, smoothness) are off"));
     // A second run with the same options reads the search from its cache.
     let cached = dir.path().join("sphere").join("tune_restir.json");

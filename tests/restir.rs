@@ -791,6 +791,70 @@ fn the_shrunk_default_task_recovers_its_texture() {
 }
 
 #[test]
+fn without_priors_at_tuned_settings_neither_estimator_drifts() {
+    let Some(gpu) = gpu() else { return };
+    // The default task without its priors (no multiscale gradient, no smoothness), shrunk to
+    // 64^2 images and a 128x64 texture, each estimator at the settings `bench --tune` chose
+    // for it on the full task (docs/studies.md, "Reuse and the reconstruction"): half the
+    // learning rate, and for ReSTIR an M cap of 2. At the task's own rate both drift (the
+    // error rises after an early low: ReSTIR ended 1.13x above its lowest in 60 s, the
+    // baseline 1.05x); at these settings neither ends more than 5% above its lowest value,
+    // over three seeds, and both recover most of the way. At about equal time (ReSTIR's
+    // iteration costs 1.08-1.09x the baseline's on the default task, so the baseline gets 9%
+    // more iterations) the two end level here: mean over the seeds 0.1580 (ReSTIR, 150
+    // iterations) against 0.1581 (baseline, 164; 0.1603 at 150). That is too close to assert
+    // an order, and the full task's 60 s runs end with the baseline ahead (0.1381 against
+    // 0.1467), which is why the default estimator is the baseline.
+    let mut task = shrunk_default_task(64, 512);
+    task.textures[0].resolution = [128, 64];
+    task.textures[0].learning_rate *= 0.5;
+    task.optimizer.multiscale_levels = 0;
+    task.optimizer.smoothness = 0.0;
+    let dir = tempfile::tempdir().unwrap();
+    let prep = psrestir::job::Problem::from_task(&gpu, &task, dir.path(), false).unwrap();
+    let truth = prep.reference.clone().unwrap();
+    for method in [Method::Baseline, Method::Restir] {
+        let iterations = if method == Method::Restir { 150 } else { 164 };
+        for seed in [1u32, 2, 3] {
+            let restir = RestirOptions {
+                m_cap: 2.0,
+                ..Default::default()
+            };
+            let settings = Settings {
+                seed,
+                ..psrestir::task::task_settings(&task, &prep.cameras, method, restir)
+            };
+            let mut opt =
+                Optimizer::new(&gpu, &prep.scene, prep.set.clone(), settings, &prep.targets)
+                    .unwrap();
+            let observed = opt.observed_texels().unwrap().to_vec();
+            let rmse = |values: &[f32]| {
+                psrestir::optim::observed::rmse_observed(&prep.set, values, &truth, &observed)
+            };
+            let initial = rmse(&prep.set.values);
+            let mut lowest = initial;
+            for i in 0..iterations {
+                opt.set_progress(i as f64 / iterations as f64);
+                opt.step().unwrap();
+                lowest = lowest.min(rmse(&opt.read_params().unwrap()));
+            }
+            let last = rmse(&opt.read_params().unwrap());
+            eprintln!(
+                "{method:?} seed {seed}: observed-texel RMSE {initial:.4} -> {last:.4}, lowest {lowest:.4}"
+            );
+            assert!(
+                last <= 1.05 * lowest,
+                "{method:?} seed {seed}: ends at {last}, more than 5% above its lowest {lowest}"
+            );
+            assert!(
+                last <= 0.7 * initial,
+                "{method:?} seed {seed}: {last} is above 0.7 x the initial {initial}"
+            );
+        }
+    }
+}
+
+#[test]
 fn a_restored_state_continues_like_the_original() {
     let Some(gpu) = gpu() else { return };
     let make = |target_smoothing| {

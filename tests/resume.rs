@@ -398,6 +398,7 @@ fn ctrl_c_writes_the_checkpoint_and_outputs_then_resumes() {
         .arg(&task)
         .arg("--out")
         .arg(&out)
+        .args(["--method", "restir"])
         .stdout(std::process::Stdio::piped())
         .spawn()
         .unwrap();
@@ -442,6 +443,7 @@ fn ctrl_c_writes_the_checkpoint_and_outputs_then_resumes() {
         .arg("--out")
         .arg(&out)
         .arg("--resume")
+        .args(["--method", "restir"])
         .args(["--iterations", &(done + 20).to_string()])
         .status()
         .unwrap();

@@ -182,12 +182,12 @@ pub fn gradient_table(r: &BenchReport) -> String {
     for x in &r.scenes {
         let _ = writeln!(
             s,
-            "| {} | {} / {} | {} | {:.2} | {} | {} | **{}** | **{}** | {} | {} | **{}** | **{}** |",
+            "| {} | {} / {} | {} | {} | {} | {} | **{}** | **{}** | {} | {} | **{}** | **{}** |",
             x.name,
             x.primal_spp,
             x.gradient_spp,
             ratio(x.ms_per_iteration_ratio),
-            x.baseline_spp_equal_time,
+            ratio(x.baseline_spp_equal_time),
             sci(x.gradient_relmse_estimator_only_baseline),
             sci(x.gradient_relmse_estimator_only_restir),
             ratio(x.gradient_relmse_estimator_only_ratio),
@@ -632,36 +632,42 @@ pub fn report_markdown(r: &BenchReport) -> String {
     if r.scenes.iter().any(|x| x.optimization.is_some()) {
         md.push_str(&reconstruction_markdown(r));
     }
-    md.push_str("## Primal image error\n\n");
-    md.push_str(&primal_table(r));
-    md.push_str(
-        "\nThe primal image after the warm-up against a converged render of the same textures; \
-         the control variate carries the last image forward (primal_cv.wgsl).\n\n",
-    );
-    md.push_str("## Gradient error\n\n");
-    md.push_str(&gradient_table(r));
-    md.push_str(
-        "\nRatios are ReSTIR / baseline (below 1: ReSTIR is better). Estimator-only: both \
-         estimators under the converged adjoint, ReSTIR after the estimates under it named \
-         above; total: both under the adjoint of one primal render at the protocol's spp, the same \
-         render for both (common random numbers: both see the same render's noise). The paper (RTX 2080 Ti, 1400² images, 2048² textures) reports gradient relMSE \
-         0.23–0.32× and final image relMSE 0.18–0.73× at equal time.\n\n",
-    );
-    md.push_str("### Per texture\n\n");
-    md.push_str(&texture_table(r));
-    md.push_str(
-        "\nEach texture's part of the equal-iteration errors above: the sum of its entries' \
-         terms over the count of all entries, so that a scene's parts add up to its figure.\n\n",
-    );
-    md.push_str("### Successive estimates\n\n");
-    md.push_str(&successive_table(r));
-    md.push_str(
-        "\nAn optimizer adds up its successive steps. The baseline's estimates are \
-         independent, so the error of their mean falls as 1/n; ReSTIR's successive estimates \
-         share kept samples, so theirs falls more slowly. The mean of n successive \
-         estimates, both under the converged adjoint at the same textures, against the mean \
-         of n independent baseline estimates.\n\n",
-    );
+    // Absent with --end-to-end-only.
+    if r.scenes
+        .iter()
+        .any(|x| x.gradient_relmse_restir.is_finite())
+    {
+        md.push_str("## Primal image error\n\n");
+        md.push_str(&primal_table(r));
+        md.push_str(
+            "\nThe primal image after the warm-up against a converged render of the same textures; \
+             the control variate carries the last image forward (primal_cv.wgsl).\n\n",
+        );
+        md.push_str("## Gradient error\n\n");
+        md.push_str(&gradient_table(r));
+        md.push_str(
+            "\nRatios are ReSTIR / baseline (below 1: ReSTIR is better). Estimator-only: both \
+             estimators under the converged adjoint, ReSTIR after the estimates under it named \
+             above; total: both under the adjoint of one primal render at the protocol's spp, the same \
+             render for both (common random numbers: both see the same render's noise). The paper (RTX 2080 Ti, 1400² images, 2048² textures) reports gradient relMSE \
+             0.23–0.32× and final image relMSE 0.18–0.73× at equal time.\n\n",
+        );
+        md.push_str("### Per texture\n\n");
+        md.push_str(&texture_table(r));
+        md.push_str(
+            "\nEach texture's part of the equal-iteration errors above: the sum of its entries' \
+             terms over the count of all entries, so that a scene's parts add up to its figure.\n\n",
+        );
+        md.push_str("### Successive estimates\n\n");
+        md.push_str(&successive_table(r));
+        md.push_str(
+            "\nAn optimizer adds up its successive steps. The baseline's estimates are \
+             independent, so the error of their mean falls as 1/n; ReSTIR's successive estimates \
+             share kept samples, so theirs falls more slowly. The mean of n successive \
+             estimates, both under the converged adjoint at the same textures, against the mean \
+             of n independent baseline estimates.\n\n",
+        );
+    }
     if r.scenes.iter().any(|x| x.optimization.is_some()) {
         md.push_str("## GPU time per pass (ms, timestamp queries), state and merge work\n\n");
         md.push_str(&pass_table(r));

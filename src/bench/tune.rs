@@ -2,7 +2,8 @@
 //! not the reported one, so that neither runs on settings made for the other.
 //!
 //! Coordinate search from the task's settings, one pass, in this order: the learning rate
-//! (x0.5, x2), Adam's β1 (0.5, 0) and β2 (0.99), and for ReSTIR the M cap (2, 32), whether
+//! (x0.5, x2, and on in the better direction while it keeps improving, up to x1/8 or x8),
+//! Adam's β1 (0.5, 0) and β2 (0.99), and for ReSTIR the M cap (2, 32), whether
 //! the cap follows the learning-rate schedule, and the target smoothing (0, 0.9). Each trial
 //! optimizes for the tuning budget from the initial textures with the seed
 //! [`TUNE_SEED_OFFSET`] away from the task's; its score is the observed-texel RMSE at the
@@ -241,22 +242,40 @@ pub(super) fn tune(
         settings: best,
         score: best_score,
     }];
-    for coordinate in coordinates(method) {
+    let mut try_one = |candidate: Tunable, best: &mut Tunable, best_score: &mut f64| {
+        let score = trial(gpu, prep, settings, &candidate, budget_s)?;
+        progress.message(format!(
+            "{}: tuning, {} → {score:.4} (best {best_score:.4})",
+            method.name(),
+            candidate.describe(method)
+        ));
+        trials.push(Trial {
+            settings: candidate,
+            score,
+        });
+        let better = score < *best_score * (1.0 - MIN_GAIN);
+        if better {
+            *best = candidate;
+            *best_score = score;
+        }
+        Ok::<bool, Error>(better)
+    };
+    for (k, coordinate) in coordinates(method).into_iter().enumerate() {
         let base = best;
         for candidate in coordinate(&base) {
-            let score = trial(gpu, prep, settings, &candidate, budget_s)?;
-            progress.message(format!(
-                "{}: tuning, {} → {score:.4} (best {best_score:.4})",
-                method.name(),
-                candidate.describe(method)
-            ));
-            trials.push(Trial {
-                settings: candidate,
-                score,
-            });
-            if score < best_score * (1.0 - MIN_GAIN) {
-                best = candidate;
-                best_score = score;
+            try_one(candidate, &mut best, &mut best_score)?;
+        }
+        // The learning rate: on in the direction that improved.
+        if k == 0 && best.learning_rate_scale != base.learning_rate_scale {
+            let step = best.learning_rate_scale / base.learning_rate_scale;
+            while (0.125..=8.0).contains(&(best.learning_rate_scale * step)) {
+                let next = Tunable {
+                    learning_rate_scale: best.learning_rate_scale * step,
+                    ..best
+                };
+                if !try_one(next, &mut best, &mut best_score)? {
+                    break;
+                }
             }
         }
     }

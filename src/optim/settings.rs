@@ -64,7 +64,7 @@ impl Settings {
             gradient_spp: 1,
             loss: Loss::L2,
             seed: 1,
-            method: Method::Restir,
+            method: Method::default(),
             restir: RestirOptions::default(),
             schedule: Schedule::constant(),
             adam: Default::default(),

@@ -15,6 +15,7 @@
 //!
 //! [optimizer]
 //! iterations = 300                # and/or time_budget_s
+//! method = "baseline"             # gradient estimator, or "restir"; --method overrides it
 //! primal_spp = 2
 //! primal = "control_variate"      # or "independent" (the default)
 //! cv_max_weight = 0.9             # upper clamp of the control variate's weight (0..1)
@@ -27,6 +28,11 @@
 //! smoothness = 0.1                # weight of the smoothness prior on observed texels (0: off)
 //! eval_every = 10                 # low-noise image error every N iterations (0: never)
 //! eval_spp = 16
+//!
+//! [optimizer.adam]                # Adam's decays and epsilon (these are the defaults)
+//! beta1 = 0.9
+//! beta2 = 0.999
+//! eps = 1e-8
 //!
 //! [optimizer.schedule]            # learning-rate schedule (default: constant)
 //! kind = "cosine"                 # or "constant", "step", "exponential"
@@ -161,6 +167,9 @@ pub struct OptimizerSpec {
     /// Samples per pixel of the gradient pass.
     #[serde(default = "one")]
     pub gradient_spp: u32,
+    /// Gradient estimator: "baseline" (the default) or "restir"; `--method` overrides it.
+    #[serde(default)]
+    pub method: crate::optim::Method,
     /// Image loss.
     #[serde(default)]
     pub loss: Loss,

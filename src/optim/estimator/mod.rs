@@ -18,13 +18,16 @@ use crate::render::{GpuScene, Techniques};
 use crate::Result;
 pub use restir::{Confidence, RestirOptions};
 
-/// The gradient estimator.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+/// The gradient estimator. The default is the one that ends lower on the bundled default task
+/// at equal time, each at its own best settings (docs/studies.md, "Which estimator is the
+/// default"): on the machines measured so far, the baseline.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Method {
     /// Plain Monte Carlo: every candidate adds its value to the texels it touches.
+    #[default]
     Baseline,
     /// Parameter-space ReSTIR.
-    #[default]
     Restir,
 }
 
