@@ -304,11 +304,13 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         ));
     }
     std::fs::create_dir_all(&o.out).map_err(|e| Error::file(&o.out, e.to_string()))?;
+    // Steps of the progress bar per scene: targets, the primal and gradient phases (one per
+    // seed and the reference), the search and each estimator's optimization.
     let per_scene = if o.end_to_end_only {
         3
     } else {
         o.repeats.max(1) as u64 + if o.gradient_only { 2 } else { 4 }
-    };
+    } + u64::from(o.tune && !o.gradient_only);
     let progress = Progress::new(o.progress, loaded.len() as u64 * per_scene);
     let mut report = BenchReport {
         version: env!("CARGO_PKG_VERSION").into(),
