@@ -15,6 +15,7 @@ use super::*;
 use crate::optim::adam::AdamOptions;
 use crate::optim::Stop;
 use serde::Deserialize;
+use std::fmt::Write as _;
 
 /// The tuning runs use the task's seed plus this.
 pub const TUNE_SEED_OFFSET: u32 = 7919;
@@ -87,8 +88,6 @@ impl Tunable {
         s
     }
 }
-
-use std::fmt::Write as _;
 
 /// One trial of the search.
 #[derive(Clone, Debug, Serialize, Deserialize)]

@@ -379,11 +379,9 @@ fn resume(
             ),
         ));
     }
-    c.state
-        .estimator
-        .check_method(opt.settings().method)
+    // Refused before anything is written when another estimator or other images wrote it.
+    opt.restore(&c.state)
         .map_err(|e| Error::file(ckpt_path, e.to_string()))?;
-    opt.restore(&c.state)?;
     let mut rows = c.header.metrics;
     rows.retain(|r| r.iteration <= opt.iteration);
     log::info!(

@@ -172,13 +172,14 @@ impl Optimizer {
     }
 
     /// Continue from a state taken with [`Optimizer::state`] of an optimizer made with the same
-    /// scene, textures and estimator. A state without reservoirs restores a ReSTIR optimizer
-    /// with empty ones (its next iteration starts afresh, as the first does).
+    /// scene, textures and estimator; one written by another estimator is refused before
+    /// anything is restored. An estimator state without arrays restores a ReSTIR optimizer
+    /// with empty reservoirs (its next iteration starts afresh, as the first does).
     pub fn restore(&mut self, state: &OptimizerState) -> Result<()> {
+        state.estimator.check_method(self.settings.method)?;
         self.write_params(&state.params)?;
         self.write_moments(&[state.m1.clone(), state.m2.clone()])?;
         let last = (state.iteration as usize + 1) % 2;
-        state.estimator.check_method(self.settings.method)?;
         let mut snapshot = Some(&state.estimator);
         let mut cv_snapshot = state.control_variate.as_ref();
         match &state.previous {

@@ -145,8 +145,8 @@ pub(crate) trait Estimator {
     /// `iteration` iterations.
     fn snapshot(&self, gpu: &Gpu, iteration: u32) -> Result<EstimatorState>;
     /// Restore a snapshot taken after `iteration` iterations (None, or a state without
-    /// arrays: start afresh). An error when it was written by another estimator or for other
-    /// textures or images.
+    /// arrays: start afresh). The optimizer has checked that this estimator wrote it; an
+    /// error when it was written for other textures or images.
     fn restore(&mut self, gpu: &Gpu, state: Option<&EstimatorState>, iteration: u32) -> Result<()>;
     /// Bytes of GPU state the estimator keeps besides the optimizer's.
     fn state_bytes(&self) -> u64;

@@ -584,9 +584,6 @@ impl Estimator for Restir {
         _iteration: u32,
     ) -> Result<()> {
         let n_texels = u64::from(self.merge_params.n_texels);
-        if let Some(r) = state {
-            r.check_method(Method::Restir)?;
-        }
         let (slots, headers) = match state.filter(|r| !r.arrays.is_empty()) {
             Some(r) => {
                 let missing =
