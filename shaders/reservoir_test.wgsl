@@ -1,6 +1,7 @@
 // Test pass for the reservoir update: invocation i offers candidate i % n_candidates, with
 // weight weights[i % n_candidates], to reservoir i / (n_candidates * copies), so that many
-// invocations hit each reservoir at once. The test checks the selection frequencies.
+// invocations hit each reservoir at once (slot 0 of observed texel r, sign 0's lock). The
+// test checks the selection frequencies.
 #import shared/rng
 #import shared/reservoir
 
@@ -13,9 +14,12 @@ struct ReservoirTestParams {
 
 @group(0) @binding(0) var<uniform> tp: ReservoirTestParams;
 @group(0) @binding(1) var<storage, read> weights: array<f32>;
-@group(0) @binding(2) var<storage, read_write> fresh: array<atomic<u32>>;
-@group(0) @binding(3) var<storage, read_write> locks: array<atomic<u32>>;
-@group(0) @binding(4) var<storage, read_write> failures: array<atomic<u32>>;
+@group(0) @binding(2) var<storage, read_write> slots0: array<atomic<u32>>;
+@group(0) @binding(3) var<storage, read_write> slots1: array<atomic<u32>>;
+@group(0) @binding(4) var<storage, read_write> slots2: array<atomic<u32>>;
+@group(0) @binding(5) var<storage, read_write> slots3: array<atomic<u32>>;
+@group(0) @binding(6) var<storage, read_write> headers: array<atomic<u32>>;
+@group(0) @binding(7) var<storage, read_write> failures: array<atomic<u32>>;
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {
@@ -30,8 +34,8 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         return;
     }
     rng_init(tp.seed, i, 0u);
-    let cand = Candidate(c, vec3f(w, 0.0, 0.0), PathVertex(0u, vec2f(0.0), vec2f(0.0), vec2f(0.0), vec4f(0.0)), vec3f(0.0), 0.0);
-    if !reservoir_offer(r, r, w, rand(), cand) {
+    let cand = Candidate(c, array<u32, 5>(c, 0u, 0u, 0u, 0u));
+    if !reservoir_offer(0u, r, 0u, w, rand(), cand) {
         atomicAdd(&failures[0], 1u);
     }
 }

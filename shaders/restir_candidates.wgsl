@@ -6,7 +6,10 @@
 // the adjoints (cp.smoothing; shared/reservoir.wgsl), which this pass forms for every pixel.
 // A candidate is offered to the texel's positive reservoir when q > 0, to the negative one
 // when q < 0 (or to one reservoir without positivization) with the resampling weight |q| x
-// MIS weight / density, and the reservoir keeps e.
+// MIS weight / density, and the reservoir keeps the path (shared/compact_path.wgsl; the
+// samples are taken at the rounded hit, directions and radiances that it stores). Only
+// observed texels have reservoirs (observed_map); a candidate for another texel is dropped
+// and counted (CANDIDATE_STAT_UNMAPPED: the observed-texel pass's strata missed it).
 // When the merge will reuse, each candidate also carries its target under the previous
 // iteration's textures and target adjoint (the merge's MIS weights need it): the same path,
 // one more BRDF-with-derivative evaluation per technique here, shared by the path's texels,
@@ -40,24 +43,42 @@ struct CandidateParams {
 
 @group(1) @binding(0) var<uniform> cp: CandidateParams;
 @group(1) @binding(1) var<storage, read> adjoint: array<vec4f>;
-@group(1) @binding(2) var<storage, read_write> fresh: array<atomic<u32>>;
-@group(1) @binding(3) var<storage, read_write> locks: array<atomic<u32>>;
-// CANDIDATE_STAT_* slots (generated from src/optim/estimator/restir.rs).
-@group(1) @binding(4) var<storage, read_write> cstats: array<atomic<u32>, 4>;
+// Slot k of every observed texel's reservoirs (shared/reservoir.wgsl) and the texels'
+// headers, which say which slots hold the kept reservoirs and carry the locks.
+@group(1) @binding(2) var<storage, read_write> slots0: array<atomic<u32>>;
+@group(1) @binding(3) var<storage, read_write> slots1: array<atomic<u32>>;
+@group(1) @binding(4) var<storage, read_write> slots2: array<atomic<u32>>;
+@group(1) @binding(5) var<storage, read_write> slots3: array<atomic<u32>>;
+@group(1) @binding(6) var<storage, read_write> headers: array<atomic<u32>>;
+// CANDIDATE_STAT_* slots (generated from src/gpu/abi.rs).
+@group(1) @binding(7) var<storage, read_write> cstats: array<atomic<u32>, 4>;
 // The target adjoints (shared/reservoir.wgsl), both parities: the last iteration's, and this
 // one's, which this pass forms.
-@group(1) @binding(5) var<storage, read_write> targets: array<vec4f>;
-// Which slots hold each texel's kept reservoirs (shared/reservoir.wgsl).
-@group(1) @binding(6) var<storage, read> headers: array<u32>;
+@group(1) @binding(8) var<storage, read_write> targets: array<vec4f>;
+// The compaction map: per 32 texels, which are observed (bits) and how many observed texels
+// come before them.
+@group(1) @binding(9) var<storage, read> observed_map: array<vec2u>;
+
+// The index of texel t among the observed texels, or UNOBSERVED.
+fn observed_index(t: u32) -> u32 {
+    let m = observed_map[t >> 5u];
+    let bit = 1u << (t & 31u);
+    if (m.x & bit) == 0u {
+        return UNOBSERVED;
+    }
+    return m.y + countOneBits(m.x & (bit - 1u));
+}
 
 var<private> offered: u32 = 0u;
 var<private> lost: u32 = 0u;
 var<private> dropped: u32 = 0u;
+var<private> unmapped: u32 = 0u;
 
 // adj: the pixel's adjoint (for the value), adj_t: its target adjoint; bg_prev and adj_t_prev:
 // the path's BRDF derivatives and the pixel's target adjoint under the previous iteration's
-// state (unused unless cp.prev_targets).
-fn offer_technique(g: GradientSample, ds: DirectSample, bg: BrdfGrad, bg_prev: BrdfGrad, vertex: PathVertex, adj: vec3f, adj_t: vec3f, adj_t_prev: vec3f, info: u32) {
+// state (unused unless cp.prev_targets); ko, rgbe: the technique's stored direction and
+// radiance.
+fn offer_technique(g: GradientSample, ds: DirectSample, bg: BrdfGrad, bg_prev: BrdfGrad, ko: vec2u, rgbe: u32, adj: vec3f, adj_t: vec3f, adj_t_prev: vec3f, info: u32) {
     if ds.scale == 0.0 {
         return;
     }
@@ -93,11 +114,15 @@ fn offer_technique(g: GradientSample, ds: DirectSample, bg: BrdfGrad, bg_prev: B
                 dropped += 1u;
                 continue;
             }
-            let texel = p.texel_offset + fp.texel[k];
+            let i = observed_index(p.texel_offset + fp.texel[k]);
+            if i == UNOBSERVED {
+                unmapped += 1u;
+                continue;
+            }
             let s = select(0u, 1u, cp.positivize != 0u && q < 0.0);
-            let r = RESERVOIR_SLOTS * texel + fresh_slot(headers[texel], s);
+            let slot = fresh_slot(atomicLoad(&headers[i]), s);
             offered += 1u;
-            if !reservoir_offer(r, 2u * texel + s, w, rand(), Candidate(info, e, vertex, ds.radiance, q_prev)) {
+            if !reservoir_offer(slot, i, s, w, rand(), Candidate(info, path_words(g.tri, g.kb, ko, rgbe, q_prev))) {
                 lost += 1u;
             }
         }
@@ -131,6 +156,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         return;
     }
     techniques = TECH_MIS;
+    compact_paths = true;
     let info = a.pixel | (cp.camera_index << INFO_CAMERA_SHIFT);
     var adj_t_prev = vec3f(0.0);
     if cp.prev_targets != 0u {
@@ -155,8 +181,8 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
             nee_prev = brdf_eval_cos_grad(mat_prev, wo, oct_decode(g.nee_vertex.wi));
             bsdf_prev = brdf_eval_cos_grad(mat_prev, wo, oct_decode(g.bsdf_vertex.wi));
         }
-        offer_technique(g, g.nee, g.nee_grad, nee_prev, g.nee_vertex, a.adj, adj_t, adj_t_prev, info);
-        offer_technique(g, g.bsdf, g.bsdf_grad, bsdf_prev, g.bsdf_vertex, a.adj, adj_t, adj_t_prev, info | (1u << INFO_TECH_SHIFT));
+        offer_technique(g, g.nee, g.nee_grad, nee_prev, g.nee_ko, g.nee_rgbe, a.adj, adj_t, adj_t_prev, info);
+        offer_technique(g, g.bsdf, g.bsdf_grad, bsdf_prev, g.bsdf_ko, g.bsdf_rgbe, a.adj, adj_t, adj_t_prev, info | (1u << INFO_TECH_SHIFT));
     }
     atomicAdd(&cstats[CANDIDATE_STAT_OFFERED], offered);
     if lost > 0u {
@@ -164,5 +190,8 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     }
     if dropped > 0u {
         atomicAdd(&cstats[CANDIDATE_STAT_DROPPED], dropped);
+    }
+    if unmapped > 0u {
+        atomicAdd(&cstats[CANDIDATE_STAT_UNMAPPED], unmapped);
     }
 }

@@ -13,30 +13,32 @@
 // Geometry, cameras and lights do not change during a texture optimization, so a stored path
 // (pixel, camera-ray hit, incident direction, incident radiance; visibility was tested when it
 // was drawn) stays a valid path with the same value of everything but the BRDF and the
-// adjoint. The shift is the identity in path space (Jacobian 1): a kept sample is evaluated
-// under the current textures by one BRDF-with-derivative evaluation from what the reservoir
-// stores of the hit (material, texture coordinates, shading-frame directions): no geometry
-// is read. That gives its factor e (shared/reservoir.wgsl); its value is the pixel's adjoint
-// times e, its target the luminance of the pixel's target adjoint times e, and its target
-// under the previous state comes from the stored factor and the previous target adjoint.
-// A fresh sample's target under the previous textures and target adjoint (both
-// double-buffered) comes with it from the candidate pass (RES_Q_PREV), which evaluated the
-// same path there; with the verify flag the merge evaluates it again and compares. Nothing
-// here traces a ray: shared/bvh is not part of this pass (a test checks the composed module).
+// adjoint. The shift is the identity in path space (Jacobian 1): a stored sample, fresh or
+// kept, is evaluated under the current textures from its compact form
+// (shared/compact_path.wgsl): the hit is rebuilt from its triangle and barycentrics and the
+// camera's position (texture coordinates, shading frame, outgoing direction, the glTF
+// material's inputs there), and one BRDF-with-derivative evaluation gives its factor e; its
+// value is the pixel's adjoint times e, its target the luminance of the pixel's target
+// adjoint times e. Its target under the previous state is stored with it: the candidate pass
+// computes it for a fresh sample, and the merge stores each merged sample's current target,
+// which is its previous-state target at the next merge. With the verify flag the merge
+// evaluates every stored path under the previous state as well and compares. Nothing here
+// traces a ray: shared/bvh is not part of this pass (a test checks the composed module).
 // MIS: balance heuristic with confidences over the inputs' own targets.
 // Selection is in place: a texel's four reservoir slots hold its two kept reservoirs and the
 // two fresh ones (shared/reservoir.wgsl); the merged reservoir of sign s is whichever input
-// it selected, where it already lies, with its W (and, for a kept sample, its factor under
-// the current textures) rewritten, and the texel's header says which slot that is. The two slots
-// the new header leaves free get W = 0 for the next iteration's candidates.
+// it selected, where it already lies, with its W and its target rewritten, and the texel's
+// header says which slot that is. The two slots the new header leaves free get W = 0 for the
+// next iteration's candidates. One invocation per observed texel (observed_list).
 #import shared/rng
-#import shared/surface
+#import shared/compact_path
 #import shared/reservoir_slots
 #import gen/abi
 
 // Mirrored by MergeParams in src/optim/estimator/restir.rs. flags: MERGE_FLAG_* (generated).
 struct MergeParams {
-    n_texels: u32,
+    // Observed texels (invocations).
+    n_observed: u32,
     n_pixels: u32,
     seed: u32,
     flags: u32,
@@ -50,88 +52,102 @@ struct MergeParams {
     target_cur: u32,
     target_prev: u32,
     _pad0: u32,
+    // The cameras' positions (xyz), by the camera index of a reservoir's info word.
+    origins: array<vec4f, MAX_CAMERAS>,
 }
 
 @group(1) @binding(0) var<uniform> mp: MergeParams;
 @group(1) @binding(1) var<storage, read> adjoint: array<vec4f>;
 // The target adjoints of this iteration and the last (shared/reservoir.wgsl).
 @group(1) @binding(2) var<storage, read> targets: array<vec4f>;
-// Reservoir slots (RESERVOIR_WORDS / 4 vec4s each) and headers (each texel's invocation owns
-// its four slots and its header).
-@group(1) @binding(3) var<storage, read_write> slots: array<vec4u>;
-@group(1) @binding(4) var<storage, read_write> headers: array<u32>;
-@group(1) @binding(5) var<storage, read_write> grad: array<f32>;
-// MERGE_STAT_* slots (generated from src/optim/estimator/restir.rs).
-@group(1) @binding(6) var<storage, read_write> mstats: array<atomic<u32>, 4>;
+// Slot k of every observed texel's reservoirs, and their headers (each observed texel's
+// invocation owns its four slots and its header).
+@group(1) @binding(3) var<storage, read_write> slots0: array<u32>;
+@group(1) @binding(4) var<storage, read_write> slots1: array<u32>;
+@group(1) @binding(5) var<storage, read_write> slots2: array<u32>;
+@group(1) @binding(6) var<storage, read_write> slots3: array<u32>;
+@group(1) @binding(7) var<storage, read_write> headers: array<u32>;
+@group(1) @binding(8) var<storage, read_write> grad: array<f32>;
+// MERGE_STAT_* slots (generated from src/gpu/abi.rs).
+@group(1) @binding(9) var<storage, read_write> mstats: array<atomic<u32>, 4>;
+// The texel (index into all optimized texels) of each observed texel.
+@group(1) @binding(10) var<storage, read> observed_list: array<u32>;
 
 var<private> evaluations: u32 = 0u;
 var<private> dropped: u32 = 0u;
 
-// A stored path with its W and its factor (RES_VALUE) under the textures it was formed at.
+// Word j of slot k's buffer.
+fn slot_word(k: u32, j: u32) -> u32 {
+    switch k {
+        case 0u: {
+            return slots0[j];
+        }
+        case 1u: {
+            return slots1[j];
+        }
+        case 2u: {
+            return slots2[j];
+        }
+        default: {
+            return slots3[j];
+        }
+    }
+}
+
+fn set_slot_word(k: u32, j: u32, x: u32) {
+    switch k {
+        case 0u: {
+            slots0[j] = x;
+        }
+        case 1u: {
+            slots1[j] = x;
+        }
+        case 2u: {
+            slots2[j] = x;
+        }
+        default: {
+            slots3[j] = x;
+        }
+    }
+}
+
+// A stored path rebuilt: its info word, W, the path and its vertex.
 struct Stored {
     info: u32,
     w: f32,
-    v: vec3f,
-    vertex: PathVertex,
-    radiance: vec3f,
+    path: PathWords,
+    sv: StoredVertex,
 }
 
-// The slots are read here as vec4s: a CPU device (lavapipe) loads a storage word at a
-// per-invocation address lane by lane, so one 16-byte load costs what one 4-byte load does
-// (RESERVOIR_WORDS / 4 loads instead of RESERVOIR_WORDS per stored path: merge 4-11%
-// faster on lavapipe).
-const SLOT_VEC4S: u32 = RESERVOIR_WORDS / 4u;
-
-// Word i of a reservoir read as SLOT_VEC4S vec4s (i is a constant: this is a register pick).
-fn word_of(q: array<vec4u, SLOT_VEC4S>, i: u32) -> u32 {
-    return q[i / 4u][i % 4u];
-}
-
-fn word(r: u32, i: u32) -> u32 {
-    return slots[r * SLOT_VEC4S + i / 4u][i % 4u];
-}
-
-fn set_word(r: u32, i: u32, x: u32) {
-    slots[r * SLOT_VEC4S + i / 4u][i % 4u] = x;
-}
-
-fn slot_w(r: u32) -> f32 {
-    return bitcast<f32>(word(r, RES_W));
-}
-
-fn slot_value(r: u32) -> vec3f {
-    return vec3f(bitcast<f32>(word(r, RES_VALUE)), bitcast<f32>(word(r, RES_VALUE + 1u)), bitcast<f32>(word(r, RES_VALUE + 2u)));
-}
-
-fn load(r: u32) -> Stored {
-    let b = r * SLOT_VEC4S;
-    var q: array<vec4u, SLOT_VEC4S>;
-    for (var i = 0u; i < SLOT_VEC4S; i++) {
-        q[i] = slots[b + i];
+// The reservoir in slot k of observed texel i.
+fn load(k: u32, i: u32) -> Stored {
+    let b = i * RESERVOIR_WORDS;
+    var words: array<u32, 5>;
+    for (var j = 0u; j < 5u; j++) {
+        words[j] = slot_word(k, b + RES_TRI + j);
     }
-    var s: Stored;
-    s.info = word_of(q, RES_INFO);
-    s.w = bitcast<f32>(word_of(q, RES_W));
-    s.v = bitcast<vec3f>(vec3u(word_of(q, RES_VALUE), word_of(q, RES_VALUE + 1u), word_of(q, RES_VALUE + 2u)));
-    s.vertex = PathVertex(
-        word_of(q, RES_MATERIAL),
-        bitcast<vec2f>(vec2u(word_of(q, RES_UV), word_of(q, RES_UV + 1u))),
-        bitcast<vec2f>(vec2u(word_of(q, RES_WO), word_of(q, RES_WO + 1u))),
-        bitcast<vec2f>(vec2u(word_of(q, RES_WI), word_of(q, RES_WI + 1u))),
-        bitcast<vec4f>(vec4u(word_of(q, RES_FIXED), word_of(q, RES_FIXED + 1u), word_of(q, RES_FIXED + 2u), word_of(q, RES_FIXED + 3u))),
-    );
-    s.radiance = bitcast<vec3f>(vec3u(word_of(q, RES_RADIANCE), word_of(q, RES_RADIANCE + 1u), word_of(q, RES_RADIANCE + 2u)));
-    return s;
+    let info = slot_word(k, b + RES_INFO);
+    let path = unpack_path(words);
+    let cam = min((info >> INFO_CAMERA_SHIFT) & INFO_CAMERA_MASK, MAX_CAMERAS - 1u);
+    return Stored(info, bitcast<f32>(slot_word(k, b + RES_W)), path, stored_vertex(mp.origins[cam].xyz, path));
 }
 
-fn set_w(r: u32, w: f32) {
-    set_word(r, RES_W, bitcast<u32>(w));
+fn slot_w(k: u32, i: u32) -> f32 {
+    return bitcast<f32>(slot_word(k, i * RESERVOIR_WORDS + RES_W));
 }
 
-fn set_value(r: u32, v: vec3f) {
-    set_word(r, RES_VALUE, bitcast<u32>(v.x));
-    set_word(r, RES_VALUE + 1u, bitcast<u32>(v.y));
-    set_word(r, RES_VALUE + 2u, bitcast<u32>(v.z));
+fn set_w(k: u32, i: u32, w: f32) {
+    set_slot_word(k, i * RESERVOIR_WORDS + RES_W, bitcast<u32>(w));
+}
+
+// Store q as the target under the previous state of the reservoir in slot k of texel i (the
+// high bytes of its direction words).
+fn set_q_prev(k: u32, i: u32, q: f32) {
+    let b = i * RESERVOIR_WORDS;
+    let h = bf16_pack(q);
+    let low = (1u << RES_OCT_BITS) - 1u;
+    set_slot_word(k, b + RES_WI_X, (slot_word(k, b + RES_WI_X) & low) | ((h & 0xffu) << RES_OCT_BITS));
+    set_slot_word(k, b + RES_WI_Y, (slot_word(k, b + RES_WI_Y) & low) | ((h >> 8u) << RES_OCT_BITS));
 }
 
 // Target of reservoir sign s (0 positive, 1 negative) for signed target q; |q| without
@@ -161,8 +177,11 @@ fn pixel_adjoints(info: u32) -> PixelAdjoints {
 // path_factor), under the current (prev = false) or previous textures.
 fn evaluate(st: Stored, ti: u32, local: u32, prev: bool) -> vec3f {
     evaluations += 1u;
+    if !st.sv.valid {
+        return vec3f(0.0);
+    }
     use_prev_params = prev;
-    let e = path_factor(st.vertex, st.radiance, ti, local);
+    let e = path_factor(st.sv.vertex, st.path.radiance, ti, local);
     use_prev_params = false;
     if !all(abs(e) < vec3f(3.0e38)) {
         dropped += 1u;
@@ -177,34 +196,39 @@ fn record_verified(err: f32) {
     atomicMax(&mstats[MERGE_STAT_VERIFY_MAX_ERROR], bitcast<u32>(min(err, 3.0e38)));
 }
 
-// A kept sample: its target under the previous state (from its stored factor), and its
-// factor, value and target under the current state.
+// A stored sample: its target under the previous state (stored), and its value and target
+// under the current state.
 struct Evaluated {
     q_prev: f32,
     v: vec3f,
     q: f32,
-    e: vec3f,
 }
 
-fn evaluate_kept(r: u32, ti: u32, local: u32, ch: u32, verify: bool) -> Evaluated {
-    let st = load(r);
-    if verify {
-        // The stored factor was computed under the previous textures: evaluating the stored
-        // path there must give it back.
-        let again = evaluate(st, ti, local, true);
-        record_verified(length(again - st.v) / max(length(st.v), 1e-30));
-    }
+// The reservoir in slot k of observed texel i, for texel `local` of texture ti with ch
+// channels. With `verify`, its evaluation under the previous state is compared with the
+// stored target: the error is relative to the larger of its targets under both states, the
+// scale at which q_prev enters the MIS weights (a target near zero is a sum that cancels,
+// whose own relative rounding error is unbounded).
+fn evaluate_stored(k: u32, i: u32, ti: u32, local: u32, ch: u32, verify: bool) -> Evaluated {
+    let st = load(k, i);
     let pa = pixel_adjoints(st.info);
     let e = evaluate(st, ti, local, false);
-    return Evaluated(target_of(with_adjoint(st.v, pa.target_prev, ch), ch), with_adjoint(e, pa.value, ch), target_of(with_adjoint(e, pa.target_cur, ch), ch), e);
+    let q = target_of(with_adjoint(e, pa.target_cur, ch), ch);
+    if verify {
+        let again = target_of(with_adjoint(evaluate(st, ti, local, true), pa.target_prev, ch), ch);
+        let scale = max(max(abs(again), abs(q)), 1e-30);
+        record_verified(abs(again - st.path.q_prev) / scale);
+    }
+    return Evaluated(st.path.q_prev, with_adjoint(e, pa.value, ch), q);
 }
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {
-    let t = id.x + id.y * mp.stride;
-    if t >= mp.n_texels {
+    let i = id.x + id.y * mp.stride;
+    if i >= mp.n_observed {
         return;
     }
+    let t = observed_list[i];
     // The texture holding texel t.
     var ti = 0u;
     for (var k = 0u; k < mp.n_textures; k++) {
@@ -218,23 +242,22 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     let ch = p.channels;
     let n_signs = select(1u, 2u, (mp.flags & MERGE_FLAG_POSITIVIZE) != 0u);
     let reuse = (mp.flags & MERGE_FLAG_TEMPORAL) != 0u && (mp.flags & MERGE_FLAG_HAVE_PREV) != 0u;
-    let verify = (mp.flags & MERGE_FLAG_VERIFY) != 0u;
-    let h = headers[t];
-    let base = RESERVOIR_SLOTS * t;
+    let verify = (mp.flags & MERGE_FLAG_VERIFY) != 0u && reuse;
+    let h = headers[i];
     // Slots of the kept reservoirs (signs 0 and 1 of the last merge) and of the fresh ones.
-    let kept_r = base + vec2u(header_slot(h, 0u), header_slot(h, 1u));
-    let fresh_r = base + vec2u(fresh_slot(h, 0u), fresh_slot(h, 1u));
-    let fresh_w = vec2f(slot_w(fresh_r.x), slot_w(fresh_r.y));
+    let kept_k = vec2u(header_slot(h, 0u), header_slot(h, 1u));
+    let fresh_k = vec2u(fresh_slot(h, 0u), fresh_slot(h, 1u));
+    let fresh_w = vec2f(slot_w(fresh_k.x, i), slot_w(fresh_k.y, i));
     var kept_w = vec2f(0.0);
     if reuse {
-        kept_w = vec2f(slot_w(kept_r.x), slot_w(kept_r.y));
+        kept_w = vec2f(slot_w(kept_k.x, i), slot_w(kept_k.y, i));
         // Without positivization the sign-1 reservoir is always empty.
         kept_w.y = select(0.0, kept_w.y, n_signs == 2u);
     }
-    // Most texels of a typical task hold no sample at all (unobserved, or not hit this
-    // iteration and never before): their gradient is 0, found from the header and four
-    // words, and their slots and header stay as they are (the fresh slots are empty; kept
-    // ones that are not reused keep their slots until a merge selects something else).
+    // Many observed texels hold no sample in an iteration (not hit this iteration and never
+    // before): their gradient is 0, found from the header and four words, and their slots
+    // and header stay as they are (the fresh slots are empty; kept ones that are not reused
+    // keep their slots until a merge selects something else).
     if !any(fresh_w > vec2f(0.0)) && !any(kept_w > vec2f(0.0)) {
         for (var c = 0u; c < ch; c++) {
             grad[p.offset + local * ch + c] = 0.0;
@@ -242,21 +265,34 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         return;
     }
 
-    // Kept samples (their values under the previous state are stored), each evaluated under
-    // the current state. Plain variables, not arrays indexed by a loop counter: on a CPU
-    // device those live in memory.
-    var k0 = Evaluated(0.0, vec3f(0.0), 0.0, vec3f(0.0));
-    var k1 = Evaluated(0.0, vec3f(0.0), 0.0, vec3f(0.0));
-    // One loop over the kept inputs that hold a sample, so that neighbouring invocations
-    // that need one evaluation run it together whichever sign it is for.
-    let n_kept = u32(kept_w.x > 0.0) + u32(kept_w.y > 0.0);
-    for (var i = 0u; i < n_kept; i++) {
-        let second = i == 1u || !(kept_w.x > 0.0);
-        let e = evaluate_kept(select(kept_r.x, kept_r.y, second), ti, local, ch, verify);
-        if second {
-            k1 = e;
-        } else {
-            k0 = e;
+    // Every input that holds a sample (the fresh ones of signs 0 and 1, then the kept ones),
+    // evaluated under the current state, in one loop so that neighbouring invocations run
+    // their evaluations together. Plain variables, not arrays indexed by a loop counter: on a
+    // CPU device those live in memory.
+    let none = Evaluated(0.0, vec3f(0.0), 0.0);
+    var f0 = none;
+    var f1 = none;
+    var k0 = none;
+    var k1 = none;
+    var rest = u32(fresh_w.x > 0.0) | (u32(fresh_w.y > 0.0) << 1u) | (u32(kept_w.x > 0.0) << 2u) | (u32(kept_w.y > 0.0) << 3u);
+    while rest != 0u {
+        let j = firstTrailingBit(rest);
+        rest &= rest - 1u;
+        let k = select(select(kept_k.y, kept_k.x, j == 2u), select(fresh_k.y, fresh_k.x, j == 0u), j < 2u);
+        let e = evaluate_stored(k, i, ti, local, ch, verify);
+        switch j {
+            case 0u: {
+                f0 = e;
+            }
+            case 1u: {
+                f1 = e;
+            }
+            case 2u: {
+                k0 = e;
+            }
+            default: {
+                k1 = e;
+            }
         }
     }
     let k_qprev = vec2f(k0.q_prev, k1.q_prev);
@@ -266,34 +302,21 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     let m_k = select(0.0, mp.m_kept, reuse);
     var g = vec3f(0.0);
     // The slot each sign's merged reservoir ends in.
-    var out_slot = vec2u(fresh_r.x - base, fresh_r.y - base);
+    var out_slot = fresh_k;
     for (var s = 0u; s < n_signs; s++) {
-        let r_fresh = fresh_r[s];
-        let c_ok = fresh_w[s] > 0.0;
-        // A fresh sample's factor under the current textures and its target under the
-        // previous state are stored.
-        var c_e = vec3f(0.0);
-        var c_v = vec3f(0.0);
-        var c_qcur = 0.0;
-        var c_qprev = 0.0;
-        if c_ok {
-            c_e = slot_value(r_fresh);
-            let pa = pixel_adjoints(word(r_fresh, RES_INFO));
-            c_v = with_adjoint(c_e, pa.value, ch);
-            c_qcur = target_of(with_adjoint(c_e, pa.target_cur, ch), ch);
-            if reuse {
-                c_qprev = bitcast<f32>(word(r_fresh, RES_Q_PREV));
-                if verify {
-                    // The candidate pass evaluated the same path under the same state, in
-                    // another shader (so the rounding may differ). The error is relative to
-                    // the larger of the sample's targets under both states, the scale at
-                    // which q_prev enters the MIS weights (a target near zero is a sum that
-                    // cancels, whose own relative rounding error is unbounded).
-                    let again = target_of(with_adjoint(evaluate(load(r_fresh), ti, local, true), pa.target_prev, ch), ch);
-                    let scale = max(max(abs(again), abs(c_qcur)), 1e-30);
-                    record_verified(abs(again - c_qprev) / scale);
-                }
-            }
+        var c = f0;
+        if s == 1u {
+            c = f1;
+        }
+        let c_qcur = c.q;
+        let c_qprev = select(0.0, c.q_prev, reuse);
+        // The candidate pass offered the fresh sample to this sign for the sign of the same
+        // target from the same stored path; a rounding difference between the two shaders
+        // that flips a target of about zero drops it.
+        var c_ok = fresh_w[s] > 0.0;
+        if c_ok && !(tau(c_qcur, s) > 0.0) {
+            c_ok = false;
+            dropped += 1u;
         }
         // Resampling weights m_r(y_r) * tau_s(q_cur(y_r)) * W_r of the fresh input (w0) and
         // the kept ones (wk).
@@ -323,8 +346,8 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         let total = w0 + wk.x + wk.y;
         if !(total > 0.0) || !(total < 3.0e38) {
             // Empty: the fresh slot (W = 0 from here on) stands for it.
-            if c_ok {
-                set_w(r_fresh, 0.0);
+            if fresh_w[s] > 0.0 {
+                set_w(fresh_k[s], i, 0.0);
             }
             continue;
         }
@@ -340,28 +363,29 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         }
         // A kept sample goes to at most one sign (its weight is zero for the other), so the
         // two merged reservoirs always lie in different slots.
-        var r_out = r_fresh;
-        var v = c_v;
+        var k_out = fresh_k[s];
+        var v = c.v;
         var q = c_qcur;
         if pick != 0u {
-            r_out = kept_r[pick - 1u];
+            k_out = kept_k[pick - 1u];
             v = select(k0.v, k1.v, pick == 2u);
             q = select(k0.q, k1.q, pick == 2u);
-            set_value(r_out, select(k0.e, k1.e, pick == 2u));
         }
         let w_out = total / tau(q, s);
-        set_w(r_out, w_out);
-        out_slot[s] = r_out - base;
+        set_w(k_out, i, w_out);
+        // Its target now is its target under the previous state at the next merge.
+        set_q_prev(k_out, i, q);
+        out_slot[s] = k_out;
         g += v * w_out;
     }
     let new_h = out_slot.x | (out_slot.y << HEADER_SLOT_BITS);
-    headers[t] = new_h;
+    headers[i] = new_h;
     // The slots the new header leaves free take the next iteration's candidates: the inputs
     // that were not selected, kept or fresh, are emptied.
     for (var s = 0u; s < 2u; s++) {
-        let r = base + fresh_slot(new_h, s);
-        if slot_w(r) != 0.0 {
-            set_w(r, 0.0);
+        let k = fresh_slot(new_h, s);
+        if slot_w(k, i) != 0.0 {
+            set_w(k, i, 0.0);
         }
     }
     for (var c = 0u; c < ch; c++) {

@@ -5,6 +5,7 @@
 // reuse this split (ReSTIR stores the path, direction and radiance, without the factor).
 #import shared/bvh
 #import shared/surface
+#import shared/compact_path
 
 // Which techniques contribute to area and environment lights (delta lights always use NEE).
 var<private> techniques: u32 = TECH_MIS;
@@ -187,27 +188,60 @@ fn direct_radiance_states(o: vec3f, d: vec3f, both: bool) -> array<vec3f, 2> {
 // samples with their BRDF derivatives. valid is false when the ray misses, hits the back of a
 // single-sided surface, or hits a material without optimized textures. The outgoing and each
 // sample's incident direction are taken to the shading frame and rounded through the
-// octahedral encoding that ReSTIR stores (about 1e-7), and the derivatives are taken there, so
-// that a stored path (shared/surface.wgsl, path_factor) re-evaluates to the same value.
+// octahedral encoding (about 1e-7), and the derivatives are taken there. With compact_paths
+// (ReSTIR's candidates) the hit's barycentrics, the incident directions and the radiances are
+// rounded as ReSTIR stores them (shared/compact_path.wgsl) before anything is evaluated, so
+// that a stored path (stored_vertex, path_factor) re-evaluates to the same value.
+var<private> compact_paths: bool = false;
+
 struct GradientSample {
     valid: bool,
     sf: Surface,
     m: Material,
     nee: DirectSample,
     nee_grad: BrdfGrad,
-    // The path of each technique as ReSTIR stores it.
+    // The path of each technique as the BRDF sees it.
     nee_vertex: PathVertex,
     bsdf: DirectSample,
     bsdf_grad: BrdfGrad,
     bsdf_vertex: PathVertex,
+    // With compact_paths: the hit's triangle and fixed-point barycentrics, and each
+    // technique's fixed-point direction and RGBE radiance (shared/compact_path.wgsl).
+    tri: u32,
+    kb: vec2u,
+    nee_ko: vec2u,
+    nee_rgbe: u32,
+    bsdf_ko: vec2u,
+    bsdf_rgbe: u32,
+}
+
+// The octahedral coordinates of wi (world space) in sf's frame, rounded to the fixed point
+// ReSTIR stores when compact_paths (ko: the fixed-point values).
+struct RoundedDirection {
+    oct: vec2f,
+    ko: vec2u,
+}
+
+fn rounded_direction(sf: Surface, wi: vec3f) -> RoundedDirection {
+    let e = oct_encode(to_local(sf.frame, wi));
+    if !compact_paths {
+        return RoundedDirection(e, vec2u(0u));
+    }
+    let ko = vec2u(oct_round(e.x), oct_round(e.y));
+    return RoundedDirection(vec2f(oct_value(ko.x), oct_value(ko.y)), ko);
 }
 
 fn gradient_sample(o: vec3f, d: vec3f) -> GradientSample {
     var out: GradientSample;
     out.valid = false;
-    let hit = trace_closest(o, d, 3.0e38);
+    var hit = trace_closest(o, d, 3.0e38);
     if hit.tri == NONE {
         return out;
+    }
+    if compact_paths {
+        out.tri = hit.tri;
+        out.kb = vec2u(bary_round(hit.b1), bary_round(hit.b2));
+        hit = stored_hit(hit.tri, out.kb);
     }
     out.sf = surface_at(o, hit);
     out.m = materials[out.sf.material];
@@ -216,17 +250,25 @@ fn gradient_sample(o: vec3f, d: vec3f) -> GradientSample {
         return out;
     }
     let gltf = gltf_inputs(out.sf.material, out.sf.uv);
-    let fixed = fixed_pack(out.sf.material, gltf);
     let mat = with_optimized(out.sf.material, out.sf.uv, gltf);
     let s = sample_direct(out.sf, mat);
     out.nee = s.nee;
     out.bsdf = s.bsdf;
-    let wo = oct_encode(to_local(out.sf.frame, out.sf.wo));
-    out.nee_vertex = PathVertex(out.sf.material, out.sf.uv, wo, oct_encode(to_local(out.sf.frame, s.nee.wi)), fixed);
-    out.bsdf_vertex = PathVertex(out.sf.material, out.sf.uv, wo, oct_encode(to_local(out.sf.frame, s.bsdf.wi)), fixed);
-    let wo_l = oct_decode(wo);
-    out.nee_grad = brdf_eval_cos_grad(mat, wo_l, oct_decode(out.nee_vertex.wi));
-    out.bsdf_grad = brdf_eval_cos_grad(mat, wo_l, oct_decode(out.bsdf_vertex.wi));
+    if compact_paths {
+        out.nee_rgbe = rgbe_pack(s.nee.radiance);
+        out.nee.radiance = rgbe_unpack(out.nee_rgbe);
+        out.bsdf_rgbe = rgbe_pack(s.bsdf.radiance);
+        out.bsdf.radiance = rgbe_unpack(out.bsdf_rgbe);
+    }
+    let nee_wi = rounded_direction(out.sf, s.nee.wi);
+    let bsdf_wi = rounded_direction(out.sf, s.bsdf.wi);
+    out.nee_ko = nee_wi.ko;
+    out.bsdf_ko = bsdf_wi.ko;
+    out.nee_vertex = path_vertex(out.sf, gltf, nee_wi.oct);
+    out.bsdf_vertex = path_vertex(out.sf, gltf, bsdf_wi.oct);
+    let wo_l = oct_decode(out.nee_vertex.wo);
+    out.nee_grad = brdf_eval_cos_grad(mat, wo_l, oct_decode(nee_wi.oct));
+    out.bsdf_grad = brdf_eval_cos_grad(mat, wo_l, oct_decode(bsdf_wi.oct));
     out.valid = true;
     return out;
 }

@@ -2,26 +2,30 @@
 #import gen/abi
 #import shared/reservoir_slots
 
-// Streaming reservoir updates for parameter-space ReSTIR. A reservoir holds one path (the
-// layout, RES_* and RESERVOIR_WORDS, is generated from src/optim/estimator/restir.rs): the
-// camera sample that started it (pixel, camera, technique in RES_INFO), what the BRDF needs of
-// the camera ray's hit (material, texture coordinates, the outgoing and incident directions
-// in its shading frame, octahedral, and the material inputs no optimized texture replaces)
-// and the radiance arriving along the incident direction, with its factor under the
-// iteration's textures (the derivative d(BRDF cos L_i)/d(texel) per image channel: the value
-// is the pixel's adjoint times it, the target the luminance of the target adjoint times it),
-// and the weight sum (fresh reservoirs) or unbiased contribution weight W (merged).
+// Streaming reservoir updates for parameter-space ReSTIR. A reservoir holds one path in
+// RESERVOIR_WORDS words (the layout, RES_*, is generated from src/gpu/abi.rs): the camera
+// sample that started it (pixel, camera, technique in RES_INFO), its weight sum (fresh
+// reservoirs) or unbiased contribution weight W (merged), and the path in its compact form
+// (shared/compact_path.wgsl: the camera ray's hit, the incident direction in the hit's
+// shading frame, the incident radiance) with the path's target under the previous state:
+// for a fresh path the candidate pass computes it, for a merged one the merge stores the
+// target it had there, which is its target under the previous state at the next merge.
+// The path's factor for a texel (d(BRDF cos L_i)/d(texel) per image channel) is re-evaluated
+// from these by the merge; its value is the pixel's adjoint times the factor, its target the
+// luminance of the target adjoint times it.
 // Target adjoint: the resampling targets use an exponential moving average of the adjoints,
 // per pixel, a_t = s a_{t-1} + (1 - s) adjoint_t (s: RestirOptions::target_smoothing), which
 // changes less between iterations than a noisy primal's adjoint; the values use the
 // iteration's own adjoint. Any target that is non-zero wherever the value is keeps the
 // estimate unbiased, and a_t is fixed before the gradient samples are drawn.
-// Texel t owns RESERVOIR_SLOTS reservoir slots, 4t to 4t + 3, and a header word that says
-// which slot holds its positive (sign 0) and its negative (sign 1) reservoir: two distinct
-// slots, so two are free for the next iteration's fresh candidates (fresh_slot). The merge
-// selects in place and rewrites the header: a kept sample is never copied.
-// Passes that offer candidates declare `fresh` (the slots, as atomics) and `locks` (one word
-// per texel and sign).
+// Only texels that a camera observes have reservoirs: observed texel i (the compaction map,
+// src/optim/estimator/restir.rs) owns RESERVOIR_SLOTS slots, slot k at word
+// i * RESERVOIR_WORDS of buffer `slots<k>`, and header word i, which says which slot holds
+// its positive (sign 0) and its negative (sign 1) reservoir: two distinct slots, so two are
+// free for the next iteration's fresh candidates (fresh_slot). The merge selects in place
+// and rewrites the header: a kept sample is never copied. The header's lock bits
+// (HEADER_LOCK_SHIFT + sign) guard the fresh reservoirs while the candidate pass writes them.
+// Passes that offer candidates declare `slots0` .. `slots3` and `headers` as atomics.
 
 // Tries before an offer gives up (and is counted as lost). Invocations of one SIMD group
 // never wait on each other (the holder finishes in the iteration that took the lock), so the
@@ -31,62 +35,79 @@
 // A holder always releases in the same iteration, so the bound is never reached otherwise.
 const LOCK_BOUND: u32 = 4194304u;
 
-// A candidate path and its factor for one texel.
+// A candidate path for one texel.
 struct Candidate {
     // Pixel | camera << INFO_CAMERA_SHIFT | technique << INFO_TECH_SHIFT (0 light, 1 BSDF).
     info: u32,
-    // d(BRDF cos L_i)/d(texel) per image channel, before the adjoint (RES_VALUE).
-    value: vec3f,
-    // The path's first vertex as path_factor (shared/surface.wgsl) evaluates it.
-    vertex: PathVertex,
-    radiance: vec3f,
-    // Target of the path for this texel under the previous iteration's textures and target
-    // adjoint (0 when the merge will not reuse; RES_Q_PREV).
-    q_prev: f32,
+    // The path's words after RES_W (shared/compact_path.wgsl, path_words), with its target
+    // under the previous iteration's textures and target adjoint (0 when the merge will not
+    // reuse).
+    words: array<u32, 5>,
 }
 
-// Streaming update from many invocations at once. Design: a per-reservoir lock taken with
-// atomicCompareExchangeWeak, the critical section and the release inside the loop iteration
-// that took it (a lock that spins first and works after the loop deadlocks within a SIMD group
-// on lavapipe). Chosen over order-independent selection (atomicMin on -ln(u)/w keys), which
-// is deterministic but needs a second pass in which every candidate is traced again to write
-// its payload: the candidate pass is the expensive part, and doubling it would cost more than
-// determinism is worth here. Every word is accessed atomically so that the next holder sees it. The
-// candidate replaces the sample with probability w / (Wsum_before + w), which makes the
-// selection exactly proportional to weight. Offers to reservoir r hold lock word `lock`.
+fn slot_store(k: u32, i: u32, x: u32) {
+    switch k {
+        case 0u: {
+            atomicStore(&slots0[i], x);
+        }
+        case 1u: {
+            atomicStore(&slots1[i], x);
+        }
+        case 2u: {
+            atomicStore(&slots2[i], x);
+        }
+        default: {
+            atomicStore(&slots3[i], x);
+        }
+    }
+}
+
+fn slot_load(k: u32, i: u32) -> u32 {
+    switch k {
+        case 0u: {
+            return atomicLoad(&slots0[i]);
+        }
+        case 1u: {
+            return atomicLoad(&slots1[i]);
+        }
+        case 2u: {
+            return atomicLoad(&slots2[i]);
+        }
+        default: {
+            return atomicLoad(&slots3[i]);
+        }
+    }
+}
+
+// Streaming update from many invocations at once. Design: a per-reservoir lock bit in the
+// texel's header, taken with atomicOr (test and set), the critical section and the release
+// inside the loop iteration that took it (a lock that spins first and works after the loop
+// deadlocks within a SIMD group on lavapipe). Chosen over order-independent selection
+// (atomicMin on -ln(u)/w keys), which is deterministic but needs a second pass in which every
+// candidate is traced again to write its payload: the candidate pass is the expensive part,
+// and doubling it would cost more than determinism is worth here. Every word is accessed
+// atomically so that the next holder sees it. The candidate replaces the sample with
+// probability w / (Wsum_before + w), which makes the selection exactly proportional to
+// weight. Offers go to slot k of observed texel i, sign `sign`'s lock.
 // Returns false if the bounded loop never got the lock (the caller counts it).
-fn reservoir_offer(r: u32, lock: u32, w: f32, u: f32, c: Candidate) -> bool {
-    for (var k = 0u; k < LOCK_BOUND; k++) {
-        if atomicCompareExchangeWeak(&locks[lock], 0u, 1u).exchanged {
-            let base = r * RESERVOIR_WORDS;
-            let before = bitcast<f32>(atomicLoad(&fresh[base + RES_W]));
+fn reservoir_offer(k: u32, i: u32, sign: u32, w: f32, u: f32, c: Candidate) -> bool {
+    let bit = 1u << (HEADER_LOCK_SHIFT + sign);
+    for (var n = 0u; n < LOCK_BOUND; n++) {
+        if (atomicOr(&headers[i], bit) & bit) == 0u {
+            let base = i * RESERVOIR_WORDS;
+            let before = bitcast<f32>(slot_load(k, base + RES_W));
             let wsum = before + w;
-            atomicStore(&fresh[base + RES_W], bitcast<u32>(wsum));
+            slot_store(k, base + RES_W, bitcast<u32>(wsum));
             // The first offer to an empty reservoir is always taken (u * wsum < w can fail
             // for a denormal w), so that its weight never stands beside the payload of an
             // older sample left in a free slot.
             if before == 0.0 || u * wsum < w {
-                atomicStore(&fresh[base + RES_INFO], c.info);
-                atomicStore(&fresh[base + RES_VALUE], bitcast<u32>(c.value.x));
-                atomicStore(&fresh[base + RES_VALUE + 1u], bitcast<u32>(c.value.y));
-                atomicStore(&fresh[base + RES_VALUE + 2u], bitcast<u32>(c.value.z));
-                atomicStore(&fresh[base + RES_MATERIAL], c.vertex.material);
-                atomicStore(&fresh[base + RES_UV], bitcast<u32>(c.vertex.uv.x));
-                atomicStore(&fresh[base + RES_UV + 1u], bitcast<u32>(c.vertex.uv.y));
-                atomicStore(&fresh[base + RES_WI], bitcast<u32>(c.vertex.wi.x));
-                atomicStore(&fresh[base + RES_WI + 1u], bitcast<u32>(c.vertex.wi.y));
-                atomicStore(&fresh[base + RES_WO], bitcast<u32>(c.vertex.wo.x));
-                atomicStore(&fresh[base + RES_WO + 1u], bitcast<u32>(c.vertex.wo.y));
-                atomicStore(&fresh[base + RES_RADIANCE], bitcast<u32>(c.radiance.x));
-                atomicStore(&fresh[base + RES_RADIANCE + 1u], bitcast<u32>(c.radiance.y));
-                atomicStore(&fresh[base + RES_RADIANCE + 2u], bitcast<u32>(c.radiance.z));
-                atomicStore(&fresh[base + RES_Q_PREV], bitcast<u32>(c.q_prev));
-                atomicStore(&fresh[base + RES_FIXED], bitcast<u32>(c.vertex.fixed.x));
-                atomicStore(&fresh[base + RES_FIXED + 1u], bitcast<u32>(c.vertex.fixed.y));
-                atomicStore(&fresh[base + RES_FIXED + 2u], bitcast<u32>(c.vertex.fixed.z));
-                atomicStore(&fresh[base + RES_FIXED + 3u], bitcast<u32>(c.vertex.fixed.w));
+                slot_store(k, base + RES_INFO, c.info);
+                for (var j = 0u; j < 5u; j++) {
+                    slot_store(k, base + RES_TRI + j, c.words[j]);
+                }
             }
-            atomicStore(&locks[lock], 0u);
+            atomicAnd(&headers[i], ~bit);
             return true;
         }
     }

@@ -1,7 +1,8 @@
-// Where a texel's reservoirs lie: RESERVOIR_SLOTS slots per texel and a header word per texel
-// (the layout is generated from src/gpu/abi.rs, gen/abi). The header
-// names two distinct slots, those of the positive (sign 0) and the negative (sign 1)
-// reservoir; the other two are free for the next iteration's fresh candidates.
+// Where a texel's reservoirs lie: RESERVOIR_SLOTS slots per observed texel and a header word
+// (the layout is generated from src/gpu/abi.rs, gen/abi). The header names two distinct
+// slots, those of the positive (sign 0) and the negative (sign 1) reservoir; the other two
+// are free for the next iteration's fresh candidates. Bits from HEADER_LOCK_SHIFT on are the
+// candidate pass's locks.
 #import gen/abi
 
 // The slot of sign s's reservoir in header h.

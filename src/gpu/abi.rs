@@ -30,38 +30,37 @@ pub mod technique {
     pub const MIS: u32 = 3;
 }
 
-/// ReSTIR's reservoirs: word offsets within a reservoir, the packing of its info word, and
-/// a texel's slots and header (WGSL: `RES_*`, `INFO_*`, `RESERVOIR_WORDS`,
-/// `RESERVOIR_SLOTS`, `HEADER_*`).
+/// ReSTIR's reservoirs in their compact form: word offsets within a reservoir, the packing
+/// of its words, a texel's slots and header (WGSL: `RES_*`, `INFO_*`, `RESERVOIR_WORDS`,
+/// `RESERVOIR_SLOTS`, `HEADER_*`). A reservoir stores its path as the camera ray's hit
+/// (triangle and barycentrics), the incident direction in the hit's shading frame and the
+/// incident radiance; everything else the BRDF needs is rebuilt from the scene
+/// (shaders/shared/compact_path.wgsl; the precision of each encoding is stated in
+/// `crate::optim::estimator::compact`).
 pub mod reservoir {
     /// Pixel | camera << CAMERA_SHIFT | technique << TECH_SHIFT.
     pub const INFO: u32 = 0;
     /// Weight sum (fresh reservoirs) or unbiased contribution weight W (merged), f32.
     pub const W: u32 = 1;
-    /// The path's factor e = d(BRDF cos L_i)/d(texel) per image channel (RGB f32) under the
-    /// textures the reservoir was formed at; its value is the pixel's adjoint times e.
-    pub const VALUE: u32 = 2;
-    /// Material of the camera ray's hit (index into the scene's materials).
-    pub const MATERIAL: u32 = 5;
-    /// Texture coordinates (UV0) of the hit, f32.
-    pub const UV: u32 = 6;
-    /// Incident direction in the hit's shading frame, octahedral, two f32.
-    pub const WI: u32 = 8;
-    /// Outgoing (towards the camera) direction in the shading frame, octahedral, two f32.
-    pub const WO: u32 = 10;
-    /// Incident radiance, RGB f32.
-    pub const RADIANCE: u32 = 12;
-    /// Fresh reservoirs: the path's target under the previous iteration's textures and
-    /// target adjoint (f32), computed by the candidate pass, which has the material
-    /// at hand, so that the merge does not evaluate fresh paths again.
-    pub const Q_PREV: u32 = 15;
-    /// The material inputs at the hit that no optimized texture replaces, four f32
-    /// (shaders/shared/surface.wgsl, fixed_pack): re-evaluating the path samples no glTF
-    /// texture.
-    pub const FIXED: u32 = 16;
-    /// Words per reservoir (a multiple of 4: the merge reads a reservoir as vec4s).
-    pub const WORDS: u32 = 20;
-    const _: () = assert!(WORDS % 4 == 0);
+    /// Triangle index (TRI_BITS) and the low bits of the first barycentric.
+    pub const TRI: u32 = 2;
+    /// The high bits of the first barycentric and the second one.
+    pub const BARY: u32 = 3;
+    /// The incident direction's first octahedral coordinate (24 bits) and the low byte of
+    /// the target under the previous state (bfloat16).
+    pub const WI_X: u32 = 4;
+    /// The second octahedral coordinate (24 bits) and the high byte of that target.
+    pub const WI_Y: u32 = 5;
+    /// Incident radiance, RGB with a shared exponent (RGBE, 8 bits each).
+    pub const RADIANCE: u32 = 6;
+    /// Words per reservoir.
+    pub const WORDS: u32 = 7;
+    /// Bits of the triangle index (ReSTIR handles scenes of up to 2^24 triangles).
+    pub const TRI_BITS: u32 = 24;
+    /// Bits of each barycentric (fixed point in [0, 1)).
+    pub const BARY_BITS: u32 = 20;
+    /// Bits of each octahedral coordinate (fixed point in [-1, 1)).
+    pub const OCT_BITS: u32 = 24;
     /// Bits of the pixel index (images up to 8192 x 8192 = 2^26 pixels).
     pub const CAMERA_SHIFT: u32 = 26;
     /// Camera index mask after the shift.
@@ -70,14 +69,21 @@ pub mod reservoir {
     pub const PIXEL_MASK: u32 = (1 << CAMERA_SHIFT) - 1;
     /// The technique bit: 0 light sampling, 1 BSDF sampling.
     pub const TECH_SHIFT: u32 = 29;
-    /// Reservoir slots per texel: its two kept reservoirs and the two fresh ones.
+    /// Reservoir slots per texel: its two kept reservoirs and the two fresh ones. Slot k of
+    /// every observed texel lies in its own buffer (`slots<k>`), so that no binding holds
+    /// more than a quarter of the state.
     pub const SLOTS: u32 = 4;
     /// Bits of a slot index in a texel's header (sign 0's slot, then sign 1's).
     pub const HEADER_SLOT_BITS: u32 = 2;
     /// Slot index mask after the shift.
     pub const HEADER_SLOT_MASK: u32 = (1 << HEADER_SLOT_BITS) - 1;
+    /// The header's lock bit of sign 0's fresh reservoir (sign 1's is the next bit): the
+    /// candidate pass takes it while it writes that reservoir.
+    pub const HEADER_LOCK_SHIFT: u32 = 2 * HEADER_SLOT_BITS;
     /// The header of a texel whose reservoirs lie in slots 0 (sign 0) and 1 (sign 1).
     pub const HEADER_FIRST_TWO: u32 = 1 << HEADER_SLOT_BITS;
+    /// Marks a texel no camera observes in the compaction map's lookups (u32::MAX).
+    pub const UNOBSERVED: u32 = u32::MAX;
 
     /// The slot of sign `sign`'s reservoir in header `h`.
     pub fn header_slot(h: u32, sign: u32) -> u32 {
@@ -129,6 +135,9 @@ pub mod stat {
     pub const CANDIDATE_LOST: u32 = 1;
     /// `restir_candidates.wgsl`: non-finite candidates dropped.
     pub const CANDIDATE_DROPPED: u32 = 2;
+    /// `restir_candidates.wgsl`: candidates for texels outside the compaction map (texels
+    /// that the observed-texel pass's strata missed), dropped.
+    pub const CANDIDATE_UNMAPPED: u32 = 3;
     /// `restir_merge.wgsl`: kept paths evaluated.
     pub const MERGE_EVALUATIONS: u32 = 0;
     /// `restir_merge.wgsl`: non-finite values dropped.
@@ -152,21 +161,23 @@ pub const CONSTANTS: &[(&str, u32)] = &[
     ("RESERVOIR_WORDS", reservoir::WORDS),
     ("RES_INFO", reservoir::INFO),
     ("RES_W", reservoir::W),
-    ("RES_VALUE", reservoir::VALUE),
-    ("RES_MATERIAL", reservoir::MATERIAL),
-    ("RES_UV", reservoir::UV),
-    ("RES_WI", reservoir::WI),
-    ("RES_WO", reservoir::WO),
+    ("RES_TRI", reservoir::TRI),
+    ("RES_BARY", reservoir::BARY),
+    ("RES_WI_X", reservoir::WI_X),
+    ("RES_WI_Y", reservoir::WI_Y),
     ("RES_RADIANCE", reservoir::RADIANCE),
-    ("RES_Q_PREV", reservoir::Q_PREV),
-    ("RES_FIXED", reservoir::FIXED),
+    ("RES_TRI_BITS", reservoir::TRI_BITS),
+    ("RES_BARY_BITS", reservoir::BARY_BITS),
+    ("RES_OCT_BITS", reservoir::OCT_BITS),
     ("RESERVOIR_SLOTS", reservoir::SLOTS),
     ("HEADER_SLOT_BITS", reservoir::HEADER_SLOT_BITS),
     ("HEADER_SLOT_MASK", reservoir::HEADER_SLOT_MASK),
+    ("HEADER_LOCK_SHIFT", reservoir::HEADER_LOCK_SHIFT),
     ("INFO_CAMERA_SHIFT", reservoir::CAMERA_SHIFT),
     ("INFO_CAMERA_MASK", reservoir::CAMERA_MASK),
     ("INFO_PIXEL_MASK", reservoir::PIXEL_MASK),
     ("INFO_TECH_SHIFT", reservoir::TECH_SHIFT),
+    ("UNOBSERVED", reservoir::UNOBSERVED),
     ("MAX_CAMERAS", MAX_CAMERAS),
     ("MERGE_FLAG_TEMPORAL", merge_flag::TEMPORAL),
     ("MERGE_FLAG_POSITIVIZE", merge_flag::POSITIVIZE),
@@ -185,6 +196,7 @@ pub const CONSTANTS: &[(&str, u32)] = &[
     ("CANDIDATE_STAT_OFFERED", stat::CANDIDATE_OFFERED),
     ("CANDIDATE_STAT_LOST", stat::CANDIDATE_LOST),
     ("CANDIDATE_STAT_DROPPED", stat::CANDIDATE_DROPPED),
+    ("CANDIDATE_STAT_UNMAPPED", stat::CANDIDATE_UNMAPPED),
     ("MERGE_STAT_EVALUATIONS", stat::MERGE_EVALUATIONS),
     ("MERGE_STAT_DROPPED", stat::MERGE_DROPPED),
     ("MERGE_STAT_VERIFIED", stat::MERGE_VERIFIED),
@@ -236,6 +248,7 @@ mod tests {
             assert!(w.contains(&format!("const {name}: u32 = {v}u;")));
         }
         assert_eq!(MAX_CAMERAS, 8);
-        assert_eq!(reservoir::WORDS % 4, 0);
+        assert_eq!(reservoir::TRI_BITS + 2 * reservoir::BARY_BITS, 64);
+        assert!(reservoir::HEADER_LOCK_SHIFT + 2 <= 32);
     }
 }

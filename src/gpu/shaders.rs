@@ -45,6 +45,7 @@ pub const SOURCES: &[(&str, &str)] = sources!(
     "shared/reservoir",
     "shared/adjoint_pixel",
     "shared/surface",
+    "shared/compact_path",
     "render",
     "trace_rays",
     "gradient",

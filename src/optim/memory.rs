@@ -5,11 +5,28 @@ use crate::gpu::Gpu;
 use crate::render::params::ParamSet;
 use crate::{Error, Result};
 
+/// What a buffer's size scales with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Scale {
+    /// Every texel of the optimized textures.
+    Texel,
+    /// The texels that a camera observes (ReSTIR's reservoirs).
+    ObservedTexel,
+    /// Every pixel of every camera.
+    Pixel,
+}
+
 /// The buffers an optimizer allocates besides the scene's, by label and size in bytes.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MemoryPlan {
-    /// (label, bytes) of each buffer.
-    pub buffers: Vec<(String, u64)>,
+    /// (label, bytes, what it scales with) of each buffer.
+    pub buffers: Vec<(String, u64, Scale)>,
+    /// Texels of the optimized textures.
+    pub texels: u64,
+    /// Texels that a camera observes.
+    pub observed_texels: u64,
+    /// Pixels of all cameras.
+    pub pixels: u64,
 }
 
 impl MemoryPlan {
@@ -18,19 +35,45 @@ impl MemoryPlan {
         self.buffers.iter().map(|b| b.1).sum()
     }
 
+    /// Bytes per unit of `scale` (per texel, per observed texel or per pixel).
+    pub fn bytes_per(&self, scale: Scale) -> f64 {
+        let n = match scale {
+            Scale::Texel => self.texels,
+            Scale::ObservedTexel => self.observed_texels,
+            Scale::Pixel => self.pixels,
+        };
+        let bytes: u64 = self.buffers.iter().filter(|b| b.2 == scale).map(|b| b.1).sum();
+        bytes as f64 / n.max(1) as f64
+    }
+
+    /// One line: the total and the bytes per texel, per observed texel and per pixel.
+    pub fn summary(&self) -> String {
+        format!(
+            "optimizer memory {:.1} MiB: {:.1} bytes per texel ({} texels), {:.1} per observed \
+             texel ({} observed), {:.1} per pixel ({} pixels of all cameras)",
+            self.total() as f64 / MIB,
+            self.bytes_per(Scale::Texel),
+            self.texels,
+            self.bytes_per(Scale::ObservedTexel),
+            self.observed_texels,
+            self.bytes_per(Scale::Pixel),
+            self.pixels
+        )
+    }
+
     /// Refuse, before anything is allocated, a buffer larger than the device binds or
     /// allocates, naming the buffer, its size and the limit.
     pub fn check(&self, gpu: &Gpu) -> Result<()> {
         let l = gpu.device.limits();
         let limit = l.max_storage_buffer_binding_size.min(l.max_buffer_size);
-        if let Some((label, bytes)) = self.buffers.iter().find(|b| b.1 > limit) {
+        if let Some((label, bytes, _)) = self.buffers.iter().find(|b| b.1 > limit) {
             return Err(Error::Unsuitable(format!(
                 "the optimizer's {label} buffer needs {bytes} bytes ({:.1} MiB), the device allows \
-                 {limit} bytes ({:.1} MiB) per storage buffer; use smaller textures or images \
-                 (the optimizer needs {:.1} MiB in all)",
+                 {limit} bytes ({:.1} MiB) per storage buffer; use smaller textures or images, \
+                 or fewer observed texels ({})",
                 *bytes as f64 / MIB,
                 limit as f64 / MIB,
-                self.total() as f64 / MIB
+                self.summary()
             )));
         }
         Ok(())
@@ -39,8 +82,14 @@ impl MemoryPlan {
 
 const MIB: f64 = 1024.0 * 1024.0;
 
-/// The optimizer's buffers for textures `set`, images as in `settings`, `n_cams` cameras.
-pub fn memory_plan(set: &ParamSet, settings: &Settings, n_cams: usize) -> MemoryPlan {
+/// The optimizer's buffers for textures `set` of which `n_observed` texels are observed,
+/// images as in `settings`, `n_cams` cameras.
+pub fn memory_plan(
+    set: &ParamSet,
+    settings: &Settings,
+    n_cams: usize,
+    n_observed: u64,
+) -> MemoryPlan {
     let n_params = set.values.len() as u64;
     let n_texels: u64 = set
         .textures
@@ -48,27 +97,41 @@ pub fn memory_plan(set: &ParamSet, settings: &Settings, n_cams: usize) -> Memory
         .map(|t| (t.width * t.height) as u64)
         .sum();
     let pixels = settings.width as u64 * settings.height as u64;
+    let all_pixels = pixels * n_cams as u64;
+    let texel = |label: &str, bytes: u64| (label.to_string(), bytes, Scale::Texel);
+    let pixel = |label: String, bytes: u64| (label, bytes, Scale::Pixel);
     let mut buffers = vec![
-        ("params".to_string(), 4 * n_params),
-        ("params_prev".to_string(), 4 * n_params),
-        ("gradient".to_string(), 4 * n_params),
-        ("adam moment1".to_string(), 4 * n_params),
-        ("adam moment2".to_string(), 4 * n_params),
-        ("primal accum".to_string(), 16 * pixels),
-        ("primal accum_prev".to_string(), 16 * pixels),
-        ("adjoint even".to_string(), 16 * pixels * n_cams as u64),
-        ("adjoint odd".to_string(), 16 * pixels * n_cams as u64),
+        texel("params", 4 * n_params),
+        texel("params_prev", 4 * n_params),
+        texel("gradient", 4 * n_params),
+        texel("adam moment1", 4 * n_params),
+        texel("adam moment2", 4 * n_params),
+        texel("observed texels", 4 * n_texels),
+        pixel("primal accum".into(), 16 * pixels),
+        pixel("primal accum_prev".into(), 16 * pixels),
+        pixel("adjoint even".into(), 16 * all_pixels),
+        pixel("adjoint odd".into(), 16 * all_pixels),
     ];
     for k in 0..n_cams {
-        buffers.push((format!("target {k}"), 16 * pixels));
+        buffers.push(pixel(format!("target {k}"), 16 * pixels));
     }
     buffers.extend(estimator::memory(
         settings.method,
         n_texels,
-        pixels * n_cams as u64,
+        n_observed,
+        all_pixels,
     ));
     if settings.primal == PrimalMode::ControlVariate {
-        buffers.extend(primal::memory(pixels, n_cams as u64));
+        buffers.extend(
+            primal::memory(pixels, n_cams as u64)
+                .into_iter()
+                .map(|(l, b)| (l, b, Scale::Pixel)),
+        );
     }
-    MemoryPlan { buffers }
+    MemoryPlan {
+        buffers,
+        texels: n_texels,
+        observed_texels: n_observed,
+        pixels: all_pixels,
+    }
 }

@@ -77,9 +77,9 @@ pub struct Optimizer {
     camera_infos: Vec<GpuCameraInfo>,
     /// The texture_export pipeline, built on first use.
     export_pipeline: std::sync::OnceLock<wgpu::ComputePipeline>,
-    /// The observed-texel mask, computed on first use.
-    /// Its flags, and the GPU buffer they were read from (one word per texel, nonzero:
-    /// observed), which the multiscale and smoothness passes bind.
+    /// The observed-texel mask, computed when the optimizer is made: its flags, and the GPU
+    /// buffer they were read from (one word per texel, nonzero: observed), which the
+    /// multiscale and smoothness passes bind.
     observed: std::sync::OnceLock<(Vec<bool>, wgpu::Buffer)>,
     /// The multiscale gradient pass, built at the first step that uses it.
     multiscale: Option<multiscale::Multiscale>,
@@ -104,9 +104,25 @@ impl Optimizer {
     ) -> Result<Optimizer> {
         let (w, h) = (settings.width, settings.height);
         check_inputs(&settings, targets)?;
-        memory_plan(&set, &settings, targets.len()).check(gpu)?;
+        let mut camera_infos = Vec::new();
+        for &cam in &settings.cameras {
+            let c = scene
+                .cameras
+                .get(cam)
+                .ok_or_else(|| Error::Invalid(format!("camera index {cam} out of range")))?;
+            camera_infos.push(camera_info(c, w, h));
+        }
+        // The textures and the scene first: which texels the cameras observe decides what
+        // ReSTIR allocates.
+        memory_plan(&set, &settings, targets.len(), 0).check(gpu)?;
         let params = ParamBuffers::new(gpu, &set);
         let renderer = Renderer::with_param_buffers(gpu, scene, &set, &params)?;
+        let grid = renderer.tile_grid(w, h);
+        let observed = observed::observed_mask(gpu, &renderer.scene, &camera_infos, grid)?;
+        let n_observed = observed.0.iter().filter(|&&o| o).count() as u64;
+        let plan = memory_plan(&set, &settings, targets.len(), n_observed);
+        plan.check(gpu)?;
+        log::info!("{}", plan.summary());
 
         let n_pixels = w * h;
         let n_cams = targets.len() as u32;
@@ -139,16 +155,6 @@ impl Optimizer {
             adam: gpu.storage_zeroed("adam stats", 16),
         };
         let loss = loss::LossPass::new(gpu, settings.loss, (w, h), targets, &accum, &adjoint)?;
-        let grid = renderer.tile_grid(w, h);
-
-        let mut camera_infos = Vec::new();
-        for &cam in &settings.cameras {
-            let c = scene
-                .cameras
-                .get(cam)
-                .ok_or_else(|| Error::Invalid(format!("camera index {cam} out of range")))?;
-            camera_infos.push(camera_info(c, w, h));
-        }
         let estimator = estimator::build(&estimator::Setup {
             gpu,
             scene: &renderer.scene,
@@ -158,6 +164,7 @@ impl Optimizer {
             adjoint: &adjoint,
             grad: &grad,
             grid,
+            observed: &observed.0,
         })?;
 
         let cams = camera_passes(&CameraSetup {
@@ -215,7 +222,7 @@ impl Optimizer {
             estimator,
             camera_infos,
             export_pipeline: std::sync::OnceLock::new(),
-            observed: std::sync::OnceLock::new(),
+            observed: std::sync::OnceLock::from(observed),
             multiscale: None,
             smoothness: None,
             progress: 0.0,

@@ -45,49 +45,66 @@ impl Optimizer {
         if let Some(m) = self.observed.get() {
             return Ok(m);
         }
-        let gpu = &self.gpu;
-        let layout = gpu.pass_layout("observed_texels", 1)?;
-        let scene = &self.renderer().scene;
-        let pipeline = gpu.compute_pipeline("observed_texels", &[&scene.layout, &layout])?;
-        let n_texels = scene.n_texels as u64;
-        let mask = gpu.storage_zeroed("observed texels", n_texels * 4);
-        for (k, camera) in self.camera_infos.iter().enumerate() {
-            let params = ObservedParams {
-                camera: *camera,
-                strata: STRATA,
-                stride: self.grid.0 * WORKGROUP,
-                _pad: [0; 2],
-            };
-            let uniform = gpu.uniform(
-                &format!("observed_texels params {k}"),
-                bytemuck::bytes_of(&params),
-            );
-            let group = gpu.bind(
-                &OBSERVED_GROUP,
-                "observed_texels",
-                &layout,
-                &[("op", &uniform), ("observed", &mask)],
-            );
-            let mut enc = gpu
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("observed_texels"),
-                });
-            crate::gpu::encode_pass(
-                &mut enc,
-                "observed_texels",
-                &pipeline,
-                &[&scene.bind_group, &group],
-                self.grid,
-            );
-            gpu.queue.submit([enc.finish()]);
-        }
-        let words: Vec<u32> = gpu.read_pod(&mask)?;
-        gpu.check("observed_texels")?;
-        let m = words[..n_texels as usize].iter().map(|&w| w != 0).collect();
-        Ok(self.observed.get_or_init(|| (m, mask)))
+        let m = observed_mask(
+            &self.gpu,
+            &self.renderer().scene,
+            &self.camera_infos,
+            self.grid,
+        )?;
+        Ok(self.observed.get_or_init(|| m))
     }
 }
+
+/// Which texels of the optimized textures of `scene` the cameras `cameras` observe (tiled in
+/// `grid` workgroups per image), and the GPU buffer the flags were read from (one `u32` per
+/// texel, nonzero where observed).
+pub(crate) fn observed_mask(
+    gpu: &crate::gpu::Gpu,
+    scene: &crate::render::GpuScene,
+    cameras: &[GpuCameraInfo],
+    grid: (u32, u32),
+) -> Result<(Vec<bool>, wgpu::Buffer)> {
+    let layout = gpu.pass_layout("observed_texels", 1)?;
+    let pipeline = gpu.compute_pipeline("observed_texels", &[&scene.layout, &layout])?;
+    let n_texels = scene.n_texels as u64;
+    let mask = gpu.storage_zeroed("observed texels", n_texels * 4);
+    for (k, camera) in cameras.iter().enumerate() {
+        let params = ObservedParams {
+            camera: *camera,
+            strata: STRATA,
+            stride: grid.0 * WORKGROUP,
+            _pad: [0; 2],
+        };
+        let uniform = gpu.uniform(
+            &format!("observed_texels params {k}"),
+            bytemuck::bytes_of(&params),
+        );
+        let group = gpu.bind(
+            &OBSERVED_GROUP,
+            "observed_texels",
+            &layout,
+            &[("op", &uniform), ("observed", &mask)],
+        );
+        let mut enc = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("observed_texels"),
+            });
+        crate::gpu::encode_pass(
+            &mut enc,
+            "observed_texels",
+            &pipeline,
+            &[&scene.bind_group, &group],
+            grid,
+        );
+        gpu.queue.submit([enc.finish()]);
+    }
+    let words: Vec<u32> = gpu.read_pod(&mask)?;
+    gpu.check("observed_texels")?;
+    let m = words[..n_texels as usize].iter().map(|&w| w != 0).collect();
+    Ok((m, mask))
+}
+
 
 /// RMSE of `values` against `truth` (laid out like `set.values`) over the channels of the
 /// texels marked in `observed` (one flag per texel, as [`Optimizer::observed_texels`]);

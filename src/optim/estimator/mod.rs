@@ -110,6 +110,8 @@ pub(crate) struct Setup<'a> {
     pub grad: &'a wgpu::Buffer,
     /// Workgroups of one camera's image in 8x8 tiles.
     pub grid: (u32, u32),
+    /// Which texels the cameras observe (one flag per texel of all optimized textures).
+    pub observed: &'a [bool],
 }
 
 /// What one iteration's encoding needs.
@@ -180,11 +182,17 @@ pub(crate) fn max_cameras(method: Method) -> Option<usize> {
     }
 }
 
-/// The buffers `method` allocates for `n_texels` texels and `n_pixels` pixels (all
-/// cameras'), by label and size in bytes.
-pub(crate) fn memory(method: Method, n_texels: u64, n_pixels: u64) -> Vec<(String, u64)> {
+/// The buffers `method` allocates for `n_texels` texels of which `n_observed` are observed,
+/// and `n_pixels` pixels (all cameras'), by label, size in bytes and what the size scales
+/// with.
+pub(crate) fn memory(
+    method: Method,
+    n_texels: u64,
+    n_observed: u64,
+    n_pixels: u64,
+) -> Vec<(String, u64, crate::optim::Scale)> {
     match method {
         Method::Baseline => Vec::new(),
-        Method::Restir => restir::memory(n_texels, n_pixels),
+        Method::Restir => restir::memory(n_texels, n_observed, n_pixels),
     }
 }

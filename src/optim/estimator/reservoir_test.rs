@@ -9,7 +9,9 @@ use crate::{Error, Result};
 pub(crate) const RESERVOIR_TEST_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
     pass: "reservoir_test",
     group: 0,
-    names: &["tp", "weights", "fresh", "locks", "failures"],
+    names: &[
+        "tp", "weights", "slots0", "slots1", "slots2", "slots3", "headers", "failures",
+    ],
 };
 
 /// Run the streaming reservoir update of shaders/shared/reservoir.wgsl on the GPU for a test:
@@ -45,7 +47,11 @@ pub fn selection_trial(
         bytemuck::cast_slice(&init),
         wgpu::BufferUsages::COPY_SRC,
     );
-    let locks = gpu.storage_zeroed("reservoir_test locks", reservoirs as u64 * 4);
+    // Slots 1 to 3 take no offers here; the headers hold the locks.
+    let unused: Vec<wgpu::Buffer> = (1..4)
+        .map(|k| gpu.storage_zeroed(&format!("reservoir_test slots{k}"), 16))
+        .collect();
+    let headers = gpu.storage_zeroed("reservoir_test headers", reservoirs as u64 * 4);
     let failures = gpu.storage_zeroed("reservoir_test failures", 16);
     let group = gpu.bind(
         &RESERVOIR_TEST_GROUP,
@@ -54,8 +60,11 @@ pub fn selection_trial(
         &[
             ("tp", &uniform),
             ("weights", &w),
-            ("fresh", &res),
-            ("locks", &locks),
+            ("slots0", &res),
+            ("slots1", &unused[0]),
+            ("slots2", &unused[1]),
+            ("slots3", &unused[2]),
+            ("headers", &headers),
             ("failures", &failures),
         ],
     );

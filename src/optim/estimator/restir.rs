@@ -19,6 +19,7 @@
 //!    gradient sum over signs of v(y) W. It traces no ray.
 use super::{Diagnostics, Estimator, EstimatorState, Frame, Method, Setup};
 use crate::gpu::encode_timed_pass;
+use crate::optim::Scale;
 use crate::gpu::{grid_2d, Gpu};
 use crate::optim::{pass_seed, FaultCounts, PassKind, PassTimer, Seeds};
 use crate::render::layout::GpuCameraInfo;
@@ -31,7 +32,16 @@ pub(crate) const CANDIDATES_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl
     pass: "restir_candidates",
     group: 1,
     names: &[
-        "cp", "adjoint", "fresh", "locks", "cstats", "targets", "headers",
+        "cp",
+        "adjoint",
+        "slots0",
+        "slots1",
+        "slots2",
+        "slots3",
+        "headers",
+        "cstats",
+        "targets",
+        "observed_map",
     ],
 };
 /// Group 1 of `restir_merge.wgsl`.
@@ -39,7 +49,17 @@ pub(crate) const MERGE_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
     pass: "restir_merge",
     group: 1,
     names: &[
-        "mp", "adjoint", "targets", "slots", "headers", "grad", "mstats",
+        "mp",
+        "adjoint",
+        "targets",
+        "slots0",
+        "slots1",
+        "slots2",
+        "slots3",
+        "headers",
+        "grad",
+        "mstats",
+        "observed_list",
     ],
 };
 
@@ -51,11 +71,17 @@ pub use crate::gpu::abi::reservoir;
 /// Cameras a ReSTIR optimizer can use (the camera index has three bits in a reservoir).
 pub const MAX_CAMERAS: usize = crate::gpu::abi::MAX_CAMERAS as usize;
 
-/// Bytes of ReSTIR state per texel: four reservoir slots (the kept positive and negative
-/// reservoirs and the fresh ones), a header word and a lock word per sign. Per pixel of every
-/// camera it also keeps [`STATE_BYTES_PER_PIXEL`].
-pub const STATE_BYTES_PER_TEXEL: u64 =
-    reservoir::SLOTS as u64 * reservoir::WORDS as u64 * 4 + 4 + 2 * 4;
+/// Bytes of ReSTIR state per observed texel: four reservoir slots (the kept positive and
+/// negative reservoirs and the fresh ones, [`reservoir::WORDS`] words each), a header word
+/// (slots and locks) and the texel's entry in the list of observed texels. Per texel of the
+/// textures it also keeps [`STATE_BYTES_PER_32_TEXELS`] per 32 texels (the compaction map),
+/// and per pixel of every camera [`STATE_BYTES_PER_PIXEL`].
+pub const STATE_BYTES_PER_OBSERVED_TEXEL: u64 =
+    reservoir::SLOTS as u64 * reservoir::WORDS as u64 * 4 + 4 + 4;
+
+/// Bytes of ReSTIR's compaction map per 32 texels of the optimized textures: which are
+/// observed (a bit each) and how many observed texels come before them.
+pub const STATE_BYTES_PER_32_TEXELS: u64 = 8;
 
 /// Bytes of ReSTIR state per pixel of every camera: the target adjoints of both parities
 /// (RGBA f32 each).
@@ -71,6 +97,7 @@ const MERGE_STAT_VERIFIED: usize = crate::gpu::abi::stat::MERGE_VERIFIED as usiz
 const MERGE_STAT_VERIFY_MAX_ERROR: usize = crate::gpu::abi::stat::MERGE_VERIFY_MAX_ERROR as usize;
 const CANDIDATE_STAT_LOST: usize = crate::gpu::abi::stat::CANDIDATE_LOST as usize;
 const CANDIDATE_STAT_DROPPED: usize = crate::gpu::abi::stat::CANDIDATE_DROPPED as usize;
+const CANDIDATE_STAT_UNMAPPED: usize = crate::gpu::abi::stat::CANDIDATE_UNMAPPED as usize;
 
 /// Confidence of the fresh candidates in the merge (the kept sample's is min(M, M-cap)).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -195,7 +222,7 @@ pub struct CandidateParams {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct MergeParams {
-    pub n_texels: u32,
+    pub n_observed: u32,
     pub n_pixels: u32,
     pub seed: u32,
     pub flags: u32,
@@ -207,6 +234,7 @@ pub struct MergeParams {
     pub target_cur: u32,
     pub target_prev: u32,
     pub _pad: u32,
+    pub origins: [[f32; 4]; MAX_CAMERAS],
 }
 
 /// Names in the ReSTIR estimator's [`EstimatorState`]: the kept reservoirs (two per texel,
@@ -222,6 +250,9 @@ pub mod state_names {
     pub const TARGETS: &str = "targets";
     /// Counter: the merges so far.
     pub const HISTORY: &str = "history";
+    /// Counter: words per reservoir ([`super::reservoir::WORDS`]; a state saved with another
+    /// reservoir layout is refused).
+    pub const WORDS: &str = "reservoir words";
 }
 
 /// What the merge pass counted since the optimizer was created.
@@ -231,21 +262,26 @@ pub struct MergeDiagnostics {
     pub evaluations: u64,
     /// Kept paths checked with [`RestirOptions::verify_paths`].
     pub verified: u64,
-    /// Largest relative difference between a kept path's stored factor and its evaluation
-    /// under the state it was drawn at.
+    /// Largest relative difference between a stored path's target under the previous state
+    /// (stored with it, in bfloat16) and its evaluation there.
     pub max_relative_error: f32,
+    /// Candidates for texels outside the compaction map (texels that the observed-texel
+    /// pass's strata missed), dropped by the candidate pass.
+    pub unmapped: u64,
 }
 
 impl MergeDiagnostics {
     const EVALUATIONS: &'static str = "merge evaluations";
     const VERIFIED: &'static str = "merge verified";
     const MAX_RELATIVE_ERROR: &'static str = "merge max relative error";
+    const UNMAPPED: &'static str = "candidates unmapped";
 
     fn named(&self) -> Diagnostics {
         vec![
             (Self::EVALUATIONS, self.evaluations as f64),
             (Self::VERIFIED, self.verified as f64),
             (Self::MAX_RELATIVE_ERROR, f64::from(self.max_relative_error)),
+            (Self::UNMAPPED, self.unmapped as f64),
         ]
     }
 
@@ -258,11 +294,13 @@ impl MergeDiagnostics {
                 get(Self::EVALUATIONS),
                 get(Self::VERIFIED),
                 get(Self::MAX_RELATIVE_ERROR),
+                get(Self::UNMAPPED),
             ) {
-                (Some(e), Some(v), Some(m)) => Some(MergeDiagnostics {
+                (Some(e), Some(v), Some(m), Some(u)) => Some(MergeDiagnostics {
                     evaluations: e as u64,
                     verified: v as u64,
                     max_relative_error: m as f32,
+                    unmapped: u as u64,
                 }),
                 _ => None,
             },
@@ -270,21 +308,57 @@ impl MergeDiagnostics {
     }
 }
 
-/// The buffers ReSTIR allocates for `n_texels` texels and `n_pixels` pixels (all cameras'),
-/// by label and size in bytes.
-pub(crate) fn memory(n_texels: u64, n_pixels: u64) -> Vec<(String, u64)> {
-    vec![
+/// The buffers ReSTIR allocates for `n_texels` texels of which `n_observed` are observed,
+/// and `n_pixels` pixels (all cameras'), by label, size in bytes and what the size scales
+/// with. Slot k of every observed texel lies in buffer `reservoir slots<k>`, so that each
+/// binding holds a quarter of the reservoirs.
+pub(crate) fn memory(n_texels: u64, n_observed: u64, n_pixels: u64) -> Vec<(String, u64, Scale)> {
+    let slot_bytes = n_observed * reservoir::WORDS as u64 * 4;
+    let mut out: Vec<(String, u64, Scale)> = (0..reservoir::SLOTS)
+        .map(|k| (format!("reservoir slots{k}"), slot_bytes, Scale::ObservedTexel))
+        .collect();
+    out.extend([
         (
-            "reservoir slots".to_string(),
-            n_texels * reservoir::SLOTS as u64 * reservoir::WORDS as u64 * 4,
+            "reservoir headers".to_string(),
+            n_observed * 4,
+            Scale::ObservedTexel,
         ),
-        ("reservoir headers".to_string(), n_texels * 4),
-        ("reservoir locks".to_string(), n_texels * 2 * 4),
+        (
+            "observed texel list".to_string(),
+            n_observed * 4,
+            Scale::ObservedTexel,
+        ),
+        (
+            "observed texel map".to_string(),
+            n_texels.div_ceil(32) * STATE_BYTES_PER_32_TEXELS,
+            Scale::Texel,
+        ),
         (
             "target adjoints".to_string(),
             STATE_BYTES_PER_PIXEL * n_pixels,
+            Scale::Pixel,
         ),
-    ]
+    ]);
+    out
+}
+
+/// The compaction map of `observed` (one flag per texel): per 32 texels, which are observed
+/// (bits) and how many observed texels come before them; and the list of observed texels.
+fn compaction_map(observed: &[bool]) -> (Vec<[u32; 2]>, Vec<u32>) {
+    let mut map = Vec::with_capacity(observed.len().div_ceil(32));
+    let mut list = Vec::new();
+    for (w, chunk) in observed.chunks(32).enumerate() {
+        let mut bits = 0u32;
+        let before = list.len() as u32;
+        for (b, &o) in chunk.iter().enumerate() {
+            if o {
+                bits |= 1 << b;
+                list.push((w * 32 + b) as u32);
+            }
+        }
+        map.push([bits, before]);
+    }
+    (map, list)
 }
 
 struct Camera {
@@ -299,11 +373,10 @@ pub(crate) struct Restir {
     candidate_pipeline: wgpu::ComputePipeline,
     merge_pipeline: wgpu::ComputePipeline,
     cameras: Vec<Camera>,
-    /// Reservoir slots, four per texel, and the headers that say which hold the kept
-    /// reservoirs (shaders/shared/reservoir_slots.wgsl).
-    slots: wgpu::Buffer,
+    /// Reservoir slot k of every observed texel (`slots[k]`), and the headers that say which
+    /// slots hold the kept reservoirs (shaders/shared/reservoir_slots.wgsl).
+    slots: Vec<wgpu::Buffer>,
     headers: wgpu::Buffer,
-    locks: wgpu::Buffer,
     merge_uniform: wgpu::Buffer,
     merge_params: MergeParams,
     merge_groups: [wgpu::BindGroup; 2],
@@ -315,6 +388,8 @@ pub(crate) struct Restir {
     targets: wgpu::Buffer,
     /// Pixels (vec4s) of one parity's target adjoints.
     target_len: u32,
+    /// Bytes of the compaction map and the list of observed texels.
+    map_bytes: u64,
     grid: (u32, u32),
     options: RestirOptions,
     /// The target smoothing in use ([`RestirOptions::target_smoothing_for`]).
@@ -326,11 +401,9 @@ pub(crate) struct Restir {
 }
 
 impl Restir {
-    pub(crate) fn new(s: &Setup) -> Result<Restir> {
-        let gpu = s.gpu;
-        let o = s.settings.restir;
+    /// An error naming what this estimator cannot handle in `s`.
+    fn check_setup(s: &Setup) -> Result<()> {
         let n_cams = s.cameras.len();
-        let smoothing = o.target_smoothing_for(s.settings.primal);
         if n_cams > MAX_CAMERAS {
             return Err(Error::Invalid(format!(
                 "ReSTIR handles at most {MAX_CAMERAS} cameras, the task has {n_cams}"
@@ -343,31 +416,70 @@ impl Restir {
                 reservoir::CAMERA_SHIFT
             )));
         }
+        let n_tris = s.scene.info.n_tris;
+        if u64::from(n_tris) > 1 << reservoir::TRI_BITS {
+            return Err(Error::Invalid(format!(
+                "ReSTIR handles scenes of at most 2^{} triangles, the scene has {n_tris}; use \
+                 --method baseline",
+                reservoir::TRI_BITS
+            )));
+        }
+        Ok(())
+    }
+
+    pub(crate) fn new(s: &Setup) -> Result<Restir> {
+        Self::check_setup(s)?;
+        let gpu = s.gpu;
+        let o = s.settings.restir;
+        let n_cams = s.cameras.len();
+        let smoothing = o.target_smoothing_for(s.settings.primal);
+        let n_pixels = s.settings.width * s.settings.height;
         let candidate_layout = gpu.pass_layout("restir_candidates", 1)?;
         let merge_layout = gpu.pass_layout("restir_merge", 1)?;
         let candidate_pipeline =
             gpu.compute_pipeline("restir_candidates", &[&s.scene.layout, &candidate_layout])?;
         let merge_pipeline =
             gpu.compute_pipeline("restir_merge", &[&s.scene.layout, &merge_layout])?;
-        let n_texels = s.scene.n_texels as u64;
+        let (map, list) = compaction_map(s.observed);
+        let n_observed = list.len() as u64;
         let n_all_pixels = s.adjoint[0].size() / 16;
-        let sizes = memory(n_texels, n_all_pixels);
-        let slots = gpu.storage_zeroed(&sizes[0].0, sizes[0].1);
+        let sizes = memory(s.scene.n_texels as u64, n_observed, n_all_pixels);
+        let size = |label: &str| sizes.iter().find(|b| b.0 == label).map_or(0, |b| b.1);
+        // wgpu binds no empty buffer: at least one word each.
+        let slots: Vec<wgpu::Buffer> = (0..reservoir::SLOTS)
+            .map(|k| {
+                let label = format!("reservoir slots{k}");
+                gpu.storage_zeroed(&label, size(&label).max(4))
+            })
+            .collect();
         let headers = gpu.storage(
-            &sizes[1].0,
-            bytemuck::cast_slice(&vec![reservoir::HEADER_FIRST_TWO; n_texels as usize]),
+            "reservoir headers",
+            bytemuck::cast_slice(&vec![reservoir::HEADER_FIRST_TWO; list.len().max(1)]),
             wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
         );
-        let locks = gpu.storage_zeroed(&sizes[2].0, sizes[2].1);
+        let observed_list = gpu.storage(
+            "observed texel list",
+            bytemuck::cast_slice(if list.is_empty() { &[0u32][..] } else { &list }),
+            wgpu::BufferUsages::empty(),
+        );
+        let observed_map = gpu.storage(
+            "observed texel map",
+            bytemuck::cast_slice(if map.is_empty() { &[[0u32; 2]][..] } else { &map }),
+            wgpu::BufferUsages::empty(),
+        );
         let candidate_stats = gpu.storage_zeroed("candidate stats", 16);
         let merge_stats = gpu.storage_zeroed("merge stats", 16);
         let target_len = n_all_pixels as u32;
-        let targets = gpu.storage_zeroed(&sizes[3].0, sizes[3].1);
+        let targets = gpu.storage_zeroed("target adjoints", size("target adjoints"));
         let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
-        let merge_grid = grid_2d(n_texels as u32, WORKGROUP, max_dim);
+        let merge_grid = grid_2d(n_observed as u32, WORKGROUP, max_dim);
         let spp = s.settings.gradient_spp;
+        let mut origins = [[0.0; 4]; MAX_CAMERAS];
+        for (o, c) in origins.iter_mut().zip(s.cameras) {
+            *o = [c.origin[0], c.origin[1], c.origin[2], 0.0];
+        }
         let merge_params = MergeParams {
-            n_texels: n_texels as u32,
+            n_observed: n_observed as u32,
             n_pixels,
             seed: 0,
             flags: 0,
@@ -382,6 +494,7 @@ impl Restir {
             target_cur: 0,
             target_prev: 0,
             _pad: 0,
+            origins,
         };
         let merge_uniform = gpu.uniform("merge params", bytemuck::bytes_of(&merge_params));
         let merge_groups = [0usize, 1].map(|p| {
@@ -393,10 +506,14 @@ impl Restir {
                     ("mp", &merge_uniform),
                     ("adjoint", &s.adjoint[p]),
                     ("targets", &targets),
-                    ("slots", &slots),
+                    ("slots0", &slots[0]),
+                    ("slots1", &slots[1]),
+                    ("slots2", &slots[2]),
+                    ("slots3", &slots[3]),
                     ("headers", &headers),
                     ("grad", s.grad),
                     ("mstats", &merge_stats),
+                    ("observed_list", &observed_list),
                 ],
             )
         });
@@ -432,11 +549,14 @@ impl Restir {
                         &[
                             ("cp", &uniform),
                             ("adjoint", &s.adjoint[p]),
-                            ("fresh", &slots),
-                            ("locks", &locks),
+                            ("slots0", &slots[0]),
+                            ("slots1", &slots[1]),
+                            ("slots2", &slots[2]),
+                            ("slots3", &slots[3]),
+                            ("headers", &headers),
                             ("cstats", &candidate_stats),
                             ("targets", &targets),
-                            ("headers", &headers),
+                            ("observed_map", &observed_map),
                         ],
                     )
                 });
@@ -453,7 +573,6 @@ impl Restir {
             cameras: cams,
             slots,
             headers,
-            locks,
             merge_uniform,
             merge_params,
             merge_groups,
@@ -462,6 +581,7 @@ impl Restir {
             merge_stats,
             targets,
             target_len,
+            map_bytes: observed_list.size() + observed_map.size(),
             grid: s.grid,
             options: o,
             smoothing,
@@ -474,10 +594,12 @@ impl Restir {
     /// What the merge pass counted so far.
     pub(crate) fn merge_diagnostics(&self, gpu: &Gpu) -> Result<MergeDiagnostics> {
         let m: Vec<u32> = gpu.read_pod(&self.merge_stats)?;
+        let c: Vec<u32> = gpu.read_pod(&self.candidate_stats)?;
         Ok(MergeDiagnostics {
             evaluations: m[MERGE_STAT_EVALUATIONS] as u64,
             verified: m[MERGE_STAT_VERIFIED] as u64,
             max_relative_error: f32::from_bits(m[MERGE_STAT_VERIFY_MAX_ERROR]),
+            unmapped: c[CANDIDATE_STAT_UNMAPPED] as u64,
         })
     }
 }
@@ -485,9 +607,9 @@ impl Restir {
 impl Estimator for Restir {
     fn encode(&mut self, enc: &mut wgpu::CommandEncoder, frame: &Frame, timer: &mut PassTimer) {
         let parity = frame.parity();
-        // The free slots are empty already: the merge empties them. Every lock is released by
-        // the invocation that took it; clearing them costs little and guards the invariant.
-        enc.clear_buffer(&self.locks, 0, None);
+        // The free slots are empty already: the merge empties them, and every lock bit is
+        // released by the invocation that took it. The gradient of a texel no camera observes
+        // is never written: it stays 0 from the buffer's creation.
         let have_prev = self.history > 0;
         let reuse = self.options.temporal && have_prev;
         let target_cur = parity as u32 * self.target_len;
@@ -561,16 +683,23 @@ impl Estimator for Restir {
     }
 
     fn snapshot(&self, gpu: &Gpu, _iteration: u32) -> Result<EstimatorState> {
-        // The kept reservoirs, sign 0 then sign 1 of each texel, wherever they lie.
-        let slots: Vec<u32> = gpu.read_pod(&self.slots)?;
+        // The kept reservoirs, sign 0 then sign 1 of each observed texel, wherever they lie.
+        let slots = self
+            .slots
+            .iter()
+            .map(|b| gpu.read_pod::<u32>(b))
+            .collect::<Result<Vec<_>>>()?;
         let headers: Vec<u32> = gpu.read_pod(&self.headers)?;
-        let n_texels = self.merge_params.n_texels as usize;
+        let n_observed = self.merge_params.n_observed as usize;
         let mut state = EstimatorState::new(Method::Restir);
-        state.counters = vec![(state_names::HISTORY.into(), self.history)];
+        state.counters = vec![
+            (state_names::HISTORY.into(), self.history),
+            (state_names::WORDS.into(), reservoir::WORDS),
+        ];
         state.arrays = vec![
             (
                 state_names::RESERVOIRS.into(),
-                kept_reservoirs(&slots, &headers[..n_texels]),
+                kept_reservoirs(&slots, &headers[..n_observed]),
             ),
             (state_names::TARGETS.into(), gpu.read_pod(&self.targets)?),
         ];
@@ -583,8 +712,8 @@ impl Estimator for Restir {
         state: Option<&EstimatorState>,
         _iteration: u32,
     ) -> Result<()> {
-        let n_texels = u64::from(self.merge_params.n_texels);
-        let (slots, headers) = match state.filter(|r| !r.arrays.is_empty()) {
+        let n_observed = self.merge_params.n_observed as usize;
+        let kept = match state.filter(|r| !r.arrays.is_empty()) {
             Some(r) => {
                 let missing =
                     |name: &str| Error::Invalid(format!("the saved ReSTIR state has no {name}"));
@@ -597,12 +726,20 @@ impl Estimator for Restir {
                 let history = r
                     .counter(state_names::HISTORY)
                     .ok_or_else(|| missing(state_names::HISTORY))?;
-                let expected = n_texels * 2 * reservoir::WORDS as u64;
-                if reservoirs.len() as u64 != expected {
+                let words = r.counter(state_names::WORDS).unwrap_or(0);
+                if words != reservoir::WORDS {
+                    return Err(Error::Invalid(format!(
+                        "the saved ReSTIR state has reservoirs of {words} words, this version of \
+                         psrestir keeps {}: start afresh (without --resume)",
+                        reservoir::WORDS
+                    )));
+                }
+                let expected = n_observed * 2 * reservoir::WORDS as usize;
+                if reservoirs.len() != expected {
                     return Err(Error::Invalid(format!(
                         "the saved ReSTIR state has {} words where this optimizer keeps {expected} \
-                         ({n_texels} texels x 2 reservoirs x {} words): it was saved for other \
-                         textures, or by a version of psrestir with another reservoir layout",
+                         ({n_observed} observed texels x 2 reservoirs x {} words): it was saved \
+                         for other textures or cameras",
                         reservoirs.len(),
                         reservoir::WORDS
                     )));
@@ -618,27 +755,30 @@ impl Estimator for Restir {
                 gpu.queue
                     .write_buffer(&self.targets, 0, bytemuck::cast_slice(targets));
                 self.history = if self.options.temporal { history } else { 0 };
-                slots_holding(reservoirs)
+                reservoirs.to_vec()
             }
             None => {
                 // The first iteration forms the target adjoint from its own adjoint alone.
                 self.history = 0;
-                let words = reservoir::SLOTS as usize * reservoir::WORDS as usize;
-                (
-                    vec![0; n_texels as usize * words],
-                    vec![reservoir::HEADER_FIRST_TWO; n_texels as usize],
-                )
+                vec![0; n_observed * 2 * reservoir::WORDS as usize]
             }
         };
-        gpu.queue
-            .write_buffer(&self.slots, 0, bytemuck::cast_slice(&slots));
-        gpu.queue
-            .write_buffer(&self.headers, 0, bytemuck::cast_slice(&headers));
+        let (slots, headers) = slots_holding(&kept);
+        for (buffer, words) in self.slots.iter().zip(&slots) {
+            if !words.is_empty() {
+                gpu.queue
+                    .write_buffer(buffer, 0, bytemuck::cast_slice(words));
+            }
+        }
+        if !headers.is_empty() {
+            gpu.queue
+                .write_buffer(&self.headers, 0, bytemuck::cast_slice(&headers));
+        }
         Ok(())
     }
 
     fn state_bytes(&self) -> u64 {
-        self.slots.size() + self.headers.size() + self.locks.size()
+        self.slots.iter().map(|b| b.size()).sum::<u64>() + self.headers.size() + self.map_bytes
     }
 
     fn diagnostics(&self, gpu: &Gpu) -> Result<Diagnostics> {
@@ -646,32 +786,33 @@ impl Estimator for Restir {
     }
 }
 
-/// The kept reservoirs (two per texel, sign 0 then sign 1) that `headers` point at in
-/// `slots`.
-fn kept_reservoirs(slots: &[u32], headers: &[u32]) -> Vec<u32> {
+/// The kept reservoirs (two per observed texel, sign 0 then sign 1) that `headers` point at
+/// in `slots` (slot k of every observed texel in `slots[k]`).
+fn kept_reservoirs(slots: &[Vec<u32>], headers: &[u32]) -> Vec<u32> {
     let words = reservoir::WORDS as usize;
-    let per_texel = reservoir::SLOTS as usize * words;
     let mut out = Vec::with_capacity(headers.len() * 2 * words);
-    for (t, &h) in headers.iter().enumerate() {
+    for (i, &h) in headers.iter().enumerate() {
         for sign in 0..2 {
-            let r = t * per_texel + reservoir::header_slot(h, sign) as usize * words;
-            out.extend_from_slice(&slots[r..r + words]);
+            let k = reservoir::header_slot(h, sign) as usize;
+            out.extend_from_slice(&slots[k][i * words..(i + 1) * words]);
         }
     }
     out
 }
 
-/// Slots and headers that hold `kept` (two reservoirs per texel) in slots 0 and 1, with
-/// slots 2 and 3 free.
-fn slots_holding(kept: &[u32]) -> (Vec<u32>, Vec<u32>) {
+/// Slots and headers that hold `kept` (two reservoirs per observed texel) in slots 0 and 1,
+/// with slots 2 and 3 free.
+fn slots_holding(kept: &[u32]) -> (Vec<Vec<u32>>, Vec<u32>) {
     let words = reservoir::WORDS as usize;
-    let n_texels = kept.len() / (2 * words);
-    let mut slots = vec![0; n_texels * reservoir::SLOTS as usize * words];
-    for t in 0..n_texels {
-        let dst = t * reservoir::SLOTS as usize * words;
-        slots[dst..dst + 2 * words].copy_from_slice(&kept[t * 2 * words..(t + 1) * 2 * words]);
+    let n = kept.len() / (2 * words);
+    let mut slots = vec![vec![0; n * words]; reservoir::SLOTS as usize];
+    for i in 0..n {
+        for sign in 0..2 {
+            let src = (2 * i + sign) * words;
+            slots[sign][i * words..(i + 1) * words].copy_from_slice(&kept[src..src + words]);
+        }
     }
-    (slots, vec![reservoir::HEADER_FIRST_TWO; n_texels])
+    (slots, vec![reservoir::HEADER_FIRST_TWO; n])
 }
 
 #[cfg(test)]
@@ -681,21 +822,41 @@ mod tests {
     #[test]
     fn kept_reservoirs_follow_the_headers() {
         let words = reservoir::WORDS as usize;
-        // Two texels whose reservoirs are numbered by (texel, sign).
+        // Two observed texels whose reservoirs are numbered by (texel, sign).
         let kept: Vec<u32> = (0..2 * 2 * words as u32).collect();
         let (mut slots, mut headers) = slots_holding(&kept);
         assert_eq!(kept_reservoirs(&slots, &headers), kept);
         // Texel 1's reservoirs move to slots 3 (sign 0) and 2 (sign 1), as a merge that
         // selected its fresh samples leaves them.
-        let per_texel = reservoir::SLOTS as usize * words;
-        let (s0, s1) = (per_texel, per_texel + words);
-        let moved: Vec<u32> = slots[s0..s0 + 2 * words].to_vec();
-        slots[per_texel + 3 * words..per_texel + 4 * words].copy_from_slice(&moved[..words]);
-        slots[per_texel + 2 * words..per_texel + 3 * words].copy_from_slice(&moved[words..]);
-        slots[s0..s1 + words].fill(0);
+        let r = words..2 * words;
+        let (s0, s1) = (slots[0][r.clone()].to_vec(), slots[1][r.clone()].to_vec());
+        slots[3][r.clone()].copy_from_slice(&s0);
+        slots[2][r.clone()].copy_from_slice(&s1);
+        slots[0][r.clone()].fill(0);
+        slots[1][r].fill(0);
         headers[1] = 3 | (2 << reservoir::HEADER_SLOT_BITS);
         assert_eq!(reservoir::header_slot(headers[1], 0), 3);
         assert_eq!(reservoir::header_slot(headers[1], 1), 2);
         assert_eq!(kept_reservoirs(&slots, &headers), kept);
+    }
+
+    #[test]
+    fn the_compaction_map_counts_the_observed_texels_before_each_word() {
+        let observed: Vec<bool> = (0..100).map(|t| t % 3 == 0 || t == 40).collect();
+        let (map, list) = compaction_map(&observed);
+        assert_eq!(map.len(), 4);
+        let expected: Vec<u32> = (0..100).filter(|&t| observed[t as usize]).collect();
+        assert_eq!(list, expected);
+        // The WGSL lookup (restir_candidates.wgsl, observed_index) on the CPU.
+        for (t, &o) in observed.iter().enumerate() {
+            let [bits, before] = map[t / 32];
+            let bit = 1u32 << (t % 32);
+            if o {
+                let i = before + (bits & (bit - 1)).count_ones();
+                assert_eq!(list[i as usize], t as u32);
+            } else {
+                assert_eq!(bits & bit, 0);
+            }
+        }
     }
 }
