@@ -159,6 +159,10 @@ pub(crate) struct RenderArgs {
     /// Multiplier for the environment light.
     #[arg(long, default_value_t = 1.0)]
     pub(crate) env_scale: f32,
+    /// Add no default environment to a scene without punctual lights and environment (one
+    /// lit by its emissive surfaces alone).
+    #[arg(long)]
+    pub(crate) no_default_env: bool,
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     pub(crate) seed: u32,

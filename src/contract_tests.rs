@@ -305,7 +305,7 @@ fn pass_uniform_mirrors_match_wgsl_field_by_field() {
         "MergeParams",
         crate::optim::restir::MergeParams,
         [
-            n_texels,
+            n_observed,
             n_pixels,
             seed,
             flags,
@@ -315,7 +315,8 @@ fn pass_uniform_mirrors_match_wgsl_field_by_field() {
             n_textures,
             stride,
             target_cur,
-            target_prev
+            target_prev,
+            origins
         ]
     );
     mirror!(

@@ -151,6 +151,7 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
         size,
         env,
         env_scale,
+        no_default_env,
         seed,
         technique,
         output,
@@ -200,14 +201,14 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
             sc.cameras.len() - 1
         }
         None => {
-            for note in sc.add_defaults() {
+            for note in sc.add_defaults(!no_default_env) {
                 log::warn!("{}: {note}", path.display());
             }
             sc.camera(camera.as_deref())?
         }
     };
     if cameras.is_some() {
-        for note in sc.add_defaults() {
+        for note in sc.add_defaults(!no_default_env) {
             log::warn!("{}: {note}", path.display());
         }
     }

@@ -55,7 +55,7 @@ fn a_device_without_the_needed_limits_is_refused_by_name() {
         return;
     }
     let adapter = in_memory::adapter().unwrap();
-    // WebGPU's default limits: 8 storage buffers per stage, psrestir binds 16.
+    // WebGPU's default limits: 8 storage buffers per stage, psrestir binds 20.
     let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
         required_limits: wgpu::Limits::default(),
         ..Default::default()
@@ -65,7 +65,7 @@ fn a_device_without_the_needed_limits_is_refused_by_name() {
         .unwrap_err()
         .to_string();
     assert!(
-        e.contains("max_storage_buffers_per_shader_stage is 8, psrestir needs 16")
+        e.contains("max_storage_buffers_per_shader_stage is 8, psrestir needs 20")
             && e.contains("required_limits"),
         "{e}"
     );
@@ -226,34 +226,44 @@ fn a_task_too_large_for_the_device_is_refused_before_allocating() {
     }))
     .unwrap();
     let gpu = Gpu::from_device(device, queue, adapter.get_info()).unwrap();
-    // 400x400 roughness texels: 640 kB of values, but ReSTIR's reservoirs take two reservoirs
-    // per texel in one buffer (2 x 52 bytes: 16.6 MB).
+    // 500x500 roughness texels: 1 MB of values, which fits, but ReSTIR keeps each of its four
+    // reservoir slots of every observed texel in its own buffer (28 bytes per observed texel
+    // each), which does not once more than 37449 texels are observed.
     let spec = psrestir::TextureSpec {
         material: "plane".into(),
         slot: psrestir::Slot::Roughness,
-        resolution: [400, 400],
+        resolution: [500, 500],
         init: psrestir::Init::Scalar(0.5),
         learning_rate: 0.01,
     };
     let mut p = Problem::new(in_memory::scene(), vec![0], &[spec], Filter::Bilinear).unwrap();
-    p.render_targets(&gpu, in_memory::scene(), 16, 16, 4, 1)
+    p.render_targets(&gpu, in_memory::scene(), 64, 64, 4, 1)
         .unwrap();
-    let e = Optimizer::for_problem(&gpu, &p, settings(Method::Restir))
+    let at = |method| Settings {
+        method,
+        ..Settings::new(64, 64, vec![0])
+    };
+    // The baseline has no reservoirs and fits; it counts the observed texels.
+    let base = Optimizer::for_problem(&gpu, &p, at(Method::Baseline)).unwrap();
+    let observed = base
+        .observed_texels()
+        .unwrap()
+        .iter()
+        .filter(|&&o| o)
+        .count() as u64;
+    let bytes = observed * psrestir::optim::restir::reservoir::WORDS as u64 * 4;
+    assert!(bytes > 1 << 20, "{observed} observed texels fit the device");
+    let e = Optimizer::for_problem(&gpu, &p, at(Method::Restir))
         .err()
         .expect("refused")
         .to_string();
-    let bytes = 400
-        * 400
-        * psrestir::optim::restir::reservoir::SLOTS as u64
-        * psrestir::optim::restir::reservoir::WORDS as u64
-        * 4;
     assert!(
-        e.contains(&format!("reservoir slots buffer needs {bytes} bytes"))
-            && e.contains("1048576 bytes"),
+        e.contains(&format!("reservoir slots0 buffer needs {bytes} bytes"))
+            && e.contains("1048576 bytes")
+            && e.contains(&format!("{observed} observed")),
         "{e}"
     );
-    // The baseline has no reservoirs and fits.
-    Optimizer::for_problem(&gpu, &p, settings(Method::Baseline)).unwrap();
+    drop(base);
 
     // A scene whose images hold more than one binding can: 600x600 RGBA8 = 1.44 MB.
     let mut big = in_memory::truth([[200, 40, 40], [40, 40, 200]]);

@@ -5,7 +5,9 @@
 mod common;
 
 use psrestir::bench::{bench, resolve_scene, BenchOptions};
-use psrestir::optim::restir::{STATE_BYTES_PER_TEXEL, TARGET_SMOOTHING_INDEPENDENT};
+use psrestir::optim::restir::{
+    STATE_BYTES_PER_32_TEXELS, STATE_BYTES_PER_OBSERVED_TEXEL, TARGET_SMOOTHING_INDEPENDENT,
+};
 use serde_json::Value;
 use std::path::Path;
 
@@ -187,18 +189,27 @@ fn bench_json_has_every_field_finite_and_in_range() {
         assert!(number(s, k) >= 1.0, "{k}");
     }
     // The merge's work, counted between the sampled iterations (2, 10, ...): it evaluates
-    // kept paths, at most two per texel (one per sign).
+    // stored paths, at most four per observed texel (the fresh and the kept one of each sign).
     if number(s, "iterations_restir") >= 10.0 {
         let e = number(s, "merge_evaluations_per_iteration");
         assert!(
-            e > 0.0 && e <= 2.0 * number(s, "texels"),
+            e > 0.0 && e <= 4.0 * number(s, "observed_texels"),
             "merge_evaluations_per_iteration {e}"
         );
     }
-    // ReSTIR's extra state per texel is exactly the reservoirs and locks (buffers that scale
-    // with the image, its target adjoints among them, are not counted per texel).
+    // ReSTIR's extra state per texel is exactly the reservoirs and headers of the observed
+    // texels and the compaction map (buffers that scale with the image, its target adjoints
+    // among them, are not counted per texel).
     let extra = number(s, "state_bytes_per_texel") - number(s, "state_bytes_per_texel_baseline");
-    assert_eq!(extra, STATE_BYTES_PER_TEXEL as f64);
+    let texels = number(s, "texels");
+    let observed = number(s, "observed_texels");
+    let expected = (observed * STATE_BYTES_PER_OBSERVED_TEXEL as f64
+        + (texels / 32.0).ceil() * STATE_BYTES_PER_32_TEXELS as f64)
+        / texels;
+    assert!(
+        (extra - expected).abs() < 1e-9 * expected,
+        "{extra} bytes per texel, expected {expected}"
+    );
     // Curves start at the initial state and run to the budget.
     for c in ["curve_baseline", "curve_restir"] {
         let pts = s[c].as_array().unwrap();

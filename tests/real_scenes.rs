@@ -48,8 +48,8 @@ fn jpeg_bytes(w: u32, h: u32, rgb: &[u8]) -> Vec<u8> {
 /// A scene as a modeling tool exports it: one mesh with two primitives and two materials
 /// (a plane with a PNG base color texture, a box with a JPEG texture mirrored by
 /// KHR_texture_transform's negative scale), no camera and no light. `plane_png` is the
-/// plane's texture.
-fn blender_like_glb(path: &Path, plane_png: &[u8]) {
+/// plane's texture; with `glowing_box` the box's texture is its emissive texture as well.
+fn blender_like_glb(path: &Path, plane_png: &[u8], glowing_box: bool) {
     let mut b = GltfBuilder::new();
     b.use_extension("KHR_texture_transform");
     let s_nearest = b.add_sampler(json!({"magFilter": 9728, "minFilter": 9728}));
@@ -70,13 +70,18 @@ fn blender_like_glb(path: &Path, plane_png: &[u8]) {
         "name": "planeA",
         "pbrMetallicRoughness": {"baseColorTexture": {"index": tex_a}, "metallicFactor": 0.0, "roughnessFactor": 0.7}
     }));
-    let mat_b = b.add_material(json!({
+    let mut box_material = json!({
         "name": "boxB",
         "pbrMetallicRoughness": {
             "baseColorTexture": {"index": tex_b, "extensions": {"KHR_texture_transform": {"scale": [-2.0, 1.0], "offset": [1.0, 0.0]}}},
             "metallicFactor": 0.0, "roughnessFactor": 0.5
         }
-    }));
+    });
+    if glowing_box {
+        box_material["emissiveTexture"] = json!({"index": tex_b});
+        box_material["emissiveFactor"] = json!([1.0, 1.0, 1.0]);
+    }
+    let mat_b = b.add_material(box_material);
     // The plane y = 0, [-1, 1]^2, facing +y, u along +x, v along -z.
     let plane = [
         [-1.0, 0.0, 1.0],
@@ -239,7 +244,7 @@ fn a_gltf_without_camera_or_light_renders_with_defaults() {
     }
     let dir = tempfile::tempdir().unwrap();
     let glb = dir.path().join("model.glb");
-    blender_like_glb(&glb, &png_bytes(TEX, TEX, &truth_texels()).unwrap());
+    blender_like_glb(&glb, &png_bytes(TEX, TEX, &truth_texels()).unwrap(), false);
     let out = dir.path().join("x.png");
     let o = Command::new(env!("CARGO_BIN_EXE_psrestir"))
         .args(["render", glb.to_str().unwrap(), "-o", out.to_str().unwrap()])
@@ -268,6 +273,48 @@ fn a_gltf_without_camera_or_light_renders_with_defaults() {
     );
 }
 
+/// An asset without camera and punctual light whose only light is a glowing (emissive
+/// textured) part: the default environment lights the rest of it, and the notice says why;
+/// `--no-default-env` leaves it lit by the glowing part alone, far darker.
+#[test]
+fn a_light_less_asset_with_a_glowing_part_gets_the_default_environment() {
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let glb = dir.path().join("glowing.glb");
+    blender_like_glb(&glb, &png_bytes(TEX, TEX, &truth_texels()).unwrap(), true);
+    let render = |extra: &[&str], out: &str| {
+        let out = dir.path().join(out);
+        let o = Command::new(env!("CARGO_BIN_EXE_psrestir"))
+            .args(["render", glb.to_str().unwrap(), "-o", out.to_str().unwrap()])
+            .args(["--size", "64x64", "--spp", "16"])
+            .args(extra)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr).to_string();
+        assert!(o.status.success(), "{stderr}");
+        let img = image::open(&out).unwrap().to_rgb8();
+        // The plane's pixels: the bottom rows, in front of the box.
+        let plane: Vec<f64> = img
+            .enumerate_pixels()
+            .filter(|(_, y, _)| *y >= 56)
+            .map(|(_, _, p)| p.0.iter().map(|&c| c as f64).sum::<f64>() / 3.0)
+            .collect();
+        (stderr, plane.iter().sum::<f64>() / plane.len() as f64)
+    };
+    let (stderr, lit) = render(&[], "lit.png");
+    assert!(stderr.contains("only emissive surfaces"), "{stderr}");
+    // The plane under the white environment (its texture averages about sRGB 120).
+    assert!(lit > 40.0, "the plane is dark: mean sRGB value {lit}");
+    let (stderr, dark) = render(&["--no-default-env"], "dark.png");
+    assert!(!stderr.contains("environment"), "{stderr}");
+    assert!(
+        dark < 0.5 * lit,
+        "lit by the glowing box alone: {dark} vs {lit}"
+    );
+}
+
 #[test]
 fn three_transforms_json_views_recover_the_base_color() {
     let Some(gpu) = gpu() else { return };
@@ -275,12 +322,12 @@ fn three_transforms_json_views_recover_the_base_color() {
     let d = dir.path();
     // The ground truth renders the targets; the model starts from gray.
     let truth_png = png_bytes(TEX, TEX, &truth_texels()).unwrap();
-    blender_like_glb(&d.join("truth.glb"), &truth_png);
+    blender_like_glb(&d.join("truth.glb"), &truth_png, false);
     let gray = png_bytes(TEX, TEX, &vec![[128, 128, 128, 255]; (TEX * TEX) as usize]).unwrap();
-    blender_like_glb(&d.join("model.glb"), &gray);
+    blender_like_glb(&d.join("model.glb"), &gray, false);
     std::fs::create_dir_all(d.join("frames")).unwrap();
     let mut truth = psrestir::scene::load(&d.join("truth.glb")).unwrap();
-    truth.add_defaults();
+    truth.add_defaults(true);
     truth.cameras.clear();
     for (name, m, k) in views() {
         truth.cameras.push(Camera::with_intrinsics(&name, m, k));

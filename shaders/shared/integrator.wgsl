@@ -255,10 +255,16 @@ fn gradient_sample(o: vec3f, d: vec3f) -> GradientSample {
     out.nee = s.nee;
     out.bsdf = s.bsdf;
     if compact_paths {
+        // A radiance too large for any format is left as it is, so that the candidate pass
+        // finds its value not finite and drops and counts it.
         out.nee_rgbe = rgbe_pack(s.nee.radiance);
-        out.nee.radiance = rgbe_unpack(out.nee_rgbe);
+        if all(s.nee.radiance < vec3f(3.0e38)) {
+            out.nee.radiance = rgbe_unpack(out.nee_rgbe);
+        }
         out.bsdf_rgbe = rgbe_pack(s.bsdf.radiance);
-        out.bsdf.radiance = rgbe_unpack(out.bsdf_rgbe);
+        if all(s.bsdf.radiance < vec3f(3.0e38)) {
+            out.bsdf.radiance = rgbe_unpack(out.bsdf_rgbe);
+        }
     }
     let nee_wi = rounded_direction(out.sf, s.nee.wi);
     let bsdf_wi = rounded_direction(out.sf, s.bsdf.wi);

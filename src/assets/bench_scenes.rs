@@ -449,6 +449,8 @@ width = 128
 height = 128
 seed = 13
 output = "out/bench/dish"
+# Lit by its area lights alone: no default environment.
+default_environment = false
 "#,
         r#"
 [[textures]]
@@ -547,6 +549,8 @@ width = 128
 height = 128
 seed = 14
 output = "out/bench/sphere"
+# Lit by its area lights alone: no default environment.
+default_environment = false
 "#,
         r#"
 [[textures]]

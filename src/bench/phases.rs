@@ -152,6 +152,7 @@ pub(super) struct OptimizationRun {
     pub(super) passes: Option<PassTimes>,
     pub(super) merge_evaluations: Option<f64>,
     pub(super) state_bytes_per_texel: f64,
+    pub(super) observed_texels: u64,
     pub(super) final_image: Image,
 }
 
@@ -263,6 +264,7 @@ pub(super) fn optimization_phase(
         passes: passes.map(|(s, n)| s.divided(n as f64)),
         merge_evaluations: evaluations.map(|(s, n)| s as f64 / n as f64),
         state_bytes_per_texel: opt.state_bytes_per_texel(),
+        observed_texels: opt.observed_texels()?.iter().filter(|&&o| o).count() as u64,
         curve,
         final_image,
     })
@@ -386,6 +388,7 @@ pub(super) fn optimization_phases(
         merge_evaluations_per_iteration: re.merge_evaluations,
         state_bytes_per_texel: re.state_bytes_per_texel,
         state_bytes_per_texel_baseline: base.state_bytes_per_texel,
+        observed_texels: re.observed_texels,
         texture_rmse_observed_min_baseline: min_observed(&base),
         texture_rmse_observed_min_restir: min_observed(&re),
         settings_baseline: describe(Method::Baseline, tb_best),

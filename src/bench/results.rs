@@ -173,11 +173,13 @@ pub struct OptimizationResult {
     /// Kept paths ReSTIR's merge evaluated per iteration, from the second iteration whose pass
     /// times are sampled to the last (the merge's work; it traces no ray).
     pub merge_evaluations_per_iteration: Option<f64>,
-    /// Bytes of GPU state per texel of the ReSTIR optimizer (textures, gradient, Adam,
-    /// reservoirs, locks).
+    /// Bytes of GPU state per texel of the ReSTIR optimizer (textures, gradient, Adam, and
+    /// the reservoirs and headers of the observed texels with the compaction map).
     pub state_bytes_per_texel: f64,
     /// The same for the baseline optimizer.
     pub state_bytes_per_texel_baseline: f64,
+    /// Texels that the cameras observe (those with reservoirs).
+    pub observed_texels: u64,
     /// Lowest observed-texel RMSE of the baseline's run (a run that ends well above it
     /// drifted: it has a floor).
     pub texture_rmse_observed_min_baseline: f64,

@@ -414,7 +414,7 @@ fn task_scene(task: &Task, path: &Path) -> Result<(Scene, Vec<usize>, FrameImage
             ));
         }
     }
-    for note in s.add_defaults() {
+    for note in s.add_defaults(task.default_environment) {
         log::warn!("{}: {note}", s.source.display());
     }
     Ok((s, added, frames))

@@ -42,7 +42,12 @@ impl MemoryPlan {
             Scale::ObservedTexel => self.observed_texels,
             Scale::Pixel => self.pixels,
         };
-        let bytes: u64 = self.buffers.iter().filter(|b| b.2 == scale).map(|b| b.1).sum();
+        let bytes: u64 = self
+            .buffers
+            .iter()
+            .filter(|b| b.2 == scale)
+            .map(|b| b.1)
+            .sum();
         bytes as f64 / n.max(1) as f64
     }
 

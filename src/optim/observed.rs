@@ -105,7 +105,6 @@ pub(crate) fn observed_mask(
     Ok((m, mask))
 }
 
-
 /// RMSE of `values` against `truth` (laid out like `set.values`) over the channels of the
 /// texels marked in `observed` (one flag per texel, as [`Optimizer::observed_texels`]);
 /// NaN when none is observed.

@@ -492,9 +492,11 @@ impl Scene {
 
     /// Make a scene renderable as it comes from a modeling tool: without a camera, add one
     /// named `default` that frames the scene's bounds (from the front, +Z, slightly above);
-    /// without any light, add a uniform white environment. Each addition is noted in
-    /// `warnings` and returned.
-    pub fn add_defaults(&mut self) -> Vec<String> {
+    /// with `environment`, and neither a punctual light nor an environment, add a uniform
+    /// white environment, whatever emissive surfaces it has (an asset's glowing parts light
+    /// little of it; a scene lit by its emissive surfaces alone passes `false`). Each
+    /// addition is noted in `warnings` and returned.
+    pub fn add_defaults(&mut self, environment: bool) -> Vec<String> {
         let mut notes = Vec::new();
         if self.cameras.is_empty() {
             let (c, r) = self.bounding_sphere();
@@ -508,9 +510,18 @@ impl Scene {
                 eye.to_array()
             ));
         }
-        if !self.has_light() {
+        if environment && self.lights.is_empty() && self.env.is_none() {
+            let emissive = self.has_light();
             self.env = Some(EnvMap::constant([1.0, 1.0, 1.0]));
-            notes.push("the scene has no light: added a uniform white environment".into());
+            notes.push(if emissive {
+                "the scene has no punctual light and no environment, only emissive surfaces: \
+                 added a uniform white environment (a scene lit by its emissive surfaces alone \
+                 says `default_environment = false` in its task, or renders with \
+                 --no-default-env)"
+                    .into()
+            } else {
+                "the scene has no light: added a uniform white environment".into()
+            });
         }
         self.warnings.extend(notes.iter().cloned());
         notes

@@ -253,6 +253,10 @@ pub struct Task {
     /// Multiplier of the environment map.
     #[serde(default = "unit")]
     pub env_scale: f32,
+    /// Whether a scene without punctual lights and environment gets the default uniform white
+    /// environment (true; false for a scene lit by its emissive surfaces alone).
+    #[serde(default = "yes")]
+    pub default_environment: bool,
     /// Cameras rendered every iteration (names or indices). When absent: the cameras that
     /// the task defines or loads from `cameras_file`, or else all of the scene's.
     pub cameras: Option<Vec<String>>,
@@ -288,6 +292,9 @@ pub struct Task {
     pub path: PathBuf,
 }
 
+fn yes() -> bool {
+    true
+}
 fn unit() -> f32 {
     1.0
 }

@@ -8,6 +8,7 @@
 //! - [`restir`]: parameter-space ReSTIR, two reservoirs per texel reused across iterations
 //!   (shaders/restir_candidates.wgsl, shaders/restir_merge.wgsl).
 pub mod baseline;
+pub mod compact;
 mod reservoir_test;
 pub mod restir;
 

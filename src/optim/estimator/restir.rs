@@ -19,8 +19,8 @@
 //!    gradient sum over signs of v(y) W. It traces no ray.
 use super::{Diagnostics, Estimator, EstimatorState, Frame, Method, Setup};
 use crate::gpu::encode_timed_pass;
-use crate::optim::Scale;
 use crate::gpu::{grid_2d, Gpu};
+use crate::optim::Scale;
 use crate::optim::{pass_seed, FaultCounts, PassKind, PassTimer, Seeds};
 use crate::render::layout::GpuCameraInfo;
 use crate::render::WORKGROUP;
@@ -315,7 +315,13 @@ impl MergeDiagnostics {
 pub(crate) fn memory(n_texels: u64, n_observed: u64, n_pixels: u64) -> Vec<(String, u64, Scale)> {
     let slot_bytes = n_observed * reservoir::WORDS as u64 * 4;
     let mut out: Vec<(String, u64, Scale)> = (0..reservoir::SLOTS)
-        .map(|k| (format!("reservoir slots{k}"), slot_bytes, Scale::ObservedTexel))
+        .map(|k| {
+            (
+                format!("reservoir slots{k}"),
+                slot_bytes,
+                Scale::ObservedTexel,
+            )
+        })
         .collect();
     out.extend([
         (
@@ -464,7 +470,11 @@ impl Restir {
         );
         let observed_map = gpu.storage(
             "observed texel map",
-            bytemuck::cast_slice(if map.is_empty() { &[[0u32; 2]][..] } else { &map }),
+            bytemuck::cast_slice(if map.is_empty() {
+                &[[0u32; 2]][..]
+            } else {
+                &map
+            }),
             wgpu::BufferUsages::empty(),
         );
         let candidate_stats = gpu.storage_zeroed("candidate stats", 16);
