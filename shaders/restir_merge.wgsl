@@ -119,17 +119,41 @@ struct Stored {
     sv: StoredVertex,
 }
 
+// The RESERVOIR_WORDS words from word b of slot k's buffer, read in one switch.
+fn slot_words(k: u32, b: u32) -> array<u32, RESERVOIR_WORDS> {
+    var w: array<u32, RESERVOIR_WORDS>;
+    switch k {
+        case 0u: {
+            for (var j = 0u; j < RESERVOIR_WORDS; j++) {
+                w[j] = slots0[b + j];
+            }
+        }
+        case 1u: {
+            for (var j = 0u; j < RESERVOIR_WORDS; j++) {
+                w[j] = slots1[b + j];
+            }
+        }
+        case 2u: {
+            for (var j = 0u; j < RESERVOIR_WORDS; j++) {
+                w[j] = slots2[b + j];
+            }
+        }
+        default: {
+            for (var j = 0u; j < RESERVOIR_WORDS; j++) {
+                w[j] = slots3[b + j];
+            }
+        }
+    }
+    return w;
+}
+
 // The reservoir in slot k of observed texel i.
 fn load(k: u32, i: u32) -> Stored {
-    let b = i * RESERVOIR_WORDS;
-    var words: array<u32, 5>;
-    for (var j = 0u; j < 5u; j++) {
-        words[j] = slot_word(k, b + RES_TRI + j);
-    }
-    let info = slot_word(k, b + RES_INFO);
-    let path = unpack_path(words);
+    let w = slot_words(k, i * RESERVOIR_WORDS);
+    let path = unpack_path(array<u32, 5>(w[RES_TRI], w[RES_TRI + 1u], w[RES_TRI + 2u], w[RES_TRI + 3u], w[RES_TRI + 4u]));
+    let info = w[RES_INFO];
     let cam = min((info >> INFO_CAMERA_SHIFT) & INFO_CAMERA_MASK, MAX_CAMERAS - 1u);
-    return Stored(info, bitcast<f32>(slot_word(k, b + RES_W)), path, stored_vertex(mp.origins[cam].xyz, path));
+    return Stored(info, bitcast<f32>(w[RES_W]), path, stored_vertex(mp.origins[cam].xyz, path));
 }
 
 fn slot_w(k: u32, i: u32) -> f32 {
