@@ -115,7 +115,7 @@ fn scene_mirrors_match_wgsl_field_by_field() {
         "render",
         "TriShading",
         GpuTriShading,
-        [n0, n1, n2, uv01, uv2, material, light]
+        [n0, t0, n1, t1, n2, t2, uv01, uv2, material, light]
     );
     mirror!(
         "render",
@@ -136,9 +136,11 @@ fn scene_mirrors_match_wgsl_field_by_field() {
             param_base_color,
             param_metallic,
             param_roughness,
+            normal_scale,
             base_color_tex,
             mr_tex,
             emissive_tex,
+            normal_tex,
             uv_xf
         ]
     );

@@ -115,6 +115,89 @@ fn plane_under_point_spot_and_directional_lights_matches_the_closed_form() {
     }
 }
 
+/// A flat plane whose normal map tilts the normal by 0.5 rad towards the tangent (+x, the
+/// direction of +u), scaled by normalTexture.scale 0.8, under a directional light straight
+/// above: every pixel is the BRDF's closed form about the tilted normal (decoded from the
+/// 8-bit texel exactly as the shader decodes it), which differs from the untilted one by far
+/// more than the tolerance. The plane is built in code, so its tangent is its face's.
+#[test]
+fn a_normal_map_tilts_the_shading_normal_by_its_angle() {
+    let Some(gpu) = gpu() else { return };
+    let (base, metallic, roughness) = (Vec3::new(0.6, 0.5, 0.4), 0.0, 0.6);
+    let (angle, scale) = (0.5f32, 0.8f32);
+    let texel = [angle.sin(), 0.0, angle.cos()].map(|c| ((c + 1.0) * 0.5 * 255.0).round() as u8);
+    let decoded = Vec3::from(texel.map(|c| c as f32 / 255.0 * 2.0 - 1.0));
+    let v = Vec3::new(decoded.x * scale, decoded.y * scale, decoded.z).normalize();
+    // Tangent +x, bitangent +z (decreasing v), normal +y.
+    let tilted = (Vec3::X * v.x + Vec3::Z * v.y + Vec3::Y * v.z).normalize();
+    assert!(tilted.dot(Vec3::Y) < 0.95, "{tilted}");
+    let mut mat = material(base.to_array(), metallic, roughness);
+    mat.normal_texture = Some(psrestir::scene::TextureSlot {
+        image: 0,
+        wrap_s: Wrap::Repeat,
+        wrap_t: Wrap::Repeat,
+        nearest: true,
+        transform: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+    });
+    mat.normal_scale = scale;
+    let mut scene = plane_scene(mat, 5.0);
+    scene.images.push(psrestir::scene::Image8 {
+        name: "normal".into(),
+        width: 2,
+        height: 2,
+        rgba: vec![[texel[0], texel[1], texel[2], 255]; 4],
+    });
+    let intensity = Vec3::splat(3.0);
+    scene.lights.push(PunctualLight {
+        name: "sun".into(),
+        kind: PunctualKind::Directional,
+        position: Vec3::ZERO,
+        direction: Vec3::NEG_Y,
+        intensity,
+        range: 0.0,
+    });
+    let spp = 16;
+    let r = Renderer::new(&gpu, &scene).unwrap();
+    let out = render_image(&r, W, spp, 5, Techniques::Mis);
+    let cam = &scene.cameras[0];
+    let (mut worst, mut flat_off) = (0.0f64, 0usize);
+    for y in 0..W {
+        for x in 0..W {
+            let mut subs = Vec::new();
+            let mut flat = Vec::new();
+            for j in 0..4 {
+                for i in 0..4 {
+                    let p = Vec2::new(
+                        x as f32 + (i as f32 + 0.5) / 4.0,
+                        y as f32 + (j as f32 + 0.5) / 4.0,
+                    );
+                    let (_, d) = camera_dir(cam, W, W, p);
+                    let f = |n| brdf_eval_cos(base, metallic, roughness, n, -d, Vec3::Y);
+                    subs.push(lum((f(tilted) * intensity).to_array()));
+                    flat.push(lum((f(Vec3::Y) * intensity).to_array()));
+                }
+            }
+            let (m, sd) = mean_sd(&subs);
+            let (m_flat, _) = mean_sd(&flat);
+            let got = lum(out.at(x, y));
+            let tol = 5.0 * sd / (spp as f64).sqrt() + 2e-3 * m + 1e-6;
+            worst = worst.max((got - m).abs() / tol);
+            assert!(
+                (got - m).abs() <= tol,
+                "pixel ({x},{y}): {got} vs closed form {m} about the tilted normal (tolerance \
+                 {tol}; about the untilted normal {m_flat})"
+            );
+            flat_off += ((got - m_flat).abs() > tol) as usize;
+        }
+    }
+    eprintln!("normal map: worst error / tolerance {worst:.3}");
+    // The tilt shows: most pixels are far from the untilted normal's value.
+    assert!(
+        flat_off > (W * W / 2) as usize,
+        "{flat_off} pixels differ from flat"
+    );
+}
+
 /// Irradiance at a point on the axis of a uniformly emitting rectangle (half-edges a, b at
 /// distance h, radiance L): E = 2 L [X/sqrt(1+X^2) atan(Y/sqrt(1+X^2)) + Y/sqrt(1+Y^2)
 /// atan(X/sqrt(1+Y^2))], X = a/h, Y = b/h (four corner rectangles of the classic form factor).

@@ -298,8 +298,15 @@ fn a_1024_squared_texture_optimizes_with_restir() {
         ..in_memory::texture()
     };
     let mut p = Problem::new(in_memory::scene(), vec![0], &[spec], Filter::Bilinear).unwrap();
-    p.render_targets(&gpu, in_memory::truth([[230, 60, 40], [40, 90, 220]]), 64, 64, 64, 3)
-        .unwrap();
+    p.render_targets(
+        &gpu,
+        in_memory::truth([[230, 60, 40], [40, 90, 220]]),
+        64,
+        64,
+        64,
+        3,
+    )
+    .unwrap();
     // With the multiscale gradient, as a texture of many texels per pixel needs (each texel
     // alone is seen by a few samples at most).
     let s = Settings {

@@ -76,6 +76,7 @@ fn random_soup() -> (Scene, Vec<Ray>) {
             p,
             n: [Vec3::Y; 3],
             uv: Default::default(),
+            t: Default::default(),
             material: 0,
         });
     }

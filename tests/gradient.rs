@@ -1,7 +1,8 @@
 //! The baseline gradient is unbiased: its mean over many independent estimates equals the
 //! central finite difference of the loss, per texel, for base color, roughness and metallic,
 //! with nearest and bilinear filters, on a small scene with hard and soft shadows; also with
-//! the control-variate primal (whose adjoint carries earlier iterations' samples).
+//! the control-variate primal (whose adjoint carries earlier iterations' samples), and on a
+//! normal-mapped plane.
 mod common;
 
 use common::*;
@@ -33,8 +34,18 @@ fn check_gradient_with(
     target_values: &[f32],
     primal: PrimalMode,
 ) {
+    check_gradient_on(shadow_scene(), slot, filter, values, target_values, primal)
+}
+
+fn check_gradient_on(
+    scene: psrestir::scene::Scene,
+    slot: Slot,
+    filter: Filter,
+    values: &[f32],
+    target_values: &[f32],
+    primal: PrimalMode,
+) {
     let Some(gpu) = gpu() else { return };
-    let scene = shadow_scene();
     let init = Init::Vector(vec![0.5; slot.channels() as usize]);
     let set = ParamSet::from_specs(
         &scene,
@@ -230,5 +241,39 @@ fn roughness_gradient_with_the_control_variate_matches_finite_differences() {
         &[0.3, 0.5, 0.7, 0.4],
         &[0.8, 0.2, 0.4, 0.9],
         PrimalMode::ControlVariate,
+    );
+}
+
+/// The plane with a normal map of bumps: the gradient passes shade with the same perturbed
+/// normal as the renders.
+#[test]
+fn base_color_gradient_with_a_normal_map_matches_finite_differences() {
+    let mut scene = shadow_scene();
+    with_normal_map(&mut scene);
+    let v = [0.5, 0.4, 0.3, 0.6, 0.5, 0.2, 0.3, 0.3, 0.3, 0.7, 0.6, 0.5];
+    let t = [0.8, 0.2, 0.1, 0.3, 0.6, 0.4, 0.5, 0.5, 0.5, 0.2, 0.3, 0.9];
+    check_gradient_on(
+        scene,
+        Slot::BaseColor,
+        Filter::Bilinear,
+        &v,
+        &t,
+        PrimalMode::Independent,
+    );
+}
+
+#[test]
+fn roughness_gradient_with_a_normal_map_matches_finite_differences() {
+    let mut scene = shadow_scene();
+    with_normal_map(&mut scene);
+    let v = [0.5, 0.3, 0.7, 0.4];
+    let t = [0.3, 0.6, 0.4, 0.8];
+    check_gradient_on(
+        scene,
+        Slot::Roughness,
+        Filter::Bilinear,
+        &v,
+        &t,
+        PrimalMode::Independent,
     );
 }

@@ -87,7 +87,19 @@ fn optimizer_seeded(
     target_values: &[f32],
     seed: u32,
 ) -> Optimizer {
-    let scene = shadow_scene();
+    let o = (restir, values, target_values, seed);
+    optimizer_on(gpu, shadow_scene(), slots, filter, method, o)
+}
+
+/// [`optimizer_seeded`] on `scene`, with (ReSTIR options, values, target values, seed).
+fn optimizer_on(
+    gpu: &psrestir::gpu::Gpu,
+    scene: psrestir::scene::Scene,
+    slots: &[Slot],
+    filter: Filter,
+    method: Method,
+    (restir, values, target_values, seed): (RestirOptions, &[f32], &[f32], u32),
+) -> Optimizer {
     let specs: Vec<TextureSpec> = slots
         .iter()
         .map(|&slot| TextureSpec {
@@ -509,21 +521,21 @@ fn stored_paths_keep_the_inputs_no_texture_replaces() {
         verify_paths: true,
         ..Default::default()
     };
-    for slots in combinations {
+    // The last combination again on a normal-mapped plane: the merge rebuilds the perturbed
+    // shading frame from the stored hit.
+    let mut bumpy = shadow_scene();
+    with_normal_map(&mut bumpy);
+    let runs = combinations
+        .iter()
+        .map(|s| (*s, shadow_scene()))
+        .chain([(combinations[4], bumpy)]);
+    for (slots, scene) in runs {
         let n: usize = slots.iter().map(|s| 4 * s.channels() as usize).sum();
         let a: Vec<f32> = (0..n).map(|i| 0.3 + 0.05 * (i % 7) as f32).collect();
         let b: Vec<f32> = (0..n).map(|i| 0.6 - 0.04 * (i % 5) as f32).collect();
         let t = vec![0.5; n];
-        let mut re = optimizer_seeded(
-            &gpu,
-            slots,
-            Filter::Bilinear,
-            Method::Restir,
-            opts,
-            &a,
-            &t,
-            5,
-        );
+        let o = (opts, &a[..], &t[..], 5);
+        let mut re = optimizer_on(&gpu, scene, slots, Filter::Bilinear, Method::Restir, o);
         for it in 0..12 {
             re.write_params(if it % 2 == 0 { &a } else { &b }).unwrap();
             re.step().unwrap();

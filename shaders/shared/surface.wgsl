@@ -33,13 +33,16 @@ fn surface_at(o: vec3f, hit: Hit) -> Surface {
     let len_to = length(to);
     let d = select(vec3f(0.0, 0.0, -1.0), to / len_to, len_to > 0.0);
     var ng = normalize(cross(p1 - p0, p2 - p0));
-    var ns = b0 * s.n0.xyz + hit.b1 * s.n1.xyz + hit.b2 * s.n2.xyz;
+    var ns = b0 * s.n0 + hit.b1 * s.n1 + hit.b2 * s.n2;
     let front = dot(ng, d) < 0.0;
     let m = materials[s.material];
     var out: Surface;
     out.p = p;
     out.uv = b0 * s.uv01.xy + hit.b1 * s.uv01.zw + hit.b2 * s.uv2;
     out.material = s.material;
+    if m.normal_tex.offset != NONE && s.t0 != 0u && s.t1 != 0u && s.t2 != 0u {
+        ns = normal_mapped(m, out.uv, ns, vec3f(b0, hit.b1, hit.b2), s);
+    }
     out.front = front;
     out.wo = -d;
     out.valid = front || m.double_sided != 0u;
@@ -56,6 +59,32 @@ fn surface_at(o: vec3f, hit: Hit) -> Surface {
     out.ng = ng;
     out.frame = onb(ns);
     return out;
+}
+
+// A vertex tangent packed by pack_tangent (src/render/layout.rs): direction and handedness w.
+fn tangent_at(w: u32) -> vec4f {
+    let e = vec2f(f32(w & 0x7fffu), f32((w >> 15u) & 0x7fffu)) * (2.0 / 32767.0) - 1.0;
+    return vec4f(oct_decode(e), select(1.0, -1.0, (w & 0x40000000u) != 0u));
+}
+
+// The normal n (interpolated, of the front face) perturbed by material m's tangent-space
+// normal map at uv: the interpolated tangent of triangle s at barycentrics b, made
+// orthogonal to n, the bitangent cross(n, t) x w, and the map's normal (2 x texel - 1, X and
+// Y times normal_scale) in that frame. The back face of a double-sided surface flips the
+// result with the rest of its shading frame.
+fn normal_mapped(m: Material, uv: vec2f, n: vec3f, b: vec3f, s: TriShading) -> vec3f {
+    let t0 = tangent_at(s.t0);
+    var t = b.x * t0.xyz + b.y * tangent_at(s.t1).xyz + b.z * tangent_at(s.t2).xyz;
+    let nn = normalize(n);
+    t -= nn * dot(nn, t);
+    let tn = sample_texture(m.normal_tex, transform_uv(m, 3u, uv)).xyz * 2.0 - 1.0;
+    let v = vec3f(tn.xy * m.normal_scale, tn.z);
+    if !(length(t) > 0.0) || !(length(v) > 0.0) || !all(nn == nn) {
+        return n;
+    }
+    t = normalize(t);
+    let bt = cross(nn, t) * t0.w;
+    return normalize(t * v.x + bt * v.y + nn * v.z);
 }
 
 // The BRDF inputs of material `mi` at texture coordinates uv are

@@ -15,10 +15,14 @@ struct BvhNode {
 }
 
 // Shading data of one triangle (BVH order). light: index into lights[] when emissive, else NONE.
+// t0..t2: the vertex tangents for normal maps, packed (shared/surface.wgsl, tangent_at; 0: none).
 struct TriShading {
-    n0: vec4f,
-    n1: vec4f,
-    n2: vec4f,
+    n0: vec3f,
+    t0: u32,
+    n1: vec3f,
+    t1: u32,
+    n2: vec3f,
+    t2: u32,
     uv01: vec4f,
     uv2: vec2f,
     material: u32,
@@ -45,14 +49,18 @@ struct Material {
     param_base_color: u32,
     param_metallic: u32,
     param_roughness: u32,
-    _pad0: u32,
+    // normalTexture's scale of the tangent-space normal's X and Y.
+    normal_scale: f32,
     _pad1: u32,
     _pad2: u32,
     base_color_tex: TexRef,
     mr_tex: TexRef,
     emissive_tex: TexRef,
-    // Per slot (base color, metallic-roughness, emissive) a 2x3 UV transform, two rows each.
-    uv_xf: array<vec4f, 6>,
+    // Tangent-space normal map (linear).
+    normal_tex: TexRef,
+    // Per slot (base color, metallic-roughness, emissive, normal) a 2x3 UV transform, two
+    // rows each.
+    uv_xf: array<vec4f, 8>,
 }
 
 // intensity: color x intensity (cd for point/spot, lux for directional). direction: where the

@@ -232,6 +232,7 @@ fn gpu_materials(scene: &Scene, image_offsets: &[u32]) -> Vec<GpuMaterial> {
             let [a, b] = xf(&m.base_color_texture);
             let [c, d] = xf(&m.metallic_roughness_texture);
             let [e, f] = xf(&m.emissive_texture);
+            let [g, h] = xf(&m.normal_texture);
             GpuMaterial {
                 base_color: m.base_color.to_array(),
                 emissive: m.emissive.to_array(),
@@ -241,11 +242,13 @@ fn gpu_materials(scene: &Scene, image_offsets: &[u32]) -> Vec<GpuMaterial> {
                 param_base_color: u32::MAX,
                 param_metallic: u32::MAX,
                 param_roughness: u32::MAX,
-                _pad: [0; 3],
+                normal_scale: m.normal_scale,
+                _pad: [0; 2],
                 base_color_tex: tex_ref(&m.base_color_texture, true),
                 mr_tex: tex_ref(&m.metallic_roughness_texture, false),
                 emissive_tex: tex_ref(&m.emissive_texture, true),
-                uv_xf: [a, b, c, d, e, f],
+                normal_tex: tex_ref(&m.normal_texture, false),
+                uv_xf: [a, b, c, d, e, f, g, h],
             }
         })
         .collect()
@@ -413,10 +416,24 @@ fn bvh_triangles(
         for p in t.p {
             positions.push([p.x, p.y, p.z, 0.0]);
         }
+        // A normal-mapped triangle built in code without tangents takes its face's.
+        let mut tangents = t.t;
+        let mapped = scene
+            .materials
+            .get(t.material as usize)
+            .is_some_and(|m| m.normal_texture.is_some());
+        if mapped && tangents.iter().all(|v| *v == glam::Vec4::ZERO) {
+            let n = (t.p[1] - t.p[0]).cross(t.p[2] - t.p[0]).normalize_or_zero();
+            tangents = [crate::scene::tangents::face_tangent(t.p, t.uv, n); 3];
+        }
+        let packed = tangents.map(|v| if mapped { pack_tangent(v) } else { 0 });
         shading.push(GpuTriShading {
-            n0: t.n[0].extend(0.0).to_array(),
-            n1: t.n[1].extend(0.0).to_array(),
-            n2: t.n[2].extend(0.0).to_array(),
+            n0: t.n[0].to_array(),
+            t0: packed[0],
+            n1: t.n[1].to_array(),
+            t1: packed[1],
+            n2: t.n[2].to_array(),
+            t2: packed[2],
             uv01: [t.uv[0].x, t.uv[0].y, t.uv[1].x, t.uv[1].y],
             uv2: t.uv[2].to_array(),
             material: t.material,

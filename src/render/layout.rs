@@ -7,9 +7,12 @@ use bytemuck::{Pod, Zeroable};
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct GpuTriShading {
-    pub n0: [f32; 4],
-    pub n1: [f32; 4],
-    pub n2: [f32; 4],
+    pub n0: [f32; 3],
+    pub t0: u32,
+    pub n1: [f32; 3],
+    pub t1: u32,
+    pub n2: [f32; 3],
+    pub t2: u32,
     pub uv01: [f32; 4],
     pub uv2: [f32; 2],
     pub material: u32,
@@ -48,11 +51,33 @@ pub struct GpuMaterial {
     pub param_base_color: u32,
     pub param_metallic: u32,
     pub param_roughness: u32,
-    pub _pad: [u32; 3],
+    pub normal_scale: f32,
+    pub _pad: [u32; 2],
     pub base_color_tex: GpuTexRef,
     pub mr_tex: GpuTexRef,
     pub emissive_tex: GpuTexRef,
-    pub uv_xf: [[f32; 4]; 6],
+    pub normal_tex: GpuTexRef,
+    pub uv_xf: [[f32; 4]; 8],
+}
+
+/// A vertex tangent (xyz, w = ±1) in one word for `TriShading`: 0 for none, else bit 31
+/// set, bit 30 for w < 0, and the direction's octahedral coordinates in 15 bits each (about
+/// 1e-4 rad; shaders/shared/surface.wgsl, tangent_at).
+pub fn pack_tangent(t: glam::Vec4) -> u32 {
+    let d = t.truncate();
+    let l1 = d.x.abs() + d.y.abs() + d.z.abs();
+    if !(l1 > 0.0) || !l1.is_finite() {
+        return 0;
+    }
+    let n = d / l1;
+    let sign = |v: f32| if v >= 0.0 { 1.0 } else { -1.0 };
+    let e = if n.z >= 0.0 {
+        [n.x, n.y]
+    } else {
+        [(1.0 - n.y.abs()) * sign(n.x), (1.0 - n.x.abs()) * sign(n.y)]
+    };
+    let q = |x: f32| (((x + 1.0) * 0.5 * 32767.0).round() as u32).min(32767);
+    (1 << 31) | if t.w < 0.0 { 1 << 30 } else { 0 } | q(e[0]) | (q(e[1]) << 15)
 }
 
 /// Light kinds (`crate::gpu::abi::light`, WGSL `LIGHT_*`).

@@ -341,6 +341,10 @@ impl<'a> Loader<'a> {
                 Some(info) => Some(self.slot(info.texture(), info.texture_transform())?),
                 None => None,
             };
+            let (normal_texture, normal_scale) = match m.normal_texture() {
+                Some(info) => (Some(self.slot(info.texture(), None)?), info.scale()),
+                None => (None, 1.0),
+            };
             let strength = m.emissive_strength().unwrap_or(1.0);
             let mat = Material {
                 name,
@@ -351,6 +355,8 @@ impl<'a> Loader<'a> {
                 metallic_roughness_texture,
                 emissive: Vec3::from(m.emissive_factor()) * strength,
                 emissive_texture,
+                normal_texture,
+                normal_scale,
                 double_sided: m.double_sided(),
             };
             if !mat.factors_valid() {
@@ -454,6 +460,8 @@ impl<'a> Loader<'a> {
             let uvs: Option<Vec<Vec2>> = reader
                 .read_tex_coords(0)
                 .map(|t| t.into_f32().map(Vec2::from).collect());
+            let tangents: Option<Vec<Vec4>> =
+                reader.read_tangents().map(|t| t.map(Vec4::from).collect());
             let indices: Vec<u32> = match reader.read_indices() {
                 Some(i) => i.into_u32().collect(),
                 None => (0..positions.len() as u32).collect(),
@@ -464,6 +472,7 @@ impl<'a> Loader<'a> {
             }
             if normals.as_ref().is_some_and(|n| n.len() != nv)
                 || uvs.as_ref().is_some_and(|u| u.len() != nv)
+                || tangents.as_ref().is_some_and(|t| t.len() != nv)
             {
                 return Err(self.err(format!("{what}: attribute counts differ")));
             }
@@ -482,14 +491,39 @@ impl<'a> Loader<'a> {
                     ));
                 }
             }
+            // Tangents of each face's vertices, for a normal-mapped material: the file's, or
+            // MikkTSpace's from the positions, normals and UV0.
+            let normal_mapped = self.scene.materials[material as usize]
+                .normal_texture
+                .is_some();
+            let face_tangents: Option<Vec<Vec4>> = match (&tangents, &uvs) {
+                _ if !normal_mapped => None,
+                (Some(t), _) => Some(indices.iter().map(|&i| t[i as usize]).collect()),
+                (None, Some(uv)) => {
+                    super::tangents::mikktspace(&positions, normals.as_deref(), uv, &indices)
+                }
+                (None, None) => {
+                    self.scene.warnings.push(format!(
+                        "{what}: material `{}` has a normal map but the primitive has no \
+                         TEXCOORD_0: the normal map is not applied there",
+                        self.scene.materials[material as usize].name
+                    ));
+                    None
+                }
+            };
+            let tangent_m = Mat3::from_mat4(world);
             let (mut skipped, mut degenerate) = (0, 0);
-            for f in indices.chunks_exact(3) {
+            for (fi, f) in indices.chunks_exact(3).enumerate() {
                 if self.scene.triangles.len() >= MAX_TRIANGLES {
                     return Err(self.err(format!("more than {MAX_TRIANGLES} triangles")));
                 }
                 let mut idx = [f[0] as usize, f[1] as usize, f[2] as usize];
+                // Which of the face's vertices each corner is (the winding is reversed under
+                // a mirroring transform).
+                let mut corner = [0, 1, 2];
                 if flip {
                     idx.swap(1, 2);
+                    corner.swap(1, 2);
                 }
                 let p = idx.map(|i| world.transform_point3(positions[i]));
                 if !p.iter().all(|&v| in_bounds(v)) {
@@ -518,7 +552,28 @@ impl<'a> Loader<'a> {
                     Some(u) if u[i].is_finite() => u[i],
                     _ => Vec2::ZERO,
                 });
-                self.scene.triangles.push(Triangle { p, n, uv, material });
+                // A tangent is a direction on the surface (transformed like positions); a
+                // mirroring transform also mirrors the bitangent's handedness.
+                let t = match &face_tangents {
+                    Some(ft) => corner.map(|k| {
+                        let v = ft[3 * fi + k];
+                        let d = (tangent_m * v.truncate()).normalize_or_zero();
+                        let w = if (v.w < 0.0) != flip { -1.0 } else { 1.0 };
+                        if d.is_finite() {
+                            d.extend(w)
+                        } else {
+                            Vec4::ZERO
+                        }
+                    }),
+                    None => [Vec4::ZERO; 3],
+                };
+                self.scene.triangles.push(Triangle {
+                    p,
+                    n,
+                    uv,
+                    t,
+                    material,
+                });
             }
             if skipped > 0 {
                 self.scene.warnings.push(format!(

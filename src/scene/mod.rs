@@ -7,6 +7,7 @@ pub mod env;
 mod files;
 pub mod images;
 mod load;
+pub mod tangents;
 
 use glam::{Mat4, Vec2, Vec3, Vec4};
 use std::path::PathBuf;
@@ -33,6 +34,11 @@ pub struct Triangle {
     pub n: [Vec3; 3],
     /// Vertex UV0 (zero when the mesh has none).
     pub uv: [Vec2; 3],
+    /// Vertex tangents for normal maps (xyz, and w = ±1: the bitangent is
+    /// cross(normal, tangent) x w, glTF's TANGENT); zero where the file gives none and the
+    /// material has no normal map. A normal-mapped triangle without them gets MikkTSpace
+    /// tangents when loaded, or (built in code) its face's tangent from its UVs on upload.
+    pub t: [Vec4; 3],
     /// Index into [`Scene::materials`].
     pub material: u32,
 }
@@ -49,6 +55,7 @@ impl Triangle {
             p: k.map(|i| p[i]),
             n: [n; 3],
             uv: k.map(|i| uv[i]),
+            t: [Vec4::ZERO; 3],
             material,
         })
     }
@@ -107,6 +114,10 @@ pub struct Material {
     pub emissive: Vec3,
     /// emissiveTexture (sRGB).
     pub emissive_texture: Option<TextureSlot>,
+    /// normalTexture (linear, tangent space; its KHR_texture_transform is not read).
+    pub normal_texture: Option<TextureSlot>,
+    /// normalTexture's scale (of the tangent-space normal's X and Y).
+    pub normal_scale: f32,
     /// doubleSided.
     pub double_sided: bool,
 }
@@ -118,6 +129,7 @@ impl Material {
             && self.emissive.is_finite()
             && self.metallic.is_finite()
             && self.roughness.is_finite()
+            && self.normal_scale.is_finite()
             && self.emissive.min_element() >= 0.0
     }
 }
@@ -133,6 +145,8 @@ impl Default for Material {
             metallic_roughness_texture: None,
             emissive: Vec3::ZERO,
             emissive_texture: None,
+            normal_texture: None,
+            normal_scale: 1.0,
             double_sided: false,
         }
     }

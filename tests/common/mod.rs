@@ -47,12 +47,14 @@ pub fn quad(c: Vec3, u: Vec3, v: Vec3, material: u32) -> Vec<Triangle> {
             p: [p[0], p[1], p[2]],
             n: [n; 3],
             uv: [uv[0], uv[1], uv[2]],
+            t: Default::default(),
             material,
         },
         Triangle {
             p: [p[0], p[2], p[3]],
             n: [n; 3],
             uv: [uv[0], uv[2], uv[3]],
+            t: Default::default(),
             material,
         },
     ]
@@ -195,6 +197,34 @@ pub fn block_z_scores(
 
 /// A 2x2-unit plane (UV 0..1) under a point light and an emissive quad, with a floating
 /// blocker that casts a hard shadow (point light) and a soft one (area light).
+/// Give material 0 (the plane of [`shadow_scene`]) a tangent-space normal map of 4x4 bumps
+/// that tilt its normal by up to about 0.6 rad in varying directions.
+#[allow(dead_code)]
+pub fn with_normal_map(s: &mut Scene) {
+    let rgba: Vec<[u8; 4]> = (0..16)
+        .map(|i| {
+            let (x, y) = ((i % 4) as f32 - 1.5, (i / 4) as f32 - 1.5);
+            let n = Vec3::new(0.35 * x, -0.25 * y, 1.0).normalize();
+            let c = |v: f32| ((v + 1.0) * 0.5 * 255.0).round() as u8;
+            [c(n.x), c(n.y), c(n.z), 255]
+        })
+        .collect();
+    s.images.push(psrestir::scene::Image8 {
+        name: "bumps".into(),
+        width: 4,
+        height: 4,
+        rgba,
+    });
+    s.materials[0].normal_texture = Some(psrestir::scene::TextureSlot {
+        image: s.images.len() - 1,
+        wrap_s: psrestir::scene::Wrap::Repeat,
+        wrap_t: psrestir::scene::Wrap::Repeat,
+        nearest: false,
+        transform: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+    });
+    s.materials[0].normal_scale = 1.2;
+}
+
 pub fn shadow_scene() -> Scene {
     let mut s = Scene::default();
     s.materials.push(Material {
