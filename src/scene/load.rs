@@ -329,6 +329,25 @@ impl<'a> Loader<'a> {
                 .name()
                 .map(str::to_string)
                 .unwrap_or_else(|| format!("material {}", m.index().unwrap_or(0)));
+            // Every texture is read with TEXCOORD_0; a texture that names another set is
+            // read with it all the same, with a warning.
+            let sets = [
+                ("baseColorTexture", pbr.base_color_texture().map(|i| i.tex_coord())),
+                (
+                    "metallicRoughnessTexture",
+                    pbr.metallic_roughness_texture().map(|i| i.tex_coord()),
+                ),
+                ("emissiveTexture", m.emissive_texture().map(|i| i.tex_coord())),
+                ("normalTexture", m.normal_texture().map(|i| i.tex_coord())),
+            ];
+            for (slot, set) in sets {
+                if let Some(k) = set.filter(|&k| k != 0) {
+                    self.scene.warnings.push(format!(
+                        "material `{name}`: {slot} uses TEXCOORD_{k}, which psrestir does not \
+                         read: it is read with TEXCOORD_0"
+                    ));
+                }
+            }
             let base_color_texture = match pbr.base_color_texture() {
                 Some(info) => Some(self.slot(info.texture(), info.texture_transform())?),
                 None => None,
