@@ -26,7 +26,10 @@ fn texture(f: impl Fn(f32, f32) -> [f32; 3]) -> Vec<u8> {
     let mut out = Vec::with_capacity((SIZE * SIZE * 3) as usize);
     for y in 0..SIZE {
         for x in 0..SIZE {
-            let (u, v) = ((x as f32 + 0.5) / SIZE as f32, (y as f32 + 0.5) / SIZE as f32);
+            let (u, v) = (
+                (x as f32 + 0.5) / SIZE as f32,
+                (y as f32 + 0.5) / SIZE as f32,
+            );
             out.extend(f(u, v).map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8));
         }
     }

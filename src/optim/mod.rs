@@ -32,7 +32,6 @@ pub use timing::*;
 use crate::gpu::abi::stat;
 use crate::gpu::Gpu;
 use crate::image_io::Image;
-use crate::render::layout::*;
 use crate::render::params::{ParamBuffers, ParamSet};
 use crate::render::{camera_info, Renderer, Techniques};
 use crate::scene::Scene;
@@ -73,14 +72,12 @@ pub struct Optimizer {
     control_variate: Option<primal::ControlVariate>,
     timer: PassTimer,
     estimator: Box<dyn Estimator>,
-    /// Camera constants of the task's cameras at the task's image size.
-    camera_infos: Vec<GpuCameraInfo>,
     /// The texture_export pipeline, built on first use.
     export_pipeline: std::sync::OnceLock<wgpu::ComputePipeline>,
     /// The observed-texel mask, computed when the optimizer is made: its flags, and the GPU
     /// buffer they were read from (one word per texel, nonzero: observed), which the
     /// multiscale and smoothness passes bind.
-    observed: std::sync::OnceLock<(Vec<bool>, wgpu::Buffer)>,
+    observed: (Vec<bool>, wgpu::Buffer),
     /// The multiscale gradient pass, built at the first step that uses it.
     multiscale: Option<multiscale::Multiscale>,
     /// The smoothness prior's pass, built at the first step that uses it.
@@ -220,9 +217,8 @@ impl Optimizer {
             control_variate,
             timer,
             estimator,
-            camera_infos,
             export_pipeline: std::sync::OnceLock::new(),
-            observed: std::sync::OnceLock::from(observed),
+            observed,
             multiscale: None,
             smoothness: None,
             progress: 0.0,

@@ -34,7 +34,8 @@ pub const STRATA: u32 = 4;
 impl Optimizer {
     /// For every texel of the optimized textures (in the order of `set.textures`, row-major
     /// within each), whether some camera sample of the task reaches it with a non-zero filter
-    /// weight: 4 x 4 rays per pixel and camera, computed on the GPU at the first call.
+    /// weight: 4 x 4 rays per pixel and camera, computed on the GPU when the optimizer is made
+    /// (ReSTIR gives reservoirs to these texels only).
     pub fn observed_texels(&self) -> Result<&[bool]> {
         Ok(&self.observed_mask()?.0)
     }
@@ -42,16 +43,7 @@ impl Optimizer {
     /// [`Optimizer::observed_texels`] and the GPU buffer it was read from (one `u32` per
     /// texel, nonzero where observed).
     pub(crate) fn observed_mask(&self) -> Result<&(Vec<bool>, wgpu::Buffer)> {
-        if let Some(m) = self.observed.get() {
-            return Ok(m);
-        }
-        let m = observed_mask(
-            &self.gpu,
-            &self.renderer().scene,
-            &self.camera_infos,
-            self.grid,
-        )?;
-        Ok(self.observed.get_or_init(|| m))
+        Ok(&self.observed)
     }
 }
 

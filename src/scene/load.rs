@@ -332,12 +332,18 @@ impl<'a> Loader<'a> {
             // Every texture is read with TEXCOORD_0; a texture that names another set is
             // read with it all the same, with a warning.
             let sets = [
-                ("baseColorTexture", pbr.base_color_texture().map(|i| i.tex_coord())),
+                (
+                    "baseColorTexture",
+                    pbr.base_color_texture().map(|i| i.tex_coord()),
+                ),
                 (
                     "metallicRoughnessTexture",
                     pbr.metallic_roughness_texture().map(|i| i.tex_coord()),
                 ),
-                ("emissiveTexture", m.emissive_texture().map(|i| i.tex_coord())),
+                (
+                    "emissiveTexture",
+                    m.emissive_texture().map(|i| i.tex_coord()),
+                ),
                 ("normalTexture", m.normal_texture().map(|i| i.tex_coord())),
             ];
             for (slot, set) in sets {
