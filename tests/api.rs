@@ -283,6 +283,41 @@ fn a_task_too_large_for_the_device_is_refused_before_allocating() {
     );
 }
 
+/// A 2048x2048 base color texture that the cameras observe entirely plans within the lavapipe
+/// device's limits with ReSTIR (each reservoir slot in its own buffer, 112 MiB each), at no
+/// more than 128 bytes per observed texel.
+#[test]
+fn a_2048_squared_texture_plans_within_the_device_with_restir() {
+    if no_gpu() {
+        return;
+    }
+    let gpu = Gpu::new().unwrap();
+    let spec = psrestir::TextureSpec {
+        resolution: [2048, 2048],
+        ..in_memory::texture()
+    };
+    let set = psrestir::render::params::ParamSet::from_specs(
+        &in_memory::scene(),
+        &[spec],
+        Filter::Bilinear,
+        std::path::Path::new("test"),
+    )
+    .unwrap();
+    let s = Settings {
+        width: 128,
+        height: 128,
+        ..settings(Method::Restir)
+    };
+    let plan = psrestir::optim::memory_plan(&set, &s, 4, 2048 * 2048);
+    eprintln!("{}", plan.summary());
+    plan.check(&gpu).unwrap();
+    let per_observed = plan.bytes_per(psrestir::optim::Scale::ObservedTexel);
+    assert!(
+        per_observed <= 128.0,
+        "{per_observed} bytes per observed texel"
+    );
+}
+
 /// A 1024x1024 base color texture (the regime the method is meant for) plans within the
 /// lavapipe device's limits and optimizes with ReSTIR: the loss stays finite and falls, and
 /// the reservoirs exist for the observed texels only.
