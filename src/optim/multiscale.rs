@@ -136,7 +136,7 @@ impl super::Optimizer {
     pub(crate) fn prepare_multiscale(&mut self) -> Result<()> {
         let levels = self.settings.multiscale_levels;
         if levels > 0 && self.multiscale.is_none() {
-            let (_, mask) = self.observed_mask()?;
+            let (_, mask) = self.observed_mask();
             let m = Multiscale::new(&self.gpu, &self.set, &self.grad, mask, levels)?;
             self.multiscale = Some(m);
         }

@@ -37,13 +37,13 @@ impl Optimizer {
     /// weight: 4 x 4 rays per pixel and camera, computed on the GPU when the optimizer is made
     /// (ReSTIR gives reservoirs to these texels only).
     pub fn observed_texels(&self) -> Result<&[bool]> {
-        Ok(&self.observed_mask()?.0)
+        Ok(&self.observed.0)
     }
 
     /// [`Optimizer::observed_texels`] and the GPU buffer it was read from (one `u32` per
     /// texel, nonzero where observed).
-    pub(crate) fn observed_mask(&self) -> Result<&(Vec<bool>, wgpu::Buffer)> {
-        Ok(&self.observed)
+    pub(crate) fn observed_mask(&self) -> &(Vec<bool>, wgpu::Buffer) {
+        &self.observed
     }
 }
 

@@ -199,7 +199,7 @@ impl super::Optimizer {
                 &self.set,
                 &self.grad,
                 &self.params.values,
-                self.observed_mask()?,
+                self.observed_mask(),
                 lambda,
             )?;
             self.smoothness = Some(s);

@@ -60,6 +60,21 @@ pub struct GpuMaterial {
     pub uv_xf: [[f32; 4]; 8],
 }
 
+/// Unit direction to octahedral coordinates in [-1, 1]² (WGSL `oct_encode`,
+/// shaders/shared/surface.wgsl); the zero vector gives NaN.
+pub fn oct_encode(d: [f32; 3]) -> [f32; 2] {
+    let l1 = d[0].abs() + d[1].abs() + d[2].abs();
+    let n = [d[0] / l1, d[1] / l1, d[2] / l1];
+    if n[2] >= 0.0 {
+        return [n[0], n[1]];
+    }
+    let sign = |v: f32| if v >= 0.0 { 1.0 } else { -1.0 };
+    [
+        (1.0 - n[1].abs()) * sign(n[0]),
+        (1.0 - n[0].abs()) * sign(n[1]),
+    ]
+}
+
 /// A vertex tangent (xyz, w = ±1) in one word for `TriShading`: 0 for none, else bit 31
 /// set, bit 30 for w < 0, and the direction's octahedral coordinates in 15 bits each (about
 /// 1e-4 rad; shaders/shared/surface.wgsl, tangent_at).
@@ -69,13 +84,7 @@ pub fn pack_tangent(t: glam::Vec4) -> u32 {
     if !(l1 > 0.0) || !l1.is_finite() {
         return 0;
     }
-    let n = d / l1;
-    let sign = |v: f32| if v >= 0.0 { 1.0 } else { -1.0 };
-    let e = if n.z >= 0.0 {
-        [n.x, n.y]
-    } else {
-        [(1.0 - n.y.abs()) * sign(n.x), (1.0 - n.x.abs()) * sign(n.y)]
-    };
+    let e = oct_encode(d.to_array());
     let q = |x: f32| (((x + 1.0) * 0.5 * 32767.0).round() as u32).min(32767);
     (1 << 31) | if t.w < 0.0 { 1 << 30 } else { 0 } | q(e[0]) | (q(e[1]) << 15)
 }

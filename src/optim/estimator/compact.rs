@@ -16,6 +16,7 @@
 //! rounding only moves the point, direction and radiance a sample is evaluated at by these
 //! amounts. The previous-state target only enters the MIS weights.
 use crate::gpu::abi::reservoir;
+pub use crate::render::layout::oct_encode;
 
 /// Largest error of a rounded barycentric: a step of 2^-20 (half a step, but a whole one for
 /// b = 1, which rounds to the largest step below it).
@@ -52,20 +53,6 @@ pub fn oct_round(x: f32) -> u32 {
 /// The octahedral coordinate of fixed-point `k` (WGSL `oct_value`).
 pub fn oct_value(k: u32) -> f32 {
     k as f32 * (1.0 / OCT_HALF_SCALE) - 1.0
-}
-
-/// Unit direction to octahedral coordinates (WGSL `oct_encode`).
-pub fn oct_encode(d: [f32; 3]) -> [f32; 2] {
-    let l1 = d[0].abs() + d[1].abs() + d[2].abs();
-    let n = [d[0] / l1, d[1] / l1, d[2] / l1];
-    if n[2] >= 0.0 {
-        return [n[0], n[1]];
-    }
-    let sign = |v: f32| if v >= 0.0 { 1.0 } else { -1.0 };
-    [
-        (1.0 - n[1].abs()) * sign(n[0]),
-        (1.0 - n[0].abs()) * sign(n[1]),
-    ]
 }
 
 /// Octahedral coordinates to a unit direction (WGSL `oct_decode`).
