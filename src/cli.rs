@@ -31,6 +31,26 @@ pub(crate) enum MethodArg {
     Baseline,
     /// Parameter-space ReSTIR: per-texel reservoirs reused across iterations.
     Restir,
+    /// A recursive control variate on the gradient: each sample evaluated at the current and
+    /// the previous state corrects the running estimate.
+    Recursive,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum StepArg {
+    /// Adam.
+    Adam,
+    /// The variance-scaled step: the estimate over its standard deviation, clipped.
+    Variance,
+}
+
+impl StepArg {
+    pub(crate) fn kind(self) -> optim::StepKind {
+        match self {
+            StepArg::Adam => optim::StepKind::Adam,
+            StepArg::Variance => optim::StepKind::Variance,
+        }
+    }
 }
 
 /// Choice of gradient estimator, shared by the commands that estimate gradients.
@@ -130,6 +150,7 @@ impl EstimatorArgs {
         let method = match self.method {
             Some(MethodArg::Restir) => optim::Method::Restir,
             Some(MethodArg::Baseline) => optim::Method::Baseline,
+            Some(MethodArg::Recursive) => optim::Method::Recursive,
             None => task_method,
         };
         Ok((method, self.restir.resolve()?))
@@ -221,6 +242,19 @@ pub(crate) struct OptimizeArgs {
     /// Adam's epsilon (overrides the task).
     #[arg(long)]
     pub(crate) adam_eps: Option<f32>,
+    /// The step taken with each gradient (overrides the task's `optimizer.step`).
+    #[arg(long, value_enum)]
+    pub(crate) step: Option<StepArg>,
+    /// The variance-scaled step's largest step, in learning rates (overrides the task).
+    #[arg(long)]
+    pub(crate) step_clip: Option<f32>,
+    /// The recursive estimator's fixed weight of the fresh term, in (0, 1] (overrides the
+    /// task; default: chosen per parameter by inverse variance).
+    #[arg(long)]
+    pub(crate) recursive_weight: Option<f32>,
+    /// The recursive estimator's lower bound of the adaptive weight (overrides the task).
+    #[arg(long)]
+    pub(crate) recursive_min_weight: Option<f32>,
 }
 
 /// The arguments of `psrestir bench`.

@@ -19,6 +19,9 @@ fn every_bind_group_declaration_names_its_wgsl_bindings() {
         crate::optim::multiscale::MULTISCALE_GROUP,
         crate::optim::smoothness::SMOOTHNESS_GROUP,
         baseline::GRADIENT_GROUP,
+        crate::optim::estimator::recursive::GRADIENT_GROUP,
+        crate::optim::estimator::recursive::COMBINE_GROUP,
+        crate::optim::variance_step::VARIANCE_STEP_GROUP,
         restir::CANDIDATES_GROUP,
         restir::MERGE_GROUP,
         restir::RESERVOIR_TEST_GROUP,
@@ -241,6 +244,53 @@ fn pass_uniform_mirrors_match_wgsl_field_by_field() {
             stride,
             inv_spp,
             adjoint_offset
+        ]
+    );
+    mirror!(
+        "recursive_gradient",
+        "RecursiveGradientParams",
+        crate::optim::estimator::recursive::RecursiveGradientParams,
+        [
+            camera,
+            seed,
+            spp,
+            stride,
+            inv_spp,
+            adjoint_offset,
+            have_prev
+        ]
+    );
+    mirror!(
+        "recursive_combine",
+        "RecursiveCombineParams",
+        crate::optim::estimator::recursive::RecursiveCombineParams,
+        [
+            count,
+            have_prev,
+            fixed_weight,
+            min_weight,
+            beta,
+            bias_f,
+            bias_dl,
+            n_f
+        ]
+    );
+    mirror!(
+        "variance_step",
+        "VarianceStepParams",
+        crate::optim::variance_step::VarianceStepParams,
+        [
+            offset,
+            count,
+            lr,
+            clip,
+            beta,
+            eps,
+            bias,
+            own_variance,
+            lo,
+            hi,
+            mask
         ]
     );
     mirror!(

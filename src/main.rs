@@ -281,6 +281,10 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
         adam_beta1,
         adam_beta2,
         adam_eps,
+        step,
+        step_clip,
+        recursive_weight,
+        recursive_min_weight,
     } = args;
     let path = task.unwrap_or_else(|| PathBuf::from(DEFAULT_TASK));
     let mut task = Task::load(&path)?;
@@ -296,6 +300,14 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
     adam.beta1 = adam_beta1.unwrap_or(adam.beta1);
     adam.beta2 = adam_beta2.unwrap_or(adam.beta2);
     adam.eps = adam_eps.unwrap_or(adam.eps);
+    if let Some(s) = step {
+        task.optimizer.step = s.kind();
+    }
+    let vs = &mut task.optimizer.variance_step;
+    vs.clip = step_clip.unwrap_or(vs.clip);
+    let rec = &mut task.optimizer.recursive;
+    rec.weight = recursive_weight.or(rec.weight);
+    rec.min_weight = recursive_min_weight.unwrap_or(rec.min_weight);
     if let Some(p) = primal {
         task.optimizer.primal = p.mode();
     }

@@ -114,7 +114,7 @@ fn two_optimizers_on_one_device_interleaved_end_as_alone() {
         problem(&gpu, [[20, 200, 60], [240, 240, 30]]),
     );
     const N: u32 = 40;
-    for method in [Method::Baseline, Method::Restir] {
+    for method in [Method::Baseline, Method::Restir, Method::Recursive] {
         let alone = |p: &Problem| {
             let mut o = Optimizer::for_problem(&gpu, p, settings(method)).unwrap();
             o.run(Stop::iterations(N), |_| ControlFlow::Continue(()))
@@ -141,10 +141,13 @@ fn two_optimizers_on_one_device_interleaved_end_as_alone() {
         // about `ab` (0.7) apart. The baseline is deterministic up to the order of float
         // atomics (1e-8 here), so it must match tightly. ReSTIR's reservoirs depend on the
         // order in which invocations take their locks, and 40 Adam steps amplify that: two
-        // runs alone end 0.02 to 0.11 apart (eight pairs measured), so 0.2.
+        // runs alone end 0.02 to 0.11 apart (eight pairs measured), so 0.2. The recursive
+        // estimator is as deterministic as the baseline, but its running estimate carries
+        // the rounding of every earlier iteration.
         let tol = match method {
             Method::Baseline => 1e-5,
             Method::Restir => 0.2,
+            Method::Recursive => 1e-3,
         };
         assert!(
             ia_a <= tol,

@@ -72,6 +72,9 @@ fn check_gradient_on(
         multiscale_levels: 0,
         smoothness: 0.0,
         exposure_learning_rate: None,
+        recursive: Default::default(),
+        step: Default::default(),
+        variance_step: Default::default(),
     };
     // Target: the scene with other texel values, rendered with many samples.
     let blank = Image::new(W, W);

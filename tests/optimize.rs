@@ -82,6 +82,9 @@ fn setup_with(
         multiscale_levels: 0,
         smoothness: 0.0,
         exposure_learning_rate: None,
+        recursive: Default::default(),
+        step: Default::default(),
+        variance_step: Default::default(),
     };
     change(&mut settings);
     let init = set.values.clone();

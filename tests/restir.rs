@@ -129,6 +129,9 @@ fn optimizer_on(
         multiscale_levels: 0,
         smoothness: 0.0,
         exposure_learning_rate: None,
+        recursive: Default::default(),
+        step: Default::default(),
+        variance_step: Default::default(),
     };
     let base = Settings {
         method: Method::Baseline,
@@ -190,6 +193,9 @@ fn without_reuse_restir_equals_the_baseline_for_scalar_textures() {
             multiscale_levels: 0,
             smoothness: 0.0,
             exposure_learning_rate: None,
+            recursive: Default::default(),
+            step: Default::default(),
+            variance_step: Default::default(),
         };
         let opt = Optimizer::new(
             &gpu,
@@ -625,6 +631,9 @@ fn gradients_follow_a_sign_change() {
             multiscale_levels: 0,
             smoothness: 0.0,
             exposure_learning_rate: None,
+            recursive: Default::default(),
+            step: Default::default(),
+            variance_step: Default::default(),
         };
         let opt = Optimizer::new(
             &gpu,

@@ -194,6 +194,7 @@ pub(super) fn optimization_phase(
     let name = match method {
         Method::Baseline => "baseline",
         Method::Restir => "ReSTIR",
+        Method::Recursive => "recursive",
     };
     loop {
         let eval_due = seconds >= o.budget_s * next_eval as f64 / (points - 1) as f64;

@@ -17,15 +17,25 @@ use std::borrow::Cow;
 pub type Generator = fn() -> String;
 
 /// WGSL written by Rust: (name under `gen/`, generator).
-pub const GENERATED: &[(&str, Generator)] = &[("gen/abi", crate::gpu::abi::wgsl)];
+pub const GENERATED: &[(&str, Generator)] = &[
+    ("gen/abi", crate::gpu::abi::wgsl),
+    (
+        "gen/recursive",
+        crate::optim::estimator::recursive::abi::wgsl,
+    ),
+];
 
 macro_rules! sources {
-    ($($name:literal),* $(,)?) => {
-        &[$(($name, include_str!(concat!("../../shaders/", $name, ".wgsl")))),*]
+    ($($name:literal),* ; $($pass:literal in $dir:literal),* $(,)?) => {
+        &[
+            $(($name, include_str!(concat!("../../shaders/", $name, ".wgsl"))),)*
+            $(($pass, include_str!(concat!("../", $dir, "/", $pass, ".wgsl"))),)*
+        ]
     };
 }
 
-/// Every WGSL file of the project: (path under `shaders/` without extension, source).
+/// Every WGSL file of the project: (path under `shaders/` without extension, source), then
+/// the passes that live in an estimator's folder (`name in "folder under src/"`).
 pub const SOURCES: &[(&str, &str)] = sources!(
     "shared/types",
     "shared/rng",
@@ -60,6 +70,9 @@ pub const SOURCES: &[(&str, &str)] = sources!(
     "primal_cv",
     "multiscale_gradient",
     "smoothness",
+    "variance_step";
+    "recursive_gradient" in "optim/estimator/recursive",
+    "recursive_combine" in "optim/estimator/recursive",
 );
 
 /// The passes (top-level WGSL files with an entry point `main`).

@@ -13,6 +13,14 @@ impl Optimizer {
         self.estimator.set_techniques(techniques)
     }
 
+    /// Forget what the gradient estimator carries over from earlier iterations (ReSTIR's
+    /// reservoirs, the recursive estimator's running estimate and variances): the next
+    /// iteration starts it afresh, as the first one did. The textures, Adam's moments and the
+    /// previous iteration's textures and adjoint are left as they are.
+    pub fn reset_estimator(&mut self) -> Result<()> {
+        self.estimator.restore(&self.gpu, None, self.iteration)
+    }
+
     /// `grad` (laid out like the parameters) written to the gradient buffer, transformed on
     /// the GPU by the passes `encode` records, and read back: how the tests check a pass that
     /// acts on the gradient before Adam against its CPU twin. `what` names the caller in

@@ -122,6 +122,7 @@ pub fn memory_plan(
     }
     buffers.extend(estimator::memory(
         settings.method,
+        n_params,
         n_texels,
         n_observed,
         all_pixels,

@@ -15,6 +15,7 @@ pub mod primal;
 pub mod schedule;
 pub mod smoothness;
 pub mod texture_export;
+pub mod variance_step;
 
 mod measure;
 mod memory;
@@ -39,9 +40,16 @@ use crate::{Error, Result};
 use cameras::{camera_passes, check_inputs, CameraPasses, CameraSetup, Stats};
 pub use estimator::restir::{self, MergeDiagnostics};
 use estimator::Estimator;
-pub use estimator::{Confidence, EstimatorState, Method, RestirOptions};
+pub use estimator::{Confidence, EstimatorState, Method, RecursiveOptions, RestirOptions};
 pub use primal::{ControlVariateSnapshot, PrimalMode};
 pub use schedule::{Schedule, ScheduleKind};
+pub use variance_step::{StepKind, VarianceStepOptions};
+
+/// The step the optimizer takes with each gradient estimate.
+enum StepPass {
+    Adam(adam::AdamPass),
+    Variance(variance_step::VarianceStepPass),
+}
 
 /// The optimizer: a scene on the GPU with its optimized textures, targets, and the passes.
 pub struct Optimizer {
@@ -64,7 +72,7 @@ pub struct Optimizer {
     /// Exposures and their optimizer state.
     exposure: ExposureState,
     grid: (u32, u32),
-    adam: adam::AdamPass,
+    step: StepPass,
     accum: wgpu::Buffer,
     /// The primal samples under the previous textures (control variate).
     accum_prev: wgpu::Buffer,
@@ -175,18 +183,33 @@ impl Optimizer {
             accum_prev: &accum_prev,
             stats: &stats,
         });
-        let adam = adam::AdamPass::new(
-            gpu,
-            &set,
-            settings.adam,
-            settings.adam_mask,
-            adam::AdamBuffers {
-                grad: &grad,
-                params: &params.values,
-                moments: &moments,
-                stats: &stats.adam,
-            },
-        )?;
+        let step = match settings.step {
+            StepKind::Adam => StepPass::Adam(adam::AdamPass::new(
+                gpu,
+                &set,
+                settings.adam,
+                settings.adam_mask,
+                adam::AdamBuffers {
+                    grad: &grad,
+                    params: &params.values,
+                    moments: &moments,
+                    stats: &stats.adam,
+                },
+            )?),
+            StepKind::Variance => StepPass::Variance(variance_step::VarianceStepPass::new(
+                gpu,
+                &set,
+                settings.variance_step,
+                settings.adam_mask,
+                variance_step::StepBuffers {
+                    grad: &grad,
+                    params: &params.values,
+                    moments: &moments,
+                    variance: estimator.variance(),
+                    stats: &stats.adam,
+                },
+            )?),
+        };
         // Primal, control variate and loss per camera, the estimator's passes (at most two
         // per camera), smoothness, multiscale and Adam per texture.
         let timer = PassTimer::new(gpu, 6 * n_cams + 2 + 3 * set.textures.len() as u32);
@@ -211,7 +234,7 @@ impl Optimizer {
                 steps: 0,
             },
             grid,
-            adam,
+            step,
             accum,
             accum_prev,
             control_variate,
@@ -288,8 +311,8 @@ impl Optimizer {
         }
     }
 
-    /// Whether the next iteration needs this one's textures (ReSTIR's merge, the control
-    /// variate).
+    /// Whether the next iteration needs this one's textures (ReSTIR's merge, the recursive
+    /// estimator, the control variate).
     fn uses_previous_state(&self) -> bool {
         self.estimator.uses_previous_state() || self.control_variate.is_some()
     }
@@ -325,9 +348,14 @@ impl Optimizer {
         }
         self.encode_multiscale(&mut enc, self.iteration);
         let factor = self.settings.schedule.factor(self.iteration, self.progress);
-        self.last_learning_rates =
-            self.adam
-                .encode(&self.gpu, &mut enc, &self.set, factor, t, &mut self.timer);
+        self.last_learning_rates = match &mut self.step {
+            StepPass::Adam(a) => {
+                a.encode(&self.gpu, &mut enc, &self.set, factor, t, &mut self.timer)
+            }
+            StepPass::Variance(v) => {
+                v.encode(&self.gpu, &mut enc, &self.set, factor, t, &mut self.timer)
+            }
+        };
         self.timer.resolve(&mut enc);
         self.gpu.queue.submit([enc.finish()]);
         self.finish_iteration(true);

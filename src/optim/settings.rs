@@ -1,6 +1,7 @@
 //! What an optimization samples and how it stops: [`Settings`], [`Stop`], [`Progress`].
 
-use super::{Method, PrimalMode, RestirOptions, Schedule};
+use super::{Method, PrimalMode, RecursiveOptions, RestirOptions, Schedule};
+use super::{StepKind, VarianceStepOptions};
 use crate::vocab::Loss;
 
 /// How each iteration samples.
@@ -30,6 +31,12 @@ pub struct Settings {
     pub method: Method,
     /// ReSTIR options (used when `method` is ReSTIR).
     pub restir: RestirOptions,
+    /// The recursive estimator's options (used when `method` is recursive).
+    pub recursive: RecursiveOptions,
+    /// The step taken with each gradient estimate: Adam, or the variance-scaled step.
+    pub step: StepKind,
+    /// The variance-scaled step's options (used when `step` is `Variance`).
+    pub variance_step: VarianceStepOptions,
     /// Learning-rate schedule: a factor of every texture's learning rate over the run (see
     /// [`Optimizer::set_progress`](super::Optimizer::set_progress)).
     pub schedule: Schedule,
@@ -66,6 +73,9 @@ impl Settings {
             seed: 1,
             method: Method::default(),
             restir: RestirOptions::default(),
+            recursive: RecursiveOptions::default(),
+            step: StepKind::default(),
+            variance_step: VarianceStepOptions::default(),
             schedule: Schedule::constant(),
             adam: Default::default(),
             adam_mask: false,
@@ -102,6 +112,12 @@ impl Settings {
         }
         if let Err((key, msg)) = self.adam.check() {
             return bad(&format!("optimizer.adam.{key}"), msg);
+        }
+        if let Err((key, msg)) = self.recursive.check() {
+            return bad(&format!("optimizer.recursive.{key}"), msg);
+        }
+        if let Err((key, msg)) = self.variance_step.check() {
+            return bad(&format!("optimizer.variance_step.{key}"), msg);
         }
         if self.multiscale_levels > super::multiscale::MAX_LEVELS {
             let msg = format!("must be between 0 and {}", super::multiscale::MAX_LEVELS);
@@ -206,6 +222,18 @@ mod tests {
                 Box::new(|s| s.schedule.final_factor = 0.0),
             ),
             ("restir", Box::new(|s| s.restir.m_cap = 0.0)),
+            (
+                "optimizer.recursive.weight",
+                Box::new(|s| s.recursive.weight = Some(0.0)),
+            ),
+            (
+                "optimizer.recursive.min_weight",
+                Box::new(|s| s.recursive.min_weight = 2.0),
+            ),
+            (
+                "optimizer.variance_step.clip",
+                Box::new(|s| s.variance_step.clip = -1.0),
+            ),
         ];
         for (key, spoil) in cases {
             let mut s = ok.clone();

@@ -15,7 +15,8 @@
 //!
 //! [optimizer]
 //! iterations = 300                # and/or time_budget_s
-//! method = "baseline"             # gradient estimator, or "restir"; --method overrides it
+//! method = "baseline"             # gradient estimator: or "restir", "recursive"; --method overrides it
+//! step = "adam"                   # or "variance": the variance-scaled step
 //! primal_spp = 2
 //! primal = "control_variate"      # or "independent" (the default)
 //! cv_max_weight = 0.9             # upper clamp of the control variate's weight (0..1)
@@ -33,6 +34,16 @@
 //! beta1 = 0.9
 //! beta2 = 0.999
 //! eps = 1e-8
+//!
+//! [optimizer.recursive]           # the recursive estimator (these are the defaults)
+//! # weight = 0.1                  # fixed weight of the fresh term; absent: by inverse variance
+//! min_weight = 0.05               # lower bound of the adaptive weight
+//! beta = 0.9                      # decay of its moving variances
+//!
+//! [optimizer.variance_step]       # the variance-scaled step (these are the defaults)
+//! clip = 1.0                      # the largest step, in learning rates
+//! beta = 0.9                      # decay of the moving variance (estimators without their own)
+//! eps = 1e-12
 //!
 //! [optimizer.schedule]            # learning-rate schedule (default: constant)
 //! kind = "cosine"                 # or "constant", "step", "exponential"
@@ -167,9 +178,19 @@ pub struct OptimizerSpec {
     /// Samples per pixel of the gradient pass.
     #[serde(default = "one")]
     pub gradient_spp: u32,
-    /// Gradient estimator: "baseline" (the default) or "restir"; `--method` overrides it.
+    /// Gradient estimator: "baseline" (the default), "restir" or "recursive"; `--method`
+    /// overrides it.
     #[serde(default)]
     pub method: crate::optim::Method,
+    /// The recursive estimator's options (`[optimizer.recursive]`).
+    #[serde(default)]
+    pub recursive: crate::optim::RecursiveOptions,
+    /// The step taken with each gradient: "adam" (the default) or "variance".
+    #[serde(default)]
+    pub step: crate::optim::StepKind,
+    /// The variance-scaled step's options (`[optimizer.variance_step]`).
+    #[serde(default)]
+    pub variance_step: crate::optim::VarianceStepOptions,
     /// Image loss.
     #[serde(default)]
     pub loss: Loss,
@@ -629,6 +650,9 @@ pub fn task_settings(
         seed: task.seed,
         method,
         restir,
+        recursive: task.optimizer.recursive,
+        step: task.optimizer.step,
+        variance_step: task.optimizer.variance_step,
         schedule: task.optimizer.schedule.clone(),
         adam: task.optimizer.adam,
         adam_mask: task.optimizer.adam_mask,

@@ -7,8 +7,11 @@
 //!   touches (shaders/gradient.wgsl).
 //! - [`restir`]: parameter-space ReSTIR, two reservoirs per texel reused across iterations
 //!   (shaders/restir_candidates.wgsl, shaders/restir_merge.wgsl).
+//! - [`recursive`]: a recursive control variate on the gradient: fresh samples evaluated at
+//!   the current and the previous state correct the running estimate (its own folder).
 pub mod baseline;
 pub mod compact;
+pub mod recursive;
 mod reservoir_test;
 pub mod restir;
 
@@ -17,6 +20,7 @@ use crate::gpu::Gpu;
 use crate::render::layout::GpuCameraInfo;
 use crate::render::{GpuScene, Techniques};
 use crate::Result;
+pub use recursive::RecursiveOptions;
 pub use restir::{Confidence, RestirOptions};
 
 /// The gradient estimator. The default is the one that ends lower on the bundled default task
@@ -30,6 +34,8 @@ pub enum Method {
     Baseline,
     /// Parameter-space ReSTIR.
     Restir,
+    /// The recursive control variate on the gradient.
+    Recursive,
 }
 
 impl Method {
@@ -38,6 +44,7 @@ impl Method {
         match self {
             Method::Baseline => "baseline",
             Method::Restir => "restir",
+            Method::Recursive => "recursive",
         }
     }
 }
@@ -161,6 +168,12 @@ pub(crate) trait Estimator {
             "this estimator samples with MIS only; {techniques:?} is for the baseline"
         )))
     }
+    /// The variance of each gradient scalar it wrote, laid out like the gradient, when the
+    /// estimator tracks it (the variance-scaled step divides by its square root; without it
+    /// the step tracks a moving variance of the gradient itself).
+    fn variance(&self) -> Option<&wgpu::Buffer> {
+        None
+    }
     /// What the estimator counted since it was made (empty unless it counts something).
     fn diagnostics(&self, _gpu: &Gpu) -> Result<Diagnostics> {
         Ok(Vec::new())
@@ -172,22 +185,24 @@ pub(crate) fn build(setup: &Setup) -> Result<Box<dyn Estimator>> {
     Ok(match setup.settings.method {
         Method::Baseline => Box::new(baseline::Baseline::new(setup)?),
         Method::Restir => Box::new(restir::Restir::new(setup)?),
+        Method::Recursive => Box::new(recursive::Recursive::new(setup)?),
     })
 }
 
 /// The most cameras `method` can use in one optimization (None: no limit of its own).
 pub(crate) fn max_cameras(method: Method) -> Option<usize> {
     match method {
-        Method::Baseline => None,
+        Method::Baseline | Method::Recursive => None,
         Method::Restir => Some(restir::MAX_CAMERAS),
     }
 }
 
-/// The buffers `method` allocates for `n_texels` texels of which `n_observed` are observed,
-/// and `n_pixels` pixels (all cameras'), by label, size in bytes and what the size scales
-/// with.
+/// The buffers `method` allocates for `n_params` parameter scalars in `n_texels` texels of
+/// which `n_observed` are observed, and `n_pixels` pixels (all cameras'), by label, size in
+/// bytes and what the size scales with.
 pub(crate) fn memory(
     method: Method,
+    n_params: u64,
     n_texels: u64,
     n_observed: u64,
     n_pixels: u64,
@@ -195,5 +210,6 @@ pub(crate) fn memory(
     match method {
         Method::Baseline => Vec::new(),
         Method::Restir => restir::memory(n_texels, n_observed, n_pixels),
+        Method::Recursive => recursive::memory(n_params),
     }
 }

@@ -1,0 +1,66 @@
+// Variance-scaled step for one optimized texture, then clamping to the valid range: each
+// scalar moves by -lr * clamp(d / (sqrt(Var[d]) + eps), -clip, clip), with no first moment.
+// Var[d] is the estimator's own tracked variance of its estimate d where it has one
+// (own_variance, the recursive estimator's), otherwise a moving variance of the gradient
+// kept in the moment buffers (moment1: mean, moment2: second moment, decay beta). A surer
+// estimate (higher d / sqrt(Var[d])) takes a larger step, up to clip x lr; a pure-noise one
+// moves by about lr times a standard normal. Non-finite gradients leave their parameter
+// unchanged and are counted; with mask, an entry whose gradient is exactly zero keeps its
+// value and moments.
+#import gen/abi
+
+// Mirrored by VarianceStepParams in src/optim/variance_step.rs.
+struct VarianceStepParams {
+    offset: u32,
+    count: u32,
+    lr: f32,
+    clip: f32,
+    beta: f32,
+    eps: f32,
+    // 1 - beta^t for the step t (from 1).
+    bias: f32,
+    own_variance: u32,
+    lo: f32,
+    hi: f32,
+    mask: u32,
+    _pad0: u32,
+}
+
+@group(0) @binding(0) var<uniform> vp: VarianceStepParams;
+@group(0) @binding(1) var<storage, read> grad: array<f32>;
+@group(0) @binding(2) var<storage, read_write> params: array<f32>;
+@group(0) @binding(3) var<storage, read_write> moment1: array<f32>;
+@group(0) @binding(4) var<storage, read_write> moment2: array<f32>;
+@group(0) @binding(5) var<storage, read> variance: array<f32>;
+@group(0) @binding(6) var<storage, read_write> step_stats: array<atomic<u32>, 4>;
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) groups: vec3u) {
+    let k = gid.x + gid.y * groups.x * 64u;
+    if k >= vp.count {
+        return;
+    }
+    let i = vp.offset + k;
+    let g_in = grad[i];
+    if vp.mask != 0u && g_in == 0.0 {
+        return;
+    }
+    if !(abs(g_in) < 3.0e38) {
+        atomicAdd(&step_stats[ADAM_STAT_SKIPPED], 1u);
+        return;
+    }
+    let g = clamp(g_in, -1.0e18, 1.0e18);
+    var var_d = 0.0;
+    if vp.own_variance != 0u {
+        var_d = variance[i];
+    } else {
+        let m = vp.beta * moment1[i] + (1.0 - vp.beta) * g;
+        let v = vp.beta * moment2[i] + (1.0 - vp.beta) * g * g;
+        moment1[i] = m;
+        moment2[i] = v;
+        let mean = m / vp.bias;
+        var_d = max(v / vp.bias - mean * mean, 0.0);
+    }
+    let z = clamp(g / (sqrt(var_d) + vp.eps), -vp.clip, vp.clip);
+    params[i] = clamp(params[i] - vp.lr * z, vp.lo, vp.hi);
+}

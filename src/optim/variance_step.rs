@@ -1,0 +1,250 @@
+//! The variance-scaled step (Bálint et al. 2023): the pass of shaders/variance_step.wgsl
+//! (`VarianceStepPass`, one dispatch per optimized texture), its options and its CPU
+//! reference. Each scalar moves by −lr · clamp(d / (√Var[d] + eps), −clip, clip), where d is
+//! the gradient estimate and Var[d] its variance: the estimator's own where it tracks one
+//! (the recursive estimator), otherwise a moving variance of the gradient. Unlike Adam, whose
+//! per-scalar normalization gives any estimator about the same step, a lower-variance
+//! estimate takes a larger step.
+use crate::gpu::{encode_timed_pass, grid_2d, Gpu};
+use crate::optim::{PassKind, PassTimer};
+use crate::render::params::ParamSet;
+use crate::render::WORKGROUP;
+use crate::Result;
+
+/// Which step the optimizer takes with the gradient estimate (the task file's
+/// `optimizer.step`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum StepKind {
+    /// Adam (first and second moments).
+    #[default]
+    Adam,
+    /// The variance-scaled step: no first moment, the estimate's variance in the denominator.
+    Variance,
+}
+
+impl StepKind {
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            StepKind::Adam => "adam",
+            StepKind::Variance => "variance",
+        }
+    }
+}
+
+/// The variance-scaled step's options (the task file's `[optimizer.variance_step]`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VarianceStepOptions {
+    /// The largest step, in learning rates (> 0).
+    pub clip: f32,
+    /// Decay of the moving variance kept for estimators without their own, in [0, 1).
+    pub beta: f32,
+    /// Added to the standard deviation (> 0).
+    pub eps: f32,
+}
+
+impl Default for VarianceStepOptions {
+    fn default() -> Self {
+        VarianceStepOptions {
+            clip: 1.0,
+            beta: 0.9,
+            eps: 1e-12,
+        }
+    }
+}
+
+impl VarianceStepOptions {
+    /// An error naming the field that is out of range.
+    pub fn check(&self) -> std::result::Result<(), (&'static str, &'static str)> {
+        if !(self.clip.is_finite() && self.clip > 0.0) {
+            return Err(("clip", "must be a positive number"));
+        }
+        if !(0.0..1.0).contains(&self.beta) {
+            return Err(("beta", "must be in [0, 1)"));
+        }
+        if !(self.eps.is_finite() && self.eps > 0.0) {
+            return Err(("eps", "must be a positive number"));
+        }
+        Ok(())
+    }
+}
+
+/// One variance-scaled step at step number `t` (from 1) with clamping to `[lo, hi]`, on the
+/// CPU: with `variance`, the estimator's own; otherwise the moving moments `m`, `v`
+/// (updated here) give it.
+#[allow(clippy::too_many_arguments)]
+pub fn step(
+    o: &VarianceStepOptions,
+    params: &mut [f32],
+    m: &mut [f32],
+    v: &mut [f32],
+    grad: &[f32],
+    variance: Option<&[f32]>,
+    lr: f32,
+    t: u32,
+    (lo, hi): (f32, f32),
+    mask: bool,
+) {
+    let bias = 1.0 - o.beta.powi(t as i32);
+    for i in 0..params.len() {
+        let g = grad[i];
+        if !g.is_finite() || (mask && g == 0.0) {
+            continue;
+        }
+        let var = match variance {
+            Some(var) => var[i],
+            None => {
+                m[i] = o.beta * m[i] + (1.0 - o.beta) * g;
+                v[i] = o.beta * v[i] + (1.0 - o.beta) * g * g;
+                let mean = m[i] / bias;
+                (v[i] / bias - mean * mean).max(0.0)
+            }
+        };
+        let z = (g / (var.sqrt() + o.eps)).clamp(-o.clip, o.clip);
+        params[i] = (params[i] - lr * z).clamp(lo, hi);
+    }
+}
+
+/// `VarianceStepParams` in shaders/variance_step.wgsl (a test checks the layout).
+/// The fields are documented in the WGSL twin.
+#[allow(missing_docs)]
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct VarianceStepParams {
+    pub offset: u32,
+    pub count: u32,
+    pub lr: f32,
+    pub clip: f32,
+    pub beta: f32,
+    pub eps: f32,
+    pub bias: f32,
+    pub own_variance: u32,
+    pub lo: f32,
+    pub hi: f32,
+    pub mask: u32,
+    pub _pad: u32,
+}
+
+/// Group 0 of `variance_step.wgsl`.
+pub(crate) const VARIANCE_STEP_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
+    pass: "variance_step",
+    group: 0,
+    names: &[
+        "vp",
+        "grad",
+        "params",
+        "moment1",
+        "moment2",
+        "variance",
+        "step_stats",
+    ],
+};
+
+/// What the variance-scaled step binds.
+pub(crate) struct StepBuffers<'a> {
+    pub grad: &'a wgpu::Buffer,
+    pub params: &'a wgpu::Buffer,
+    pub moments: &'a [wgpu::Buffer; 2],
+    /// The estimator's variance, or None (a moving variance of the gradient).
+    pub variance: Option<&'a wgpu::Buffer>,
+    pub stats: &'a wgpu::Buffer,
+}
+
+/// The variance-scaled step's pass: per optimized texture a uniform, its bind group and its
+/// parameters.
+pub(crate) struct VarianceStepPass {
+    pipeline: wgpu::ComputePipeline,
+    textures: Vec<(wgpu::Buffer, wgpu::BindGroup, VarianceStepParams)>,
+    /// Bound in place of the estimator's variance when it has none (never read then).
+    _unused: Option<wgpu::Buffer>,
+}
+
+impl VarianceStepPass {
+    pub(crate) fn new(
+        gpu: &Gpu,
+        set: &ParamSet,
+        options: VarianceStepOptions,
+        mask: bool,
+        b: StepBuffers,
+    ) -> Result<VarianceStepPass> {
+        let layout = gpu.pass_layout("variance_step", 0)?;
+        let pipeline = gpu.compute_pipeline("variance_step", &[&layout])?;
+        let unused = match b.variance {
+            Some(_) => None,
+            None => Some(gpu.storage_zeroed("variance step unused variance", 16)),
+        };
+        let variance = b.variance.or(unused.as_ref()).expect("one of the two");
+        let textures = set
+            .textures
+            .iter()
+            .map(|t| {
+                let (lo, hi) = t.slot.range();
+                let p = VarianceStepParams {
+                    offset: t.offset,
+                    count: t.len() as u32,
+                    lr: t.learning_rate,
+                    clip: options.clip,
+                    beta: options.beta,
+                    eps: options.eps,
+                    bias: 1.0,
+                    own_variance: b.variance.is_some() as u32,
+                    lo,
+                    hi,
+                    mask: mask as u32,
+                    _pad: 0,
+                };
+                let u = gpu.uniform(
+                    &format!("variance step params {}", t.name()),
+                    bytemuck::bytes_of(&p),
+                );
+                let g = gpu.bind(
+                    &VARIANCE_STEP_GROUP,
+                    "variance_step",
+                    &layout,
+                    &[
+                        ("vp", &u),
+                        ("grad", b.grad),
+                        ("params", b.params),
+                        ("moment1", &b.moments[0]),
+                        ("moment2", &b.moments[1]),
+                        ("variance", variance),
+                        ("step_stats", b.stats),
+                    ],
+                );
+                (u, g, p)
+            })
+            .collect();
+        Ok(VarianceStepPass {
+            pipeline,
+            textures,
+            _unused: unused,
+        })
+    }
+
+    /// Record step `t` (from 1) of every texture at its learning rate times `factor`;
+    /// returns the learning rates used, one per texture.
+    pub(crate) fn encode(
+        &mut self,
+        gpu: &Gpu,
+        enc: &mut wgpu::CommandEncoder,
+        set: &ParamSet,
+        factor: f32,
+        t: u32,
+        timer: &mut PassTimer,
+    ) -> Vec<f32> {
+        let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
+        let mut rates = Vec::with_capacity(self.textures.len());
+        for ((u, g, p), tex) in self.textures.iter_mut().zip(&set.textures) {
+            p.lr = tex.learning_rate * factor;
+            rates.push(p.lr);
+            p.bias = 1.0 - p.beta.powi(t as i32);
+            gpu.queue.write_buffer(u, 0, bytemuck::bytes_of(p));
+            let grid = grid_2d(p.count, WORKGROUP, max_dim);
+            let timing = timer.next(PassKind::Adam);
+            encode_timed_pass(enc, "variance_step", &self.pipeline, &[g], grid, timing);
+        }
+        rates
+    }
+}
