@@ -1,10 +1,13 @@
-// Variance-scaled step for one optimized texture, then clamping to the valid range: each
-// scalar moves by -lr * clamp(d / (sqrt(Var[d]) + eps), -clip, clip), with no first moment.
+// Variance-scaled step for one optimized texture, then clamping to the valid range: with
+// z = d / (sqrt(Var[d]) + eps), each scalar moves by -lr * clamp(shrink(z), -clip, clip),
+// where shrink(z) = sign(z) max(|z| - threshold, 0) keeps only the part of the estimate that
+// exceeds its noise (threshold 0: -lr d / sqrt(Var[d]), clipped); no first moment.
 // Var[d] is the estimator's own tracked variance of its estimate d where it has one
 // (own_variance, the recursive estimator's), otherwise a moving variance of the gradient
 // kept in the moment buffers (moment1: mean, moment2: second moment, decay beta). A surer
 // estimate (higher d / sqrt(Var[d])) takes a larger step, up to clip x lr; a pure-noise one
-// moves by about lr times a standard normal. Non-finite gradients leave their parameter
+// moves by lr times a standard normal shrunk by the threshold, so that a texel the images
+// hardly determine does not drift with errors that a running estimate repeats. Non-finite gradients leave their parameter
 // unchanged and are counted; with mask, an entry whose gradient is exactly zero keeps its
 // value and moments.
 #import gen/abi
@@ -23,7 +26,7 @@ struct VarianceStepParams {
     lo: f32,
     hi: f32,
     mask: u32,
-    _pad0: u32,
+    threshold: f32,
 }
 
 @group(0) @binding(0) var<uniform> vp: VarianceStepParams;
@@ -61,6 +64,8 @@ fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) grou
         let mean = m / vp.bias;
         var_d = max(v / vp.bias - mean * mean, 0.0);
     }
-    let z = clamp(g / (sqrt(var_d) + vp.eps), -vp.clip, vp.clip);
-    params[i] = clamp(params[i] - vp.lr * z, vp.lo, vp.hi);
+    let z = g / (sqrt(var_d) + vp.eps);
+    let shrunk = sign(z) * max(abs(z) - vp.threshold, 0.0);
+    let step = clamp(shrunk, -vp.clip, vp.clip);
+    params[i] = clamp(params[i] - vp.lr * step, vp.lo, vp.hi);
 }

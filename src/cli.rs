@@ -248,6 +248,10 @@ pub(crate) struct OptimizeArgs {
     /// The variance-scaled step's largest step, in learning rates (overrides the task).
     #[arg(long)]
     pub(crate) step_clip: Option<f32>,
+    /// The variance-scaled step's threshold: standard deviations taken off each estimate's
+    /// magnitude (overrides the task).
+    #[arg(long)]
+    pub(crate) step_threshold: Option<f32>,
     /// The recursive estimator's fixed weight of the fresh term, in (0, 1] (overrides the
     /// task; default: chosen per parameter by inverse variance).
     #[arg(long)]
@@ -302,6 +306,15 @@ pub(crate) struct BenchArgs {
     /// Measure the equal-time optimization only (skip the primal and gradient-error phases).
     #[arg(long)]
     pub(crate) end_to_end_only: bool,
+    /// Further estimators optimized at equal time after the baseline and ReSTIR (both with
+    /// Adam), as METHOD or METHOD:STEP (steps: adam, variance), comma-separated; `none` for
+    /// none.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "recursive:adam,recursive:variance"
+    )]
+    pub(crate) contenders: Vec<String>,
     /// Switch off the tasks' priors (multiscale gradient, smoothness prior).
     #[arg(long)]
     pub(crate) no_priors: bool,

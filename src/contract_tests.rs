@@ -290,7 +290,8 @@ fn pass_uniform_mirrors_match_wgsl_field_by_field() {
             own_variance,
             lo,
             hi,
-            mask
+            mask,
+            threshold
         ]
     );
     mirror!(

@@ -283,6 +283,7 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
         adam_eps,
         step,
         step_clip,
+        step_threshold,
         recursive_weight,
         recursive_min_weight,
     } = args;
@@ -305,6 +306,7 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
     }
     let vs = &mut task.optimizer.variance_step;
     vs.clip = step_clip.unwrap_or(vs.clip);
+    vs.threshold = step_threshold.unwrap_or(vs.threshold);
     let rec = &mut task.optimizer.recursive;
     rec.weight = recursive_weight.or(rec.weight);
     rec.min_weight = recursive_min_weight.unwrap_or(rec.min_weight);
@@ -399,6 +401,7 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         protocol,
         gradient_only,
         end_to_end_only,
+        contenders,
         no_priors,
         tune,
         tune_budget,
@@ -407,6 +410,12 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         report: to_docs,
         restir,
     } = args;
+    let contenders = contenders
+        .iter()
+        .filter(|c| c.as_str() != "none")
+        .map(|c| psrestir::bench::Contender::parse(c))
+        .collect::<std::result::Result<Vec<_>, _>>()
+        .map_err(|m| anyhow::anyhow!("--contenders: {m}"))?;
     if let Some(b) = tune_budget {
         if !(b.is_finite() && b > 0.0) {
             bail!("--tune-budget must be a positive number of seconds");
@@ -446,6 +455,7 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         },
         gradient_only,
         end_to_end_only,
+        contenders,
         no_priors,
         tune,
         tune_budget_s: tune_budget,

@@ -377,3 +377,68 @@ fn recursive_estimator_recovers_a_texture_with_either_step() {
         assert_eq!(f.lost_updates + f.dropped_gradient, 0, "{f:?}");
     }
 }
+
+/// The mechanism on the default task, as the bench measures it for ReSTIR: under a converged
+/// adjoint at the initial textures, the estimator-only error of the mean of 10 successive
+/// recursive estimates (after 20 to settle) against that of the mean of 10 independent
+/// baseline estimates, and of one estimate each. A diagnostic, not a check: about a minute.
+/// `cargo test --release --test recursive -- --ignored successive --nocapture`
+#[test]
+#[ignore = "a diagnostic on the full default task, run by hand"]
+fn successive_recursive_estimates_on_the_default_task() {
+    let Some(gpu) = gpu() else { return };
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let task = psrestir::task::Task::load(&root.join("scenes/default/task.toml")).unwrap();
+    let out = tempfile::tempdir().unwrap();
+    let prep = psrestir::job::Problem::from_task(&gpu, &task, out.path(), false).unwrap();
+    let settings =
+        |method| psrestir::task::task_settings(&task, &prep.cameras, method, Default::default());
+    let mut base = Optimizer::for_problem(&gpu, &prep, settings(Method::Baseline)).unwrap();
+    let (converged, _) = base.converged_adjoint(256, 0xad).unwrap();
+    // The reference: 256 gradient spp (128 estimates of the task's 2).
+    let n = base.read_params().unwrap().len();
+    let mut reference = vec![0f64; n];
+    for j in 0..128u32 {
+        let g = base
+            .estimate_gradient_with_adjoint(5000 + 2 * j, &converged)
+            .unwrap();
+        for (r, v) in reference.iter_mut().zip(&g) {
+            *r += *v as f64 / 128.0;
+        }
+    }
+    let relmse = |g: &[f64]| {
+        let g: Vec<f32> = g.iter().map(|&v| v as f32).collect();
+        psrestir::bench::gradient_relmse(&g, &reference)
+    };
+    let mean_of = |rows: &[Vec<f32>]| -> Vec<f64> {
+        (0..n)
+            .map(|i| rows.iter().map(|r| r[i] as f64).sum::<f64>() / rows.len() as f64)
+            .collect()
+    };
+    let base_rows: Vec<Vec<f32>> = (0..10u32)
+        .map(|j| {
+            base.estimate_gradient_with_adjoint(100 + 2 * j, &converged)
+                .unwrap()
+        })
+        .collect();
+    let mut rec = Optimizer::for_problem(&gpu, &prep, settings(Method::Recursive)).unwrap();
+    for j in 0..20u32 {
+        rec.estimate_gradient_with_adjoint(200 + j, &converged)
+            .unwrap();
+    }
+    let rec_rows: Vec<Vec<f32>> = (0..10u32)
+        .map(|j| {
+            rec.estimate_gradient_with_adjoint(220 + j, &converged)
+                .unwrap()
+        })
+        .collect();
+    let one = |r: &[f32]| relmse(&r.iter().map(|&v| v as f64).collect::<Vec<_>>());
+    let (b1, r1) = (one(&base_rows[0]), one(&rec_rows[0]));
+    let (b10, r10) = (relmse(&mean_of(&base_rows)), relmse(&mean_of(&rec_rows)));
+    eprintln!(
+        "one estimate: baseline {b1:.4e}, recursive {r1:.4e} ({:.3}x); mean of 10: baseline \
+         {b10:.4e}, recursive {r10:.4e} ({:.3}x)",
+        r1 / b1,
+        r10 / b10
+    );
+}

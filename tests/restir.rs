@@ -566,11 +566,10 @@ fn restir_with_reuse_is_unbiased_for_base_color_nearest() {
     check_unbiased_with_reuse(Slot::BaseColor, Filter::Nearest, &v, &t);
 }
 
+// Failed (about 20% small on texel 3) while base color's target was the luminance alone:
+// its channels' values cancel there, and samples with a near-zero target were almost never
+// selected (shared/params.wgsl, target_of).
 #[test]
-#[ignore = "fails on lavapipe for this version and for d3b00b5 alike: texel 3's channels come out \
-            about 20% small (parameter 11: -1.30e-3 to -1.46e-3 over six runs against the \
-            baseline's -1.71e-3 +- 0.03e-3), a bias of the luminance target with reuse to be \
-            found; see docs/studies.md"]
 fn restir_with_reuse_is_unbiased_for_base_color_bilinear() {
     let v = [0.5, 0.4, 0.3, 0.6, 0.5, 0.2, 0.3, 0.3, 0.3, 0.7, 0.6, 0.5];
     let t = [0.8, 0.2, 0.1, 0.3, 0.6, 0.4, 0.5, 0.5, 0.5, 0.2, 0.3, 0.9];
@@ -713,6 +712,12 @@ fn shrunk_default_task(side: u32, target_spp: u32) -> psrestir::task::Task {
     task.width = side;
     task.height = side;
     task.target.spp = target_spp;
+    // These tests compare the estimators under Adam, at the rate Adam was tuned to on this
+    // task (the task itself now takes the variance-scaled step at half of it).
+    task.optimizer.step = psrestir::optim::StepKind::Adam;
+    for t in &mut task.textures {
+        t.learning_rate = 0.02;
+    }
     task
 }
 

@@ -140,6 +140,14 @@ fn killed_run_resumes_from_its_checkpoint() {
     kill_and_resume("restir");
 }
 
+#[test]
+fn killed_recursive_run_resumes_from_its_checkpoint() {
+    if no_gpu() {
+        return;
+    }
+    kill_and_resume("recursive");
+}
+
 /// Every output under its real name in `dir` is whole: the checkpoint loads, the metrics
 /// parse, every image decodes and the optimized scene loads. (A kill during a write may leave
 /// a temporary file, which the next run removes.)
@@ -351,14 +359,17 @@ fn kill_and_resume(method: &str) {
     }
     psrestir::scene::load(&b.join("optimized.glb")).unwrap();
     let r0 = ref_rows[0].1;
-    if method == "baseline" {
+    if method == "baseline" || method == "recursive" {
         // The baseline is deterministic up to the order of float additions (two runs agree
         // to 1e-8 in texture RMSE at every iteration), so a resume that restores textures,
-        // Adam moments and the random numbers exactly follows the uninterrupted run.
+        // Adam moments and the random numbers exactly follows the uninterrupted run. So is
+        // the recursive estimator, once its running estimate and variances are restored too;
+        // its estimate carries earlier iterations' rounding, hence a looser bound.
+        let tol = if method == "baseline" { 1e-5 } else { 1e-4 };
         for (x, y) in ref_rows.iter().zip(&rows) {
             assert!(
-                (x.1 - y.1).abs() <= 1e-5,
-                "baseline: iteration {}: resumed RMSE {}, uninterrupted {}",
+                (x.1 - y.1).abs() <= tol,
+                "{method}: iteration {}: resumed RMSE {}, uninterrupted {}",
                 x.0,
                 y.1,
                 x.1

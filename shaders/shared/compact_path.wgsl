@@ -1,6 +1,6 @@
 // ReSTIR's compact path: what a reservoir keeps of a path in RESERVOIR_WORDS words (layout
 // RES_* from src/gpu/abi.rs; each encoding's precision is stated and tested in
-// src/optim/estimator/compact.rs, which mirrors these functions). A path is the camera ray's
+// src/optim/estimator/restir/compact.rs, which mirrors these functions). A path is the camera ray's
 // hit (triangle, barycentrics in fixed point), the incident direction in the hit's shading
 // frame (octahedral, fixed point) and the incident radiance (RGBE). Everything else the BRDF
 // needs (texture coordinates, shading frame, outgoing direction, the material inputs that no

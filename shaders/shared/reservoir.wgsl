@@ -19,7 +19,7 @@
 // iteration's own adjoint. Any target that is non-zero wherever the value is keeps the
 // estimate unbiased, and a_t is fixed before the gradient samples are drawn.
 // Only texels that a camera observes have reservoirs: observed texel i (the compaction map,
-// src/optim/estimator/restir.rs) owns RESERVOIR_SLOTS slots, slot k at word
+// src/optim/estimator/restir/mod.rs) owns RESERVOIR_SLOTS slots, slot k at word
 // i * RESERVOIR_WORDS of buffer `slots<k>`, and header word i, which says which slot holds
 // its positive (sign 0) and its negative (sign 1) reservoir: two distinct slots, so two are
 // free for the next iteration's fresh candidates (fresh_slot). The merge selects in place

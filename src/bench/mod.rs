@@ -35,7 +35,7 @@ use crate::image_io::Image;
 use crate::job::run::rmse;
 use crate::job::Problem;
 use crate::optim::observed::rmse_observed;
-use crate::optim::{Method, Optimizer, PassTimes, RestirOptions, Settings};
+use crate::optim::{Method, Optimizer, PassTimes, RestirOptions, Settings, StepKind};
 use crate::task::task_settings;
 use crate::task::Task;
 use crate::{Error, Result};
@@ -64,6 +64,65 @@ impl Protocol {
             t.optimizer.filter = crate::vocab::Filter::Nearest;
         }
         t
+    }
+}
+
+/// A further estimator with its step, optimized beside the baseline and ReSTIR (both with
+/// Adam) in the equal-time phase.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Contender {
+    /// The gradient estimator.
+    pub method: Method,
+    /// The step.
+    pub step: StepKind,
+}
+
+impl Contender {
+    /// The recursive estimator with Adam and with the variance-scaled step: the bench's
+    /// default contenders.
+    pub const DEFAULT: [Contender; 2] = [
+        Contender {
+            method: Method::Recursive,
+            step: StepKind::Adam,
+        },
+        Contender {
+            method: Method::Recursive,
+            step: StepKind::Variance,
+        },
+    ];
+
+    /// How reports name it, e.g. `recursive, variance-scaled step`.
+    pub fn name(&self) -> String {
+        match self.step {
+            StepKind::Adam => format!("{}, Adam", self.method.name()),
+            StepKind::Variance => format!("{}, variance-scaled step", self.method.name()),
+        }
+    }
+
+    /// Its key in file names (`recursive`, `recursive_variance`).
+    pub fn key(&self) -> String {
+        tune::contender_key(self.method, self.step)
+    }
+
+    /// Parse `METHOD` or `METHOD:STEP` (`recursive:variance`).
+    pub fn parse(s: &str) -> std::result::Result<Contender, String> {
+        let (m, st) = s.split_once(':').unwrap_or((s, "adam"));
+        let method = match m {
+            "baseline" => Method::Baseline,
+            "restir" => Method::Restir,
+            "recursive" => Method::Recursive,
+            _ => {
+                return Err(format!(
+                    "unknown estimator `{m}` (baseline, restir, recursive)"
+                ))
+            }
+        };
+        let step = match st {
+            "adam" => StepKind::Adam,
+            "variance" => StepKind::Variance,
+            _ => return Err(format!("unknown step `{st}` (adam, variance)")),
+        };
+        Ok(Contender { method, step })
     }
 }
 
@@ -116,6 +175,9 @@ pub struct BenchOptions {
     pub tune_budget_s: Option<f64>,
     /// The equal-time optimization only (no primal or gradient-error phases).
     pub end_to_end_only: bool,
+    /// Further estimators and steps optimized in the equal-time phase after the baseline and
+    /// ReSTIR (both with Adam), each tuned like them with `tune`.
+    pub contenders: Vec<Contender>,
 }
 
 impl Default for BenchOptions {
@@ -141,6 +203,7 @@ impl Default for BenchOptions {
             tune: false,
             tune_budget_s: None,
             end_to_end_only: false,
+            contenders: Contender::DEFAULT.to_vec(),
         }
     }
 }
@@ -306,11 +369,17 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
     std::fs::create_dir_all(&o.out).map_err(|e| Error::file(&o.out, e.to_string()))?;
     // Steps of the progress bar per scene: targets, the primal and gradient phases (one per
     // seed and the reference), the search and each estimator's optimization.
+    let contenders = if o.gradient_only {
+        0
+    } else {
+        o.contenders.len() as u64
+    };
     let per_scene = if o.end_to_end_only {
         3
     } else {
         o.repeats.max(1) as u64 + if o.gradient_only { 2 } else { 4 }
-    } + u64::from(o.tune && !o.gradient_only);
+    } + u64::from(o.tune && !o.gradient_only)
+        + contenders;
     let progress = Progress::new(o.progress, loaded.len() as u64 * per_scene);
     let mut report = BenchReport {
         version: env!("CARGO_PKG_VERSION").into(),
@@ -370,16 +439,24 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
                     env!("CARGO_PKG_VERSION"),
                 );
                 let mut t = Vec::new();
-                for method in [Method::Baseline, Method::Restir] {
-                    let s = settings(&prep, task, method, o);
+                let all = [Method::Baseline, Method::Restir]
+                    .map(|method| Contender {
+                        method,
+                        step: StepKind::Adam,
+                    })
+                    .into_iter()
+                    .chain(o.contenders.iter().copied());
+                for c in all {
+                    let mut s = settings(&prep, task, c.method, o);
+                    s.step = c.step;
                     t.push(Some(tune::tune(
                         gpu, &prep, &s, budget, &key, &dir, &progress,
                     )?));
                 }
                 progress.done();
-                [t[0].take(), t[1].take()]
+                t
             } else {
-                [None, None]
+                vec![None; 2 + o.contenders.len()]
             };
             let (r, f) = optimization_phases(gpu, task, &prep, o, tuned, &progress)?;
             (Some(r), Some(f))

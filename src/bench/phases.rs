@@ -161,11 +161,13 @@ pub(super) fn optimization_phase(
     task: &Task,
     prep: &Problem,
     o: &BenchOptions,
-    method: Method,
+    who: Contender,
     tuned: Option<&tune::Tunable>,
     progress: &Progress,
 ) -> Result<OptimizationRun> {
+    let method = who.method;
     let mut s = settings(prep, task, method, o);
+    s.step = who.step;
     if let Some(t) = tuned {
         t.apply(&mut s);
     }
@@ -191,10 +193,10 @@ pub(super) fn optimization_phase(
     let mut last_count: Option<(u32, u32)> = None;
     let mut evaluations: Option<(u64, u32)> = None;
     let mut last_image = None;
-    let name = match method {
-        Method::Baseline => "baseline",
-        Method::Restir => "ReSTIR",
-        Method::Recursive => "recursive",
+    let name = match (method, who.step) {
+        (Method::Baseline, StepKind::Adam) => "baseline".to_string(),
+        (Method::Restir, StepKind::Adam) => "ReSTIR".to_string(),
+        _ => who.name(),
     };
     loop {
         let eval_due = seconds >= o.budget_s * next_eval as f64 / (points - 1) as f64;
@@ -277,7 +279,7 @@ pub(super) fn optimization_phases(
     task: &Task,
     prep: &Problem,
     o: &BenchOptions,
-    tuned: [Option<tune::Tuned>; 2],
+    mut tuned: Vec<Option<tune::Tuned>>,
     progress: &Progress,
 ) -> Result<(OptimizationResult, FinalImages)> {
     let init = Optimizer::for_problem(gpu, prep, settings(prep, task, Method::Baseline, o))?;
@@ -303,15 +305,21 @@ pub(super) fn optimization_phases(
         learning_rate_factor: None,
         image_relmse: Some(image_initial),
     };
-    let [tuned_baseline, tuned_restir] = tuned;
+    tuned.resize(2 + o.contenders.len(), None);
+    let tuned_others = tuned.split_off(2);
+    let (tuned_restir, tuned_baseline) = (tuned.pop().flatten(), tuned.pop().flatten());
     let best = |t: &Option<tune::Tuned>| t.as_ref().map(|t| t.best);
     let (tb_best, tr_best) = (best(&tuned_baseline), best(&tuned_restir));
+    let adam = |method| Contender {
+        method,
+        step: StepKind::Adam,
+    };
     let base = optimization_phase(
         gpu,
         task,
         prep,
         o,
-        Method::Baseline,
+        adam(Method::Baseline),
         tb_best.as_ref(),
         progress,
     )?;
@@ -320,13 +328,17 @@ pub(super) fn optimization_phases(
         task,
         prep,
         o,
-        Method::Restir,
+        adam(Method::Restir),
         tr_best.as_ref(),
         progress,
     )?;
-    let describe = |method: Method, t: Option<tune::Tunable>| {
-        t.unwrap_or_else(|| tune::Tunable::untuned(&settings(prep, task, method, o)))
-            .describe(method)
+    let describe = |who: Contender, t: Option<tune::Tunable>| {
+        t.unwrap_or_else(|| {
+            let mut s = settings(prep, task, who.method, o);
+            s.step = who.step;
+            tune::Tunable::untuned(&s)
+        })
+        .describe(who.method)
     };
     let min_observed = |r: &OptimizationRun| {
         r.curve
@@ -364,6 +376,30 @@ pub(super) fn optimization_phases(
         v.extend_from_slice(c);
         v
     };
+    let mut contenders = Vec::new();
+    for (&who, tuned) in o.contenders.iter().zip(tuned_others) {
+        let t_best = best(&tuned);
+        let run = optimization_phase(gpu, task, prep, o, who, t_best.as_ref(), progress)?;
+        let (t, to, i) = last(&run);
+        contenders.push(ContenderResult {
+            name: who.name(),
+            key: who.key(),
+            image_relmse: i,
+            image_relmse_ratio: i / ib,
+            texture_rmse: t,
+            texture_rmse_observed: to,
+            texture_rmse_observed_ratio: to / tob,
+            texture_rmse_observed_third: third(&run),
+            texture_rmse_observed_min: min_observed(&run),
+            ms_per_iteration: run.ms_per_iteration,
+            iterations: run.iterations,
+            passes: run.passes,
+            state_bytes_per_texel: run.state_bytes_per_texel,
+            settings: describe(who, t_best),
+            tuned,
+            curve: with_start(&run.curve),
+        });
+    }
     let result = OptimizationResult {
         image_relmse_initial: image_initial,
         image_relmse_baseline: ib,
@@ -392,12 +428,13 @@ pub(super) fn optimization_phases(
         observed_texels: re.observed_texels,
         texture_rmse_observed_min_baseline: min_observed(&base),
         texture_rmse_observed_min_restir: min_observed(&re),
-        settings_baseline: describe(Method::Baseline, tb_best),
-        settings_restir: describe(Method::Restir, tr_best),
+        settings_baseline: describe(adam(Method::Baseline), tb_best),
+        settings_restir: describe(adam(Method::Restir), tr_best),
         tuned_baseline,
         tuned_restir,
         curve_baseline: with_start(&base.curve),
         curve_restir: with_start(&re.curve),
+        contenders,
     };
     let finals = FinalImages {
         target: prep.targets[0].clone(),

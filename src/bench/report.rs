@@ -312,6 +312,43 @@ pub fn optimization_table(r: &BenchReport) -> String {
     s
 }
 
+/// The further estimators and steps (`BenchOptions::contenders`) at equal time, with ratios
+/// over the baseline with Adam (empty when there are none).
+pub fn contender_table(r: &BenchReport) -> String {
+    let rows: Vec<_> = r
+        .scenes
+        .iter()
+        .filter_map(|x| x.optimization.as_ref().map(|o| (x, o)))
+        .flat_map(|(x, o)| o.contenders.iter().map(move |c| (x, o, c)))
+        .collect();
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut s = String::from(
+        "| scene | estimator, step | image relMSE | ÷ baseline | texture RMSE (observed) |          ÷ baseline | at 1/3 | end / lowest | ms/it | iterations | settings |
+         |---|---|---|---|---|---|---|---|---|---|---|
+",
+    );
+    for (x, _, c) in rows {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | **{}** | {:.4} | **{}** | {:.4} | {} | {:.0} | {} | {} |",
+            x.name,
+            c.name,
+            sci(c.image_relmse),
+            ratio(c.image_relmse_ratio),
+            c.texture_rmse_observed,
+            ratio(c.texture_rmse_observed_ratio),
+            c.texture_rmse_observed_third,
+            ratio(c.texture_rmse_observed / c.texture_rmse_observed_min),
+            c.ms_per_iteration,
+            c.iterations,
+            c.settings
+        );
+    }
+    s
+}
+
 /// Each estimator's settings in the run (tuned or the task's) and, with `--tune`, the
 /// search's score on its own seed.
 pub fn settings_table(r: &BenchReport) -> String {
@@ -348,18 +385,23 @@ pub fn curve_table(r: &BenchReport) -> String {
     );
     for x in &r.scenes {
         let Some(o) = &x.optimization else { continue };
-        for (name, curve, min) in [
+        let runs = [
             (
-                "baseline",
+                "baseline".to_string(),
                 &o.curve_baseline,
                 o.texture_rmse_observed_min_baseline,
             ),
             (
-                "ReSTIR",
+                "ReSTIR".to_string(),
                 &o.curve_restir,
                 o.texture_rmse_observed_min_restir,
             ),
-        ] {
+        ];
+        let others = o
+            .contenders
+            .iter()
+            .map(|c| (c.name.clone(), &c.curve, c.texture_rmse_observed_min));
+        for (name, curve, min) in runs.into_iter().chain(others) {
             let at = |f: f64| {
                 curve
                     .iter()
@@ -408,6 +450,14 @@ fn reconstruction_markdown(r: &BenchReport) -> String {
         }
     );
     md.push_str(&settings_table(r));
+    let contenders = contender_table(r);
+    if !contenders.is_empty() {
+        md.push_str(
+            "\n### Further estimators and steps\n\nThe same budget from the same start; \
+             ratios over the baseline with Adam above.\n\n",
+        );
+        md.push_str(&contenders);
+    }
     md.push_str("\n### Observed-texel RMSE along the run\n\n");
     md.push_str(&curve_table(r));
     md.push_str(
@@ -425,6 +475,11 @@ pub fn table(r: &BenchReport) -> String {
         s.push('\n');
         s.push_str(&settings_table(r));
         s.push('\n');
+        let contenders = contender_table(r);
+        if !contenders.is_empty() {
+            s.push_str(&contenders);
+            s.push('\n');
+        }
         s.push_str(&curve_table(r));
         s.push('\n');
     }
@@ -523,6 +578,11 @@ pub fn headline_table(r: &BenchReport) -> String {
             o.texture_rmse_observed_restir,
             ratio(o.texture_rmse_observed_restir / o.texture_rmse_observed_baseline),
         );
+    }
+    let contenders = contender_table(r);
+    if !contenders.is_empty() {
+        s.push('\n');
+        s.push_str(&contenders);
     }
     let _ = write!(
         s,

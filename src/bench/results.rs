@@ -197,6 +197,45 @@ pub struct OptimizationResult {
     pub curve_baseline: Vec<CurvePoint>,
     /// Optimization curve of ReSTIR.
     pub curve_restir: Vec<CurvePoint>,
+    /// The further estimators and steps of [`super::BenchOptions::contenders`], in order.
+    pub contenders: Vec<ContenderResult>,
+}
+
+/// The equal-time optimization of one further estimator with its step.
+#[derive(Clone, Debug, Serialize)]
+pub struct ContenderResult {
+    /// The estimator and step, e.g. `recursive, variance-scaled step`.
+    pub name: String,
+    /// Its key in file names (`recursive_variance`).
+    pub key: String,
+    /// Image relMSE after its budget.
+    pub image_relmse: f64,
+    /// Over the baseline's (with Adam).
+    pub image_relmse_ratio: f64,
+    /// Texture RMSE after its budget.
+    pub texture_rmse: f64,
+    /// Texture RMSE over the observed texels after its budget.
+    pub texture_rmse_observed: f64,
+    /// Over the baseline's (with Adam).
+    pub texture_rmse_observed_ratio: f64,
+    /// ... at a third of the budget.
+    pub texture_rmse_observed_third: f64,
+    /// Lowest observed-texel RMSE of the run.
+    pub texture_rmse_observed_min: f64,
+    /// Mean wall-clock milliseconds per iteration (GPU work finished).
+    pub ms_per_iteration: f64,
+    /// Iterations run within the budget.
+    pub iterations: u32,
+    /// Mean GPU time per pass, when available.
+    pub passes: Option<PassTimes>,
+    /// Bytes of GPU state per texel.
+    pub state_bytes_per_texel: f64,
+    /// Its settings in this run (tuned by `--tune`, else the task's).
+    pub settings: String,
+    /// The search that chose them (`--tune`).
+    pub tuned: Option<super::tune::Tuned>,
+    /// Its optimization curve.
+    pub curve: Vec<CurvePoint>,
 }
 
 /// The whole benchmark (`bench.json`).

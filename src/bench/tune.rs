@@ -3,8 +3,11 @@
 //!
 //! Coordinate search from the task's settings, one pass, in this order: the learning rate
 //! (x0.5, x2, and on in the better direction while it keeps improving, up to x1/8 or x8),
-//! Adam's β1 (0.5, 0) and β2 (0.99), and for ReSTIR the M cap (2, 32), whether
-//! the cap follows the learning-rate schedule, and the target smoothing (0, 0.9). Each trial
+//! with Adam its β1 (0.5, 0) and β2 (0.99), with the variance-scaled step its clip (× 0.5,
+//! × 2) and threshold (0, twice the task's),
+//! for ReSTIR the M cap (2, 32), whether the cap follows the learning-rate schedule, and the
+//! target smoothing (0, 0.9), and for the recursive estimator the lower bound of its adaptive
+//! weight (0.2, 0.5). Each trial
 //! optimizes for the tuning budget from the initial textures with the seed
 //! [`TUNE_SEED_OFFSET`] away from the task's; its score is the observed-texel RMSE at the
 //! end (the headline's measure). A value is kept only when it lowers the score by more than
@@ -13,7 +16,7 @@
 //! magnitude between scenes (settable with the task's `[optimizer.adam]`).
 use super::*;
 use crate::optim::adam::AdamOptions;
-use crate::optim::Stop;
+use crate::optim::{StepKind, Stop};
 use serde::Deserialize;
 use std::fmt::Write as _;
 
@@ -36,6 +39,30 @@ pub struct Tunable {
     pub m_cap_follows_schedule: bool,
     /// ReSTIR's target smoothing (None: by the primal estimator).
     pub target_smoothing: Option<f32>,
+    /// The step (not searched: the bench tunes each estimator with each step).
+    #[serde(default)]
+    pub step: StepKind,
+    /// The variance-scaled step's clip, in learning rates.
+    #[serde(default = "default_clip")]
+    pub variance_clip: f32,
+    /// The variance-scaled step's threshold, in standard deviations.
+    #[serde(default = "default_threshold")]
+    pub variance_threshold: f32,
+    /// The recursive estimator's lower bound of its adaptive weight.
+    #[serde(default = "default_min_weight")]
+    pub recursive_min_weight: f32,
+}
+
+fn default_clip() -> f32 {
+    crate::optim::VarianceStepOptions::default().clip
+}
+
+fn default_threshold() -> f32 {
+    crate::optim::VarianceStepOptions::default().threshold
+}
+
+fn default_min_weight() -> f32 {
+    crate::optim::RecursiveOptions::default().min_weight
 }
 
 impl Tunable {
@@ -47,6 +74,10 @@ impl Tunable {
             m_cap: settings.restir.m_cap,
             m_cap_follows_schedule: settings.restir.m_cap_follows_schedule,
             target_smoothing: settings.restir.target_smoothing,
+            step: settings.step,
+            variance_clip: settings.variance_step.clip,
+            variance_threshold: settings.variance_step.threshold,
+            recursive_min_weight: settings.recursive.min_weight,
         }
     }
 
@@ -56,6 +87,10 @@ impl Tunable {
         settings.restir.m_cap = self.m_cap;
         settings.restir.m_cap_follows_schedule = self.m_cap_follows_schedule;
         settings.restir.target_smoothing = self.target_smoothing;
+        settings.step = self.step;
+        settings.variance_step.clip = self.variance_clip;
+        settings.variance_step.threshold = self.variance_threshold;
+        settings.recursive.min_weight = self.recursive_min_weight;
     }
 
     /// Scale the learning rates of `opt`'s textures (made from `prep`).
@@ -67,10 +102,19 @@ impl Tunable {
 
     /// A short description, e.g. `lr x2, β1 0.5, M cap 2 (scheduled)`.
     pub fn describe(&self, method: Method) -> String {
-        let mut s = format!(
-            "lr ×{}, β1 {}, β2 {}",
-            self.learning_rate_scale, self.adam.beta1, self.adam.beta2
-        );
+        let mut s = match self.step {
+            StepKind::Adam => format!(
+                "lr ×{}, β1 {}, β2 {}",
+                self.learning_rate_scale, self.adam.beta1, self.adam.beta2
+            ),
+            StepKind::Variance => format!(
+                "variance-scaled step, lr ×{}, clip {}, threshold {}",
+                self.learning_rate_scale, self.variance_clip, self.variance_threshold
+            ),
+        };
+        if method == Method::Recursive {
+            let _ = write!(s, ", weight ≥ {}", self.recursive_min_weight);
+        }
         if method == Method::Restir {
             let _ = write!(
                 s,
@@ -86,6 +130,15 @@ impl Tunable {
             );
         }
         s
+    }
+}
+
+/// The name of an estimator with a step in file names: the method's, with `_variance` for the
+/// variance-scaled step (Adam adds nothing, so that earlier caches stay valid).
+pub fn contender_key(method: Method, step: StepKind) -> String {
+    match step {
+        StepKind::Adam => method.name().to_string(),
+        StepKind::Variance => format!("{}_variance", method.name()),
     }
 }
 
@@ -117,16 +170,48 @@ pub struct Tuned {
 type Coordinate = Box<dyn Fn(&Tunable) -> Vec<Tunable>>;
 
 /// The candidates of each coordinate, in search order.
-fn coordinates(method: Method) -> Vec<Coordinate> {
-    let mut c: Vec<Coordinate> = vec![
-        Box::new(|b: &Tunable| {
+fn coordinates(method: Method, step: StepKind) -> Vec<Coordinate> {
+    let learning_rate: Coordinate = Box::new(|b: &Tunable| {
+        [0.5, 2.0]
+            .map(|f| Tunable {
+                learning_rate_scale: b.learning_rate_scale * f,
+                ..*b
+            })
+            .to_vec()
+    });
+    let mut c: Vec<Coordinate> = vec![learning_rate];
+    if step == StepKind::Variance {
+        c.push(Box::new(|b: &Tunable| {
             [0.5, 2.0]
                 .map(|f| Tunable {
-                    learning_rate_scale: b.learning_rate_scale * f,
+                    variance_clip: b.variance_clip * f,
                     ..*b
                 })
                 .to_vec()
-        }),
+        }));
+        c.push(Box::new(|b: &Tunable| {
+            [0.0, 2.0 * b.variance_threshold.max(0.5)]
+                .map(|variance_threshold| Tunable {
+                    variance_threshold,
+                    ..*b
+                })
+                .to_vec()
+        }));
+    }
+    if method == Method::Recursive {
+        c.push(Box::new(|b: &Tunable| {
+            [0.2, 0.5]
+                .map(|w| Tunable {
+                    recursive_min_weight: w,
+                    ..*b
+                })
+                .to_vec()
+        }));
+    }
+    if step == StepKind::Variance {
+        return c;
+    }
+    c.extend::<Vec<Coordinate>>(vec![
         Box::new(|b: &Tunable| {
             [0.5, 0.0]
                 .map(|beta1| Tunable {
@@ -144,7 +229,7 @@ fn coordinates(method: Method) -> Vec<Coordinate> {
                 ..*b
             }]
         }),
-    ];
+    ]);
     if method == Method::Restir {
         c.push(Box::new(|b: &Tunable| {
             [2.0, 32.0].map(|m_cap| Tunable { m_cap, ..*b }).to_vec()
@@ -211,13 +296,14 @@ pub(super) fn tune(
     progress: &Progress,
 ) -> Result<Tuned> {
     let method = settings.method;
-    let path = dir.join(format!("tune_{}.json", method.name()));
+    let who = contender_key(method, settings.step);
+    let path = dir.join(format!("tune_{who}.json"));
     if let Ok(text) = std::fs::read_to_string(&path) {
         if let Ok(t) = serde_json::from_str::<Tuned>(&text) {
             if t.key == key {
                 progress.message(format!(
                     "{}: tuned settings from {}: {}",
-                    method.name(),
+                    who,
                     path.display(),
                     t.best.describe(method)
                 ));
@@ -231,11 +317,7 @@ pub(super) fn tune(
         ));
     }
     let mut best = Tunable::untuned(settings);
-    progress.message(format!(
-        "{}: tuning, {}",
-        method.name(),
-        best.describe(method)
-    ));
+    progress.message(format!("{}: tuning, {}", who, best.describe(method)));
     let mut best_score = trial(gpu, prep, settings, &best, budget_s)?;
     let mut trials = vec![Trial {
         settings: best,
@@ -245,7 +327,7 @@ pub(super) fn tune(
         let score = trial(gpu, prep, settings, &candidate, budget_s)?;
         progress.message(format!(
             "{}: tuning, {} → {score:.4} (best {best_score:.4})",
-            method.name(),
+            who,
             candidate.describe(method)
         ));
         trials.push(Trial {
@@ -259,7 +341,7 @@ pub(super) fn tune(
         }
         Ok::<bool, Error>(better)
     };
-    for (k, coordinate) in coordinates(method).into_iter().enumerate() {
+    for (k, coordinate) in coordinates(method, settings.step).into_iter().enumerate() {
         let base = best;
         for candidate in coordinate(&base) {
             try_one(candidate, &mut best, &mut best_score)?;
@@ -290,7 +372,7 @@ pub(super) fn tune(
     println!(
         "{}: tuned {}: {} (observed-texel RMSE {best_score:.4} on the tuning seed, {} trials)",
         dir.file_name().unwrap_or_default().to_string_lossy(),
-        method.name(),
+        who,
         best.describe(method),
         tuned.trials.len()
     );

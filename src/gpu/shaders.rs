@@ -58,19 +58,19 @@ pub const SOURCES: &[(&str, &str)] = sources!(
     "shared/compact_path",
     "render",
     "trace_rays",
-    "gradient",
     "loss",
     "adam",
-    "reservoir_test",
     "texture_wrap_test",
-    "restir_candidates",
-    "restir_merge",
     "texture_export",
     "observed_texels",
     "primal_cv",
     "multiscale_gradient",
     "smoothness",
     "variance_step";
+    "gradient" in "optim/estimator/baseline",
+    "restir_candidates" in "optim/estimator/restir",
+    "restir_merge" in "optim/estimator/restir",
+    "reservoir_test" in "optim/estimator/restir",
     "recursive_gradient" in "optim/estimator/recursive",
     "recursive_combine" in "optim/estimator/recursive",
 );
@@ -339,6 +339,27 @@ mod tests {
         for f in files {
             assert!(source(&f).is_some(), "shaders/{f}.wgsl is not in SOURCES");
         }
+        // The passes in the estimators' folders (a pass's name is its file's stem).
+        let estimators = concat!(env!("CARGO_MANIFEST_DIR"), "/src/optim/estimator");
+        let mut found = 0;
+        for e in std::fs::read_dir(estimators).unwrap() {
+            let d = e.unwrap().path();
+            if !d.is_dir() {
+                continue;
+            }
+            for f in std::fs::read_dir(&d).unwrap() {
+                let p = f.unwrap().path();
+                if p.extension().is_some_and(|x| x == "wgsl") {
+                    let stem = p.file_stem().unwrap().to_string_lossy().to_string();
+                    assert!(source(&stem).is_some(), "{} is not in SOURCES", p.display());
+                    found += 1;
+                }
+            }
+        }
+        assert!(
+            found >= 6,
+            "only {found} WGSL files in the estimators' folders"
+        );
     }
 
     #[test]

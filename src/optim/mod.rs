@@ -205,7 +205,12 @@ impl Optimizer {
                     grad: &grad,
                     params: &params.values,
                     moments: &moments,
-                    variance: estimator.variance(),
+                    // The estimator's variance is that of its own estimate; the multiscale
+                    // gradient averages it over blocks, so the step then tracks the
+                    // variance of what it is given.
+                    variance: estimator
+                        .variance()
+                        .filter(|_| settings.multiscale_levels == 0),
                     stats: &stats.adam,
                 },
             )?),

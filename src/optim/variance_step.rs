@@ -1,10 +1,13 @@
-//! The variance-scaled step (Bálint et al. 2023): the pass of shaders/variance_step.wgsl
-//! (`VarianceStepPass`, one dispatch per optimized texture), its options and its CPU
-//! reference. Each scalar moves by −lr · clamp(d / (√Var[d] + eps), −clip, clip), where d is
-//! the gradient estimate and Var[d] its variance: the estimator's own where it tracks one
-//! (the recursive estimator), otherwise a moving variance of the gradient. Unlike Adam, whose
-//! per-scalar normalization gives any estimator about the same step, a lower-variance
-//! estimate takes a larger step.
+//! The variance-scaled step (after Bálint et al. 2023): the pass of
+//! shaders/variance_step.wgsl (`VarianceStepPass`, one dispatch per optimized texture), its
+//! options and its CPU reference. With z = d / (√Var[d] + eps), where d is the gradient
+//! estimate and Var[d] its variance (the estimator's own where it tracks one, the recursive
+//! estimator's, otherwise a moving variance of the gradient), each scalar moves by
+//! −lr · clamp(sign(z) · max(|z| − threshold, 0), −clip, clip). Unlike Adam, whose per-scalar
+//! normalization gives any estimator about the same step, a lower-variance estimate takes a
+//! larger step; the threshold keeps only the part of the estimate that exceeds its noise, so
+//! that scalars the images hardly determine do not drift, and a lower-variance estimate gets
+//! closer to the optimum before its steps stop.
 use crate::gpu::{encode_timed_pass, grid_2d, Gpu};
 use crate::optim::{PassKind, PassTimer};
 use crate::render::params::ParamSet;
@@ -43,6 +46,9 @@ pub struct VarianceStepOptions {
     pub beta: f32,
     /// Added to the standard deviation (> 0).
     pub eps: f32,
+    /// How many standard deviations of the estimate are taken off its magnitude before the
+    /// step (>= 0; 0: none).
+    pub threshold: f32,
 }
 
 impl Default for VarianceStepOptions {
@@ -51,6 +57,7 @@ impl Default for VarianceStepOptions {
             clip: 1.0,
             beta: 0.9,
             eps: 1e-12,
+            threshold: 1.0,
         }
     }
 }
@@ -66,6 +73,9 @@ impl VarianceStepOptions {
         }
         if !(self.eps.is_finite() && self.eps > 0.0) {
             return Err(("eps", "must be a positive number"));
+        }
+        if !(self.threshold.is_finite() && self.threshold >= 0.0) {
+            return Err(("threshold", "must be a number >= 0"));
         }
         Ok(())
     }
@@ -102,8 +112,9 @@ pub fn step(
                 (v[i] / bias - mean * mean).max(0.0)
             }
         };
-        let z = (g / (var.sqrt() + o.eps)).clamp(-o.clip, o.clip);
-        params[i] = (params[i] - lr * z).clamp(lo, hi);
+        let z = g / (var.sqrt() + o.eps);
+        let shrunk = z.signum() * (z.abs() - o.threshold).max(0.0);
+        params[i] = (params[i] - lr * shrunk.clamp(-o.clip, o.clip)).clamp(lo, hi);
     }
 }
 
@@ -124,7 +135,7 @@ pub struct VarianceStepParams {
     pub lo: f32,
     pub hi: f32,
     pub mask: u32,
-    pub _pad: u32,
+    pub threshold: f32,
 }
 
 /// Group 0 of `variance_step.wgsl`.
@@ -193,7 +204,7 @@ impl VarianceStepPass {
                     lo,
                     hi,
                     mask: mask as u32,
-                    _pad: 0,
+                    threshold: options.threshold,
                 };
                 let u = gpu.uniform(
                     &format!("variance step params {}", t.name()),

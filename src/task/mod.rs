@@ -42,6 +42,7 @@
 //!
 //! [optimizer.variance_step]       # the variance-scaled step (these are the defaults)
 //! clip = 1.0                      # the largest step, in learning rates
+//! threshold = 1.0                 # standard deviations taken off each estimate
 //! beta = 0.9                      # decay of the moving variance (estimators without their own)
 //! eps = 1e-12
 //!

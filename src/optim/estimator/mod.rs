@@ -4,16 +4,19 @@
 //! the loss have written every camera's adjoint.
 //!
 //! - [`baseline`]: plain Monte Carlo, every sample adds its derivative to the texels it
-//!   touches (shaders/gradient.wgsl).
+//!   touches (`gradient.wgsl`).
 //! - [`restir`]: parameter-space ReSTIR, two reservoirs per texel reused across iterations
-//!   (shaders/restir_candidates.wgsl, shaders/restir_merge.wgsl).
+//!   (`restir_candidates.wgsl`, `restir_merge.wgsl`).
 //! - [`recursive`]: a recursive control variate on the gradient: fresh samples evaluated at
-//!   the current and the previous state correct the running estimate (its own folder).
+//!   the current and the previous state correct the running estimate
+//!   (`recursive_gradient.wgsl`, `recursive_combine.wgsl`).
+//!
+//! Each lives in its own folder with its Rust and its passes' WGSL (shared WGSL stays in
+//! `shaders/shared/`).
 pub mod baseline;
-pub mod compact;
 pub mod recursive;
-mod reservoir_test;
 pub mod restir;
+pub use restir::compact;
 
 use super::{FaultCounts, PassTimer, Settings};
 use crate::gpu::Gpu;

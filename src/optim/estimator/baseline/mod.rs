@@ -1,4 +1,4 @@
-//! The baseline estimator (shaders/gradient.wgsl): plain Monte Carlo. Every camera sample
+//! The baseline estimator (gradient.wgsl): plain Monte Carlo. Every camera sample
 //! differentiates its light-sampled and BSDF-sampled contributions with respect to the
 //! material at its hit point and adds them, weighted by its pixel's adjoint, into the texels
 //! that the texture filter touches. Float additions are bounded compare-and-swap loops on
@@ -19,7 +19,7 @@ pub(crate) const GRADIENT_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
     names: &["gp", "adjoint", "grad", "gstats"],
 };
 
-/// `GradientParams` in shaders/gradient.wgsl (a test checks the layout).
+/// `GradientParams` in gradient.wgsl (a test checks the layout).
 /// The fields are documented in the WGSL twin.
 #[allow(missing_docs)]
 #[repr(C)]
@@ -36,7 +36,7 @@ pub struct GradientParams {
     pub _pad: u32,
 }
 
-/// `gstats` slots of shaders/gradient.wgsl.
+/// `gstats` slots of gradient.wgsl.
 const STAT_LOST: usize = crate::gpu::abi::stat::GRADIENT_LOST as usize;
 const STAT_DROPPED: usize = crate::gpu::abi::stat::GRADIENT_DROPPED as usize;
 

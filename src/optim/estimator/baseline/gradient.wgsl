@@ -9,7 +9,7 @@
 #import shared/adjoint_pixel
 #import shared/integrator
 
-// Mirrored by GradientParams in src/optim/estimator/baseline.rs.
+// Mirrored by GradientParams in src/optim/estimator/baseline/mod.rs.
 struct GradientParams {
     camera: CameraInfo,
     seed: u32,

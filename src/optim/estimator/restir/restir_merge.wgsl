@@ -18,8 +18,8 @@
 // (shared/compact_path.wgsl): the hit is rebuilt from its triangle and barycentrics and the
 // camera's position (texture coordinates, shading frame, outgoing direction, the glTF
 // material's inputs there), and one BRDF-with-derivative evaluation gives its factor e; its
-// value is the pixel's adjoint times e, its target the luminance of the pixel's target
-// adjoint times e. Its target under the previous state is stored with it: the candidate pass
+// value is the pixel's adjoint times e, its target target_of(the pixel's target adjoint
+// times e). Its target under the previous state is stored with it: the candidate pass
 // computes it for a fresh sample, and the merge stores each merged sample's current target,
 // which is its previous-state target at the next merge. With the verify flag the merge
 // evaluates every stored path under the previous state as well and compares. Nothing here
@@ -35,7 +35,7 @@
 #import shared/reservoir_slots
 #import gen/abi
 
-// Mirrored by MergeParams in src/optim/estimator/restir.rs. flags: MERGE_FLAG_* (generated).
+// Mirrored by MergeParams in src/optim/estimator/restir/mod.rs. flags: MERGE_FLAG_* (generated).
 struct MergeParams {
     // Observed texels (invocations).
     n_observed: u32,

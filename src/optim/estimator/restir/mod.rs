@@ -1,8 +1,10 @@
-//! The parameter-space ReSTIR estimator (shaders/restir_candidates.wgsl,
-//! shaders/restir_merge.wgsl, shaders/shared/reservoir.wgsl).
+//! The parameter-space ReSTIR estimator (`restir_candidates.wgsl`, `restir_merge.wgsl` in
+//! this folder, shaders/shared/reservoir.wgsl).
 //!
 //! Every optimized texel keeps two reservoirs, one over the positive and one over the negative
-//! part of its target q = luminance(a x e) (x for scalar textures), where e is a path's factor
+//! part of its target q = target_of(a x e) (shared/params.wgsl: for RGB textures the
+//! luminance-weighted sum of the channels' magnitudes, signed by the luminance; the value for
+//! scalar textures), where e is a path's factor
 //! for the texel, d(BRDF cos L_i)/d(texel) per image channel, and a the pixel's target
 //! adjoint, a moving average of the adjoints ([`RestirOptions::target_smoothing`]); the
 //! path's value is v = adjoint x e. A reservoir stores a *path* (pixel and camera,
@@ -17,6 +19,9 @@
 //!    kept from the last iteration by generalized RIS (balance heuristic with confidences,
 //!    identity shift in path space, sign routing), writes the merged reservoirs and the
 //!    gradient sum over signs of v(y) W. It traces no ray.
+pub mod compact;
+mod reservoir_test;
+
 use super::{Diagnostics, Estimator, EstimatorState, Frame, Method, Setup};
 use crate::gpu::encode_timed_pass;
 use crate::gpu::{grid_2d, Gpu};
@@ -63,10 +68,10 @@ pub(crate) const MERGE_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
     ],
 };
 
-pub use super::reservoir_test::selection_trial;
-#[cfg(test)]
-pub(crate) use super::reservoir_test::RESERVOIR_TEST_GROUP;
 pub use crate::gpu::abi::reservoir;
+pub use reservoir_test::selection_trial;
+#[cfg(test)]
+pub(crate) use reservoir_test::RESERVOIR_TEST_GROUP;
 
 /// Cameras a ReSTIR optimizer can use (the camera index has three bits in a reservoir).
 pub const MAX_CAMERAS: usize = crate::gpu::abi::MAX_CAMERAS as usize;
@@ -195,7 +200,7 @@ impl RestirOptions {
 /// [`RestirOptions::target_smoothing`] by default with the independent primal.
 pub const TARGET_SMOOTHING_INDEPENDENT: f32 = 0.9;
 
-/// `CandidateParams` in shaders/restir_candidates.wgsl (a test checks the layout).
+/// `CandidateParams` in restir_candidates.wgsl (a test checks the layout).
 /// The fields are documented in the WGSL twin.
 #[allow(missing_docs)]
 #[repr(C)]
@@ -216,7 +221,7 @@ pub struct CandidateParams {
     pub _pad: u32,
 }
 
-/// `MergeParams` in shaders/restir_merge.wgsl (a test checks the layout).
+/// `MergeParams` in restir_merge.wgsl (a test checks the layout).
 /// The fields are documented in the WGSL twin.
 #[allow(missing_docs)]
 #[repr(C)]

@@ -1,8 +1,8 @@
 // ReSTIR candidate pass: every camera sample's light-sampled and BSDF-sampled paths are
 // candidates for every texel that their hit point touches. A candidate's value v for a texel
 // is the path-space integrand adjoint x e, with e = d(BRDF cos L_i)/d(texel) per image
-// channel (shared/surface.wgsl, path_factor); its target q is the luminance of the target
-// adjoint x e (x for scalar textures). The target adjoint is an exponential moving average of
+// channel (shared/surface.wgsl, path_factor); its target q is target_of(the target adjoint x
+// e) (shared/params.wgsl). The target adjoint is an exponential moving average of
 // the adjoints (cp.smoothing; shared/reservoir.wgsl), which this pass forms for every pixel.
 // A candidate is offered to the texel's positive reservoir when q > 0, to the negative one
 // when q < 0 (or to one reservoir without positivization) with the resampling weight |q| x
@@ -20,7 +20,7 @@
 #import shared/integrator
 #import shared/reservoir
 
-// Mirrored by CandidateParams in src/optim/estimator/restir.rs.
+// Mirrored by CandidateParams in src/optim/estimator/restir/mod.rs.
 struct CandidateParams {
     camera: CameraInfo,
     seed: u32,

@@ -1,4 +1,4 @@
-//! The reservoir selection test pass (shaders/reservoir_test.wgsl): the streaming update of
+//! The reservoir selection test pass (`reservoir_test.wgsl` in this folder): the streaming update of
 //! shaders/shared/reservoir.wgsl run on the GPU, for the chi-square test of its selection.
 use crate::gpu::abi::reservoir;
 use crate::gpu::{grid_2d, Gpu};
