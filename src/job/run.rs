@@ -205,6 +205,11 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     let checkpoint = open_checkpoint(&out, &ckpt_path, opts.resume)?;
     let prep = Problem::from_task(gpu, task, &out, opts.resume)?;
     let settings = task_settings(task, &prep.cameras, opts.method, opts.restir);
+    log::info!(
+        "gradient estimator: {}; step: {}",
+        settings.method.name(),
+        settings.step.name()
+    );
     let initial_rmse = prep.reference.as_ref().map(|r| rmse(&prep.set.values, r));
     let mut opt = Optimizer::for_problem(gpu, &prep, settings)?;
     let layout = layout_string(&prep.set);
