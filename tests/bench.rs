@@ -225,6 +225,31 @@ fn bench_json_has_every_field_finite_and_in_range() {
 
     let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
     assert!(md.contains("| sphere |"), "{md}");
+    // The further estimators (by default the recursive one with Adam and with the
+    // variance-scaled step) have their rows, with finite ratios over the baseline.
+    let contenders = s["contenders"].as_array().unwrap();
+    assert_eq!(contenders.len(), 2);
+    for c in contenders {
+        for key in [
+            "image_relmse_ratio",
+            "texture_rmse_observed_ratio",
+            "ms_per_iteration",
+        ] {
+            let v = number(c, key);
+            assert!(v.is_finite() && v > 0.0, "{}: {key} {v}", c["name"]);
+        }
+        assert!(md.contains(&format!("| sphere | {} |", c["name"].as_str().unwrap())));
+    }
+    // Every table row is whole: it starts and ends on its own line.
+    for line in md.lines().filter(|l| l.starts_with('|')) {
+        assert!(line.trim_end().ends_with('|'), "broken table row: {line}");
+    }
+    for line in md.lines() {
+        assert!(
+            !line.starts_with(" ") || !line.contains("|---"),
+            "broken table: {line}"
+        );
+    }
     let scene_dir = dir.path().join("sphere");
     // Three panels: texture RMSE (observed texels), image relMSE, loss.
     use psrestir::optim::plot::{PANEL_HEIGHT, PLOT_WIDTH};

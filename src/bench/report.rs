@@ -325,9 +325,9 @@ pub fn contender_table(r: &BenchReport) -> String {
         return String::new();
     }
     let mut s = String::from(
-        "| scene | estimator, step | image relMSE | ÷ baseline | texture RMSE (observed) |          ÷ baseline | at 1/3 | end / lowest | ms/it | iterations | settings |
-         |---|---|---|---|---|---|---|---|---|---|---|
-",
+        "| scene | estimator, step | image relMSE | ÷ baseline | texture RMSE (observed) | \
+         ÷ baseline | at 1/3 | end / lowest | ms/it | iterations | settings |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for (x, _, c) in rows {
         let _ = writeln!(

@@ -158,7 +158,8 @@ pub(crate) struct StepBuffers<'a> {
     pub grad: &'a wgpu::Buffer,
     pub params: &'a wgpu::Buffer,
     pub moments: &'a [wgpu::Buffer; 2],
-    /// The estimator's variance, or None (a moving variance of the gradient).
+    /// The estimator's variance, or None (a moving variance of the gradient; a small unused
+    /// buffer is bound in its place).
     pub variance: Option<&'a wgpu::Buffer>,
     pub stats: &'a wgpu::Buffer,
 }
@@ -168,8 +169,6 @@ pub(crate) struct StepBuffers<'a> {
 pub(crate) struct VarianceStepPass {
     pipeline: wgpu::ComputePipeline,
     textures: Vec<(wgpu::Buffer, wgpu::BindGroup, VarianceStepParams)>,
-    /// Bound in place of the estimator's variance when it has none (never read then).
-    _unused: Option<wgpu::Buffer>,
 }
 
 impl VarianceStepPass {
@@ -182,11 +181,8 @@ impl VarianceStepPass {
     ) -> Result<VarianceStepPass> {
         let layout = gpu.pass_layout("variance_step", 0)?;
         let pipeline = gpu.compute_pipeline("variance_step", &[&layout])?;
-        let unused = match b.variance {
-            Some(_) => None,
-            None => Some(gpu.storage_zeroed("variance step unused variance", 16)),
-        };
-        let variance = b.variance.or(unused.as_ref()).expect("one of the two");
+        let unused = gpu.storage_zeroed("variance step unused variance", 16);
+        let variance = b.variance.unwrap_or(&unused);
         let textures = set
             .textures
             .iter()
@@ -227,11 +223,7 @@ impl VarianceStepPass {
                 (u, g, p)
             })
             .collect();
-        Ok(VarianceStepPass {
-            pipeline,
-            textures,
-            _unused: unused,
-        })
+        Ok(VarianceStepPass { pipeline, textures })
     }
 
     /// Record step `t` (from 1) of every texture at its learning rate times `factor`;
