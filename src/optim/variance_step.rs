@@ -1,7 +1,7 @@
 //! The variance-scaled step (after Bálint et al. 2023): the pass of
 //! shaders/variance_step.wgsl (`VarianceStepPass`, one dispatch per optimized texture), its
-//! options and its CPU reference. With z = d / (√Var[d] + eps), where d is the gradient
-//! estimate and Var[d] its variance (the estimator's own where it tracks one, the recursive
+//! options and its CPU reference. With z = d / (√Var(d) + eps), where d is the gradient
+//! estimate and Var(d) its variance (the estimator's own where it tracks one, the recursive
 //! estimator's, otherwise a moving variance of the gradient), each scalar moves by
 //! −lr · clamp(sign(z) · max(|z| − threshold, 0), −clip, clip). Unlike Adam, whose per-scalar
 //! normalization gives any estimator about the same step, a lower-variance estimate takes a
