@@ -7,10 +7,11 @@
 //! d_t = a g_t(θ_t) + (1 − a) (d_{t−1} + g_t(θ_t) − g_t(θ_{t−1}))
 //!
 //! keeps the whole previous estimate and corrects it by how the same samples changed
-//! (`recursive_combine.wgsl`). From an unbiased start it stays unbiased for any a chosen
-//! before the iteration's samples are drawn; its variance falls with the memory 1/a while the
-//! difference term stays small, which the control-variate primal (a slowly changing
-//! adjoint) helps. By default a is chosen per parameter scalar by inverse variance from
+//! (`recursive_combine.wgsl`). From an unbiased start it stays unbiased for a constant a (the
+//! adaptive a, computed from earlier iterations only, leaves a second-order bias through its
+//! correlation with the previous estimate's error); its variance falls with the memory 1/a
+//! while the difference term stays small, which the control-variate primal (a slowly
+//! changing adjoint) helps. By default a is chosen per parameter scalar by inverse variance from
 //! moving variances of the fresh term and of the difference, tracked up to the previous
 //! iteration, with the running estimate's own variance carried along; that variance is what
 //! the variance-scaled step divides by.
