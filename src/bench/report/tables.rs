@@ -1,0 +1,275 @@
+//! The markdown tables of `report.md` and of `psrestir bench`'s output, one per measurement.
+use crate::bench::BenchReport;
+use std::fmt::Write as _;
+
+pub(super) fn sci(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.3e}")
+    } else {
+        "–".into()
+    }
+}
+
+pub(super) fn ratio(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.2}")
+    } else {
+        "–".into()
+    }
+}
+
+/// The gradient-error table (markdown), as in `report.md` and the README.
+pub fn gradient_table(r: &BenchReport) -> String {
+    let mut s = String::new();
+    s.push_str(
+        "| scene | spp primal / gradient | ms/it ratio | baseline spp (equal time) | \
+         estimator-only, equal iterations: baseline | ReSTIR | ratio | equal time ratio | \
+         total, equal iterations: baseline | ReSTIR | ratio | equal time ratio |\n",
+    );
+    s.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    for x in &r.scenes {
+        let _ = writeln!(
+            s,
+            "| {} | {} / {} | {} | {} | {} | {} | **{}** | **{}** | {} | {} | **{}** | **{}** |",
+            x.name,
+            x.primal_spp,
+            x.gradient_spp,
+            ratio(x.ms_per_iteration_ratio),
+            ratio(x.baseline_spp_equal_time),
+            sci(x.gradient_relmse_estimator_only_baseline),
+            sci(x.gradient_relmse_estimator_only_restir),
+            ratio(x.gradient_relmse_estimator_only_ratio),
+            ratio(x.gradient_relmse_estimator_only_ratio_equal_time),
+            sci(x.gradient_relmse_baseline_equal_iterations),
+            sci(x.gradient_relmse_restir),
+            ratio(x.gradient_relmse_ratio_equal_iterations),
+            ratio(x.gradient_relmse_ratio),
+        );
+    }
+    s
+}
+
+/// The gradient errors per optimized texture (markdown): each texture's part of the
+/// equal-iteration errors of the gradient table.
+pub fn texture_table(r: &BenchReport) -> String {
+    let mut s = String::from(
+        "| scene | texture | estimator-only: baseline | ReSTIR | ratio | total: baseline | \
+         ReSTIR | ratio |\n|---|---|---|---|---|---|---|---|\n",
+    );
+    for x in &r.scenes {
+        for t in &x.gradient_relmse_per_texture {
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {} | **{}** | {} | {} | **{}** |",
+                x.name,
+                t.texture,
+                sci(t.estimator_only_baseline),
+                sci(t.estimator_only_restir),
+                ratio(t.estimator_only_ratio),
+                sci(t.total_baseline_equal_iterations),
+                sci(t.total_restir),
+                ratio(t.total_ratio_equal_iterations),
+            );
+        }
+    }
+    s
+}
+
+/// The error of the mean of successive estimates (markdown): estimator-only, both
+/// estimators under the converged adjoint.
+pub fn successive_table(r: &BenchReport) -> String {
+    let mut s = String::from(
+        "| scene | estimates | one estimate: ratio | mean of them: baseline | ReSTIR | ratio |\n\
+         |---|---|---|---|---|---|\n",
+    );
+    for x in &r.scenes {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} | **{}** |",
+            x.name,
+            x.successive_estimates,
+            ratio(x.gradient_relmse_estimator_only_ratio),
+            sci(x.gradient_relmse_mean_baseline),
+            sci(x.gradient_relmse_mean_restir),
+            ratio(x.gradient_relmse_mean_ratio),
+        );
+    }
+    s
+}
+
+/// The primal estimators' table (markdown): image error of the primal at the state after the
+/// warm-up, and its GPU cost.
+pub fn primal_table(r: &BenchReport) -> String {
+    let mut s = String::from(
+        "| scene | primal relMSE independent | control variate | ratio | primal GPU ms independent \
+         | control variate | cost ratio |\n|---|---|---|---|---|---|---|\n",
+    );
+    for x in &r.scenes {
+        let ms = |v: Option<f64>| v.map(|v| format!("{v:.1}")).unwrap_or_else(|| "–".into());
+        let cost = match (x.primal_ms_independent, x.primal_ms_control_variate) {
+            (Some(a), Some(b)) => ratio(b / a),
+            _ => "–".into(),
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | **{}** | {} | {} | {} |",
+            x.name,
+            sci(x.primal_relmse_independent),
+            sci(x.primal_relmse_control_variate),
+            ratio(x.primal_relmse_ratio),
+            ms(x.primal_ms_independent),
+            ms(x.primal_ms_control_variate),
+            cost
+        );
+    }
+    s
+}
+
+/// The equal-time optimization table (markdown).
+pub fn optimization_table(r: &BenchReport) -> String {
+    let mut s = String::new();
+    s.push_str(
+        "| scene | image relMSE initial | baseline | ReSTIR | ratio | texture RMSE (observed) \
+         initial | baseline | ReSTIR | at 1/3 baseline | ReSTIR | texture RMSE (all) baseline | \
+         ReSTIR | ms/it baseline | ReSTIR | iterations baseline | ReSTIR |\n",
+    );
+    s.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    for x in &r.scenes {
+        let Some(o) = &x.optimization else { continue };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | **{}** | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.0} | {:.0} | {} | {} |",
+            x.name,
+            sci(o.image_relmse_initial),
+            sci(o.image_relmse_baseline),
+            sci(o.image_relmse_restir),
+            ratio(o.image_relmse_ratio),
+            o.texture_rmse_observed_initial,
+            o.texture_rmse_observed_baseline,
+            o.texture_rmse_observed_restir,
+            o.texture_rmse_observed_third_baseline,
+            o.texture_rmse_observed_third_restir,
+            o.texture_rmse_baseline,
+            o.texture_rmse_restir,
+            o.ms_per_iteration_baseline,
+            o.ms_per_iteration_restir,
+            o.iterations_baseline,
+            o.iterations_restir,
+        );
+    }
+    s
+}
+
+/// The further estimators and steps (`BenchOptions::contenders`) at equal time, with ratios
+/// over the baseline with Adam (empty when there are none).
+pub fn contender_table(r: &BenchReport) -> String {
+    let rows: Vec<_> = r
+        .scenes
+        .iter()
+        .filter_map(|x| x.optimization.as_ref().map(|o| (x, o)))
+        .flat_map(|(x, o)| o.contenders.iter().map(move |c| (x, o, c)))
+        .collect();
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut s = String::from(
+        "| scene | estimator, step | image relMSE | ÷ baseline | texture RMSE (observed) | \
+         ÷ baseline | at 1/3 | end / lowest | ms/it | iterations | settings |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for (x, _, c) in rows {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | **{}** | {:.4} | **{}** | {:.4} | {} | {:.0} | {} | {} |",
+            x.name,
+            c.name,
+            sci(c.image_relmse),
+            ratio(c.image_relmse_ratio),
+            c.texture_rmse_observed,
+            ratio(c.texture_rmse_observed_ratio),
+            c.texture_rmse_observed_third,
+            ratio(c.texture_rmse_observed / c.texture_rmse_observed_min),
+            c.ms_per_iteration,
+            c.iterations,
+            c.settings
+        );
+    }
+    s
+}
+
+/// Each estimator's settings in the run (tuned or the task's) and, with `--tune`, the
+/// search's score on its own seed.
+pub fn settings_table(r: &BenchReport) -> String {
+    let mut s = String::from(
+        "| scene | baseline settings | tuning score | ReSTIR settings | tuning score |\n\
+         |---|---|---|---|---|\n",
+    );
+    for x in &r.scenes {
+        let Some(o) = &x.optimization else { continue };
+        let score = |t: &Option<crate::bench::tune::Tuned>| {
+            t.as_ref().map_or("–".to_string(), |t| {
+                format!("{:.4} ({} trials)", t.score, t.trials.len())
+            })
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} |",
+            x.name,
+            o.settings_baseline,
+            score(&o.tuned_baseline),
+            o.settings_restir,
+            score(&o.tuned_restir)
+        );
+    }
+    s
+}
+
+/// Observed-texel RMSE along each run (at a quarter, half, three quarters and the end of
+/// the budget), its lowest value and how far the end lies above it.
+pub fn curve_table(r: &BenchReport) -> String {
+    let mut s = String::from(
+        "| scene | estimator | ¼ | ½ | ¾ | end | lowest | end / lowest |\n\
+         |---|---|---|---|---|---|---|---|\n",
+    );
+    for x in &r.scenes {
+        let Some(o) = &x.optimization else { continue };
+        let runs = [
+            (
+                "baseline".to_string(),
+                &o.curve_baseline,
+                o.texture_rmse_observed_min_baseline,
+            ),
+            (
+                "ReSTIR".to_string(),
+                &o.curve_restir,
+                o.texture_rmse_observed_min_restir,
+            ),
+        ];
+        let others = o
+            .contenders
+            .iter()
+            .map(|c| (c.name.clone(), &c.curve, c.texture_rmse_observed_min));
+        for (name, curve, min) in runs.into_iter().chain(others) {
+            let at = |f: f64| {
+                curve
+                    .iter()
+                    .take_while(|p| p.seconds <= f * r.budget_s)
+                    .last()
+                    .map_or(f64::NAN, |p| p.texture_rmse_observed)
+            };
+            let end = curve.last().map_or(f64::NAN, |p| p.texture_rmse_observed);
+            let _ = writeln!(
+                s,
+                "| {} | {name} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {} |",
+                x.name,
+                at(0.25),
+                at(0.5),
+                at(0.75),
+                end,
+                min,
+                ratio(end / min)
+            );
+        }
+    }
+    s
+}
