@@ -213,18 +213,50 @@ impl AdamPass {
         t: u32,
         timer: &mut PassTimer,
     ) -> Vec<f32> {
-        let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
-        let mut rates = Vec::with_capacity(self.textures.len());
-        for ((u, g, p), tex) in self.textures.iter_mut().zip(&set.textures) {
-            p.lr = tex.learning_rate * factor;
-            rates.push(p.lr);
-            p.bias1 = 1.0 - p.beta1.powi(t as i32);
-            p.bias2 = 1.0 - p.beta2.powi(t as i32);
-            gpu.queue.write_buffer(u, 0, bytemuck::bytes_of(p));
-            let grid = grid_2d(p.count, WORKGROUP, max_dim);
-            let timing = timer.next(PassKind::Adam);
-            encode_timed_pass(enc, "adam", &self.pipeline, &[g], grid, timing);
-        }
-        rates
+        let pass = ("adam", &self.pipeline);
+        encode_texture_steps(
+            gpu,
+            enc,
+            pass,
+            &mut self.textures,
+            set,
+            factor,
+            timer,
+            |p, lr| {
+                p.lr = lr;
+                p.bias1 = 1.0 - p.beta1.powi(t as i32);
+                p.bias2 = 1.0 - p.beta2.powi(t as i32);
+                p.count
+            },
+        )
     }
+}
+
+/// Record a step pass (`pass`: its name and pipeline) once per optimized texture, each with
+/// its uniform and bind group in `textures`: `prepare` sets a texture's uniform for the
+/// learning rate it is given (the texture's rate times `factor`) and returns its number of
+/// entries. Returns the learning rates used, one per texture. Shared by Adam and the
+/// variance-scaled step.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn encode_texture_steps<P: bytemuck::Pod>(
+    gpu: &Gpu,
+    enc: &mut wgpu::CommandEncoder,
+    (label, pipeline): (&str, &wgpu::ComputePipeline),
+    textures: &mut [(wgpu::Buffer, wgpu::BindGroup, P)],
+    set: &ParamSet,
+    factor: f32,
+    timer: &mut PassTimer,
+    mut prepare: impl FnMut(&mut P, f32) -> u32,
+) -> Vec<f32> {
+    let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
+    let mut rates = Vec::with_capacity(textures.len());
+    for ((u, g, p), tex) in textures.iter_mut().zip(&set.textures) {
+        let lr = tex.learning_rate * factor;
+        rates.push(lr);
+        let count = prepare(p, lr);
+        gpu.queue.write_buffer(u, 0, bytemuck::bytes_of(p));
+        let grid = grid_2d(count, WORKGROUP, max_dim);
+        encode_timed_pass(enc, label, pipeline, &[g], grid, timer.next(PassKind::Adam));
+    }
+    rates
 }

@@ -8,10 +8,10 @@
 //! larger step; the threshold keeps only the part of the estimate that exceeds its noise, so
 //! that scalars the images hardly determine do not drift, and a lower-variance estimate gets
 //! closer to the optimum before its steps stop.
-use crate::gpu::{encode_timed_pass, grid_2d, Gpu};
-use crate::optim::{PassKind, PassTimer};
+use crate::gpu::Gpu;
+use crate::optim::adam::encode_texture_steps;
+use crate::optim::PassTimer;
 use crate::render::params::ParamSet;
-use crate::render::WORKGROUP;
 use crate::Result;
 
 /// Which step the optimizer takes with the gradient estimate (the task file's
@@ -237,17 +237,20 @@ impl VarianceStepPass {
         t: u32,
         timer: &mut PassTimer,
     ) -> Vec<f32> {
-        let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
-        let mut rates = Vec::with_capacity(self.textures.len());
-        for ((u, g, p), tex) in self.textures.iter_mut().zip(&set.textures) {
-            p.lr = tex.learning_rate * factor;
-            rates.push(p.lr);
-            p.bias = 1.0 - p.beta.powi(t as i32);
-            gpu.queue.write_buffer(u, 0, bytemuck::bytes_of(p));
-            let grid = grid_2d(p.count, WORKGROUP, max_dim);
-            let timing = timer.next(PassKind::Adam);
-            encode_timed_pass(enc, "variance_step", &self.pipeline, &[g], grid, timing);
-        }
-        rates
+        let pass = ("variance_step", &self.pipeline);
+        encode_texture_steps(
+            gpu,
+            enc,
+            pass,
+            &mut self.textures,
+            set,
+            factor,
+            timer,
+            |p, lr| {
+                p.lr = lr;
+                p.bias = 1.0 - p.beta.powi(t as i32);
+                p.count
+            },
+        )
     }
 }
