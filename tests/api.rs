@@ -160,6 +160,49 @@ fn two_optimizers_on_one_device_interleaved_end_as_alone() {
     }
 }
 
+/// lavapipe compiles a shader at its first dispatch unless psrestir makes it compile at
+/// creation; either way each pass's compilation must fall before the clock. A pipeline
+/// created inside a step would be compiled inside the optimization's timed work (up to 20 s
+/// on a 2-core machine for the gradient pass): after `prepare`, steps create none, for every
+/// estimator and step, with both priors on (their passes are created lazily).
+#[test]
+fn steps_after_prepare_create_no_pipeline() {
+    if no_gpu() {
+        return;
+    }
+    let gpu = Gpu::new().unwrap();
+    let p = problem(&gpu, [[230, 60, 40], [40, 90, 220]]);
+    for method in [Method::Baseline, Method::Restir, Method::Recursive] {
+        for step in [
+            psrestir::optim::StepKind::Adam,
+            psrestir::optim::StepKind::Variance,
+        ] {
+            let mut s = settings(method);
+            s.step = step;
+            s.smoothness = 0.01;
+            s.multiscale_levels = 2;
+            let mut o = Optimizer::for_problem(&gpu, &p, s).unwrap();
+            o.prepare().unwrap();
+            let before = gpu.pipeline_times();
+            assert!(
+                before.iter().any(|t| t.pass == "smoothness")
+                    && before.iter().any(|t| t.pass == "multiscale_gradient"),
+                "{method:?}/{step:?}: prepare created the priors' passes"
+            );
+            for _ in 0..3 {
+                o.step().unwrap();
+            }
+            let after = gpu.pipeline_times();
+            assert_eq!(
+                after.len(),
+                before.len(),
+                "{method:?}/{step:?}: steps created {:?}",
+                &after[before.len()..]
+            );
+        }
+    }
+}
+
 #[test]
 fn the_gpu_texture_holds_the_current_values() {
     if no_gpu() {

@@ -85,6 +85,11 @@ fn traverse(o: vec3f, d: vec3f, tmax: f32, any_hit: bool) -> Hit {
     return hit;
 }
 
+// The closest hit, or with any_hit any hit (which is all an occlusion test needs).
+fn trace_ray(o: vec3f, d: vec3f, tmax: f32, any_hit: bool) -> Hit {
+    return traverse(o, d, tmax, any_hit);
+}
+
 fn trace_closest(o: vec3f, d: vec3f, tmax: f32) -> Hit {
     return traverse(o, d, tmax, false);
 }

@@ -399,7 +399,9 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         no_priors: o.no_priors,
         tuned: o.tune,
         scenes: Vec::new(),
+        pipelines: Vec::new(),
     };
+    let pipelines_before = gpu.pipeline_times().len();
     for task in &loaded {
         let name = scene_name(task);
         let dir = o.out.join(crate::image_io::file_safe(&name));
@@ -517,6 +519,7 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         };
         report::write_scene_files(&dir, &prep, &result, &g.snapshot, finals.as_ref())?;
         report.scenes.push(result);
+        report.pipelines = first_creations(&gpu.pipeline_times()[pipelines_before..]);
         // Written after every scene, so that an interrupted run keeps what it measured.
         report::write_report(&o.out, &report)?;
     }
@@ -531,4 +534,16 @@ fn scene_name(task: &Task) -> String {
         .map(|n| n.to_string_lossy().to_string())
         .filter(|n| !n.is_empty())
         .unwrap_or_else(|| task.path.display().to_string())
+}
+
+/// The first creation of each pass among `times`, in order (later ones load what the first
+/// compiled).
+fn first_creations(times: &[crate::gpu::PipelineTime]) -> Vec<crate::gpu::PipelineTime> {
+    let mut out: Vec<crate::gpu::PipelineTime> = Vec::new();
+    for t in times {
+        if !out.iter().any(|o| o.pass == t.pass) {
+            out.push(t.clone());
+        }
+    }
+    out
 }

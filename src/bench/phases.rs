@@ -178,6 +178,8 @@ pub(super) fn optimization_phase(
     let truth = prep.reference.as_deref();
     let texture_rmse = |v: &[f32]| truth.map(|r| rmse(v, r)).unwrap_or(f64::NAN);
     let observed = opt.observed_texels()?.to_vec();
+    // Every pass compiled before the clock starts.
+    opt.prepare()?;
     let texture_rmse_observed = |v: &[f32]| {
         truth
             .map(|r| rmse_observed(&prep.set, v, r, &observed))

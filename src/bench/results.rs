@@ -276,6 +276,9 @@ pub struct BenchReport {
     pub tuned: bool,
     /// Per scene.
     pub scenes: Vec<SceneResult>,
+    /// Each pass's pipeline the first time this run created it: seconds of creation and
+    /// compilation (or a load from the driver's shader cache), outside every clock.
+    pub pipelines: Vec<crate::gpu::PipelineTime>,
 }
 
 /// What the gradient images show (one gradient of each estimator at one state).

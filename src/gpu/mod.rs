@@ -5,8 +5,10 @@
 
 pub mod abi;
 mod binding;
+mod prepare;
 pub mod shaders;
 pub use binding::{Binding, GroupDecl};
+pub use prepare::PipelineTime;
 pub use shaders::Tracer;
 
 use crate::{Error, Result};
@@ -41,6 +43,8 @@ pub struct Gpu {
     errors: Arc<Mutex<Vec<Fault>>>,
     /// Why the device was lost, once it is.
     lost: Arc<Mutex<Option<String>>>,
+    /// The pipelines created so far and what each took ([`Gpu::pipeline_times`]).
+    pipelines: Arc<Mutex<Vec<PipelineTime>>>,
 }
 
 /// A recorded device error, by kind.
@@ -289,6 +293,7 @@ impl Gpu {
             tracer: Tracer::Software,
             errors,
             lost,
+            pipelines: Arc::default(),
         }
     }
 
@@ -431,12 +436,15 @@ impl Gpu {
     }
 
     /// Compile a compute pass from its WGSL file (composed with `shaders/shared`), with the
-    /// given bind group layouts, catching validation errors as [`Error::Shader`].
+    /// given bind group layouts, catching validation errors as [`Error::Shader`]. The driver
+    /// compiles it here, not at its first dispatch (`prepare.rs`), and the time it took is
+    /// recorded ([`Gpu::pipeline_times`]).
     pub fn compute_pipeline(
         &self,
         pass: &str,
         layouts: &[&wgpu::BindGroupLayout],
     ) -> Result<wgpu::ComputePipeline> {
+        let start = std::time::Instant::now();
         let source = shaders::compose_for(pass, self.tracer)?;
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = self
@@ -445,13 +453,13 @@ impl Gpu {
                 label: Some(pass),
                 source: wgpu::ShaderSource::Wgsl(source.into()),
             });
-        let layouts: Vec<Option<&wgpu::BindGroupLayout>> =
+        let optional: Vec<Option<&wgpu::BindGroupLayout>> =
             layouts.iter().map(|l| Some(*l)).collect();
         let layout = self
             .device
             .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some(pass),
-                bind_group_layouts: &layouts,
+                bind_group_layouts: &optional,
                 immediate_size: 0,
             });
         let pipeline = self
@@ -470,6 +478,8 @@ impl Gpu {
                 msg: e.to_string(),
             });
         }
+        self.compile_now(pass, &pipeline, layouts)?;
+        self.record_pipeline(pass, start);
         Ok(pipeline)
     }
 }

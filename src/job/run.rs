@@ -66,6 +66,9 @@ pub struct RunSummary {
     pub pass_times: Option<PassTimes>,
     /// Whether the run stopped early because `RunOptions::interrupt` was set.
     pub interrupted: bool,
+    /// Seconds this run spent creating (compiling) GPU pipelines, all before the
+    /// optimization's clock started ([`Gpu::pipeline_times`]).
+    pub pipeline_s: f64,
 }
 
 /// A render as it is compared with its target: times the camera's exposure.
@@ -203,6 +206,11 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     remove_stale_temporaries(&out);
     let ckpt_path = out.join("checkpoint.bin");
     let checkpoint = open_checkpoint(&out, &ckpt_path, opts.resume)?;
+    let pipelines_before = gpu.pipeline_times().len();
+    log::info!(
+        "preparing the targets and the GPU passes (a driver's first run on a machine compiles \
+         their shaders; later runs load them from its cache)"
+    );
     let prep = Problem::from_task(gpu, task, &out, opts.resume)?;
     let settings = task_settings(task, &prep.cameras, opts.method, opts.restir);
     log::info!(
@@ -212,6 +220,12 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     );
     let initial_rmse = prep.reference.as_ref().map(|r| rmse(&prep.set.values, r));
     let mut opt = Optimizer::for_problem(gpu, &prep, settings)?;
+    opt.prepare()?;
+    let (n_pipelines, pipeline_s) = gpu.pipeline_seconds_since(pipelines_before);
+    log::info!(
+        "{n_pipelines} GPU passes ready after {pipeline_s:.1} s of pipeline creation, before \
+         the optimization's clock starts"
+    );
     let layout = layout_string(&prep.set);
     let (mut rows, elapsed_before) = match checkpoint {
         Some(c) => resume(&mut opt, c, &ckpt_path, &layout, prep.set.values.len())?,
@@ -347,6 +361,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         faults,
         pass_times: pass_times.mean(),
         interrupted: was_interrupted,
+        pipeline_s,
     })
 }
 

@@ -336,10 +336,17 @@ impl Optimizer {
         self.loss.read_loss(&self.gpu)
     }
 
-    /// One iteration: render, loss, gradient, Adam. Returns the loss of the render.
-    pub fn step(&mut self) -> Result<StepStats> {
+    /// Create the passes that the first [`Optimizer::step`] would otherwise create (the
+    /// priors', which need the observed texels), so that no pipeline is compiled inside a
+    /// timed iteration. `step` calls it too; calling it first only moves the work.
+    pub fn prepare(&mut self) -> Result<()> {
         self.prepare_smoothness()?;
-        self.prepare_multiscale()?;
+        self.prepare_multiscale()
+    }
+
+    /// One iteration: render, loss, gradient, step. Returns the loss of the render.
+    pub fn step(&mut self) -> Result<StepStats> {
+        self.prepare()?;
         let mut enc = self
             .gpu
             .device
@@ -411,6 +418,7 @@ impl Optimizer {
                 "Optimizer::run needs a number of iterations, a time budget or both".into(),
             ));
         }
+        self.prepare()?;
         let start = std::time::Instant::now();
         let mut last = None;
         let mut done = 0;

@@ -467,6 +467,9 @@ pub fn report_markdown(r: &BenchReport) -> String {
         md.push_str("## GPU time per pass (ms, timestamp queries), state and merge work\n\n");
         md.push_str(&pass_table(r));
     }
+    if !r.pipelines.is_empty() {
+        md.push_str(&pipeline_markdown(&r.pipelines));
+    }
     md.push_str("\n## Per scene\n\n");
     for x in &r.scenes {
         let _ = writeln!(
@@ -485,6 +488,24 @@ pub fn report_markdown(r: &BenchReport) -> String {
             }
         );
     }
+    md
+}
+
+/// The pipeline-creation section: each pass's first creation in the run, slowest first.
+fn pipeline_markdown(pipelines: &[crate::gpu::PipelineTime]) -> String {
+    let mut rows = pipelines.to_vec();
+    rows.sort_by(|a, b| b.seconds.total_cmp(&a.seconds));
+    let total: f64 = rows.iter().map(|p| p.seconds).sum();
+    let mut md = String::from("\n## Pipeline creation\n\n| pass | seconds |\n|---|---:|\n");
+    for p in &rows {
+        let _ = writeln!(md, "| {} | {:.2} |", p.pass, p.seconds);
+    }
+    let _ = writeln!(
+        md,
+        "| total | {total:.2} |\n\nEach pass the first time this run created it, shader \
+         compilation included (a load instead where the driver's shader cache held it). All of \
+         it happens before the clocks above start."
+    );
     md
 }
 

@@ -1,0 +1,158 @@
+//! Pipelines compiled when they are created, not at their first dispatch, and the time that
+//! takes, recorded per pass.
+//!
+//! lavapipe (Mesa's CPU Vulkan driver) turns a compute shader into machine code at the first
+//! dispatch that uses it, not in `vkCreateComputePipelines`: on the project's 2-core machine
+//! the first iteration of the default task took 20.6 s instead of 0.1 s, inside the
+//! optimization's clock, and every equal-time figure taken on a cold shader cache was off by
+//! that much. [`Gpu::compute_pipeline`] therefore dispatches every new pipeline once with zero
+//! workgroups, on placeholder resources of the layout reflected from its WGSL: the driver
+//! compiles it (or loads it from Mesa's shader cache) and runs nothing. On a GPU, whose
+//! driver compiles at creation, this costs one empty submission per pipeline.
+use super::{shaders, Binding, Gpu};
+use crate::Result;
+use std::time::Instant;
+
+/// Placeholder buffer size: enough for any uniform block and the fixed part of any storage
+/// binding of the passes (wgpu checks a binding's size against the shader's even when no
+/// workgroup runs).
+const PLACEHOLDER_BYTES: u64 = 1 << 16;
+
+/// Seconds spent creating (and compiling) one pass's pipeline.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct PipelineTime {
+    /// The pass (its WGSL file).
+    pub pass: String,
+    /// Wall-clock seconds of creation and compilation.
+    pub seconds: f64,
+}
+
+impl Gpu {
+    /// Every pipeline this device has created so far, with the seconds each took, in order.
+    pub fn pipeline_times(&self) -> Vec<PipelineTime> {
+        self.pipelines.lock().map(|v| v.clone()).unwrap_or_default()
+    }
+
+    /// Seconds spent creating pipelines since `since` entries of [`Gpu::pipeline_times`].
+    pub fn pipeline_seconds_since(&self, since: usize) -> (usize, f64) {
+        let all = self.pipeline_times();
+        let new = all.get(since..).unwrap_or_default();
+        (new.len(), new.iter().map(|p| p.seconds).sum())
+    }
+
+    pub(super) fn record_pipeline(&self, pass: &str, start: Instant) {
+        let seconds = start.elapsed().as_secs_f64();
+        log::debug!("pipeline `{pass}` ready in {seconds:.2} s");
+        if let Ok(mut v) = self.pipelines.lock() {
+            v.push(PipelineTime {
+                pass: pass.into(),
+                seconds,
+            });
+        }
+    }
+
+    /// Dispatch `pipeline` of `pass` once with zero workgroups on placeholder resources, so
+    /// that the driver compiles it now. A pass that binds an acceleration structure (ray
+    /// queries, GPUs only, where creation compiles) is left alone.
+    pub(super) fn compile_now(
+        &self,
+        pass: &str,
+        pipeline: &wgpu::ComputePipeline,
+        layouts: &[&wgpu::BindGroupLayout],
+    ) -> Result<()> {
+        let mut kinds = Vec::new();
+        for g in 0..layouts.len() {
+            kinds.push(shaders::bindings_for(pass, g as u32, self.tracer)?);
+        }
+        if kinds
+            .iter()
+            .flatten()
+            .any(|(_, k)| *k == Binding::AccelerationStructure)
+        {
+            return Ok(());
+        }
+        let label = format!("{pass} placeholder");
+        let resources: Vec<Vec<Placeholder>> = kinds
+            .iter()
+            .map(|group| {
+                group
+                    .iter()
+                    .map(|(_, k)| self.placeholder(&label, *k))
+                    .collect()
+            })
+            .collect();
+        let groups: Vec<wgpu::BindGroup> = resources
+            .iter()
+            .zip(layouts)
+            .map(|(group, layout)| {
+                let entries: Vec<wgpu::BindGroupEntry> = group
+                    .iter()
+                    .enumerate()
+                    .map(|(i, r)| wgpu::BindGroupEntry {
+                        binding: i as u32,
+                        resource: match r {
+                            Placeholder::Buffer(b) => b.as_entire_binding(),
+                            Placeholder::Texture(v) => wgpu::BindingResource::TextureView(v),
+                        },
+                    })
+                    .collect();
+                self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some(&label),
+                    layout,
+                    entries: &entries,
+                })
+            })
+            .collect();
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some(&label),
+            });
+        {
+            let mut p = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(&label),
+                timestamp_writes: None,
+            });
+            p.set_pipeline(pipeline);
+            for (i, g) in groups.iter().enumerate() {
+                p.set_bind_group(i as u32, g, &[]);
+            }
+            p.dispatch_workgroups(0, 1, 1);
+        }
+        self.queue.submit([enc.finish()]);
+        self.wait(&label)
+    }
+
+    fn placeholder(&self, label: &str, kind: Binding) -> Placeholder {
+        match kind {
+            Binding::StorageTextureRgba32FloatWrite => {
+                let t = self.device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size: wgpu::Extent3d {
+                        width: 1,
+                        height: 1,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: wgpu::TextureFormat::Rgba32Float,
+                    usage: wgpu::TextureUsages::STORAGE_BINDING,
+                    view_formats: &[],
+                });
+                Placeholder::Texture(t.create_view(&Default::default()))
+            }
+            _ => Placeholder::Buffer(self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: PLACEHOLDER_BYTES,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::UNIFORM,
+                mapped_at_creation: false,
+            })),
+        }
+    }
+}
+
+enum Placeholder {
+    Buffer(wgpu::Buffer),
+    Texture(wgpu::TextureView),
+}
