@@ -53,13 +53,17 @@ fn mis_bsdf(p_bsdf: f32, p_light: f32) -> f32 {
 }
 
 // The first hit of a camera ray and its two direct samples: light sampling (NEE), then BSDF
-// sampling. The three rays (camera, shadow, BSDF) are traced at one call site, in a loop over
-// these stages: a CPU device inlines every function call, so each call site of the traversal
-// would be compiled anew (measured on lavapipe: about 1.5 s of pipeline creation each).
+// sampling. A CPU device inlines every function call, so each call site of a function is
+// compiled anew (measured on lavapipe: about 1.5 s of pipeline creation per traversal). So
+// the three rays (camera, shadow, BSDF) are traced at one call site, in a loop over these
+// stages, and what arrives at the shading point (emission at a hit, an area light's point,
+// the environment in a direction) is evaluated at one call site too: STAGE_LIGHT traces
+// nothing and evaluates the sampled light's point there.
 const STAGE_CAMERA: u32 = 0u;
-const STAGE_SHADOW: u32 = 1u;
-const STAGE_BSDF: u32 = 2u;
-const STAGE_DONE: u32 = 3u;
+const STAGE_LIGHT: u32 = 1u;
+const STAGE_SHADOW: u32 = 2u;
+const STAGE_BSDF: u32 = 3u;
+const STAGE_DONE: u32 = 4u;
 
 struct DirectPath {
     // The camera ray's hit (tri NONE on a miss); with compact_paths, at the barycentrics
@@ -101,8 +105,11 @@ fn direct_path(o: vec3f, d: vec3f, optimized_only: bool) -> DirectPath {
     var nee_weight = 0.0;
     var u_bsdf = vec3f(0.0);
     var bsdf_pdf = 0.0;
-    for (var ray = 0u; ray < 3u && stage != STAGE_DONE; ray++) {
-        var hit = trace_ray(ray_o, ray_d, ray_tmax, stage == STAGE_SHADOW);
+    for (var step = 0u; step < 4u && stage != STAGE_DONE; step++) {
+        var hit = Hit(ray_tmax, NONE, 0.0, 0.0);
+        if stage != STAGE_LIGHT {
+            hit = trace_ray(ray_o, ray_d, ray_tmax, stage == STAGE_SHADOW);
+        }
         var next_bsdf = false;
         if stage == STAGE_SHADOW {
             if hit.tri == NONE {
@@ -110,9 +117,18 @@ fn direct_path(o: vec3f, d: vec3f, optimized_only: bool) -> DirectPath {
             }
             next_bsdf = true;
         } else {
-            // The camera ray or the BSDF ray: what arrives along it.
+            // What arrives: from the emitter point (tri, b) seen from its front or back, or
+            // from the environment along dir when tri is NONE.
+            var tri = hit.tri;
+            var dir = ray_d;
             var front = false;
-            if stage == STAGE_CAMERA && hit.tri != NONE {
+            if stage == STAGE_LIGHT {
+                tri = ls.tri;
+                hit.b1 = ls.b.x;
+                hit.b2 = ls.b.y;
+                dir = ls.wi;
+                front = ls.front;
+            } else if stage == STAGE_CAMERA && hit.tri != NONE {
                 if compact_paths {
                     hit = stored_hit(hit.tri, vec2u(bary_round(hit.b1), bary_round(hit.b2)));
                 }
@@ -125,25 +141,82 @@ fn direct_path(o: vec3f, d: vec3f, optimized_only: bool) -> DirectPath {
                 front = dot(ng, ray_d) < 0.0;
             }
             var le = vec3f(0.0);
-            var p_light = 0.0;
-            if hit.tri == NONE {
-                le = env_radiance(ray_d);
-                if stage == STAGE_BSDF {
-                    p_light = env_light_pdf(ray_d);
-                }
-            } else {
-                // Zero at the back of a single-sided surface (which shades black).
-                le = emitted(hit.tri, hit.b1, hit.b2, front);
-                if stage == STAGE_BSDF {
-                    p_light = area_light_pdf(hit.tri, out.sf.p, ray_o + hit.t * ray_d);
+            // The environment's density in direction dir, light choice included.
+            var p_env = 0.0;
+            if !(stage == STAGE_LIGHT && ls.is_delta) {
+                if tri == NONE {
+                    le = env_radiance(dir);
+                    if stage != STAGE_CAMERA {
+                        p_env = env_light_pdf(dir);
+                    }
+                } else {
+                    // Zero at the back of a single-sided surface (which shades black).
+                    le = emitted(tri, hit.b1, hit.b2, front);
                 }
             }
             if stage == STAGE_BSDF {
+                var p_light = p_env;
+                if hit.tri != NONE {
+                    p_light = area_light_pdf(hit.tri, out.sf.p, ray_o + hit.t * ray_d);
+                }
                 let w = mis_bsdf(bsdf_pdf, p_light);
                 if !(all(le == vec3f(0.0)) || w <= 0.0) {
                     out.bsdf = DirectSample(ray_d, le, w / bsdf_pdf);
                 }
                 stage = STAGE_DONE;
+            } else if stage == STAGE_LIGHT {
+                if ls.env {
+                    ls.radiance = le;
+                    ls.pdf = p_env;
+                } else if !ls.is_delta {
+                    ls.radiance = le;
+                }
+                let sf = out.sf;
+                stage = STAGE_DONE;
+                next_bsdf = true;
+                if !(ls.pdf <= 0.0 || all(ls.radiance == vec3f(0.0)) || dot(ls.wi, sf.ng) <= 0.0) {
+                    nee_weight = 1.0;
+                    if !ls.is_delta {
+                        let p_bsdf = brdf_pdf(out.mat, to_local(sf.frame, sf.wo), to_local(sf.frame, ls.wi));
+                        nee_weight = mis_light(ls.pdf, p_bsdf);
+                    }
+                    if !(nee_weight <= 0.0) {
+                        shadow_rays += 1u;
+                        // The shadow segment runs from the offset origin to the light point
+                        // itself, moved off an emitter's surface towards the shading point by
+                        // the same relative offset, so that neither end hits its own surface.
+                        // (A ray of length `dist` along wi from the offset origin would end
+                        // past an emitter's plane wherever the origin's offset exceeds its
+                        // margin along the plane's normal, and find the emitter itself in the
+                        // way; tests/techniques.rs and tests/analytic.rs catch that.)
+                        let so = offset_origin(sf, ls.wi);
+                        if ls.dist >= 3.0e38 {
+                            ray_o = so;
+                            ray_d = ls.wi;
+                            ray_tmax = 3.0e38;
+                            stage = STAGE_SHADOW;
+                        } else {
+                            var q = sf.p + ls.dist * ls.wi;
+                            if any(ls.n != vec3f(0.0)) {
+                                let scale = 1e-4 * (1.0 + max(max(abs(q.x), abs(q.y)), abs(q.z)));
+                                q += ls.n * select(-scale, scale, dot(ls.n, -ls.wi) >= 0.0);
+                            }
+                            let to = q - so;
+                            let len = length(to);
+                            if len <= 0.0 {
+                                out.nee = DirectSample(ls.wi, ls.radiance, nee_weight / ls.pdf);
+                            } else {
+                                ray_o = so;
+                                ray_d = to / len;
+                                ray_tmax = len * (1.0 - 1e-4);
+                                stage = STAGE_SHADOW;
+                            }
+                        }
+                        if stage == STAGE_SHADOW {
+                            next_bsdf = false;
+                        }
+                    }
+                }
             } else {
                 out.e = le;
                 stage = STAGE_DONE;
@@ -155,52 +228,8 @@ fn direct_path(o: vec3f, d: vec3f, optimized_only: bool) -> DirectPath {
                     let u_pick = rand();
                     let u_light = rand2();
                     u_bsdf = vec3f(rand(), rand2());
-                    next_bsdf = true;
                     ls = sample_light(sf.p, u_pick, u_light);
-                    if !(ls.pdf <= 0.0 || all(ls.radiance == vec3f(0.0)) || dot(ls.wi, sf.ng) <= 0.0) {
-                        nee_weight = 1.0;
-                        if !ls.is_delta {
-                            let p_bsdf = brdf_pdf(out.mat, to_local(sf.frame, sf.wo), to_local(sf.frame, ls.wi));
-                            nee_weight = mis_light(ls.pdf, p_bsdf);
-                        }
-                        if !(nee_weight <= 0.0) {
-                            shadow_rays += 1u;
-                            // The shadow segment runs from the offset origin to the light
-                            // point itself, moved off an emitter's surface towards the shading
-                            // point by the same relative offset, so that neither end hits its
-                            // own surface. (A ray of length `dist` along wi from the offset
-                            // origin would end past an emitter's plane wherever the origin's
-                            // offset exceeds its margin along the plane's normal, and find the
-                            // emitter itself in the way; tests/techniques.rs and
-                            // tests/analytic.rs catch that.)
-                            let so = offset_origin(sf, ls.wi);
-                            if ls.dist >= 3.0e38 {
-                                ray_o = so;
-                                ray_d = ls.wi;
-                                ray_tmax = 3.0e38;
-                                stage = STAGE_SHADOW;
-                            } else {
-                                var q = sf.p + ls.dist * ls.wi;
-                                if any(ls.n != vec3f(0.0)) {
-                                    let scale = 1e-4 * (1.0 + max(max(abs(q.x), abs(q.y)), abs(q.z)));
-                                    q += ls.n * select(-scale, scale, dot(ls.n, -ls.wi) >= 0.0);
-                                }
-                                let to = q - so;
-                                let len = length(to);
-                                if len <= 0.0 {
-                                    out.nee = DirectSample(ls.wi, ls.radiance, nee_weight / ls.pdf);
-                                } else {
-                                    ray_o = so;
-                                    ray_d = to / len;
-                                    ray_tmax = len * (1.0 - 1e-4);
-                                    stage = STAGE_SHADOW;
-                                }
-                            }
-                            if stage == STAGE_SHADOW {
-                                next_bsdf = false;
-                            }
-                        }
-                    }
+                    stage = STAGE_LIGHT;
                 }
             }
         }
@@ -273,25 +302,43 @@ fn direct_radiance_states(o: vec3f, d: vec3f, both: bool) -> array<vec3f, 2> {
 // that a stored path (stored_vertex, path_factor) re-evaluates to the same value.
 var<private> compact_paths: bool = false;
 
+// One technique's sample as the gradient passes use it.
+struct TechniqueSample {
+    // Direction, radiance (rounded with compact_paths) and MIS weight / density.
+    ds: DirectSample,
+    grad: BrdfGrad,
+    // The path as the BRDF sees it.
+    vertex: PathVertex,
+    // With compact_paths: the fixed-point direction and the RGBE radiance
+    // (shared/compact_path.wgsl).
+    ko: vec2u,
+    rgbe: u32,
+}
+
+// The two samples of a GradientSample, in the order in which every pass adds them.
+const SAMPLE_NEE: u32 = 0u;
+const SAMPLE_BSDF: u32 = 1u;
+
 struct GradientSample {
     valid: bool,
     sf: Surface,
     m: Material,
-    nee: DirectSample,
-    nee_grad: BrdfGrad,
-    // The path of each technique as the BRDF sees it.
-    nee_vertex: PathVertex,
-    bsdf: DirectSample,
-    bsdf_grad: BrdfGrad,
-    bsdf_vertex: PathVertex,
-    // With compact_paths: the hit's triangle and fixed-point barycentrics, and each
-    // technique's fixed-point direction and RGBE radiance (shared/compact_path.wgsl).
+    // With compact_paths: the hit's triangle and fixed-point barycentrics.
     tri: u32,
     kb: vec2u,
-    nee_ko: vec2u,
-    nee_rgbe: u32,
-    bsdf_ko: vec2u,
-    bsdf_rgbe: u32,
+    // Light sampling and BSDF sampling. The passes loop over the two (technique_sample)
+    // rather than naming each, so that their code is compiled once (see direct_path).
+    nee: TechniqueSample,
+    bsdf: TechniqueSample,
+}
+
+// Sample t (SAMPLE_NEE or SAMPLE_BSDF) of g. (A struct copy by branch: an array of the two
+// indexed by t compiled slower on lavapipe.)
+fn technique_sample(g: GradientSample, t: u32) -> TechniqueSample {
+    if t == SAMPLE_BSDF {
+        return g.bsdf;
+    }
+    return g.nee;
 }
 
 // The octahedral coordinates of wi (world space) in sf's frame, rounded to the fixed point
@@ -323,32 +370,31 @@ fn gradient_sample(o: vec3f, d: vec3f) -> GradientSample {
         out.tri = p.hit.tri;
         out.kb = vec2u(bary_round(p.hit.b1), bary_round(p.hit.b2));
     }
-    let gltf = p.gltf;
-    let mat = p.mat;
-    let s = p;
-    out.nee = s.nee;
-    out.bsdf = s.bsdf;
-    if compact_paths {
-        // A radiance too large for any format is left as it is, so that the candidate pass
-        // finds its value not finite and drops and counts it.
-        out.nee_rgbe = rgbe_pack(s.nee.radiance);
-        if all(s.nee.radiance < vec3f(3.0e38)) {
-            out.nee.radiance = rgbe_unpack(out.nee_rgbe);
+    let wo_l = oct_decode(oct_encode(to_local(out.sf.frame, out.sf.wo)));
+    for (var t = 0u; t < 2u; t++) {
+        var ts: TechniqueSample;
+        ts.ds = p.nee;
+        if t == SAMPLE_BSDF {
+            ts.ds = p.bsdf;
         }
-        out.bsdf_rgbe = rgbe_pack(s.bsdf.radiance);
-        if all(s.bsdf.radiance < vec3f(3.0e38)) {
-            out.bsdf.radiance = rgbe_unpack(out.bsdf_rgbe);
+        ts.rgbe = 0u;
+        if compact_paths {
+            // A radiance too large for any format is left as it is, so that the candidate
+            // pass finds its value not finite and drops and counts it.
+            ts.rgbe = rgbe_pack(ts.ds.radiance);
+            if all(ts.ds.radiance < vec3f(3.0e38)) {
+                ts.ds.radiance = rgbe_unpack(ts.rgbe);
+            }
+        }
+        let wi = rounded_direction(out.sf, ts.ds.wi);
+        ts.ko = wi.ko;
+        ts.vertex = path_vertex(out.sf, p.gltf, wi.oct);
+        ts.grad = brdf_eval_cos_grad(p.mat, wo_l, oct_decode(wi.oct));
+        if t == SAMPLE_BSDF {
+            out.bsdf = ts;
+        } else {
+            out.nee = ts;
         }
     }
-    let nee_wi = rounded_direction(out.sf, s.nee.wi);
-    let bsdf_wi = rounded_direction(out.sf, s.bsdf.wi);
-    out.nee_ko = nee_wi.ko;
-    out.bsdf_ko = bsdf_wi.ko;
-    out.nee_vertex = path_vertex(out.sf, gltf, nee_wi.oct);
-    out.bsdf_vertex = path_vertex(out.sf, gltf, bsdf_wi.oct);
-    let wo_l = oct_decode(out.nee_vertex.wo);
-    out.nee_grad = brdf_eval_cos_grad(mat, wo_l, oct_decode(nee_wi.oct));
-    out.bsdf_grad = brdf_eval_cos_grad(mat, wo_l, oct_decode(bsdf_wi.oct));
-    out.valid = true;
     return out;
 }

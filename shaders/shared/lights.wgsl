@@ -8,7 +8,10 @@
 // including the light choice; for delta lights the choice probability alone. dist: distance to
 // the sampled point (3e38 for directions at infinity). n: the emitter's unit geometric normal at
 // the sampled point for area lights (zero for the others), so that the shadow ray can end just
-// off the emitter's surface.
+// off the emitter's surface. sample_light leaves the radiance of area lights and the radiance
+// and density of the environment to its caller (light_arrival), which evaluates them where it
+// evaluates what a ray finds: tri, b and front say which emitter point, env whether the
+// environment.
 struct LightSample {
     wi: vec3f,
     dist: f32,
@@ -16,6 +19,10 @@ struct LightSample {
     pdf: f32,
     n: vec3f,
     is_delta: bool,
+    tri: u32,
+    b: vec2f,
+    front: bool,
+    env: bool,
 }
 
 // Index of the light whose CDF interval holds u. Bounded binary search.
@@ -148,8 +155,10 @@ fn range_window(dist: f32, range: f32) -> f32 {
     return x * x;
 }
 
+// The radiance of an area light and the radiance and density of the environment are left to
+// the caller (LightSample).
 fn sample_light(p: vec3f, u_pick: f32, u: vec2f) -> LightSample {
-    var s = LightSample(vec3f(0.0, 0.0, 1.0), 0.0, vec3f(0.0), 0.0, vec3f(0.0), true);
+    var s = LightSample(vec3f(0.0, 0.0, 1.0), 0.0, vec3f(0.0), 0.0, vec3f(0.0), true, NONE, vec2f(0.0), false, false);
     if scene.n_lights == 0u {
         return s;
     }
@@ -195,15 +204,16 @@ fn sample_light(p: vec3f, u_pick: f32, u: vec2f) -> LightSample {
             s.dist = dist;
             s.n = c / area2;
             let cos_l = dot(s.n, -s.wi);
-            s.radiance = emitted(light.tri, b.x, b.y, cos_l > 0.0);
+            s.tri = light.tri;
+            s.b = b;
+            s.front = cos_l > 0.0;
             s.pdf = light.pmf * d2 / (0.5 * area2 * max(abs(cos_l), 1e-12));
             s.is_delta = false;
         }
         default: {
             s.wi = sample_env(u);
             s.dist = 3.0e38;
-            s.radiance = env_radiance(s.wi);
-            s.pdf = light.pmf * env_pdf(s.wi);
+            s.env = true;
             s.is_delta = false;
         }
     }

@@ -329,7 +329,10 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
+    // The last row's evaluation render, like every evaluation, is not optimization time.
+    let t0 = Instant::now();
     metrics.complete_last(&mut rows, &opt)?;
+    excluded += t0.elapsed().as_secs_f64();
     let session_s = session_start.elapsed().as_secs_f64() - excluded;
     let elapsed = elapsed_before + session_s;
     let done = opt.iteration - start_iter;

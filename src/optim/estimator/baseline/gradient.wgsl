@@ -92,9 +92,12 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         rng_init(gp.seed, (gp.sample_offset + s) * a.n_pixels + a.pixel, 0u);
         let d = camera_direction(gp.camera, a.xy + rand2());
         let g = gradient_sample(gp.camera.origin, d);
-        if g.valid {
-            scatter(g.m, g.sf.uv, g.nee_grad, g.nee.radiance * g.nee.scale, a.adj);
-            scatter(g.m, g.sf.uv, g.bsdf_grad, g.bsdf.radiance * g.bsdf.scale, a.adj);
+        if !g.valid {
+            continue;
+        }
+        for (var t = 0u; t < 2u; t++) {
+            let ts = technique_sample(g, t);
+            scatter(g.m, g.sf.uv, ts.grad, ts.ds.radiance * ts.ds.scale, a.adj);
         }
     }
     atomicAdd(&gstats[GRADIENT_STAT_SAMPLES], gp.spp);

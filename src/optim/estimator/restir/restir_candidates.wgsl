@@ -74,11 +74,12 @@ var<private> lost: u32 = 0u;
 var<private> dropped: u32 = 0u;
 var<private> unmapped: u32 = 0u;
 
-// adj: the pixel's adjoint (for the value), adj_t: its target adjoint; bg_prev and adj_t_prev:
-// the path's BRDF derivatives and the pixel's target adjoint under the previous iteration's
-// state (unused unless cp.prev_targets); ko, rgbe: the technique's stored direction and
-// radiance.
-fn offer_technique(g: GradientSample, ds: DirectSample, bg: BrdfGrad, bg_prev: BrdfGrad, ko: vec2u, rgbe: u32, adj: vec3f, adj_t: vec3f, adj_t_prev: vec3f, info: u32) {
+// ts: the technique's sample; adj: the pixel's adjoint (for the value), adj_t: its target
+// adjoint; bg_prev and adj_t_prev: the path's BRDF derivatives and the pixel's target adjoint
+// under the previous iteration's state (unused unless cp.prev_targets).
+fn offer_technique(g: GradientSample, ts: TechniqueSample, bg_prev: BrdfGrad, adj: vec3f, adj_t: vec3f, adj_t_prev: vec3f, info: u32) {
+    let ds = ts.ds;
+    let bg = ts.grad;
     if ds.scale == 0.0 {
         return;
     }
@@ -122,7 +123,7 @@ fn offer_technique(g: GradientSample, ds: DirectSample, bg: BrdfGrad, bg_prev: B
             let s = select(0u, 1u, cp.positivize != 0u && q < 0.0);
             let slot = fresh_slot(atomicLoad(&headers[i]), s);
             offered += 1u;
-            if !reservoir_offer(slot, i, s, w, rand(), Candidate(info, path_words(g.tri, g.kb, ko, rgbe, q_prev))) {
+            if !reservoir_offer(slot, i, s, w, rand(), Candidate(info, path_words(g.tri, g.kb, ts.ko, ts.rgbe, q_prev))) {
                 lost += 1u;
             }
         }
@@ -169,20 +170,23 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         if !g.valid {
             continue;
         }
-        var nee_prev = g.nee_grad;
-        var bsdf_prev = g.bsdf_grad;
+        var mat_prev = SurfaceMaterial(vec3f(0.0), 0.0, 0.0);
         if cp.prev_targets != 0u {
             // The path's derivatives under the previous textures, from the stored (rounded)
             // directions, as the merge would evaluate them (shared/surface.wgsl, path_factor).
             use_prev_params = true;
-            let mat_prev = with_optimized(g.sf.material, g.sf.uv, fixed_unpack(g.sf.material, g.nee_vertex.fixed));
+            mat_prev = with_optimized(g.sf.material, g.sf.uv, fixed_unpack(g.sf.material, g.nee.vertex.fixed));
             use_prev_params = false;
-            let wo = oct_decode(g.nee_vertex.wo);
-            nee_prev = brdf_eval_cos_grad(mat_prev, wo, oct_decode(g.nee_vertex.wi));
-            bsdf_prev = brdf_eval_cos_grad(mat_prev, wo, oct_decode(g.bsdf_vertex.wi));
         }
-        offer_technique(g, g.nee, g.nee_grad, nee_prev, g.nee_ko, g.nee_rgbe, a.adj, adj_t, adj_t_prev, info);
-        offer_technique(g, g.bsdf, g.bsdf_grad, bsdf_prev, g.bsdf_ko, g.bsdf_rgbe, a.adj, adj_t, adj_t_prev, info | (1u << INFO_TECH_SHIFT));
+        let wo = oct_decode(g.nee.vertex.wo);
+        for (var t = 0u; t < 2u; t++) {
+            let ts = technique_sample(g, t);
+            var grad_prev = ts.grad;
+            if cp.prev_targets != 0u {
+                grad_prev = brdf_eval_cos_grad(mat_prev, wo, oct_decode(ts.vertex.wi));
+            }
+            offer_technique(g, ts, grad_prev, a.adj, adj_t, adj_t_prev, info | (t << INFO_TECH_SHIFT));
+        }
     }
     atomicAdd(&cstats[CANDIDATE_STAT_OFFERED], offered);
     if lost > 0u {
