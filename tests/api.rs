@@ -161,7 +161,8 @@ fn two_optimizers_on_one_device_interleaved_end_as_alone() {
 }
 
 /// lavapipe compiles a shader at its first dispatch unless psrestir makes it compile at
-/// creation; either way each pass's compilation must fall before the clock. A pipeline
+/// creation; either way each pass's compilation must fall before the clock, and
+/// `Optimizer::passes` (what a second device compiles ahead) must name what is created. A pipeline
 /// created inside a step would be compiled inside the optimization's timed work (up to 20 s
 /// on a 2-core machine for the gradient pass): after `prepare`, steps create none, for every
 /// estimator and step, with both priors on (their passes are created lazily).
@@ -181,9 +182,21 @@ fn steps_after_prepare_create_no_pipeline() {
             s.step = step;
             s.smoothness = 0.01;
             s.multiscale_levels = 2;
-            let mut o = Optimizer::for_problem(&gpu, &p, s).unwrap();
+            let created = gpu.pipeline_times().len();
+            let mut o = Optimizer::for_problem(&gpu, &p, s.clone()).unwrap();
             o.prepare().unwrap();
             let before = gpu.pipeline_times();
+            // The list that a second device compiles ahead (Gpu::compile_elsewhere) is what
+            // the optimizer creates, besides the renderer's passes.
+            let mut made: Vec<&str> = before[created..]
+                .iter()
+                .map(|t| t.pass.as_str())
+                .filter(|p| !["render", "trace_rays"].contains(p))
+                .collect();
+            let mut listed = Optimizer::passes(&s);
+            made.sort_unstable();
+            listed.sort_unstable();
+            assert_eq!(made, listed, "{method:?}/{step:?}: Optimizer::passes");
             assert!(
                 before.iter().any(|t| t.pass == "smoothness")
                     && before.iter().any(|t| t.pass == "multiscale_gradient"),

@@ -402,6 +402,23 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         pipelines: Vec::new(),
     };
     let pipelines_before = gpu.pipeline_times().len();
+    // Every optimizer pass the bench may create compiles on a second device while the first
+    // scene's targets render.
+    let mut helper = loaded.first().and_then(|task| {
+        let mut passes: Vec<&str> = Vec::new();
+        for method in [Method::Baseline, Method::Restir, Method::Recursive] {
+            for step in [StepKind::Adam, StepKind::Variance] {
+                let mut s = task_settings(task, &[], method, o.restir);
+                s.step = step;
+                for p in Optimizer::passes(&s) {
+                    if !passes.contains(&p) {
+                        passes.push(p);
+                    }
+                }
+            }
+        }
+        gpu.compile_elsewhere(&passes)
+    });
     for task in &loaded {
         let name = scene_name(task);
         let dir = o.out.join(crate::image_io::file_safe(&name));
@@ -411,6 +428,9 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         }
         progress.message(format!("{name}: rendering targets"));
         let prep = Problem::from_task(gpu, task, &dir, false)?;
+        if let Some(h) = helper.take() {
+            let _ = h.join();
+        }
         progress.done();
         let (pp, g) = if o.end_to_end_only {
             (

@@ -156,3 +156,48 @@ enum Placeholder {
     Buffer(wgpu::Buffer),
     Texture(wgpu::TextureView),
 }
+
+impl Gpu {
+    /// Compile `passes` on a second device of the same adapter, on another thread, where this
+    /// device's driver compiles at the first dispatch (a CPU driver: lavapipe compiles one
+    /// pass at a time on its queue's thread) and keeps a shader cache: the second device's
+    /// results land in the driver's cache, where this device's own creation of the same
+    /// passes finds them. Join the handle before creating them here. `None` where it would
+    /// not help: a GPU (creation compiles, in parallel already), or the cache switched off.
+    pub fn compile_elsewhere(&self, passes: &[&str]) -> Option<std::thread::JoinHandle<()>> {
+        let cache_off = std::env::var("MESA_SHADER_CACHE_DISABLE")
+            .is_ok_and(|v| matches!(v.as_str(), "1" | "true" | "TRUE" | "yes"));
+        if self.info.device_type != wgpu::DeviceType::Cpu || cache_off || passes.is_empty() {
+            return None;
+        }
+        let passes: Vec<String> = passes.iter().map(|p| p.to_string()).collect();
+        let (tracer, name) = (self.tracer, self.info.name.clone());
+        let spawned = std::thread::Builder::new()
+            .name("psrestir shader compilation".into())
+            .spawn(move || {
+                let helper = match Gpu::with_tracer(tracer) {
+                    Ok(g) if g.info.name == name => g,
+                    _ => return,
+                };
+                for pass in &passes {
+                    let mut layouts = Vec::new();
+                    for g in 0..4 {
+                        match shaders::bindings_for(pass, g, tracer) {
+                            Ok(b) if !b.is_empty() => {}
+                            _ => break,
+                        }
+                        match helper.pass_layout(pass, g) {
+                            Ok(l) => layouts.push(l),
+                            Err(_) => return,
+                        }
+                    }
+                    let refs: Vec<&wgpu::BindGroupLayout> = layouts.iter().collect();
+                    if let Err(e) = helper.compute_pipeline(pass, &refs) {
+                        log::debug!("compiling `{pass}` on a second device: {e}");
+                        return;
+                    }
+                }
+            });
+        spawned.ok()
+    }
+}

@@ -211,7 +211,14 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         "preparing the targets and the GPU passes (a driver's first run on a machine compiles \
          their shaders; later runs load them from its cache)"
     );
+    // The optimizer's passes compile on a second device while this one renders the targets.
+    let passes = Optimizer::passes(&task_settings(task, &[], opts.method, opts.restir));
+    let helper = gpu.compile_elsewhere(&passes);
+    // On an error the helper is left to finish alone (its work is a cache for later runs).
     let prep = Problem::from_task(gpu, task, &out, opts.resume)?;
+    if let Some(h) = helper {
+        let _ = h.join();
+    }
     let settings = task_settings(task, &prep.cameras, opts.method, opts.restir);
     log::info!(
         "gradient estimator: {}; step: {}",

@@ -336,6 +336,34 @@ impl Optimizer {
         self.loss.read_loss(&self.gpu)
     }
 
+    /// The passes (WGSL files) that an optimizer with `settings` creates, its estimator's
+    /// first (the slowest to compile), without the renderer's (`render`, `trace_rays`), which
+    /// a [`Problem`](crate::Problem) creates first. [`Gpu::compile_elsewhere`] compiles them while the
+    /// targets render; a test checks the list against what an optimizer creates.
+    pub fn passes(settings: &Settings) -> Vec<&'static str> {
+        let mut p: Vec<&'static str> = match settings.method {
+            Method::Baseline => vec!["gradient"],
+            Method::Restir => vec!["restir_candidates", "restir_merge"],
+            Method::Recursive => vec!["recursive_gradient", "recursive_combine"],
+        };
+        p.push("observed_texels");
+        if settings.primal == primal::PrimalMode::ControlVariate {
+            p.push("primal_cv");
+        }
+        p.push("loss");
+        p.push(match settings.step {
+            StepKind::Adam => "adam",
+            StepKind::Variance => "variance_step",
+        });
+        if settings.smoothness > 0.0 {
+            p.push("smoothness");
+        }
+        if settings.multiscale_levels > 0 {
+            p.push("multiscale_gradient");
+        }
+        p
+    }
+
     /// Create the passes that the first [`Optimizer::step`] would otherwise create (the
     /// priors', which need the observed texels), so that no pipeline is compiled inside a
     /// timed iteration. `step` calls it too; calling it first only moves the work.
