@@ -318,6 +318,11 @@ pub(crate) struct BenchArgs {
     /// Switch off the tasks' priors (multiscale gradient, smoothness prior).
     #[arg(long)]
     pub(crate) no_priors: bool,
+    /// Measure throughput only, on the first scene given (default: the bundled default
+    /// task): camera samples per second of a 256², 64-spp render and of each estimator's
+    /// passes, and each pass's pipeline creation. Writes throughput.md and throughput.json.
+    #[arg(long)]
+    pub(crate) throughput: bool,
     /// Choose each estimator's learning rate, Adam decays and (ReSTIR) M cap, its schedule and
     /// the target smoothing by a small search on another seed (cached in the output folder).
     #[arg(long)]

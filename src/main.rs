@@ -412,6 +412,7 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         end_to_end_only,
         contenders,
         no_priors,
+        throughput,
         tune,
         tune_budget,
         primal,
@@ -429,6 +430,21 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         if !(b.is_finite() && b > 0.0) {
             bail!("--tune-budget must be a positive number of seconds");
         }
+    }
+    if throughput {
+        let name = scenes.first().map_or(DEFAULT_TASK, |s| s.as_str());
+        let path = psrestir::bench::resolve_scene(name)?;
+        let task = Task::load(&path)?;
+        std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+        let gpu = Gpu::new()?;
+        let r = psrestir::bench::throughput::throughput(&gpu, &task, &path, &out)?;
+        let md = psrestir::bench::throughput::markdown(&r);
+        println!("{md}");
+        let json = serde_json::to_string_pretty(&r).context("throughput.json")?;
+        psrestir::image_io::write_atomic(&out.join("throughput.json"), json.as_bytes())?;
+        psrestir::image_io::write_atomic(&out.join("throughput.md"), md.as_bytes())?;
+        println!("wrote {}", out.join("throughput.md").display());
+        return Ok(());
     }
     if to_docs {
         // Before the hours of measuring: the checkout must be where the report goes.

@@ -408,3 +408,50 @@ fn committed_bench_scenes_are_what_the_generator_writes() {
         psrestir::task::Task::load(&committed.join(name).join("task.toml")).unwrap();
     }
 }
+
+/// `bench --throughput` on the sphere scene shrunk to 32x32 images: the forward render counts
+/// its 256² × 64 camera samples, every estimator's primal and gradient rates are positive and
+/// finite, and the pipelines it created are listed once each. Nothing asserts a speed.
+#[test]
+fn throughput_reports_every_rate_and_pipeline() {
+    let Some(gpu) = common::gpu() else { return };
+    if !gpu.timestamps {
+        eprintln!("skipped: no timestamp queries");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = resolve_scene("sphere").unwrap();
+    let task = psrestir::bench::scaled(&psrestir::Task::load(&path).unwrap(), 0.25);
+    let r = psrestir::bench::throughput::throughput(&gpu, &task, &path, dir.path()).unwrap();
+    assert_eq!(r.rates[0].samples, 256 * 256 * 64);
+    for method in ["baseline", "restir", "recursive"] {
+        for part in ["primal", "gradient"] {
+            let what = format!("{method}: {part}");
+            let rate = r
+                .rates
+                .iter()
+                .find(|x| x.what == what)
+                .unwrap_or_else(|| panic!("no rate `{what}` in {:?}", r.rates));
+            assert!(rate.samples > 0, "{what}: {rate:?}");
+            assert!(
+                rate.ms > 0.0 && rate.msamples_per_s.is_finite() && rate.msamples_per_s > 0.0,
+                "{what}: {rate:?}"
+            );
+        }
+    }
+    for pass in [
+        "render",
+        "gradient",
+        "restir_candidates",
+        "recursive_gradient",
+    ] {
+        assert_eq!(
+            r.pipelines.iter().filter(|p| p.pass == pass).count(),
+            1,
+            "{pass} in {:?}",
+            r.pipelines
+        );
+    }
+    let md = psrestir::bench::throughput::markdown(&r);
+    assert!(md.contains("| baseline: gradient |") && md.contains("## Pipeline creation"));
+}

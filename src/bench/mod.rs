@@ -24,6 +24,7 @@ mod gradient;
 mod phases;
 pub mod report;
 mod results;
+pub mod throughput;
 pub mod tune;
 
 use gradient::gradient_phase;

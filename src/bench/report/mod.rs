@@ -492,7 +492,7 @@ pub fn report_markdown(r: &BenchReport) -> String {
 }
 
 /// The pipeline-creation section: each pass's first creation in the run, slowest first.
-fn pipeline_markdown(pipelines: &[crate::gpu::PipelineTime]) -> String {
+pub(crate) fn pipeline_markdown(pipelines: &[crate::gpu::PipelineTime]) -> String {
     let mut rows = pipelines.to_vec();
     rows.sort_by(|a, b| b.seconds.total_cmp(&a.seconds));
     let total: f64 = rows.iter().map(|p| p.seconds).sum();
