@@ -127,16 +127,22 @@ fn backends() -> wgpu::Backends {
 impl Gpu {
     /// Create a headless device on the best adapter of the platform's primary backend.
     pub fn new() -> Result<Gpu> {
-        pollster::block_on(Self::new_async(None))
+        pollster::block_on(Self::new_async(None, true))
     }
 
     /// [`Gpu::new`] tracing with `tracer` whatever `PSRESTIR_TRACER` says; an error if the
     /// adapter cannot (ray queries where it offers none).
     pub fn with_tracer(tracer: Tracer) -> Result<Gpu> {
-        pollster::block_on(Self::new_async(Some(tracer)))
+        pollster::block_on(Self::new_async(Some(tracer), true))
     }
 
-    async fn new_async(tracer: Option<Tracer>) -> Result<Gpu> {
+    /// A second device of the adapter [`Gpu::with_tracer`] picks, without logging it (for
+    /// [`Gpu::compile_elsewhere`]).
+    pub(crate) fn quiet(tracer: Tracer) -> Result<Gpu> {
+        pollster::block_on(Self::new_async(Some(tracer), false))
+    }
+
+    async fn new_async(tracer: Option<Tracer>, announce: bool) -> Result<Gpu> {
         let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
         desc.backends = backends();
         let instance = wgpu::Instance::new(desc);
@@ -189,7 +195,9 @@ impl Gpu {
         let mut gpu = Gpu::wrap(device, queue, info);
         gpu.adapter_features = Some(adapter.features());
         gpu.tracer = tracer;
-        log::info!("GPU adapter: {}", gpu.describe());
+        if announce {
+            log::info!("GPU adapter: {}", gpu.describe());
+        }
         Ok(gpu)
     }
 

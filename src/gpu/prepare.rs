@@ -175,7 +175,7 @@ impl Gpu {
         let spawned = std::thread::Builder::new()
             .name("psrestir shader compilation".into())
             .spawn(move || {
-                let helper = match Gpu::with_tracer(tracer) {
+                let helper = match Gpu::quiet(tracer) {
                     Ok(g) if g.info.name == name => g,
                     _ => return,
                 };
