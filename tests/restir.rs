@@ -474,8 +474,8 @@ fn the_merge_pass_traces_no_ray() {
     };
     let tracing = [
         "traverse",
+        "trace_ray",
         "trace_closest",
-        "occluded",
         "intersect_triangle",
     ];
     let merge = functions("restir_merge");

@@ -93,7 +93,3 @@ fn trace_ray(o: vec3f, d: vec3f, tmax: f32, any_hit: bool) -> Hit {
 fn trace_closest(o: vec3f, d: vec3f, tmax: f32) -> Hit {
     return traverse(o, d, tmax, false);
 }
-
-fn occluded(o: vec3f, d: vec3f, tmax: f32) -> bool {
-    return traverse(o, d, tmax, true).tri != NONE;
-}

@@ -1,4 +1,4 @@
-// Hardware ray tracing: the same functions as shared/bvh (trace_ray, trace_closest, occluded), through
+// Hardware ray tracing: the same functions as shared/bvh (trace_ray, trace_closest), through
 // a ray query against the scene's acceleration structure, built by GpuScene::new from the
 // triangles in the order the other scene buffers use, so a hit's primitive index is the
 // triangle index. The composer substitutes this file for `#import shared/bvh` and adds
@@ -25,8 +25,4 @@ fn trace_ray(o: vec3f, d: vec3f, tmax: f32, any_hit: bool) -> Hit {
 
 fn trace_closest(o: vec3f, d: vec3f, tmax: f32) -> Hit {
     return trace_ray_query(o, d, tmax, 0u);
-}
-
-fn occluded(o: vec3f, d: vec3f, tmax: f32) -> bool {
-    return trace_ray_query(o, d, tmax, RAY_FLAG_TERMINATE_ON_FIRST_HIT).tri != NONE;
 }
