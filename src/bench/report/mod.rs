@@ -236,18 +236,24 @@ pub fn table(r: &BenchReport) -> String {
 /// The per-pass GPU times (markdown).
 pub fn pass_table(r: &BenchReport) -> String {
     let mut s = String::from(
-        "| scene | estimator | primal | loss | gradient / candidates | merge | Adam | state B/texel | merge evaluations/it |\n\
-         |---|---|---|---|---|---|---|---|---|\n",
+        "| scene | estimator | primal | loss | gradient / candidates | merge | Adam | iteration | outside the passes | state B/texel | merge evaluations/it |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for x in &r.scenes {
         let Some(o) = &x.optimization else { continue };
-        for (name, p, bytes) in [
+        for (name, p, bytes, ms) in [
             (
                 "baseline",
                 &o.passes_baseline,
                 o.state_bytes_per_texel_baseline,
+                o.ms_per_iteration_baseline,
             ),
-            ("ReSTIR", &o.passes_restir, o.state_bytes_per_texel),
+            (
+                "ReSTIR",
+                &o.passes_restir,
+                o.state_bytes_per_texel,
+                o.ms_per_iteration_restir,
+            ),
         ] {
             let evaluations = match (name, o.merge_evaluations_per_iteration) {
                 ("ReSTIR", Some(e)) => format!("{e:.0}"),
@@ -257,7 +263,7 @@ pub fn pass_table(r: &BenchReport) -> String {
                 Some(p) => {
                     let _ = writeln!(
                         s,
-                        "| {} | {name} | {:.1} | {:.1} | {:.1} | {} | {:.1} | {bytes:.0} | {evaluations} |",
+                        "| {} | {name} | {:.1} | {:.1} | {:.1} | {} | {:.1} | {ms:.1} | {:.1} | {bytes:.0} | {evaluations} |",
                         x.name,
                         p.primal_ms,
                         p.loss_ms,
@@ -267,13 +273,14 @@ pub fn pass_table(r: &BenchReport) -> String {
                         } else {
                             "–".into()
                         },
-                        p.adam_ms
+                        p.adam_ms,
+                        ms - p.total()
                     );
                 }
                 None => {
                     let _ = writeln!(
                         s,
-                        "| {} | {name} | – | – | – | – | – | {bytes:.0} | {evaluations} |",
+                        "| {} | {name} | – | – | – | – | – | {ms:.1} | – | {bytes:.0} | {evaluations} |",
                         x.name
                     );
                 }
@@ -466,6 +473,11 @@ pub fn report_markdown(r: &BenchReport) -> String {
     if r.scenes.iter().any(|x| x.optimization.is_some()) {
         md.push_str("## GPU time per pass (ms, timestamp queries), state and merge work\n\n");
         md.push_str(&pass_table(r));
+        md.push_str(
+            "\nIteration: the wall-clock mean of a timed step (GPU work finished); outside the \
+             passes: what of it no timed pass covers (copies and clears, submission, the loss \
+             readback, host work).\n",
+        );
     }
     if !r.pipelines.is_empty() {
         md.push_str(&pipeline_markdown(&r.pipelines));
