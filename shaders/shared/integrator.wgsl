@@ -83,9 +83,10 @@ struct DirectPath {
     bsdf: DirectSample,
 }
 
+// Whether material mi has an optimized texture (fields read one by one: a CPU device loads
+// every word of a struct read at a per-invocation index).
 fn has_optimized(mi: u32) -> bool {
-    let m = materials[mi];
-    return m.param_base_color != NONE || m.param_metallic != NONE || m.param_roughness != NONE;
+    return materials[mi].param_base_color != NONE || materials[mi].param_metallic != NONE || materials[mi].param_roughness != NONE;
 }
 
 // Uses 6 random numbers in a fixed order (light choice, light sample, BSDF sample), so that
