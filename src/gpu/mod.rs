@@ -45,6 +45,8 @@ pub struct Gpu {
     lost: Arc<Mutex<Option<String>>>,
     /// The pipelines created so far and what each took ([`Gpu::pipeline_times`]).
     pipelines: Arc<Mutex<Vec<PipelineTime>>>,
+    /// Whether this is a second device compiling ahead for another ([`Gpu::compile_elsewhere`]).
+    compiles_ahead: bool,
 }
 
 /// A recorded device error, by kind.
@@ -302,6 +304,7 @@ impl Gpu {
             errors,
             lost,
             pipelines: Arc::default(),
+            compiles_ahead: false,
         }
     }
 

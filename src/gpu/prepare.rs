@@ -25,6 +25,9 @@ pub struct PipelineTime {
     pub pass: String,
     /// Wall-clock seconds of creation and compilation.
     pub seconds: f64,
+    /// Whether a second device compiled it ahead, beside the first's work
+    /// ([`Gpu::compile_elsewhere`]); the first device's own creation of the pass follows.
+    pub ahead: bool,
 }
 
 impl Gpu {
@@ -33,10 +36,17 @@ impl Gpu {
         self.pipelines.lock().map(|v| v.clone()).unwrap_or_default()
     }
 
-    /// Seconds spent creating pipelines since `since` entries of [`Gpu::pipeline_times`].
+    /// Pipelines this device created since `since` entries of [`Gpu::pipeline_times`] and
+    /// the seconds it spent on them (a second device's work ahead, done beside it, is not
+    /// counted).
     pub fn pipeline_seconds_since(&self, since: usize) -> (usize, f64) {
         let all = self.pipeline_times();
-        let new = all.get(since..).unwrap_or_default();
+        let new: Vec<&PipelineTime> = all
+            .get(since..)
+            .unwrap_or_default()
+            .iter()
+            .filter(|p| !p.ahead)
+            .collect();
         (new.len(), new.iter().map(|p| p.seconds).sum())
     }
 
@@ -47,6 +57,7 @@ impl Gpu {
             v.push(PipelineTime {
                 pass: pass.into(),
                 seconds,
+                ahead: self.compiles_ahead,
             });
         }
     }
@@ -172,13 +183,17 @@ impl Gpu {
         }
         let passes: Vec<String> = passes.iter().map(|p| p.to_string()).collect();
         let (tracer, name) = (self.tracer, self.info.name.clone());
+        let record = self.pipelines.clone();
         let spawned = std::thread::Builder::new()
             .name("psrestir shader compilation".into())
             .spawn(move || {
-                let helper = match Gpu::quiet(tracer) {
+                let mut helper = match Gpu::quiet(tracer) {
                     Ok(g) if g.info.name == name => g,
                     _ => return,
                 };
+                // Its pipelines are listed with this device's, marked as compiled ahead.
+                helper.pipelines = record;
+                helper.compiles_ahead = true;
                 for pass in &passes {
                     let mut layouts = Vec::new();
                     for g in 0..4 {
