@@ -223,8 +223,14 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
         }
     });
     let gpu = Gpu::new()?;
+    log::info!(
+        "preparing the render passes (a driver's first run on a machine compiles their \
+         shaders; later runs load them from its cache)"
+    );
     let renderer = Renderer::new(&gpu, &sc)
         .with_context(|| format!("preparing {} for the GPU", path.display()))?;
+    let (n, seconds) = gpu.pipeline_seconds_since(0);
+    log::info!("{n} GPU passes ready after {seconds:.1} s of pipeline creation");
     let bar = ProgressBar::new(spp as u64).with_style(
         ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} spp, ETA {eta}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
