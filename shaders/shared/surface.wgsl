@@ -209,7 +209,20 @@ fn path_factor(pv: PathVertex, li: vec3f, ti: u32, local: u32) -> vec3f {
     if wf == 0.0 {
         return vec3f(0.0);
     }
+    return wf * slot_factor(slot, vertex_grad(pv), li);
+}
+
+// The BRDF derivatives of path vertex pv, with the glTF inputs it kept and the textures that
+// use_prev_params selects.
+fn vertex_grad(pv: PathVertex) -> BrdfGrad {
     let mat = with_optimized(pv.material, pv.uv, fixed_unpack(pv.material, pv.fixed));
-    let bg = brdf_eval_cos_grad(mat, oct_decode(pv.wo), oct_decode(pv.wi));
-    return wf * slot_factor(slot, bg, li);
+    return brdf_eval_cos_grad(mat, oct_decode(pv.wo), oct_decode(pv.wi));
+}
+
+// vertex_grad under the previous iteration's textures.
+fn vertex_grad_prev(pv: PathVertex) -> BrdfGrad {
+    use_prev_params = true;
+    let bg = vertex_grad(pv);
+    use_prev_params = false;
+    return bg;
 }

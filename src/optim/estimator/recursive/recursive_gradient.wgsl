@@ -134,20 +134,12 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         if !g.valid {
             continue;
         }
-        var mat_prev = SurfaceMaterial(vec3f(0.0), 0.0, 0.0);
-        if rp.have_prev != 0u {
-            use_prev_params = true;
-            // The glTF inputs that no optimized texture replaces, as the sample kept them.
-            let gltf = fixed_unpack(g.sf.material, g.nee.vertex.fixed);
-            mat_prev = with_optimized(g.sf.material, g.sf.uv, gltf);
-            use_prev_params = false;
-        }
-        let wo = oct_decode(g.nee.vertex.wo);
         for (var t = 0u; t < 2u; t++) {
             let ts = technique_sample(g, t);
             var grad_prev = ts.grad;
             if rp.have_prev != 0u {
-                grad_prev = brdf_eval_cos_grad(mat_prev, wo, oct_decode(ts.vertex.wi));
+                // The same path under the previous textures, with the glTF inputs it kept.
+                grad_prev = vertex_grad_prev(ts.vertex);
             }
             scatter2(g.m, g.sf.uv, ts.grad, grad_prev, ts.ds.radiance * ts.ds.scale, adj, adj_prev);
         }

@@ -170,20 +170,13 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         if !g.valid {
             continue;
         }
-        var mat_prev = SurfaceMaterial(vec3f(0.0), 0.0, 0.0);
-        if cp.prev_targets != 0u {
-            // The path's derivatives under the previous textures, from the stored (rounded)
-            // directions, as the merge would evaluate them (shared/surface.wgsl, path_factor).
-            use_prev_params = true;
-            mat_prev = with_optimized(g.sf.material, g.sf.uv, fixed_unpack(g.sf.material, g.nee.vertex.fixed));
-            use_prev_params = false;
-        }
-        let wo = oct_decode(g.nee.vertex.wo);
         for (var t = 0u; t < 2u; t++) {
             let ts = technique_sample(g, t);
             var grad_prev = ts.grad;
             if cp.prev_targets != 0u {
-                grad_prev = brdf_eval_cos_grad(mat_prev, wo, oct_decode(ts.vertex.wi));
+                // The path's derivatives under the previous textures, from the stored
+                // (rounded) directions, as the merge would evaluate them (path_factor).
+                grad_prev = vertex_grad_prev(ts.vertex);
             }
             offer_technique(g, ts, grad_prev, a.adj, adj_t, adj_t_prev, info | (t << INFO_TECH_SHIFT));
         }
