@@ -1,7 +1,11 @@
 // Adam step for one optimized texture, then clamping to the valid range. Non-finite
 // gradients leave their parameter unchanged and are counted; huge ones are clamped. With
 // mask set (sparse Adam, Mitsuba 3's mask_updates), an entry whose gradient is exactly zero
-// keeps its value and moments.
+// keeps its value and moments. With the moment filter (src/optim/moment_filter.rs) the step
+// takes two dispatches around it: phase STEP_PHASE_PAIR updates the moments and writes them to
+// the pair the filter smooths (entries from 0 for each texture), phase STEP_PHASE_FILTERED
+// steps from the filtered pair (every entry: a texel with no gradient of its own, masked or
+// not, moves with its neighbours' moments).
 #import gen/abi
 
 // Mirrored by AdamParams in src/optim/adam.rs.
@@ -18,7 +22,8 @@ struct AdamParams {
     lo: f32,
     hi: f32,
     mask: u32,
-    _pad0: u32,
+    // STEP_PHASE_FUSED, STEP_PHASE_PAIR or STEP_PHASE_FILTERED.
+    phase: u32,
 }
 
 @group(0) @binding(0) var<uniform> ap: AdamParams;
@@ -27,6 +32,23 @@ struct AdamParams {
 @group(0) @binding(3) var<storage, read_write> moment1: array<f32>;
 @group(0) @binding(4) var<storage, read_write> moment2: array<f32>;
 @group(0) @binding(5) var<storage, read_write> adam_stats: array<atomic<u32>, 4>;
+// The moment filter's pair (a small unused buffer in phase STEP_PHASE_FUSED).
+@group(0) @binding(6) var<storage, read_write> pair_first: array<f32>;
+@group(0) @binding(7) var<storage, read_write> pair_second: array<f32>;
+
+// Adam's update of entry i by first and second moments m and v.
+fn adam_step(i: u32, m: f32, v: f32) {
+    let step = ap.lr * (m / ap.bias1) / (sqrt(v / ap.bias2) + ap.eps);
+    params[i] = clamp(params[i] - step, ap.lo, ap.hi);
+}
+
+// In phase STEP_PHASE_PAIR, hand entry k's moments to the filter.
+fn write_pair(k: u32, m: f32, v: f32) {
+    if ap.phase == STEP_PHASE_PAIR {
+        pair_first[k] = m;
+        pair_second[k] = v;
+    }
+}
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) groups: vec3u) {
@@ -37,12 +59,18 @@ fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) grou
         return;
     }
     let i = ap.offset + k;
+    if ap.phase == STEP_PHASE_FILTERED {
+        adam_step(i, pair_first[k], pair_second[k]);
+        return;
+    }
     let g_in = grad[i];
     if ap.mask != 0u && g_in == 0.0 {
+        write_pair(k, moment1[i], moment2[i]);
         return;
     }
     if !(abs(g_in) < 3.0e38) {
         atomicAdd(&adam_stats[ADAM_STAT_SKIPPED], 1u);
+        write_pair(k, moment1[i], moment2[i]);
         return;
     }
     // Beyond 1e18, g * g would overflow the second moment to infinity (a finite but huge
@@ -53,6 +81,9 @@ fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) grou
     let v = ap.beta2 * moment2[i] + (1.0 - ap.beta2) * g * g;
     moment1[i] = m;
     moment2[i] = v;
-    let step = ap.lr * (m / ap.bias1) / (sqrt(v / ap.bias2) + ap.eps);
-    params[i] = clamp(params[i] - step, ap.lo, ap.hi);
+    if ap.phase == STEP_PHASE_PAIR {
+        write_pair(k, m, v);
+        return;
+    }
+    adam_step(i, m, v);
 }

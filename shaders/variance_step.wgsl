@@ -9,7 +9,12 @@
 // moves by lr times a standard normal shrunk by the threshold, so that a texel the images
 // hardly determine does not drift with errors that a running estimate repeats. Non-finite gradients leave their parameter
 // unchanged and are counted; with mask, an entry whose gradient is exactly zero keeps its
-// value and moments.
+// value and moments. With the moment filter (src/optim/moment_filter.rs) the step takes two
+// dispatches around it: phase STEP_PHASE_PAIR writes (d, Var[d]) to the pair the filter
+// smooths (entries from 0 for each texture; an entry without a gradient of its own gives d =
+// 0 and its variance as it stands), phase STEP_PHASE_FILTERED steps with the filtered pair.
+// The filtered variance is the neighbourhood's weighted mean variance, not the lower variance
+// of the filtered mean: the filter smooths this step without making it bolder.
 #import gen/abi
 
 // Mirrored by VarianceStepParams in src/optim/variance_step.rs.
@@ -27,6 +32,11 @@ struct VarianceStepParams {
     hi: f32,
     mask: u32,
     threshold: f32,
+    // STEP_PHASE_FUSED, STEP_PHASE_PAIR or STEP_PHASE_FILTERED.
+    phase: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> vp: VarianceStepParams;
@@ -36,6 +46,34 @@ struct VarianceStepParams {
 @group(0) @binding(4) var<storage, read_write> moment2: array<f32>;
 @group(0) @binding(5) var<storage, read> variance: array<f32>;
 @group(0) @binding(6) var<storage, read_write> step_stats: array<atomic<u32>, 4>;
+// The moment filter's pair (a small unused buffer in phase STEP_PHASE_FUSED).
+@group(0) @binding(7) var<storage, read_write> pair_first: array<f32>;
+@group(0) @binding(8) var<storage, read_write> pair_second: array<f32>;
+
+// Move entry i by estimate d of variance var_d.
+fn variance_step(i: u32, d: f32, var_d: f32) {
+    let z = d / (sqrt(var_d) + vp.eps);
+    let shrunk = sign(z) * max(abs(z) - vp.threshold, 0.0);
+    let step = clamp(shrunk, -vp.clip, vp.clip);
+    params[i] = clamp(params[i] - vp.lr * step, vp.lo, vp.hi);
+}
+
+// Entry i's variance as it stands (no gradient this iteration), for the filter's pair.
+fn standing_variance(i: u32) -> f32 {
+    if vp.own_variance != 0u {
+        return variance[i];
+    }
+    let mean = moment1[i] / vp.bias;
+    return max(moment2[i] / vp.bias - mean * mean, 0.0);
+}
+
+// In phase STEP_PHASE_PAIR, hand entry k's estimate and variance to the filter.
+fn write_pair(k: u32, d: f32, var_d: f32) {
+    if vp.phase == STEP_PHASE_PAIR {
+        pair_first[k] = d;
+        pair_second[k] = var_d;
+    }
+}
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) groups: vec3u) {
@@ -44,12 +82,18 @@ fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) grou
         return;
     }
     let i = vp.offset + k;
+    if vp.phase == STEP_PHASE_FILTERED {
+        variance_step(i, pair_first[k], pair_second[k]);
+        return;
+    }
     let g_in = grad[i];
     if vp.mask != 0u && g_in == 0.0 {
+        write_pair(k, 0.0, standing_variance(i));
         return;
     }
     if !(abs(g_in) < 3.0e38) {
         atomicAdd(&step_stats[ADAM_STAT_SKIPPED], 1u);
+        write_pair(k, 0.0, standing_variance(i));
         return;
     }
     let g = clamp(g_in, -1.0e18, 1.0e18);
@@ -64,8 +108,9 @@ fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) grou
         let mean = m / vp.bias;
         var_d = max(v / vp.bias - mean * mean, 0.0);
     }
-    let z = g / (sqrt(var_d) + vp.eps);
-    let shrunk = sign(z) * max(abs(z) - vp.threshold, 0.0);
-    let step = clamp(shrunk, -vp.clip, vp.clip);
-    params[i] = clamp(params[i] - vp.lr * step, vp.lo, vp.hi);
+    if vp.phase == STEP_PHASE_PAIR {
+        write_pair(k, g, var_d);
+        return;
+    }
+    variance_step(i, g, var_d);
 }

@@ -259,6 +259,19 @@ pub(crate) struct OptimizeArgs {
     /// The recursive estimator's lower bound of the adaptive weight (overrides the task).
     #[arg(long)]
     pub(crate) recursive_min_weight: Option<f32>,
+    /// Filtered moments: levels of the edge-stopping filter over the step's moments, 0 (off)
+    /// to 8 (overrides the task's `optimizer.moment_filter.levels`).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=8))]
+    pub(crate) moment_filter: Option<u32>,
+    /// The moment filter's edge-stopping scale (overrides the task).
+    #[arg(long)]
+    pub(crate) moment_filter_sigma: Option<f32>,
+    /// The moment filter measures the texture's differences between logarithms.
+    #[arg(long)]
+    pub(crate) moment_filter_log: bool,
+    /// The filtered moments replace Adam's.
+    #[arg(long)]
+    pub(crate) moment_filter_write_back: bool,
 }
 
 /// The arguments of `psrestir bench`.
@@ -307,8 +320,8 @@ pub(crate) struct BenchArgs {
     #[arg(long)]
     pub(crate) end_to_end_only: bool,
     /// Further estimators optimized at equal time after the baseline and ReSTIR (both with
-    /// Adam), as METHOD or METHOD:STEP (steps: adam, variance), comma-separated; `none` for
-    /// none.
+    /// Adam), as METHOD or METHOD:STEP (steps: adam, variance), either with `+filtered` for
+    /// filtered moments (`baseline+filtered`), comma-separated; `none` for none.
     #[arg(
         long,
         value_delimiter = ',',

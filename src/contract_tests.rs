@@ -291,7 +291,8 @@ fn pass_uniform_mirrors_match_wgsl_field_by_field() {
             lo,
             hi,
             mask,
-            threshold
+            threshold,
+            phase
         ]
     );
     mirror!(
@@ -311,7 +312,22 @@ fn pass_uniform_mirrors_match_wgsl_field_by_field() {
         "adam",
         "AdamParams",
         crate::optim::adam::AdamParams,
-        [offset, count, lr, beta1, beta2, eps, bias1, bias2, lo, hi, mask]
+        [offset, count, lr, beta1, beta2, eps, bias1, bias2, lo, hi, mask, phase]
+    );
+    mirror!(
+        "moment_filter",
+        "MomentFilterParams",
+        crate::optim::moment_filter::MomentFilterParams,
+        [
+            offset,
+            width,
+            height,
+            channels,
+            texel_offset,
+            spacing,
+            sigma,
+            log_space
+        ]
     );
     mirror!(
         "multiscale_gradient",

@@ -292,6 +292,10 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
         step_threshold,
         recursive_weight,
         recursive_min_weight,
+        moment_filter,
+        moment_filter_sigma,
+        moment_filter_log,
+        moment_filter_write_back,
     } = args;
     let path = task.unwrap_or_else(|| PathBuf::from(DEFAULT_TASK));
     let mut task = Task::load(&path)?;
@@ -319,6 +323,11 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
     if let Some(p) = primal {
         task.optimizer.primal = p.mode();
     }
+    let mf = &mut task.optimizer.moment_filter;
+    mf.levels = moment_filter.unwrap_or(mf.levels);
+    mf.sigma = moment_filter_sigma.unwrap_or(mf.sigma);
+    mf.log_space |= moment_filter_log;
+    mf.write_back |= moment_filter_write_back;
     if let Some(l) = multiscale_levels {
         task.optimizer.multiscale_levels = l;
     }
@@ -374,9 +383,9 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
         summary.out.display()
     );
     if let Some(t) = summary.pass_times {
-        let timed = t.primal_ms + t.loss_ms + t.gradient_ms + t.merge_ms + t.adam_ms;
+        let timed = t.total();
         println!(
-            "GPU time per iteration: primal {:.1} ms, loss {:.2} ms, gradient {:.1} ms, merge {:.1} ms, step {:.2} ms; \
+            "GPU time per iteration: primal {:.1} ms, loss {:.2} ms, gradient {:.1} ms, merge {:.1} ms, step {:.2} ms{}; \
              the other {:.1} ms of the {:.1} ms per iteration are outside these passes (untimed \
              copies and clears, submission, host work)",
             t.primal_ms,
@@ -384,6 +393,11 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
             t.gradient_ms,
             t.merge_ms,
             t.adam_ms,
+            if t.filter_ms > 0.0 {
+                format!(", moment filter {:.2} ms", t.filter_ms)
+            } else {
+                String::new()
+            },
             (summary.ms_per_iteration - timed).max(0.0),
             summary.ms_per_iteration
         );

@@ -72,6 +72,7 @@ fn check_gradient_on(
         multiscale_levels: 0,
         smoothness: 0.0,
         exposure_learning_rate: None,
+        moment_filter: Default::default(),
         recursive: Default::default(),
         step: Default::default(),
         variance_step: Default::default(),

@@ -1,7 +1,9 @@
 //! Adam on the GPU equals the Rust reference (with a learning-rate schedule and with masked
-//! updates too), so does the multiscale gradient, the observed-texel mask equals the texels
-//! that the camera's pixels reach, and an optimization from a constant texture recovers a
-//! known texture (with and without the multiscale gradient).
+//! updates too), so do the multiscale gradient, the moment filter and the filtered steps; the
+//! moment filter keeps constant fields and does not cross the texture's edges; the
+//! observed-texel mask equals the texels that the camera's pixels reach, and an optimization
+//! from a constant texture recovers a known texture (with and without the multiscale gradient
+//! and the moment filter).
 mod common;
 
 use common::*;
@@ -82,6 +84,7 @@ fn setup_with(
         multiscale_levels: 0,
         smoothness: 0.0,
         exposure_learning_rate: None,
+        moment_filter: Default::default(),
         recursive: Default::default(),
         step: Default::default(),
         variance_step: Default::default(),
@@ -454,9 +457,10 @@ fn optimization_recovers_a_known_texture() {
             ]
         })
         .collect();
-    // Plain, and with the multiscale gradient over 2x2 and 4x4 blocks (the whole texture): it
-    // must not blur the texels it converges to.
-    for levels in [0, 2] {
+    // Plain, with the multiscale gradient over 2x2 and 4x4 blocks (the whole texture), and
+    // with the moment filter over the whole texture: neither may blur the texels it converges
+    // to (the filter starts on a constant texture, where nothing stops it).
+    for (levels, filter_levels) in [(0, 0), (2, 0), (0, 2)] {
         let (mut opt, init) = setup_with(
             &gpu,
             Slot::BaseColor,
@@ -464,7 +468,10 @@ fn optimization_recovers_a_known_texture() {
             4,
             &truth,
             Filter::Bilinear,
-            |s| s.multiscale_levels = levels,
+            |s| {
+                s.multiscale_levels = levels;
+                s.moment_filter.levels = filter_levels;
+            },
         );
         let before = rmse(&init, &truth);
         let mut losses = Vec::new();
@@ -473,14 +480,295 @@ fn optimization_recovers_a_known_texture() {
         }
         let after = rmse(&opt.read_params().unwrap(), &truth);
         eprintln!(
-            "multiscale levels {levels}: texture RMSE {before:.4} -> {after:.4}; loss {:.3e} -> {:.3e}",
+            "multiscale levels {levels}, moment filter levels {filter_levels}: texture RMSE \
+             {before:.4} -> {after:.4}; loss {:.3e} -> {:.3e}",
             losses[0],
             losses[losses.len() - 1]
         );
         assert!(
             after < before / 3.0,
-            "multiscale levels {levels}: texture RMSE fell only from {before} to {after}"
+            "multiscale levels {levels}, moment filter levels {filter_levels}: texture RMSE \
+             fell only from {before} to {after}"
         );
         assert_eq!(opt.faults().unwrap(), Default::default());
+    }
+}
+
+/// A 40 x 40 base color and a 20 x 20 roughness texture (two textures: offsets and one
+/// channel) on the partly observed plane, with the filter's options; the optimizer made for
+/// them, its observed texels, and textures that vary between neighbours in every channel.
+fn moment_filter_setup(
+    gpu: &psrestir::gpu::Gpu,
+    o: psrestir::optim::moment_filter::MomentFilterOptions,
+) -> (Optimizer, ParamSet, Vec<bool>, Vec<f32>) {
+    let (scene, _, _) = partly_observed_plane();
+    let spec = |slot, res| TextureSpec {
+        material: "plane".into(),
+        slot,
+        resolution: [res, res],
+        init: Init::Scalar(0.5),
+        learning_rate: 0.01,
+    };
+    let specs = [spec(Slot::BaseColor, 40), spec(Slot::Roughness, 20)];
+    let set = ParamSet::from_specs(&scene, &specs, Filter::Bilinear, "test".as_ref()).unwrap();
+    let mut settings = Settings::new(48, 48, vec![0]);
+    settings.moment_filter = o;
+    let opt = Optimizer::new(gpu, &scene, set.clone(), settings, &[Image::new(48, 48)]).unwrap();
+    let observed = opt.observed_texels().unwrap().to_vec();
+    assert_partly_observed(&observed[..1600]);
+    let values: Vec<f32> = (0..set.values.len())
+        .map(|i| 0.2 + 0.6 * ((i * 31) % 97) as f32 / 97.0)
+        .collect();
+    opt.write_params(&values).unwrap();
+    (opt, set, observed, values)
+}
+
+#[test]
+fn the_moment_filter_on_the_gpu_equals_the_cpu_reference() {
+    use psrestir::optim::moment_filter::{params, reference_levels, MomentFilterOptions};
+    let Some(gpu) = gpu() else { return };
+    for (levels, sigma, log_space) in [(1, 0.3, false), (3, 0.1, true)] {
+        let o = MomentFilterOptions {
+            levels,
+            sigma,
+            log_space,
+            write_back: false,
+        };
+        let (mut opt, set, observed, values) = moment_filter_setup(&gpu, o);
+        let n = set.values.len();
+        let first: Vec<f32> = (0..n)
+            .map(|i| ((i * 7919) % 1009) as f32 / 1009.0 - 0.4)
+            .collect();
+        let second: Vec<f32> = (0..n).map(|i| 0.1 + ((i * 13) % 17) as f32).collect();
+        let [got1, got2] = opt.apply_moment_filter([&first, &second]).unwrap();
+        let (mut want1, mut want2) = (first.clone(), second.clone());
+        let mut texel = 0;
+        for (t, ps) in set.textures.iter().zip(params(&set, &o)) {
+            let r = t.offset as usize..t.offset as usize + t.len();
+            let texels = (t.width * t.height) as usize;
+            reference_levels(
+                &ps,
+                &mut want1[r.clone()],
+                &mut want2[r.clone()],
+                &values[r],
+                &observed[texel..texel + texels],
+            );
+            texel += texels;
+        }
+        let mut changed = 0;
+        for i in 0..n {
+            // 25 weighted terms per level in the same order; exp and division may differ in
+            // their last bits on the device, and the levels carry that on.
+            for (got, want, src) in [(&got1, &want1, &first), (&got2, &want2, &second)] {
+                assert!(
+                    (got[i] - want[i]).abs() <= 2e-5 * want[i].abs().max(1.0),
+                    "levels {levels}, entry {i}: {} vs {}",
+                    got[i],
+                    want[i]
+                );
+                changed += ((got[i] - src[i]).abs() > 1e-3) as usize;
+            }
+        }
+        // Not the identity: the filter changed most observed entries.
+        assert!(
+            changed > n / 2,
+            "levels {levels}: only {changed} entries changed"
+        );
+    }
+}
+
+#[test]
+fn the_moment_filter_keeps_constant_fields_and_the_textures_edges() {
+    use psrestir::optim::moment_filter::MomentFilterOptions;
+    let Some(gpu) = gpu() else { return };
+    let o = MomentFilterOptions {
+        levels: 4,
+        sigma: 0.02,
+        log_space: false,
+        write_back: false,
+    };
+    let (mut opt, set, observed, _) = moment_filter_setup(&gpu, o);
+    let n = set.values.len();
+    // A constant pair stays as it is: the weights are normalized.
+    let [c1, c2] = opt
+        .apply_moment_filter([&vec![0.25; n], &vec![3.0; n]])
+        .unwrap();
+    for i in 0..n {
+        assert!((c1[i] - 0.25).abs() <= 1e-6, "entry {i}: {}", c1[i]);
+        assert!((c2[i] - 3.0).abs() <= 1e-5, "entry {i}: {}", c2[i]);
+    }
+    // The base color: dark left of x = 20, bright right of it; the first moment +1 on the
+    // left and -1 on the right, the second 1 and 4. The filter reaches 30 texels, but a
+    // neighbour across the edge weighs exp(-0.6 sqrt(3) / 0.02) < 1e-22 of one on the same
+    // side: nothing crosses.
+    let side = |i: usize| (i / 3) % 40 < 20;
+    let mut guide = vec![0.5; n];
+    let (mut first, mut second) = (vec![0.0; n], vec![0.0; n]);
+    for i in 0..1600 * 3 {
+        guide[i] = if side(i) { 0.2 } else { 0.8 };
+        first[i] = if side(i) { 1.0 } else { -1.0 };
+        second[i] = if side(i) { 1.0 } else { 4.0 };
+    }
+    opt.write_params(&guide).unwrap();
+    let [f1, f2] = opt.apply_moment_filter([&first, &second]).unwrap();
+    for i in 0..1600 * 3 {
+        assert!((f1[i] - first[i]).abs() <= 1e-6, "entry {i}: {}", f1[i]);
+        assert!((f2[i] - second[i]).abs() <= 1e-5, "entry {i}: {}", f2[i]);
+    }
+    // The same pair on a texture without the edge is blurred across x = 20: the test above
+    // would see a filter that ignored its guide.
+    opt.write_params(&vec![0.5; n]).unwrap();
+    let [b1, _] = opt.apply_moment_filter([&first, &second]).unwrap();
+    let blurred = (0..1600 * 3)
+        .filter(|&i| observed[i / 3] && (b1[i] - first[i]).abs() > 0.1)
+        .count();
+    assert!(
+        blurred > 100,
+        "only {blurred} entries blurred without the edge"
+    );
+}
+
+#[test]
+fn filtered_adam_steps_equal_the_rust_reference() {
+    use psrestir::optim::moment_filter::{params, reference_levels, MomentFilterOptions};
+    let Some(gpu) = gpu() else { return };
+    let truth: Vec<f32> = (0..8 * 8 * 3)
+        .map(|i| (i % 7) as f32 / 7.0 + 0.05)
+        .collect();
+    let lr = 0.05;
+    let o = adam::AdamOptions::default();
+    for write_back in [false, true] {
+        let f = MomentFilterOptions {
+            levels: 2,
+            sigma: 0.1,
+            log_space: false,
+            write_back,
+        };
+        let (mut opt, init) = setup_with(
+            &gpu,
+            Slot::BaseColor,
+            lr,
+            8,
+            &truth,
+            Filter::Bilinear,
+            |s| s.moment_filter = f,
+        );
+        let observed = opt.observed_texels().unwrap().to_vec();
+        assert!(
+            observed.iter().all(|&o| o),
+            "the camera sees the whole plane"
+        );
+        let ps = params(&opt.set, &f).remove(0);
+        let n = init.len();
+        let (mut p, mut m, mut v) = (init.clone(), vec![0.0; n], vec![0.0; n]);
+        for t in 1..=3u32 {
+            opt.step().unwrap();
+            let g = opt.read_gradient().unwrap();
+            // The reference: Adam's moments, the filter on them guided by the textures the
+            // step started from, the step from the filtered pair.
+            for i in 0..n {
+                m[i] = o.beta1 * m[i] + (1.0 - o.beta1) * g[i];
+                v[i] = o.beta2 * v[i] + (1.0 - o.beta2) * g[i] * g[i];
+            }
+            let (mut fm, mut fv) = (m.clone(), v.clone());
+            reference_levels(&ps, &mut fm, &mut fv, &p, &observed);
+            let (b1, b2) = (1.0 - o.beta1.powi(t as i32), 1.0 - o.beta2.powi(t as i32));
+            for i in 0..n {
+                let s = lr * (fm[i] / b1) / ((fv[i] / b2).sqrt() + o.eps);
+                p[i] = (p[i] - s).clamp(0.0, 1.0);
+            }
+            if write_back {
+                (m, v) = (fm, fv);
+            }
+            let gpu_p = opt.read_params().unwrap();
+            let [gm, gv] = opt.read_moments().unwrap();
+            for i in 0..n {
+                assert!(
+                    (gpu_p[i] - p[i]).abs() <= 1e-5,
+                    "write-back {write_back}, step {t}, param {i}: {} vs {}",
+                    gpu_p[i],
+                    p[i]
+                );
+                assert!((gm[i] - m[i]).abs() <= 1e-5 * m[i].abs() + 1e-12);
+                assert!((gv[i] - v[i]).abs() <= 1e-5 * v[i].abs() + 1e-20);
+            }
+            (p, m, v) = (gpu_p, gm, gv);
+        }
+    }
+}
+
+#[test]
+fn filtered_variance_steps_equal_the_rust_reference() {
+    use psrestir::optim::moment_filter::{params, reference_levels, MomentFilterOptions};
+    use psrestir::optim::{StepKind, VarianceStepOptions};
+    let Some(gpu) = gpu() else { return };
+    let truth: Vec<f32> = (0..8 * 8 * 3).map(|i| (i % 5) as f32 / 5.0 + 0.1).collect();
+    let lr = 0.05;
+    let o = VarianceStepOptions {
+        threshold: 0.5,
+        ..Default::default()
+    };
+    let f = MomentFilterOptions {
+        levels: 2,
+        sigma: 0.1,
+        ..Default::default()
+    };
+    let (mut opt, init) = setup_with(
+        &gpu,
+        Slot::BaseColor,
+        lr,
+        8,
+        &truth,
+        Filter::Bilinear,
+        |s| {
+            s.step = StepKind::Variance;
+            s.variance_step = o;
+            s.moment_filter = f;
+        },
+    );
+    let observed = opt.observed_texels().unwrap().to_vec();
+    let ps = params(&opt.set, &f).remove(0);
+    let n = init.len();
+    let (mut p, mut m, mut v) = (init.clone(), vec![0.0; n], vec![0.0; n]);
+    for t in 1..=3u32 {
+        opt.step().unwrap();
+        let g = opt.read_gradient().unwrap();
+        // The reference: the moving variance, the filter on (estimate, variance), the step
+        // from the filtered pair.
+        let bias = 1.0 - o.beta.powi(t as i32);
+        let mut var = vec![0.0; n];
+        for i in 0..n {
+            m[i] = o.beta * m[i] + (1.0 - o.beta) * g[i];
+            v[i] = o.beta * v[i] + (1.0 - o.beta) * g[i] * g[i];
+            let mean = m[i] / bias;
+            var[i] = (v[i] / bias - mean * mean).max(0.0);
+        }
+        let mut d = g.clone();
+        reference_levels(&ps, &mut d, &mut var, &p, &observed);
+        let before = p.clone();
+        for i in 0..n {
+            let z = d[i] / (var[i].sqrt() + o.eps);
+            let shrunk = z.signum() * (z.abs() - o.threshold).max(0.0);
+            p[i] = (p[i] - lr * shrunk.clamp(-o.clip, o.clip)).clamp(0.0, 1.0);
+        }
+        let gpu_p = opt.read_params().unwrap();
+        let moved = (0..n)
+            .filter(|&i| (gpu_p[i] - before[i]).abs() > 1e-4)
+            .count();
+        // The first step has no variance yet (one sample): every entry moves by the clip.
+        assert!(
+            t > 1 || moved > n / 2,
+            "step {t}: only {moved} entries moved"
+        );
+        for i in 0..n {
+            assert!(
+                (gpu_p[i] - p[i]).abs() <= 1e-4,
+                "step {t}, param {i}: {} vs {}",
+                gpu_p[i],
+                p[i]
+            );
+        }
+        p = gpu_p;
+        [m, v] = opt.read_moments().unwrap();
     }
 }

@@ -76,6 +76,10 @@ pub struct Contender {
     pub method: Method,
     /// The step.
     pub step: StepKind,
+    /// With filtered moments: the task's `[optimizer.moment_filter]`, or
+    /// [`moment_filter::SUGGESTED_LEVELS`](crate::optim::moment_filter::SUGGESTED_LEVELS)
+    /// levels with the other defaults where the task has none.
+    pub filtered: bool,
 }
 
 impl Contender {
@@ -85,28 +89,60 @@ impl Contender {
         Contender {
             method: Method::Recursive,
             step: StepKind::Adam,
+            filtered: false,
         },
         Contender {
             method: Method::Recursive,
             step: StepKind::Variance,
+            filtered: false,
         },
     ];
 
-    /// How reports name it, e.g. `recursive, variance-scaled step`.
-    pub fn name(&self) -> String {
-        match self.step {
-            StepKind::Adam => format!("{}, Adam", self.method.name()),
-            StepKind::Variance => format!("{}, variance-scaled step", self.method.name()),
+    /// The baseline or ReSTIR with Adam, unfiltered (the bench's first two).
+    pub fn adam(method: Method) -> Contender {
+        Contender {
+            method,
+            step: StepKind::Adam,
+            filtered: false,
         }
     }
 
-    /// Its key in file names (`recursive`, `recursive_variance`).
-    pub fn key(&self) -> String {
-        tune::contender_key(self.method, self.step)
+    /// Put its step and filter into `s`.
+    pub fn apply(&self, s: &mut crate::optim::Settings) {
+        s.step = self.step;
+        if self.filtered && !s.moment_filter.enabled() {
+            s.moment_filter.levels = crate::optim::moment_filter::SUGGESTED_LEVELS;
+        } else if !self.filtered {
+            s.moment_filter.levels = 0;
+        }
     }
 
-    /// Parse `METHOD` or `METHOD:STEP` (`recursive:variance`).
+    /// How reports name it, e.g. `recursive, variance-scaled step, filtered moments`.
+    pub fn name(&self) -> String {
+        let step = match self.step {
+            StepKind::Adam => "Adam",
+            StepKind::Variance => "variance-scaled step",
+        };
+        let filtered = if self.filtered {
+            ", filtered moments"
+        } else {
+            ""
+        };
+        format!("{}, {step}{filtered}", self.method.name())
+    }
+
+    /// Its key in file names (`recursive`, `recursive_variance`, `baseline_filtered`).
+    pub fn key(&self) -> String {
+        tune::contender_key(self.method, self.step, self.filtered)
+    }
+
+    /// Parse `METHOD`, `METHOD:STEP` (`recursive:variance`), either with `+filtered`
+    /// (`baseline+filtered`, `recursive:variance+filtered`).
     pub fn parse(s: &str) -> std::result::Result<Contender, String> {
+        let (s, filtered) = match s.strip_suffix("+filtered") {
+            Some(rest) => (rest, true),
+            None => (s, false),
+        };
         let (m, st) = s.split_once(':').unwrap_or((s, "adam"));
         let method = match m {
             "baseline" => Method::Baseline,
@@ -123,7 +159,11 @@ impl Contender {
             "variance" => StepKind::Variance,
             _ => return Err(format!("unknown step `{st}` (adam, variance)")),
         };
-        Ok(Contender { method, step })
+        Ok(Contender {
+            method,
+            step,
+            filtered,
+        })
     }
 }
 
@@ -407,14 +447,13 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
     // scene's targets render.
     let mut helper = loaded.first().and_then(|task| {
         let mut passes: Vec<&str> = Vec::new();
-        for method in [Method::Baseline, Method::Restir, Method::Recursive] {
-            for step in [StepKind::Adam, StepKind::Variance] {
-                let mut s = task_settings(task, &[], method, o.restir);
-                s.step = step;
-                for p in Optimizer::passes(&s) {
-                    if !passes.contains(&p) {
-                        passes.push(p);
-                    }
+        let all = [Method::Baseline, Method::Restir].map(Contender::adam);
+        for c in all.iter().chain(&o.contenders) {
+            let mut s = task_settings(task, &[], c.method, o.restir);
+            c.apply(&mut s);
+            for p in Optimizer::passes(&s) {
+                if !passes.contains(&p) {
+                    passes.push(p);
                 }
             }
         }
@@ -463,15 +502,12 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
                 );
                 let mut t = Vec::new();
                 let all = [Method::Baseline, Method::Restir]
-                    .map(|method| Contender {
-                        method,
-                        step: StepKind::Adam,
-                    })
+                    .map(Contender::adam)
                     .into_iter()
                     .chain(o.contenders.iter().copied());
                 for c in all {
                     let mut s = settings(&prep, task, c.method, o);
-                    s.step = c.step;
+                    c.apply(&mut s);
                     t.push(Some(tune::tune(
                         gpu, &prep, &s, budget, &key, &dir, &progress,
                     )?));
@@ -567,4 +603,38 @@ fn first_creations(times: &[crate::gpu::PipelineTime]) -> Vec<crate::gpu::Pipeli
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn contenders_parse_with_their_step_and_filter() {
+        let c = Contender::parse("recursive:variance+filtered").unwrap();
+        assert_eq!(
+            (c.method, c.step, c.filtered),
+            (Method::Recursive, StepKind::Variance, true)
+        );
+        assert_eq!(c.key(), "recursive_variance_filtered");
+        let c = Contender::parse("baseline").unwrap();
+        assert_eq!(c, Contender::adam(Method::Baseline));
+        assert_eq!(c.key(), "baseline");
+        assert_eq!(
+            Contender::parse("baseline+filtered").unwrap().name(),
+            "baseline, Adam, filtered moments"
+        );
+        for bad in ["filtered", "baseline:sgd", "restir+blur"] {
+            assert!(Contender::parse(bad).is_err(), "{bad} accepted");
+        }
+        // The filter's levels come from the task, or the suggested ones.
+        let mut s = crate::optim::Settings::new(8, 8, vec![0]);
+        Contender::parse("baseline+filtered").unwrap().apply(&mut s);
+        assert_eq!(
+            s.moment_filter.levels,
+            crate::optim::moment_filter::SUGGESTED_LEVELS
+        );
+        Contender::adam(Method::Baseline).apply(&mut s);
+        assert!(!s.moment_filter.enabled());
+    }
 }

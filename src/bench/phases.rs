@@ -167,7 +167,7 @@ pub(super) fn optimization_phase(
 ) -> Result<OptimizationRun> {
     let method = who.method;
     let mut s = settings(prep, task, method, o);
-    s.step = who.step;
+    who.apply(&mut s);
     if let Some(t) = tuned {
         t.apply(&mut s);
     }
@@ -195,10 +195,12 @@ pub(super) fn optimization_phase(
     let mut last_count: Option<(u32, u32)> = None;
     let mut evaluations: Option<(u64, u32)> = None;
     let mut last_image = None;
-    let name = match (method, who.step) {
-        (Method::Baseline, StepKind::Adam) => "baseline".to_string(),
-        (Method::Restir, StepKind::Adam) => "ReSTIR".to_string(),
-        _ => who.name(),
+    let name = if who == Contender::adam(Method::Baseline) {
+        "baseline".to_string()
+    } else if who == Contender::adam(Method::Restir) {
+        "ReSTIR".to_string()
+    } else {
+        who.name()
     };
     loop {
         let eval_due = seconds >= o.budget_s * next_eval as f64 / (points - 1) as f64;
@@ -312,10 +314,7 @@ pub(super) fn optimization_phases(
     let (tuned_restir, tuned_baseline) = (tuned.pop().flatten(), tuned.pop().flatten());
     let best = |t: &Option<tune::Tuned>| t.as_ref().map(|t| t.best);
     let (tb_best, tr_best) = (best(&tuned_baseline), best(&tuned_restir));
-    let adam = |method| Contender {
-        method,
-        step: StepKind::Adam,
-    };
+    let adam = Contender::adam;
     let base = optimization_phase(
         gpu,
         task,
@@ -337,7 +336,7 @@ pub(super) fn optimization_phases(
     let describe = |who: Contender, t: Option<tune::Tunable>| {
         t.unwrap_or_else(|| {
             let mut s = settings(prep, task, who.method, o);
-            s.step = who.step;
+            who.apply(&mut s);
             tune::Tunable::untuned(&s)
         })
         .describe(who.method)

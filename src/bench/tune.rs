@@ -6,8 +6,10 @@
 //! with Adam its β1 (0.5, 0) and β2 (0.99), with the variance-scaled step its clip (× 0.5,
 //! × 2) and threshold (0, twice the task's),
 //! for ReSTIR the M cap (2, 32), whether the cap follows the learning-rate schedule, and the
-//! target smoothing (0, 0.9), and for the recursive estimator the lower bound of its adaptive
-//! weight (0.2, 0.5). Each trial
+//! target smoothing (0, 0.9), for the recursive estimator the lower bound of its adaptive
+//! weight (0.2, 0.5), and with filtered moments the filter's σ (× 0.25, × 4), log space, and
+//! with Adam the write-back, and β1 0.2 as well (the filter averages in space what β1
+//! averages in time). Each trial
 //! optimizes for the tuning budget from the initial textures with the seed
 //! [`TUNE_SEED_OFFSET`] away from the task's; its score is the observed-texel RMSE at the
 //! end (the headline's measure). A value is kept only when it lowers the score by more than
@@ -16,6 +18,7 @@
 //! magnitude between scenes (settable with the task's `[optimizer.adam]`).
 use super::*;
 use crate::optim::adam::AdamOptions;
+use crate::optim::moment_filter::MomentFilterOptions;
 use crate::optim::{StepKind, Stop};
 use serde::Deserialize;
 use std::fmt::Write as _;
@@ -51,6 +54,9 @@ pub struct Tunable {
     /// The recursive estimator's lower bound of its adaptive weight.
     #[serde(default = "default_min_weight")]
     pub recursive_min_weight: f32,
+    /// The moment filter (not searched when off).
+    #[serde(default)]
+    pub moment_filter: MomentFilterOptions,
 }
 
 fn default_clip() -> f32 {
@@ -78,6 +84,7 @@ impl Tunable {
             variance_clip: settings.variance_step.clip,
             variance_threshold: settings.variance_step.threshold,
             recursive_min_weight: settings.recursive.min_weight,
+            moment_filter: settings.moment_filter,
         }
     }
 
@@ -91,6 +98,7 @@ impl Tunable {
         settings.variance_step.clip = self.variance_clip;
         settings.variance_step.threshold = self.variance_threshold;
         settings.recursive.min_weight = self.recursive_min_weight;
+        settings.moment_filter = self.moment_filter;
     }
 
     /// Scale the learning rates of `opt`'s textures (made from `prep`).
@@ -115,6 +123,17 @@ impl Tunable {
         if method == Method::Recursive {
             let _ = write!(s, ", weight ≥ {}", self.recursive_min_weight);
         }
+        let f = &self.moment_filter;
+        if f.enabled() {
+            let _ = write!(
+                s,
+                ", filter {} levels σ {}{}{}",
+                f.levels,
+                f.sigma,
+                if f.log_space { " (log)" } else { "" },
+                if f.write_back { " written back" } else { "" }
+            );
+        }
         if method == Method::Restir {
             let _ = write!(
                 s,
@@ -134,12 +153,15 @@ impl Tunable {
 }
 
 /// The name of an estimator with a step in file names: the method's, with `_variance` for the
-/// variance-scaled step (Adam adds nothing, so that earlier caches stay valid).
-pub fn contender_key(method: Method, step: StepKind) -> String {
-    match step {
-        StepKind::Adam => method.name().to_string(),
-        StepKind::Variance => format!("{}_variance", method.name()),
-    }
+/// variance-scaled step (Adam adds nothing, so that earlier caches stay valid) and
+/// `_filtered` with filtered moments.
+pub fn contender_key(method: Method, step: StepKind, filtered: bool) -> String {
+    let step = match step {
+        StepKind::Adam => "",
+        StepKind::Variance => "_variance",
+    };
+    let filtered = if filtered { "_filtered" } else { "" };
+    format!("{}{step}{filtered}", method.name())
 }
 
 /// One trial of the search.
@@ -170,7 +192,7 @@ pub struct Tuned {
 type Coordinate = Box<dyn Fn(&Tunable) -> Vec<Tunable>>;
 
 /// The candidates of each coordinate, in search order.
-fn coordinates(method: Method, step: StepKind) -> Vec<Coordinate> {
+fn coordinates(method: Method, step: StepKind, filtered: bool) -> Vec<Coordinate> {
     let learning_rate: Coordinate = Box::new(|b: &Tunable| {
         [0.5, 2.0]
             .map(|f| Tunable {
@@ -208,17 +230,46 @@ fn coordinates(method: Method, step: StepKind) -> Vec<Coordinate> {
                 .to_vec()
         }));
     }
+    if filtered {
+        c.push(Box::new(|b: &Tunable| {
+            [0.25, 4.0]
+                .map(|f| {
+                    let mut t = *b;
+                    t.moment_filter.sigma *= f;
+                    t
+                })
+                .to_vec()
+        }));
+        c.push(Box::new(|b: &Tunable| {
+            let mut t = *b;
+            t.moment_filter.log_space = !t.moment_filter.log_space;
+            vec![t]
+        }));
+    }
     if step == StepKind::Variance {
         return c;
     }
+    if filtered {
+        c.push(Box::new(|b: &Tunable| {
+            let mut t = *b;
+            t.moment_filter.write_back = !t.moment_filter.write_back;
+            vec![t]
+        }));
+    }
+    let beta1s: &'static [f32] = if filtered {
+        &[0.5, 0.2, 0.0]
+    } else {
+        &[0.5, 0.0]
+    };
     c.extend::<Vec<Coordinate>>(vec![
-        Box::new(|b: &Tunable| {
-            [0.5, 0.0]
-                .map(|beta1| Tunable {
+        Box::new(move |b: &Tunable| {
+            beta1s
+                .iter()
+                .map(|&beta1| Tunable {
                     adam: AdamOptions { beta1, ..b.adam },
                     ..*b
                 })
-                .to_vec()
+                .collect()
         }),
         Box::new(|b: &Tunable| {
             vec![Tunable {
@@ -296,7 +347,8 @@ pub(super) fn tune(
     progress: &Progress,
 ) -> Result<Tuned> {
     let method = settings.method;
-    let who = contender_key(method, settings.step);
+    let filtered = settings.moment_filter.enabled();
+    let who = contender_key(method, settings.step, filtered);
     let path = dir.join(format!("tune_{who}.json"));
     if let Ok(text) = std::fs::read_to_string(&path) {
         if let Ok(t) = serde_json::from_str::<Tuned>(&text) {
@@ -341,7 +393,10 @@ pub(super) fn tune(
         }
         Ok::<bool, Error>(better)
     };
-    for (k, coordinate) in coordinates(method, settings.step).into_iter().enumerate() {
+    for (k, coordinate) in coordinates(method, settings.step, filtered)
+        .into_iter()
+        .enumerate()
+    {
         let base = best;
         for candidate in coordinate(&base) {
             try_one(candidate, &mut best, &mut best_score)?;

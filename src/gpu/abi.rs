@@ -109,6 +109,19 @@ pub mod merge_flag {
 /// vec4s of control-variate state per pixel (`primal_cv.wgsl`).
 pub const CV_VEC4S: u32 = 8;
 
+/// The phases of a step pass (WGSL `STEP_PHASE_*`).
+pub mod step_phase {
+    //! What a step pass (`adam.wgsl`, `variance_step.wgsl`) does in one dispatch: the whole
+    //! step (no moment filter), or, around the moment filter (`moment_filter.wgsl`), first
+    //! the pair it filters and then the step from the filtered pair.
+    /// Update the moments and step, in one dispatch.
+    pub const FUSED: u32 = 0;
+    /// Update the moments and write the pair that the moment filter smooths.
+    pub const PAIR: u32 = 1;
+    /// Step from the filtered pair.
+    pub const FILTERED: u32 = 2;
+}
+
 /// Counter slots of each pass's statistics buffer (WGSL `<PASS>_STAT_*`).
 pub mod stat {
     /// `render.wgsl`: camera rays.
@@ -184,6 +197,9 @@ pub const CONSTANTS: &[(&str, u32)] = &[
     ("MERGE_FLAG_HAVE_PREV", merge_flag::HAVE_PREV),
     ("MERGE_FLAG_VERIFY", merge_flag::VERIFY),
     ("CV_VEC4S", CV_VEC4S),
+    ("STEP_PHASE_FUSED", step_phase::FUSED),
+    ("STEP_PHASE_PAIR", step_phase::PAIR),
+    ("STEP_PHASE_FILTERED", step_phase::FILTERED),
     ("RENDER_STAT_CAMERA_RAYS", stat::RENDER_CAMERA_RAYS),
     ("RENDER_STAT_SHADOW_RAYS", stat::RENDER_SHADOW_RAYS),
     ("RENDER_STAT_BSDF_RAYS", stat::RENDER_BSDF_RAYS),

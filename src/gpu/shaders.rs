@@ -66,6 +66,7 @@ pub const SOURCES: &[(&str, &str)] = sources!(
     "primal_cv",
     "multiscale_gradient",
     "smoothness",
+    "moment_filter",
     "variance_step";
     "gradient" in "optim/estimator/baseline",
     "restir_candidates" in "optim/estimator/restir",

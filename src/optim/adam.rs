@@ -1,8 +1,11 @@
-//! Adam: the constants, the pass of shaders/adam.wgsl (`AdamPass`, one dispatch per
-//! optimized texture), and its CPU reference.
+//! Adam: the constants, the pass of shaders/adam.wgsl (`AdamPass`, one or two dispatches per
+//! optimized texture), its CPU reference, and what it shares with the variance-scaled step
+//! (`TextureSteps`).
+use crate::gpu::abi::step_phase;
 use crate::gpu::{encode_timed_pass, grid_2d, Gpu};
+use crate::optim::moment_filter::MomentFilter;
 use crate::optim::{PassKind, PassTimer};
-use crate::render::params::ParamSet;
+use crate::render::params::{ParamSet, ParamTexture};
 use crate::render::WORKGROUP;
 use crate::Result;
 
@@ -129,21 +132,27 @@ pub struct AdamParams {
     pub lo: f32,
     pub hi: f32,
     pub mask: u32,
-    pub _pad: u32,
+    pub phase: u32,
 }
 
 /// Group 0 of `adam.wgsl`.
 pub(crate) const ADAM_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
     pass: "adam",
     group: 0,
-    names: &["ap", "grad", "params", "moment1", "moment2", "adam_stats"],
+    names: &[
+        "ap",
+        "grad",
+        "params",
+        "moment1",
+        "moment2",
+        "adam_stats",
+        "pair_first",
+        "pair_second",
+    ],
 };
 
-/// The Adam pass: per optimized texture a uniform, its bind group and its parameters.
-pub(crate) struct AdamPass {
-    pipeline: wgpu::ComputePipeline,
-    textures: Vec<(wgpu::Buffer, wgpu::BindGroup, AdamParams)>,
-}
+/// The Adam pass: one or two dispatches per optimized texture (see [`TextureSteps`]).
+pub(crate) struct AdamPass(TextureSteps<AdamParams>);
 
 /// What the Adam pass binds.
 pub(crate) struct AdamBuffers<'a> {
@@ -157,49 +166,49 @@ impl AdamPass {
     pub(crate) fn new(
         gpu: &Gpu,
         set: &ParamSet,
-        options: AdamOptions,
-        mask: bool,
+        (options, mask): (AdamOptions, bool),
+        filter: Option<MomentFilter>,
         b: AdamBuffers,
     ) -> Result<AdamPass> {
         let layout = gpu.pass_layout("adam", 0)?;
         let pipeline = gpu.compute_pipeline("adam", &[&layout])?;
-        let textures = set
-            .textures
-            .iter()
-            .map(|t| {
-                let (lo, hi) = t.slot.range();
-                let p = AdamParams {
-                    offset: t.offset,
-                    count: t.len() as u32,
-                    lr: t.learning_rate,
-                    beta1: options.beta1,
-                    beta2: options.beta2,
-                    eps: options.eps,
-                    bias1: 1.0,
-                    bias2: 1.0,
-                    lo,
-                    hi,
-                    mask: mask as u32,
-                    _pad: 0,
-                };
-                let u = gpu.uniform(&format!("adam params {}", t.name()), bytemuck::bytes_of(&p));
-                let g = gpu.bind(
-                    &ADAM_GROUP,
-                    "adam",
-                    &layout,
-                    &[
-                        ("ap", &u),
-                        ("grad", b.grad),
-                        ("params", b.params),
-                        ("moment1", &b.moments[0]),
-                        ("moment2", &b.moments[1]),
-                        ("adam_stats", b.stats),
-                    ],
-                );
-                (u, g, p)
-            })
-            .collect();
-        Ok(AdamPass { pipeline, textures })
+        let make = |t: &ParamTexture, phase: u32| {
+            let (lo, hi) = t.slot.range();
+            AdamParams {
+                offset: t.offset,
+                count: t.len() as u32,
+                lr: t.learning_rate,
+                beta1: options.beta1,
+                beta2: options.beta2,
+                eps: options.eps,
+                bias1: 1.0,
+                bias2: 1.0,
+                lo,
+                hi,
+                mask: mask as u32,
+                phase,
+            }
+        };
+        let bind = |label: &str, u: &wgpu::Buffer, pair: &[wgpu::Buffer; 2]| {
+            gpu.bind(
+                &ADAM_GROUP,
+                label,
+                &layout,
+                &[
+                    ("ap", u),
+                    ("grad", b.grad),
+                    ("params", b.params),
+                    ("moment1", &b.moments[0]),
+                    ("moment2", &b.moments[1]),
+                    ("adam_stats", b.stats),
+                    ("pair_first", &pair[0]),
+                    ("pair_second", &pair[1]),
+                ],
+            )
+        };
+        Ok(AdamPass(TextureSteps::new(
+            gpu, "adam", pipeline, set, filter, make, bind,
+        )))
     }
 
     /// Record step `t` (from 1) of every texture at its learning rate times `factor`;
@@ -213,50 +222,108 @@ impl AdamPass {
         t: u32,
         timer: &mut PassTimer,
     ) -> Vec<f32> {
-        let pass = ("adam", &self.pipeline);
-        encode_texture_steps(
-            gpu,
-            enc,
-            pass,
-            &mut self.textures,
-            set,
-            factor,
-            timer,
-            |p, lr| {
-                p.lr = lr;
-                p.bias1 = 1.0 - p.beta1.powi(t as i32);
-                p.bias2 = 1.0 - p.beta2.powi(t as i32);
-                p.count
-            },
-        )
+        self.0.encode(gpu, enc, set, factor, timer, |p, lr| {
+            p.lr = lr;
+            p.bias1 = 1.0 - p.beta1.powi(t as i32);
+            p.bias2 = 1.0 - p.beta2.powi(t as i32);
+            p.count
+        })
+    }
+
+    /// The moment filter, when the step has one.
+    pub(crate) fn filter(&self) -> Option<&MomentFilter> {
+        self.0.filter.as_ref()
     }
 }
 
-/// Record a step pass (`pass`: its name and pipeline) once per optimized texture, each with
-/// its uniform and bind group in `textures`: `prepare` sets a texture's uniform for the
-/// learning rate it is given (the texture's rate times `factor`) and returns its number of
-/// entries. Returns the learning rates used, one per texture. Shared by Adam and the
-/// variance-scaled step.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn encode_texture_steps<P: bytemuck::Pod>(
-    gpu: &Gpu,
-    enc: &mut wgpu::CommandEncoder,
-    (label, pipeline): (&str, &wgpu::ComputePipeline),
-    textures: &mut [(wgpu::Buffer, wgpu::BindGroup, P)],
-    set: &ParamSet,
-    factor: f32,
-    timer: &mut PassTimer,
-    mut prepare: impl FnMut(&mut P, f32) -> u32,
-) -> Vec<f32> {
-    let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
-    let mut rates = Vec::with_capacity(textures.len());
-    for ((u, g, p), tex) in textures.iter_mut().zip(&set.textures) {
-        let lr = tex.learning_rate * factor;
-        rates.push(lr);
-        let count = prepare(p, lr);
-        gpu.queue.write_buffer(u, 0, bytemuck::bytes_of(p));
-        let grid = grid_2d(count, WORKGROUP, max_dim);
-        encode_timed_pass(enc, label, pipeline, &[g], grid, timer.next(PassKind::Adam));
+/// A step pass (Adam or the variance-scaled step) over every optimized texture: per texture
+/// one dispatch (phase [`step_phase::FUSED`]), or with the moment filter two around it
+/// ([`step_phase::PAIR`], the filter's levels, [`step_phase::FILTERED`]), each with its
+/// uniform, bind group and parameters.
+pub(crate) struct TextureSteps<P> {
+    label: &'static str,
+    pipeline: wgpu::ComputePipeline,
+    textures: Vec<Vec<(wgpu::Buffer, wgpu::BindGroup, P)>>,
+    pub(crate) filter: Option<MomentFilter>,
+}
+
+impl<P: bytemuck::Pod> TextureSteps<P> {
+    /// The dispatches of pass `label` for every texture of `set`: `make` gives a texture's
+    /// parameters in a phase, `bind` the bind group of a uniform with the filter's pair (a
+    /// small unused pair without the filter).
+    pub(crate) fn new(
+        gpu: &Gpu,
+        label: &'static str,
+        pipeline: wgpu::ComputePipeline,
+        set: &ParamSet,
+        filter: Option<MomentFilter>,
+        make: impl Fn(&ParamTexture, u32) -> P,
+        bind: impl Fn(&str, &wgpu::Buffer, &[wgpu::Buffer; 2]) -> wgpu::BindGroup,
+    ) -> TextureSteps<P> {
+        let unused = || {
+            [
+                gpu.storage_zeroed(&format!("{label} unused pair first"), 16),
+                gpu.storage_zeroed(&format!("{label} unused pair second"), 16),
+            ]
+        };
+        let phases: Vec<(u32, [wgpu::Buffer; 2])> = match &filter {
+            None => vec![(step_phase::FUSED, unused())],
+            Some(f) => vec![
+                (step_phase::PAIR, f.input().clone()),
+                (step_phase::FILTERED, f.output().clone()),
+            ],
+        };
+        let textures = set
+            .textures
+            .iter()
+            .map(|t| {
+                phases
+                    .iter()
+                    .map(|(phase, pair)| {
+                        let p = make(t, *phase);
+                        let name = format!("{label} params {} phase {phase}", t.name());
+                        let u = gpu.uniform(&name, bytemuck::bytes_of(&p));
+                        (u.clone(), bind(label, &u, pair), p)
+                    })
+                    .collect()
+            })
+            .collect();
+        TextureSteps {
+            label,
+            pipeline,
+            textures,
+            filter,
+        }
     }
-    rates
+
+    /// Record the step of every texture: `prepare` sets a texture's uniform for the learning
+    /// rate it is given (the texture's rate times `factor`) and returns its number of
+    /// entries. Returns the learning rates used, one per texture.
+    pub(crate) fn encode(
+        &mut self,
+        gpu: &Gpu,
+        enc: &mut wgpu::CommandEncoder,
+        set: &ParamSet,
+        factor: f32,
+        timer: &mut PassTimer,
+        mut prepare: impl FnMut(&mut P, f32) -> u32,
+    ) -> Vec<f32> {
+        let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
+        let mut rates = Vec::with_capacity(self.textures.len());
+        for (k, (dispatches, tex)) in self.textures.iter_mut().zip(&set.textures).enumerate() {
+            let lr = tex.learning_rate * factor;
+            rates.push(lr);
+            for (j, (u, g, p)) in dispatches.iter_mut().enumerate() {
+                let count = prepare(p, lr);
+                gpu.queue.write_buffer(u, 0, bytemuck::bytes_of(p));
+                let grid = grid_2d(count, WORKGROUP, max_dim);
+                let timing = timer.next(PassKind::Adam);
+                encode_timed_pass(enc, self.label, &self.pipeline, &[g], grid, timing);
+                if let (0, Some(f)) = (j, &self.filter) {
+                    f.encode(enc, k, timer);
+                }
+            }
+        }
+        rates
+    }
 }

@@ -8,6 +8,7 @@ pub mod checkpoint;
 pub mod estimator;
 pub mod export;
 pub mod loss;
+pub mod moment_filter;
 pub mod multiscale;
 pub mod observed;
 pub mod plot;
@@ -183,12 +184,28 @@ impl Optimizer {
             accum_prev: &accum_prev,
             stats: &stats,
         });
+        let mf = &settings.moment_filter;
+        let filter = if mf.enabled() {
+            let write_back = mf.write_back.then_some(&moments);
+            let f = moment_filter::MomentFilter::new(
+                gpu,
+                &set,
+                mf,
+                &params.values,
+                &observed.1,
+                write_back,
+            )?;
+            Some(f)
+        } else {
+            None
+        };
+        let filter_dispatches = filter.as_ref().map_or(0, |f| f.dispatches());
         let step = match settings.step {
             StepKind::Adam => StepPass::Adam(adam::AdamPass::new(
                 gpu,
                 &set,
-                settings.adam,
-                settings.adam_mask,
+                (settings.adam, settings.adam_mask),
+                filter,
                 adam::AdamBuffers {
                     grad: &grad,
                     params: &params.values,
@@ -199,8 +216,8 @@ impl Optimizer {
             StepKind::Variance => StepPass::Variance(variance_step::VarianceStepPass::new(
                 gpu,
                 &set,
-                settings.variance_step,
-                settings.adam_mask,
+                (settings.variance_step, settings.adam_mask),
+                filter,
                 variance_step::StepBuffers {
                     grad: &grad,
                     params: &params.values,
@@ -216,8 +233,10 @@ impl Optimizer {
             )?),
         };
         // Primal, control variate and loss per camera, the estimator's passes (at most two
-        // per camera), smoothness, multiscale and Adam per texture.
-        let timer = PassTimer::new(gpu, 6 * n_cams + 2 + 3 * set.textures.len() as u32);
+        // per camera), smoothness, multiscale and the step (two dispatches with the moment
+        // filter) per texture, and the filter's levels.
+        let per_texture = 4 * set.textures.len() as u32;
+        let timer = PassTimer::new(gpu, 6 * n_cams + 2 + per_texture + filter_dispatches);
         gpu.check("optimizer setup")?;
         Ok(Optimizer {
             gpu: gpu.clone(),
@@ -361,6 +380,9 @@ impl Optimizer {
         }
         if settings.multiscale_levels > 0 {
             p.push("multiscale_gradient");
+        }
+        if settings.moment_filter.enabled() {
+            p.push("moment_filter");
         }
         p
     }

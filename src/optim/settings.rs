@@ -48,6 +48,10 @@ pub struct Settings {
     /// Levels of the multiscale gradient (0: off; at most 4; see [`super::multiscale`]): each
     /// observed texel's gradient is averaged with its 2^l x 2^l blocks' before Adam.
     pub multiscale_levels: u32,
+    /// The moment filter (off unless `levels` > 0; see [`super::moment_filter`]): the pair the
+    /// step divides (Adam's moments, or the variance step's estimate and variance) smoothed
+    /// in texture space, across the texture's edges only where they are weak.
+    pub moment_filter: super::moment_filter::MomentFilterOptions,
     /// Weight of the smoothness prior (0: off; see [`super::smoothness`]): the gradient of
     /// `smoothness * mean squared difference of observed neighbouring texels` is added to
     /// the image loss's before the multiscale gradient and Adam.
@@ -80,6 +84,7 @@ impl Settings {
             adam: Default::default(),
             adam_mask: false,
             multiscale_levels: 0,
+            moment_filter: Default::default(),
             smoothness: 0.0,
             exposure_learning_rate: None,
         }
@@ -122,6 +127,15 @@ impl Settings {
         if self.multiscale_levels > super::multiscale::MAX_LEVELS {
             let msg = format!("must be between 0 and {}", super::multiscale::MAX_LEVELS);
             return bad("optimizer.multiscale_levels", &msg);
+        }
+        if let Err((key, msg)) = self.moment_filter.check() {
+            return bad(&format!("optimizer.moment_filter.{key}"), &msg);
+        }
+        if self.moment_filter.write_back && self.step != StepKind::Adam {
+            return bad(
+                "optimizer.moment_filter.write_back",
+                "only with step = \"adam\" (the variance step keeps no first moment)",
+            );
         }
         if !(self.smoothness.is_finite() && (0.0..=1.0e6).contains(&self.smoothness)) {
             return bad(
@@ -212,6 +226,21 @@ mod tests {
             (
                 "optimizer.smoothness",
                 Box::new(|s| s.smoothness = f32::NAN),
+            ),
+            (
+                "optimizer.moment_filter.levels",
+                Box::new(|s| s.moment_filter.levels = 9),
+            ),
+            (
+                "optimizer.moment_filter.sigma",
+                Box::new(|s| s.moment_filter.sigma = 0.0),
+            ),
+            (
+                "optimizer.moment_filter.write_back",
+                Box::new(|s| {
+                    s.moment_filter.write_back = true;
+                    s.step = StepKind::Variance;
+                }),
             ),
             (
                 "optimizer.exposure_learning_rate",

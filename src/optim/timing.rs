@@ -11,6 +11,7 @@ pub(crate) enum PassKind {
     Gradient,
     Merge,
     Adam,
+    Filter,
 }
 
 /// GPU milliseconds of each kind of pass in the last iteration (from timestamp queries).
@@ -24,8 +25,11 @@ pub struct PassTimes {
     pub gradient_ms: f64,
     /// ReSTIR's merge pass.
     pub merge_ms: f64,
-    /// Adam updates, with the multiscale gradient before them when it is on.
+    /// The step (Adam or the variance step), with the priors' passes before it when they
+    /// are on.
     pub adam_ms: f64,
+    /// The moment filter's levels, when it is on.
+    pub filter_ms: f64,
 }
 
 impl PassTimes {
@@ -36,6 +40,7 @@ impl PassTimes {
         self.gradient_ms += other.gradient_ms;
         self.merge_ms += other.merge_ms;
         self.adam_ms += other.adam_ms;
+        self.filter_ms += other.filter_ms;
     }
 
     /// Every pass divided by `n` (the mean of `n` added iterations).
@@ -46,12 +51,18 @@ impl PassTimes {
             gradient_ms: self.gradient_ms / n,
             merge_ms: self.merge_ms / n,
             adam_ms: self.adam_ms / n,
+            filter_ms: self.filter_ms / n,
         }
     }
 
     /// All passes together.
     pub fn total(&self) -> f64 {
-        self.primal_ms + self.loss_ms + self.gradient_ms + self.merge_ms + self.adam_ms
+        self.primal_ms
+            + self.loss_ms
+            + self.gradient_ms
+            + self.merge_ms
+            + self.adam_ms
+            + self.filter_ms
     }
 }
 
@@ -126,6 +137,7 @@ impl PassTimer {
                 PassKind::Gradient => t.gradient_ms += ms,
                 PassKind::Merge => t.merge_ms += ms,
                 PassKind::Adam => t.adam_ms += ms,
+                PassKind::Filter => t.filter_ms += ms,
             }
         }
         Ok(Some(t))

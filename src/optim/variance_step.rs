@@ -9,9 +9,10 @@
 //! that scalars the images hardly determine do not drift, and a lower-variance estimate gets
 //! closer to the optimum before its steps stop.
 use crate::gpu::Gpu;
-use crate::optim::adam::encode_texture_steps;
+use crate::optim::adam::TextureSteps;
+use crate::optim::moment_filter::MomentFilter;
 use crate::optim::PassTimer;
-use crate::render::params::ParamSet;
+use crate::render::params::{ParamSet, ParamTexture};
 use crate::Result;
 
 /// Which step the optimizer takes with the gradient estimate (the task file's
@@ -136,6 +137,8 @@ pub struct VarianceStepParams {
     pub hi: f32,
     pub mask: u32,
     pub threshold: f32,
+    pub phase: u32,
+    pub _pad: [u32; 3],
 }
 
 /// Group 0 of `variance_step.wgsl`.
@@ -150,6 +153,8 @@ pub(crate) const VARIANCE_STEP_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupD
         "moment2",
         "variance",
         "step_stats",
+        "pair_first",
+        "pair_second",
     ],
 };
 
@@ -164,66 +169,68 @@ pub(crate) struct StepBuffers<'a> {
     pub stats: &'a wgpu::Buffer,
 }
 
-/// The variance-scaled step's pass: per optimized texture a uniform, its bind group and its
-/// parameters.
-pub(crate) struct VarianceStepPass {
-    pipeline: wgpu::ComputePipeline,
-    textures: Vec<(wgpu::Buffer, wgpu::BindGroup, VarianceStepParams)>,
-}
+/// The variance-scaled step's pass: one or two dispatches per optimized texture (see
+/// [`TextureSteps`]).
+pub(crate) struct VarianceStepPass(TextureSteps<VarianceStepParams>);
 
 impl VarianceStepPass {
     pub(crate) fn new(
         gpu: &Gpu,
         set: &ParamSet,
-        options: VarianceStepOptions,
-        mask: bool,
+        (options, mask): (VarianceStepOptions, bool),
+        filter: Option<MomentFilter>,
         b: StepBuffers,
     ) -> Result<VarianceStepPass> {
         let layout = gpu.pass_layout("variance_step", 0)?;
         let pipeline = gpu.compute_pipeline("variance_step", &[&layout])?;
         let unused = gpu.storage_zeroed("variance step unused variance", 16);
         let variance = b.variance.unwrap_or(&unused);
-        let textures = set
-            .textures
-            .iter()
-            .map(|t| {
-                let (lo, hi) = t.slot.range();
-                let p = VarianceStepParams {
-                    offset: t.offset,
-                    count: t.len() as u32,
-                    lr: t.learning_rate,
-                    clip: options.clip,
-                    beta: options.beta,
-                    eps: options.eps,
-                    bias: 1.0,
-                    own_variance: b.variance.is_some() as u32,
-                    lo,
-                    hi,
-                    mask: mask as u32,
-                    threshold: options.threshold,
-                };
-                let u = gpu.uniform(
-                    &format!("variance step params {}", t.name()),
-                    bytemuck::bytes_of(&p),
-                );
-                let g = gpu.bind(
-                    &VARIANCE_STEP_GROUP,
-                    "variance_step",
-                    &layout,
-                    &[
-                        ("vp", &u),
-                        ("grad", b.grad),
-                        ("params", b.params),
-                        ("moment1", &b.moments[0]),
-                        ("moment2", &b.moments[1]),
-                        ("variance", variance),
-                        ("step_stats", b.stats),
-                    ],
-                );
-                (u, g, p)
-            })
-            .collect();
-        Ok(VarianceStepPass { pipeline, textures })
+        let make = |t: &ParamTexture, phase: u32| {
+            let (lo, hi) = t.slot.range();
+            VarianceStepParams {
+                offset: t.offset,
+                count: t.len() as u32,
+                lr: t.learning_rate,
+                clip: options.clip,
+                beta: options.beta,
+                eps: options.eps,
+                bias: 1.0,
+                own_variance: b.variance.is_some() as u32,
+                lo,
+                hi,
+                mask: mask as u32,
+                threshold: options.threshold,
+                phase,
+                _pad: [0; 3],
+            }
+        };
+        let bind = |label: &str, u: &wgpu::Buffer, pair: &[wgpu::Buffer; 2]| {
+            gpu.bind(
+                &VARIANCE_STEP_GROUP,
+                label,
+                &layout,
+                &[
+                    ("vp", u),
+                    ("grad", b.grad),
+                    ("params", b.params),
+                    ("moment1", &b.moments[0]),
+                    ("moment2", &b.moments[1]),
+                    ("variance", variance),
+                    ("step_stats", b.stats),
+                    ("pair_first", &pair[0]),
+                    ("pair_second", &pair[1]),
+                ],
+            )
+        };
+        Ok(VarianceStepPass(TextureSteps::new(
+            gpu,
+            "variance_step",
+            pipeline,
+            set,
+            filter,
+            make,
+            bind,
+        )))
     }
 
     /// Record step `t` (from 1) of every texture at its learning rate times `factor`;
@@ -237,20 +244,15 @@ impl VarianceStepPass {
         t: u32,
         timer: &mut PassTimer,
     ) -> Vec<f32> {
-        let pass = ("variance_step", &self.pipeline);
-        encode_texture_steps(
-            gpu,
-            enc,
-            pass,
-            &mut self.textures,
-            set,
-            factor,
-            timer,
-            |p, lr| {
-                p.lr = lr;
-                p.bias = 1.0 - p.beta.powi(t as i32);
-                p.count
-            },
-        )
+        self.0.encode(gpu, enc, set, factor, timer, |p, lr| {
+            p.lr = lr;
+            p.bias = 1.0 - p.beta.powi(t as i32);
+            p.count
+        })
+    }
+
+    /// The moment filter, when the step has one.
+    pub(crate) fn filter(&self) -> Option<&MomentFilter> {
+        self.0.filter.as_ref()
     }
 }

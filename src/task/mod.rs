@@ -46,6 +46,12 @@
 //! beta = 0.9                      # decay of the moving variance (estimators without their own)
 //! eps = 1e-12
 //!
+//! [optimizer.moment_filter]       # filtered moments (off by default: levels = 0)
+//! levels = 4                      # a-trous levels: taps 1, 2, 4, 8 texels apart (at most 8)
+//! sigma = 0.02                    # edge-stopping scale of the texture's differences
+//! log_space = false               # differences of logarithms instead
+//! write_back = false              # the filtered moments replace Adam's (Adam only)
+//!
 //! [optimizer.schedule]            # learning-rate schedule (default: constant)
 //! kind = "cosine"                 # or "constant", "step", "exponential"
 //! final = 0.05
@@ -228,6 +234,10 @@ pub struct OptimizerSpec {
     /// neighbouring texels, times this, is added to the loss that Adam descends.
     #[serde(default)]
     pub smoothness: f32,
+    /// The moment filter (`[optimizer.moment_filter]`: `levels` (0: off), `sigma`,
+    /// `log_space`, `write_back`).
+    #[serde(default)]
+    pub moment_filter: crate::optim::moment_filter::MomentFilterOptions,
     /// Iterations between evaluation renders (image relMSE of an `eval_spp` render of every
     /// camera against its target, outside the timed budget); 0: none.
     #[serde(default = "default_eval_every")]
@@ -659,6 +669,7 @@ pub fn task_settings(
         adam_mask: task.optimizer.adam_mask,
         multiscale_levels: task.optimizer.multiscale_levels,
         smoothness: task.optimizer.smoothness,
+        moment_filter: task.optimizer.moment_filter,
         exposure_learning_rate: task
             .optimizer
             .optimize_exposure

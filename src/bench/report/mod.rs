@@ -233,54 +233,67 @@ pub fn table(r: &BenchReport) -> String {
     s
 }
 
-/// The per-pass GPU times (markdown).
+/// The per-pass GPU times (markdown), for every estimator of the equal-time phase.
 pub fn pass_table(r: &BenchReport) -> String {
     let mut s = String::from(
-        "| scene | estimator | primal | loss | gradient / candidates | merge | Adam | iteration | outside the passes | state B/texel | merge evaluations/it |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| scene | estimator | primal | loss | gradient / candidates | merge | step | moment filter | iteration | outside the passes | state B/texel | merge evaluations/it |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for x in &r.scenes {
         let Some(o) = &x.optimization else { continue };
-        for (name, p, bytes, ms) in [
+        let mut rows = vec![
             (
-                "baseline",
+                "baseline".to_string(),
                 &o.passes_baseline,
                 o.state_bytes_per_texel_baseline,
                 o.ms_per_iteration_baseline,
+                None,
             ),
             (
-                "ReSTIR",
+                "ReSTIR".to_string(),
                 &o.passes_restir,
                 o.state_bytes_per_texel,
                 o.ms_per_iteration_restir,
+                o.merge_evaluations_per_iteration,
             ),
-        ] {
-            let evaluations = match (name, o.merge_evaluations_per_iteration) {
-                ("ReSTIR", Some(e)) => format!("{e:.0}"),
-                _ => "–".into(),
+        ];
+        for c in &o.contenders {
+            rows.push((
+                c.name.clone(),
+                &c.passes,
+                c.state_bytes_per_texel,
+                c.ms_per_iteration,
+                None,
+            ));
+        }
+        for (name, p, bytes, ms, evaluations) in rows {
+            let evaluations = evaluations.map_or("–".into(), |e| format!("{e:.0}"));
+            let dash_if_zero = |v: f64, digits: usize| {
+                if v > 0.0 {
+                    format!("{v:.digits$}")
+                } else {
+                    "–".into()
+                }
             };
             match p {
                 Some(p) => {
                     let _ = writeln!(
                         s,
-                        "| {} | {name} | {:.1} | {:.1} | {:.1} | {} | {:.1} | {ms:.1} | {:.1} | {bytes:.0} | {evaluations} |",
+                        "| {} | {name} | {:.1} | {:.1} | {:.1} | {} | {:.1} | {} | {ms:.1} | {:.1} | {bytes:.0} | {evaluations} |",
                         x.name,
                         p.primal_ms,
                         p.loss_ms,
                         p.gradient_ms,
-                        if name == "ReSTIR" {
-                            format!("{:.1}", p.merge_ms)
-                        } else {
-                            "–".into()
-                        },
+                        dash_if_zero(p.merge_ms, 1),
                         p.adam_ms,
+                        dash_if_zero(p.filter_ms, 2),
                         ms - p.total()
                     );
                 }
                 None => {
                     let _ = writeln!(
                         s,
-                        "| {} | {name} | – | – | – | – | – | {ms:.1} | – | {bytes:.0} | {evaluations} |",
+                        "| {} | {name} | – | – | – | – | – | – | {ms:.1} | – | {bytes:.0} | {evaluations} |",
                         x.name
                     );
                 }

@@ -1,0 +1,370 @@
+//! Filtered moments (after Chang et al., "Spatiotemporal Bilateral Gradient Filtering for
+//! Inverse Rendering", 2024): before each step, the pair of per-texel arrays the step divides
+//! (Adam's first and second moments; the variance step's estimate and its variance) is
+//! smoothed in texture space by an edge-stopping à-trous filter (shaders/moment_filter.wgsl,
+//! levels at tap spacings 1, 2, 4, ...), guided by the current texture so that it does not
+//! average across the texture's edges. Neighbouring texels of a real texture are alike, so a
+//! texel that drew few or no samples this iteration steps with its neighbours, and one noisy
+//! sample is averaged with theirs instead of being kept for many iterations. Texels no camera
+//! observes take no part. The filtered pair is used for the step only, or with `write_back`
+//! also replaces Adam's moments. [`reference()`] is the CPU twin that the tests compare
+//! against.
+
+use bytemuck::{Pod, Zeroable};
+
+use crate::error::Result;
+use crate::gpu::{encode_timed_pass, Gpu, GroupDecl};
+use crate::optim::{PassKind, PassTimer};
+use crate::render::params::ParamSet;
+
+/// The most levels (the widest tap spacing is 2^(levels - 1) texels).
+pub const MAX_LEVELS: u32 = 8;
+/// Levels where a contender of the bench asks for filtered moments and the task sets none
+/// (taps up to 8 texels apart, reaching 30).
+pub const SUGGESTED_LEVELS: u32 = 4;
+/// Taps of the cubic B-spline kernel at offsets 0, ±1, ±2 (`h` in the WGSL).
+pub const KERNEL: [f32; 3] = [0.375, 0.25, 0.0625];
+/// Added to a value before its logarithm in log space (`LOG_FLOOR` in the WGSL).
+pub const LOG_FLOOR: f32 = 1e-3;
+
+/// The moment filter's options (the task file's `[optimizer.moment_filter]`).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MomentFilterOptions {
+    /// À-trous levels (0: off, at most [`MAX_LEVELS`]); level l has taps 2^l texels apart, so
+    /// L levels reach 2^(L+1) - 2 texels.
+    pub levels: u32,
+    /// Edge-stopping scale (> 0): a neighbour whose texture values differ by d (the length
+    /// over the channels) weighs exp(-d / sigma).
+    pub sigma: f32,
+    /// Measure the texture's differences between logarithms (relative differences).
+    pub log_space: bool,
+    /// Write the filtered moments back into Adam's moments (Adam only); otherwise they are
+    /// used for the step alone.
+    pub write_back: bool,
+}
+
+impl Default for MomentFilterOptions {
+    fn default() -> Self {
+        MomentFilterOptions {
+            levels: 0,
+            sigma: 0.02,
+            log_space: false,
+            write_back: false,
+        }
+    }
+}
+
+impl MomentFilterOptions {
+    /// Whether the filter is on.
+    pub fn enabled(&self) -> bool {
+        self.levels > 0
+    }
+
+    /// An error naming the field that is out of range.
+    pub fn check(&self) -> std::result::Result<(), (&'static str, String)> {
+        if self.levels > MAX_LEVELS {
+            return Err(("levels", format!("must be between 0 and {MAX_LEVELS}")));
+        }
+        if !(self.sigma.is_finite() && self.sigma > 0.0) {
+            return Err(("sigma", "must be a positive number".into()));
+        }
+        Ok(())
+    }
+}
+
+/// Group 0 of `moment_filter.wgsl`.
+pub(crate) const MOMENT_FILTER_GROUP: GroupDecl = GroupDecl {
+    pass: "moment_filter",
+    group: 0,
+    names: &[
+        "fp",
+        "src_first",
+        "src_second",
+        "dst_first",
+        "dst_second",
+        "params",
+        "observed",
+    ],
+};
+
+/// Workgroup side of the pass (8 x 8 texels).
+const WORKGROUP_SIDE: u32 = 8;
+
+/// `MomentFilterParams` in shaders/moment_filter.wgsl (a test checks the layout).
+/// The fields are documented in the WGSL twin.
+#[allow(missing_docs)]
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct MomentFilterParams {
+    pub offset: u32,
+    pub width: u32,
+    pub height: u32,
+    pub channels: u32,
+    pub texel_offset: u32,
+    pub spacing: u32,
+    pub sigma: f32,
+    pub log_space: u32,
+}
+
+/// The pass's parameters for each texture of `set` (`texel_offset` counts the texels of the
+/// textures before it) and each level.
+pub fn params(set: &ParamSet, o: &MomentFilterOptions) -> Vec<Vec<MomentFilterParams>> {
+    let mut texel_offset = 0;
+    set.textures
+        .iter()
+        .map(|t| {
+            let levels = (0..o.levels)
+                .map(|l| MomentFilterParams {
+                    offset: t.offset,
+                    width: t.width,
+                    height: t.height,
+                    channels: t.channels(),
+                    texel_offset,
+                    spacing: 1 << l,
+                    sigma: o.sigma,
+                    log_space: o.log_space as u32,
+                })
+                .collect();
+            texel_offset += t.width * t.height;
+            levels
+        })
+        .collect()
+}
+
+/// CPU twin of one level on one texture: `first` and `second` hold the pair
+/// (`width * height * channels` floats each, filtered in place), `guide` the texture's
+/// values laid out alike, `observed` one flag per texel.
+pub fn reference(
+    p: &MomentFilterParams,
+    first: &mut [f32],
+    second: &mut [f32],
+    guide: &[f32],
+    observed: &[bool],
+) {
+    let (w, h, ch) = (p.width as i64, p.height as i64, p.channels as usize);
+    let seen =
+        |x: i64, y: i64| x >= 0 && y >= 0 && x < w && y < h && observed[(y * w + x) as usize];
+    let g = |t: usize, c: usize| {
+        let v = guide[t * ch + c];
+        if p.log_space != 0 {
+            (v.max(0.0) + LOG_FLOOR).ln()
+        } else {
+            v
+        }
+    };
+    let (src1, src2) = (first.to_vec(), second.to_vec());
+    let s = p.spacing as i64;
+    for y in 0..h {
+        for x in 0..w {
+            if !seen(x, y) {
+                continue;
+            }
+            let t = (y * w + x) as usize;
+            let (mut a, mut b, mut weights) = ([0.0f32; 3], [0.0f32; 3], 0.0f32);
+            for dy in -2i64..=2 {
+                for dx in -2i64..=2 {
+                    let (nx, ny) = (x + dx * s, y + dy * s);
+                    if !seen(nx, ny) {
+                        continue;
+                    }
+                    let n = (ny * w + nx) as usize;
+                    let d2: f32 = (0..ch).map(|c| (g(n, c) - g(t, c)).powi(2)).sum();
+                    let wt = KERNEL[dx.unsigned_abs() as usize]
+                        * KERNEL[dy.unsigned_abs() as usize]
+                        * (-d2.sqrt() / p.sigma).exp();
+                    for c in 0..ch {
+                        a[c] += wt * src1[n * ch + c];
+                        b[c] += wt * src2[n * ch + c];
+                    }
+                    weights += wt;
+                }
+            }
+            for c in 0..ch {
+                first[t * ch + c] = a[c] / weights;
+                second[t * ch + c] = b[c] / weights;
+            }
+        }
+    }
+}
+
+/// CPU twin of every level on one texture (`levels`: one texture's parameters from
+/// [`params()`]), in order.
+pub fn reference_levels(
+    levels: &[MomentFilterParams],
+    first: &mut [f32],
+    second: &mut [f32],
+    guide: &[f32],
+    observed: &[bool],
+) {
+    for p in levels {
+        reference(p, first, second, guide, observed);
+    }
+}
+
+/// The filter over every optimized texture: its pipeline, the two pairs of scratch arrays it
+/// ping-pongs between (each as long as the largest texture), and per texture and level a
+/// uniform and bind group.
+pub(crate) struct MomentFilter {
+    pipeline: wgpu::ComputePipeline,
+    /// Level l reads pair l % 2 and writes pair (l + 1) % 2.
+    pairs: [[wgpu::Buffer; 2]; 2],
+    /// Per texture, per level: the bind group (it keeps its uniform alive) and parameters.
+    levels: Vec<Vec<(wgpu::BindGroup, MomentFilterParams)>>,
+    /// Adam's moments, when the filtered pair is written back into them.
+    write_back: Option<[wgpu::Buffer; 2]>,
+    /// Per texture: its first float and length in floats.
+    ranges: Vec<(u64, u64)>,
+}
+
+impl MomentFilter {
+    /// The filter for `set` with options `o` (levels > 0), guided by the textures in
+    /// `params_buf`, over the texels marked in `mask` (the observed-texel buffer: one word
+    /// per texel, in the order of `set.textures`); `moments` are written back into when
+    /// given.
+    pub fn new(
+        gpu: &Gpu,
+        set: &ParamSet,
+        o: &MomentFilterOptions,
+        params_buf: &wgpu::Buffer,
+        mask: &wgpu::Buffer,
+        moments: Option<&[wgpu::Buffer; 2]>,
+    ) -> Result<MomentFilter> {
+        let layout = gpu.pass_layout("moment_filter", 0)?;
+        let pipeline = gpu.compute_pipeline("moment_filter", &[&layout])?;
+        let longest = set.textures.iter().map(|t| t.len()).max().unwrap_or(1) as u64;
+        let pair = |k: usize| {
+            [
+                gpu.storage_zeroed(&format!("moment filter pair {k} first"), longest * 4),
+                gpu.storage_zeroed(&format!("moment filter pair {k} second"), longest * 4),
+            ]
+        };
+        let pairs = [pair(0), pair(1)];
+        let levels = params(set, o)
+            .into_iter()
+            .zip(&set.textures)
+            .map(|(ps, t)| {
+                ps.into_iter()
+                    .enumerate()
+                    .map(|(l, p)| {
+                        let u = gpu.uniform(
+                            &format!("moment_filter params {} level {l}", t.name()),
+                            bytemuck::bytes_of(&p),
+                        );
+                        let (src, dst) = (&pairs[l % 2], &pairs[(l + 1) % 2]);
+                        let g = gpu.bind(
+                            &MOMENT_FILTER_GROUP,
+                            "moment_filter",
+                            &layout,
+                            &[
+                                ("fp", &u),
+                                ("src_first", &src[0]),
+                                ("src_second", &src[1]),
+                                ("dst_first", &dst[0]),
+                                ("dst_second", &dst[1]),
+                                ("params", params_buf),
+                                ("observed", mask),
+                            ],
+                        );
+                        (g, p)
+                    })
+                    .collect()
+            })
+            .collect();
+        Ok(MomentFilter {
+            pipeline,
+            levels,
+            write_back: moments.cloned(),
+            ranges: set
+                .textures
+                .iter()
+                .map(|t| (t.offset as u64, t.len() as u64))
+                .collect(),
+            pairs,
+        })
+    }
+
+    /// The pair a step writes for the filter.
+    pub fn input(&self) -> &[wgpu::Buffer; 2] {
+        &self.pairs[0]
+    }
+
+    /// The pair that holds the filtered values after [`MomentFilter::encode`].
+    pub fn output(&self) -> &[wgpu::Buffer; 2] {
+        let levels = self.levels.first().map_or(0, |l| l.len());
+        &self.pairs[levels % 2]
+    }
+
+    /// Record every level on texture `k` (whose pair the step wrote into
+    /// [`MomentFilter::input`]), and the write-back into the moments when asked for.
+    pub fn encode(&self, enc: &mut wgpu::CommandEncoder, k: usize, timer: &mut PassTimer) {
+        self.encode_levels(enc, k, timer);
+        if let Some(moments) = &self.write_back {
+            let (offset, len) = self.ranges[k];
+            for (src, dst) in self.output().iter().zip(moments) {
+                enc.copy_buffer_to_buffer(src, 0, dst, offset * 4, len * 4);
+            }
+        }
+    }
+
+    /// Record every level on texture `k`.
+    fn encode_levels(&self, enc: &mut wgpu::CommandEncoder, k: usize, timer: &mut PassTimer) {
+        for (g, p) in &self.levels[k] {
+            let grid = (
+                p.width.div_ceil(WORKGROUP_SIDE),
+                p.height.div_ceil(WORKGROUP_SIDE),
+            );
+            let timing = timer.next(PassKind::Filter);
+            encode_timed_pass(enc, "moment_filter", &self.pipeline, &[g], grid, timing);
+        }
+    }
+
+    /// Dispatches per iteration over all textures.
+    pub fn dispatches(&self) -> u32 {
+        self.levels.iter().map(|l| l.len() as u32).sum()
+    }
+}
+
+impl super::Optimizer {
+    /// The moment filter on the GPU applied to `pair` (two arrays laid out like the
+    /// parameters), guided by the current textures: texture by texture, the pair is written to
+    /// the filter's input, filtered and read back. For tests against [`reference()`]; an error
+    /// when the settings have no moment filter. The optimizer's moments are not touched.
+    pub fn apply_moment_filter(&mut self, pair: [&[f32]; 2]) -> Result<[Vec<f32>; 2]> {
+        let n = self.set.values.len();
+        if pair.iter().any(|p| p.len() != n) {
+            return Err(crate::Error::Invalid(format!(
+                "apply_moment_filter: the pair must have {n} values each"
+            )));
+        }
+        let filter = match &self.step {
+            super::StepPass::Adam(a) => a.filter(),
+            super::StepPass::Variance(v) => v.filter(),
+        };
+        let f = filter.ok_or_else(|| {
+            crate::Error::Invalid("apply_moment_filter: the settings have no moment filter".into())
+        })?;
+        let mut out = [vec![0.0f32; n], vec![0.0f32; n]];
+        for (k, t) in self.set.textures.iter().enumerate() {
+            let range = t.offset as usize..t.offset as usize + t.len();
+            for (buf, p) in f.input().iter().zip(pair) {
+                let values = bytemuck::cast_slice(&p[range.clone()]);
+                self.gpu.queue.write_buffer(buf, 0, values);
+            }
+            let mut enc = self
+                .gpu
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("apply_moment_filter"),
+                });
+            self.timer.begin();
+            f.encode_levels(&mut enc, k, &mut self.timer);
+            self.gpu.queue.submit([enc.finish()]);
+            for (o, buf) in out.iter_mut().zip(f.output()) {
+                let filtered: Vec<f32> = self.gpu.read_pod(buf)?;
+                o[range.clone()].copy_from_slice(&filtered[..t.len()]);
+            }
+        }
+        Ok(out)
+    }
+}
