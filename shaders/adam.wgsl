@@ -4,8 +4,9 @@
 // keeps its value and moments. With the moment filter (src/optim/moment_filter.rs) the step
 // takes two dispatches around it: phase STEP_PHASE_PAIR updates the moments and writes them to
 // the pair the filter smooths (entries from 0 for each texture), phase STEP_PHASE_FILTERED
-// steps from the filtered pair (every entry: a texel with no gradient of its own, masked or
-// not, moves with its neighbours' moments).
+// steps from own_weight x the entry's own moments + (1 - own_weight) x the filtered ones
+// (every entry: a texel with no gradient of its own, masked or not, moves with its
+// neighbours' moments), and with write_back keeps that mix as its moments.
 #import gen/abi
 
 // Mirrored by AdamParams in src/optim/adam.rs.
@@ -24,6 +25,12 @@ struct AdamParams {
     mask: u32,
     // STEP_PHASE_FUSED, STEP_PHASE_PAIR or STEP_PHASE_FILTERED.
     phase: u32,
+    // Phase STEP_PHASE_FILTERED: weight of the entry's own moments against the filtered ones.
+    own_weight: f32,
+    // Phase STEP_PHASE_FILTERED: nonzero: the mix replaces the moments.
+    write_back: u32,
+    _pad0: u32,
+    _pad1: u32,
 }
 
 @group(0) @binding(0) var<uniform> ap: AdamParams;
@@ -60,7 +67,14 @@ fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) grou
     }
     let i = ap.offset + k;
     if ap.phase == STEP_PHASE_FILTERED {
-        adam_step(i, pair_first[k], pair_second[k]);
+        let a = ap.own_weight;
+        let m = a * moment1[i] + (1.0 - a) * pair_first[k];
+        let v = a * moment2[i] + (1.0 - a) * pair_second[k];
+        if ap.write_back != 0u {
+            moment1[i] = m;
+            moment2[i] = v;
+        }
+        adam_step(i, m, v);
         return;
     }
     let g_in = grad[i];

@@ -12,9 +12,11 @@
 // value and moments. With the moment filter (src/optim/moment_filter.rs) the step takes two
 // dispatches around it: phase STEP_PHASE_PAIR writes (d, Var[d]) to the pair the filter
 // smooths (entries from 0 for each texture; an entry without a gradient of its own gives d =
-// 0 and its variance as it stands), phase STEP_PHASE_FILTERED steps with the filtered pair.
-// The filtered variance is the neighbourhood's weighted mean variance, not the lower variance
-// of the filtered mean: the filter smooths this step without making it bolder.
+// 0 and its variance as it stands), phase STEP_PHASE_FILTERED steps with
+// d = a x own d + (1 - a) x filtered d, a = own_weight, of variance a^2 x own Var[d] +
+// (1 - a)^2 x the filtered mean's variance (the filter propagates the variance of its
+// weighted mean; both as if independent, which the levels of the filter are not, so this is
+// a lower bound and the steps are somewhat bold).
 #import gen/abi
 
 // Mirrored by VarianceStepParams in src/optim/variance_step.rs.
@@ -34,9 +36,10 @@ struct VarianceStepParams {
     threshold: f32,
     // STEP_PHASE_FUSED, STEP_PHASE_PAIR or STEP_PHASE_FILTERED.
     phase: u32,
+    // Phase STEP_PHASE_FILTERED: weight of the entry's own pair against the filtered one.
+    own_weight: f32,
     _pad0: u32,
     _pad1: u32,
-    _pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> vp: VarianceStepParams;
@@ -82,11 +85,18 @@ fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) grou
         return;
     }
     let i = vp.offset + k;
+    let g_in = grad[i];
     if vp.phase == STEP_PHASE_FILTERED {
-        variance_step(i, pair_first[k], pair_second[k]);
+        // The pair phase updated the moving moments already: the variance as it stands is
+        // this iteration's; an entry without a gradient of its own has d = 0.
+        let skipped = !(abs(g_in) < 3.0e38) || (vp.mask != 0u && g_in == 0.0);
+        let own_d = select(clamp(g_in, -1.0e18, 1.0e18), 0.0, skipped);
+        let a = vp.own_weight;
+        let d = a * own_d + (1.0 - a) * pair_first[k];
+        let var_d = a * a * standing_variance(i) + (1.0 - a) * (1.0 - a) * pair_second[k];
+        variance_step(i, d, var_d);
         return;
     }
-    let g_in = grad[i];
     if vp.mask != 0u && g_in == 0.0 {
         write_pair(k, 0.0, standing_variance(i));
         return;

@@ -263,9 +263,16 @@ pub(crate) struct OptimizeArgs {
     /// to 8 (overrides the task's `optimizer.moment_filter.levels`).
     #[arg(long, value_parser = clap::value_parser!(u32).range(0..=8))]
     pub(crate) moment_filter: Option<u32>,
+    /// Taps per side of each level of the moment filter, 3 or 5 (overrides the task).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(3..=5))]
+    pub(crate) moment_filter_taps: Option<u32>,
     /// The moment filter's edge-stopping scale (overrides the task).
     #[arg(long)]
     pub(crate) moment_filter_sigma: Option<f32>,
+    /// Weight of a texel's own moments against the filtered ones, in (0, 1] (overrides the
+    /// task).
+    #[arg(long)]
+    pub(crate) moment_filter_own_weight: Option<f32>,
     /// The moment filter measures the texture's differences between logarithms.
     #[arg(long)]
     pub(crate) moment_filter_log: bool,

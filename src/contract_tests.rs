@@ -292,7 +292,8 @@ fn pass_uniform_mirrors_match_wgsl_field_by_field() {
             hi,
             mask,
             threshold,
-            phase
+            phase,
+            own_weight
         ]
     );
     mirror!(
@@ -312,7 +313,10 @@ fn pass_uniform_mirrors_match_wgsl_field_by_field() {
         "adam",
         "AdamParams",
         crate::optim::adam::AdamParams,
-        [offset, count, lr, beta1, beta2, eps, bias1, bias2, lo, hi, mask, phase]
+        [
+            offset, count, lr, beta1, beta2, eps, bias1, bias2, lo, hi, mask, phase, own_weight,
+            write_back
+        ]
     );
     mirror!(
         "moment_filter",
@@ -326,7 +330,9 @@ fn pass_uniform_mirrors_match_wgsl_field_by_field() {
             texel_offset,
             spacing,
             sigma,
-            log_space
+            log_space,
+            radius,
+            variance_of_mean
         ]
     );
     mirror!(

@@ -294,6 +294,8 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
         recursive_min_weight,
         moment_filter,
         moment_filter_sigma,
+        moment_filter_taps,
+        moment_filter_own_weight,
         moment_filter_log,
         moment_filter_write_back,
     } = args;
@@ -326,6 +328,8 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
     let mf = &mut task.optimizer.moment_filter;
     mf.levels = moment_filter.unwrap_or(mf.levels);
     mf.sigma = moment_filter_sigma.unwrap_or(mf.sigma);
+    mf.taps = moment_filter_taps.unwrap_or(mf.taps);
+    mf.own_weight = moment_filter_own_weight.unwrap_or(mf.own_weight);
     mf.log_space |= moment_filter_log;
     mf.write_back |= moment_filter_write_back;
     if let Some(l) = multiscale_levels {

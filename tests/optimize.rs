@@ -500,6 +500,7 @@ fn optimization_recovers_a_known_texture() {
 fn moment_filter_setup(
     gpu: &psrestir::gpu::Gpu,
     o: psrestir::optim::moment_filter::MomentFilterOptions,
+    step: psrestir::optim::StepKind,
 ) -> (Optimizer, ParamSet, Vec<bool>, Vec<f32>) {
     let (scene, _, _) = partly_observed_plane();
     let spec = |slot, res| TextureSpec {
@@ -513,6 +514,7 @@ fn moment_filter_setup(
     let set = ParamSet::from_specs(&scene, &specs, Filter::Bilinear, "test".as_ref()).unwrap();
     let mut settings = Settings::new(48, 48, vec![0]);
     settings.moment_filter = o;
+    settings.step = step;
     let opt = Optimizer::new(gpu, &scene, set.clone(), settings, &[Image::new(48, 48)]).unwrap();
     let observed = opt.observed_texels().unwrap().to_vec();
     assert_partly_observed(&observed[..1600]);
@@ -527,14 +529,26 @@ fn moment_filter_setup(
 fn the_moment_filter_on_the_gpu_equals_the_cpu_reference() {
     use psrestir::optim::moment_filter::{params, reference_levels, MomentFilterOptions};
     let Some(gpu) = gpu() else { return };
-    for (levels, sigma, log_space) in [(1, 0.3, false), (3, 0.1, true)] {
+    // (levels, taps, sigma, log space, the second array a variance of the mean)
+    for (levels, taps, sigma, log_space, variance_of_mean) in [
+        (1, 5, 0.3, false, false),
+        (3, 3, 0.1, true, false),
+        (2, 5, 0.05, false, true),
+    ] {
         let o = MomentFilterOptions {
             levels,
+            taps,
             sigma,
             log_space,
-            write_back: false,
+            ..Default::default()
         };
-        let (mut opt, set, observed, values) = moment_filter_setup(&gpu, o);
+        // The variance step's filter takes its second array as a variance.
+        let step = if variance_of_mean {
+            psrestir::optim::StepKind::Variance
+        } else {
+            psrestir::optim::StepKind::Adam
+        };
+        let (mut opt, set, observed, values) = moment_filter_setup(&gpu, o, step);
         let n = set.values.len();
         let first: Vec<f32> = (0..n)
             .map(|i| ((i * 7919) % 1009) as f32 / 1009.0 - 0.4)
@@ -543,7 +557,7 @@ fn the_moment_filter_on_the_gpu_equals_the_cpu_reference() {
         let [got1, got2] = opt.apply_moment_filter([&first, &second]).unwrap();
         let (mut want1, mut want2) = (first.clone(), second.clone());
         let mut texel = 0;
-        for (t, ps) in set.textures.iter().zip(params(&set, &o)) {
+        for (t, ps) in set.textures.iter().zip(params(&set, &o, variance_of_mean)) {
             let r = t.offset as usize..t.offset as usize + t.len();
             let texels = (t.width * t.height) as usize;
             reference_levels(
@@ -581,51 +595,54 @@ fn the_moment_filter_on_the_gpu_equals_the_cpu_reference() {
 fn the_moment_filter_keeps_constant_fields_and_the_textures_edges() {
     use psrestir::optim::moment_filter::MomentFilterOptions;
     let Some(gpu) = gpu() else { return };
-    let o = MomentFilterOptions {
-        levels: 4,
-        sigma: 0.02,
-        log_space: false,
-        write_back: false,
-    };
-    let (mut opt, set, observed, _) = moment_filter_setup(&gpu, o);
-    let n = set.values.len();
-    // A constant pair stays as it is: the weights are normalized.
-    let [c1, c2] = opt
-        .apply_moment_filter([&vec![0.25; n], &vec![3.0; n]])
-        .unwrap();
-    for i in 0..n {
-        assert!((c1[i] - 0.25).abs() <= 1e-6, "entry {i}: {}", c1[i]);
-        assert!((c2[i] - 3.0).abs() <= 1e-5, "entry {i}: {}", c2[i]);
+    // Both kernels, each reaching 30-31 texels, at the default sigma (0.1).
+    for (levels, taps) in [(5, 3), (4, 5)] {
+        let o = MomentFilterOptions {
+            levels,
+            taps,
+            ..Default::default()
+        };
+        let (mut opt, set, observed, _) = moment_filter_setup(&gpu, o, Default::default());
+        let n = set.values.len();
+        // A constant pair stays as it is: the weights are normalized.
+        let [c1, c2] = opt
+            .apply_moment_filter([&vec![0.25; n], &vec![3.0; n]])
+            .unwrap();
+        for i in 0..n {
+            assert!((c1[i] - 0.25).abs() <= 1e-6, "entry {i}: {}", c1[i]);
+            assert!((c2[i] - 3.0).abs() <= 1e-5, "entry {i}: {}", c2[i]);
+        }
+        // The base color: dark left of x = 20, bright right of it; the first moment +1 on
+        // the left and -1 on the right, the second 1 and 4. A neighbour across the edge has
+        // its weight multiplied by exp(-0.6 sqrt(3) / 0.1) = 3.1e-5, so a level moves a
+        // value by at most that share of the jump (2 and 3), and L levels by L times it:
+        // at most 3.1e-4 and 4.7e-4 after 5.
+        let side = |i: usize| (i / 3) % 40 < 20;
+        let mut guide = vec![0.5; n];
+        let (mut first, mut second) = (vec![0.0; n], vec![0.0; n]);
+        for i in 0..1600 * 3 {
+            guide[i] = if side(i) { 0.2 } else { 0.8 };
+            first[i] = if side(i) { 1.0 } else { -1.0 };
+            second[i] = if side(i) { 1.0 } else { 4.0 };
+        }
+        opt.write_params(&guide).unwrap();
+        let [f1, f2] = opt.apply_moment_filter([&first, &second]).unwrap();
+        for i in 0..1600 * 3 {
+            assert!((f1[i] - first[i]).abs() <= 3.2e-4, "entry {i}: {}", f1[i]);
+            assert!((f2[i] - second[i]).abs() <= 4.8e-4, "entry {i}: {}", f2[i]);
+        }
+        // The same pair on a texture without the edge is blurred across x = 20: the test
+        // above would see a filter that ignored its guide.
+        opt.write_params(&vec![0.5; n]).unwrap();
+        let [b1, _] = opt.apply_moment_filter([&first, &second]).unwrap();
+        let blurred = (0..1600 * 3)
+            .filter(|&i| observed[i / 3] && (b1[i] - first[i]).abs() > 0.1)
+            .count();
+        assert!(
+            blurred > 100,
+            "only {blurred} entries blurred without the edge"
+        );
     }
-    // The base color: dark left of x = 20, bright right of it; the first moment +1 on the
-    // left and -1 on the right, the second 1 and 4. The filter reaches 30 texels, but a
-    // neighbour across the edge weighs exp(-0.6 sqrt(3) / 0.02) < 1e-22 of one on the same
-    // side: nothing crosses.
-    let side = |i: usize| (i / 3) % 40 < 20;
-    let mut guide = vec![0.5; n];
-    let (mut first, mut second) = (vec![0.0; n], vec![0.0; n]);
-    for i in 0..1600 * 3 {
-        guide[i] = if side(i) { 0.2 } else { 0.8 };
-        first[i] = if side(i) { 1.0 } else { -1.0 };
-        second[i] = if side(i) { 1.0 } else { 4.0 };
-    }
-    opt.write_params(&guide).unwrap();
-    let [f1, f2] = opt.apply_moment_filter([&first, &second]).unwrap();
-    for i in 0..1600 * 3 {
-        assert!((f1[i] - first[i]).abs() <= 1e-6, "entry {i}: {}", f1[i]);
-        assert!((f2[i] - second[i]).abs() <= 1e-5, "entry {i}: {}", f2[i]);
-    }
-    // The same pair on a texture without the edge is blurred across x = 20: the test above
-    // would see a filter that ignored its guide.
-    opt.write_params(&vec![0.5; n]).unwrap();
-    let [b1, _] = opt.apply_moment_filter([&first, &second]).unwrap();
-    let blurred = (0..1600 * 3)
-        .filter(|&i| observed[i / 3] && (b1[i] - first[i]).abs() > 0.1)
-        .count();
-    assert!(
-        blurred > 100,
-        "only {blurred} entries blurred without the edge"
-    );
 }
 
 #[test]
@@ -641,8 +658,9 @@ fn filtered_adam_steps_equal_the_rust_reference() {
         let f = MomentFilterOptions {
             levels: 2,
             sigma: 0.1,
-            log_space: false,
+            own_weight: 0.3,
             write_back,
+            ..Default::default()
         };
         let (mut opt, init) = setup_with(
             &gpu,
@@ -658,20 +676,25 @@ fn filtered_adam_steps_equal_the_rust_reference() {
             observed.iter().all(|&o| o),
             "the camera sees the whole plane"
         );
-        let ps = params(&opt.set, &f).remove(0);
+        let ps = params(&opt.set, &f, false).remove(0);
         let n = init.len();
         let (mut p, mut m, mut v) = (init.clone(), vec![0.0; n], vec![0.0; n]);
         for t in 1..=3u32 {
             opt.step().unwrap();
             let g = opt.read_gradient().unwrap();
             // The reference: Adam's moments, the filter on them guided by the textures the
-            // step started from, the step from the filtered pair.
+            // step started from, the step from own_weight x the moments + the rest x the
+            // filtered ones.
             for i in 0..n {
                 m[i] = o.beta1 * m[i] + (1.0 - o.beta1) * g[i];
                 v[i] = o.beta2 * v[i] + (1.0 - o.beta2) * g[i] * g[i];
             }
             let (mut fm, mut fv) = (m.clone(), v.clone());
             reference_levels(&ps, &mut fm, &mut fv, &p, &observed);
+            for i in 0..n {
+                fm[i] = f.own_weight * m[i] + (1.0 - f.own_weight) * fm[i];
+                fv[i] = f.own_weight * v[i] + (1.0 - f.own_weight) * fv[i];
+            }
             let (b1, b2) = (1.0 - o.beta1.powi(t as i32), 1.0 - o.beta2.powi(t as i32));
             for i in 0..n {
                 let s = lr * (fm[i] / b1) / ((fv[i] / b2).sqrt() + o.eps);
@@ -727,7 +750,7 @@ fn filtered_variance_steps_equal_the_rust_reference() {
         },
     );
     let observed = opt.observed_texels().unwrap().to_vec();
-    let ps = params(&opt.set, &f).remove(0);
+    let ps = params(&opt.set, &f, true).remove(0);
     let n = init.len();
     let (mut p, mut m, mut v) = (init.clone(), vec![0.0; n], vec![0.0; n]);
     for t in 1..=3u32 {
@@ -743,8 +766,13 @@ fn filtered_variance_steps_equal_the_rust_reference() {
             let mean = m[i] / bias;
             var[i] = (v[i] / bias - mean * mean).max(0.0);
         }
-        let mut d = g.clone();
+        let (mut d, own_var) = (g.clone(), var.clone());
         reference_levels(&ps, &mut d, &mut var, &p, &observed);
+        for i in 0..n {
+            d[i] = f.own_weight * g[i] + (1.0 - f.own_weight) * d[i];
+            let a = f.own_weight;
+            var[i] = a * a * own_var[i] + (1.0 - a) * (1.0 - a) * var[i];
+        }
         let before = p.clone();
         for i in 0..n {
             let z = d[i] / (var[i].sqrt() + o.eps);

@@ -7,9 +7,9 @@
 //! × 2) and threshold (0, twice the task's),
 //! for ReSTIR the M cap (2, 32), whether the cap follows the learning-rate schedule, and the
 //! target smoothing (0, 0.9), for the recursive estimator the lower bound of its adaptive
-//! weight (0.2, 0.5), and with filtered moments the filter's σ (× 0.25, × 4), log space, and
-//! with Adam the write-back, and β1 0.2 as well (the filter averages in space what β1
-//! averages in time). Each trial
+//! weight (0.2, 0.5), and with filtered moments the filter's σ (× 0.25, × 4), its own weight
+//! (0.1, 0.5), log space, and with Adam the write-back, and β1 0.2 as well (the filter
+//! averages in space what β1 averages in time). Each trial
 //! optimizes for the tuning budget from the initial textures with the seed
 //! [`TUNE_SEED_OFFSET`] away from the task's; its score is the observed-texel RMSE at the
 //! end (the headline's measure). A value is kept only when it lowers the score by more than
@@ -127,9 +127,12 @@ impl Tunable {
         if f.enabled() {
             let _ = write!(
                 s,
-                ", filter {} levels σ {}{}{}",
+                ", filter {} levels of {}×{} σ {} own {}{}{}",
                 f.levels,
+                f.taps,
+                f.taps,
                 f.sigma,
+                f.own_weight,
                 if f.log_space { " (log)" } else { "" },
                 if f.write_back { " written back" } else { "" }
             );
@@ -236,6 +239,15 @@ fn coordinates(method: Method, step: StepKind, filtered: bool) -> Vec<Coordinate
                 .map(|f| {
                     let mut t = *b;
                     t.moment_filter.sigma *= f;
+                    t
+                })
+                .to_vec()
+        }));
+        c.push(Box::new(|b: &Tunable| {
+            [0.1, 0.5]
+                .map(|own_weight| {
+                    let mut t = *b;
+                    t.moment_filter.own_weight = own_weight;
                     t
                 })
                 .to_vec()

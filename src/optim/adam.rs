@@ -133,6 +133,9 @@ pub struct AdamParams {
     pub hi: f32,
     pub mask: u32,
     pub phase: u32,
+    pub own_weight: f32,
+    pub write_back: u32,
+    pub _pad: [u32; 2],
 }
 
 /// Group 0 of `adam.wgsl`.
@@ -172,6 +175,7 @@ impl AdamPass {
     ) -> Result<AdamPass> {
         let layout = gpu.pass_layout("adam", 0)?;
         let pipeline = gpu.compute_pipeline("adam", &[&layout])?;
+        let f = filter.as_ref().map(|f| f.options).unwrap_or_default();
         let make = |t: &ParamTexture, phase: u32| {
             let (lo, hi) = t.slot.range();
             AdamParams {
@@ -187,6 +191,9 @@ impl AdamPass {
                 hi,
                 mask: mask as u32,
                 phase,
+                own_weight: f.own_weight,
+                write_back: f.write_back as u32,
+                _pad: [0; 2],
             }
         };
         let bind = |label: &str, u: &wgpu::Buffer, pair: &[wgpu::Buffer; 2]| {

@@ -186,15 +186,10 @@ impl Optimizer {
         });
         let mf = &settings.moment_filter;
         let filter = if mf.enabled() {
-            let write_back = mf.write_back.then_some(&moments);
-            let f = moment_filter::MomentFilter::new(
-                gpu,
-                &set,
-                mf,
-                &params.values,
-                &observed.1,
-                write_back,
-            )?;
+            // The variance step's second array is the variance of its estimate.
+            let of_mean = settings.step == StepKind::Variance;
+            let (p, o) = (&params.values, &observed.1);
+            let f = moment_filter::MomentFilter::new(gpu, &set, (mf, of_mean), p, o)?;
             Some(f)
         } else {
             None

@@ -236,6 +236,10 @@ mod tests {
                 Box::new(|s| s.moment_filter.sigma = 0.0),
             ),
             (
+                "optimizer.moment_filter.own_weight",
+                Box::new(|s| s.moment_filter.own_weight = 0.0),
+            ),
+            (
                 "optimizer.moment_filter.write_back",
                 Box::new(|s| {
                     s.moment_filter.write_back = true;

@@ -138,7 +138,8 @@ pub struct VarianceStepParams {
     pub mask: u32,
     pub threshold: f32,
     pub phase: u32,
-    pub _pad: [u32; 3],
+    pub own_weight: f32,
+    pub _pad: [u32; 2],
 }
 
 /// Group 0 of `variance_step.wgsl`.
@@ -185,6 +186,7 @@ impl VarianceStepPass {
         let pipeline = gpu.compute_pipeline("variance_step", &[&layout])?;
         let unused = gpu.storage_zeroed("variance step unused variance", 16);
         let variance = b.variance.unwrap_or(&unused);
+        let f = filter.as_ref().map(|f| f.options).unwrap_or_default();
         let make = |t: &ParamTexture, phase: u32| {
             let (lo, hi) = t.slot.range();
             VarianceStepParams {
@@ -201,7 +203,8 @@ impl VarianceStepPass {
                 mask: mask as u32,
                 threshold: options.threshold,
                 phase,
-                _pad: [0; 3],
+                own_weight: f.own_weight,
+                _pad: [0; 2],
             }
         };
         let bind = |label: &str, u: &wgpu::Buffer, pair: &[wgpu::Buffer; 2]| {

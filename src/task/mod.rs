@@ -47,10 +47,12 @@
 //! eps = 1e-12
 //!
 //! [optimizer.moment_filter]       # filtered moments (off by default: levels = 0)
-//! levels = 4                      # a-trous levels: taps 1, 2, 4, 8 texels apart (at most 8)
-//! sigma = 0.02                    # edge-stopping scale of the texture's differences
+//! levels = 5                      # a-trous levels: taps 1, 2, 4, 8, 16 texels apart (at most 8)
+//! taps = 3                        # taps per side of a level: 3 or 5
+//! sigma = 0.1                     # edge-stopping scale of the texture's differences
 //! log_space = false               # differences of logarithms instead
-//! write_back = false              # the filtered moments replace Adam's (Adam only)
+//! own_weight = 0.25               # weight of a texel's own moments against the filtered ones
+//! write_back = false              # the mix replaces Adam's moments (Adam only)
 //!
 //! [optimizer.schedule]            # learning-rate schedule (default: constant)
 //! kind = "cosine"                 # or "constant", "step", "exponential"
@@ -235,7 +237,7 @@ pub struct OptimizerSpec {
     #[serde(default)]
     pub smoothness: f32,
     /// The moment filter (`[optimizer.moment_filter]`: `levels` (0: off), `sigma`,
-    /// `log_space`, `write_back`).
+    /// `log_space`, `own_weight`, `write_back`).
     #[serde(default)]
     pub moment_filter: crate::optim::moment_filter::MomentFilterOptions,
     /// Iterations between evaluation renders (image relMSE of an `eval_spp` render of every
