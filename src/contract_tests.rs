@@ -18,6 +18,7 @@ fn every_bind_group_declaration_names_its_wgsl_bindings() {
         crate::optim::observed::OBSERVED_GROUP,
         crate::optim::multiscale::MULTISCALE_GROUP,
         crate::optim::smoothness::SMOOTHNESS_GROUP,
+        crate::optim::moment_filter::MOMENT_FILTER_GROUP,
         baseline::GRADIENT_GROUP,
         crate::optim::estimator::recursive::GRADIENT_GROUP,
         crate::optim::estimator::recursive::COMBINE_GROUP,

@@ -716,8 +716,10 @@ fn shrunk_default_task(side: u32, target_spp: u32) -> psrestir::task::Task {
     task.height = side;
     task.target.spp = target_spp;
     // These tests compare the estimators under Adam, at the rate Adam was tuned to on this
-    // task (the task itself now takes the variance-scaled step at half of it).
+    // task (the task itself now takes the variance-scaled step at half of it), without the
+    // moment filter that the task now has.
     task.optimizer.step = psrestir::optim::StepKind::Adam;
+    task.optimizer.moment_filter.levels = 0;
     for t in &mut task.textures {
         t.learning_rate = 0.02;
     }

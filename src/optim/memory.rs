@@ -127,6 +127,18 @@ pub fn memory_plan(
         n_observed,
         all_pixels,
     ));
+    if settings.moment_filter.enabled() {
+        // Two pairs of scratch arrays, each as long as the largest texture.
+        let longest = set.textures.iter().map(|t| t.len()).max().unwrap_or(1) as u64;
+        for pair in 0..2 {
+            for half in ["first", "second"] {
+                buffers.push(texel(
+                    &format!("moment filter pair {pair} {half}"),
+                    4 * longest,
+                ));
+            }
+        }
+    }
     if settings.primal == PrimalMode::ControlVariate {
         buffers.extend(
             primal::memory(pixels, n_cams as u64)
