@@ -48,7 +48,8 @@ struct MomentFilterParams {
 // Added to a value before its logarithm, so that values at 0 (a metallic texture's common
 // value) have a finite guide. Mirrored by LOG_FLOOR in src/optim/moment_filter.rs.
 const LOG_FLOOR: f32 = 1e-3;
-// Neighbours with exp(-distance / sigma) below exp(-MAX_EXPONENT) are left out. Mirrored by MAX_EXPONENT in src/optim/moment_filter.rs.
+// Neighbours with exp(-distance / sigma) below exp(-MAX_EXPONENT) are left out. Mirrored by
+// MAX_EXPONENT in src/optim/moment_filter.rs.
 const MAX_EXPONENT: f32 = 16.0;
 
 fn is_observed(x: i32, y: i32) -> bool {
