@@ -128,16 +128,11 @@ pub fn memory_plan(
         all_pixels,
     ));
     if settings.moment_filter.enabled() {
-        // Two pairs of scratch arrays, each as long as the largest texture.
-        let longest = set.textures.iter().map(|t| t.len()).max().unwrap_or(1) as u64;
-        for pair in 0..2 {
-            for half in ["first", "second"] {
-                buffers.push(texel(
-                    &format!("moment filter pair {pair} {half}"),
-                    4 * longest,
-                ));
-            }
-        }
+        buffers.extend(
+            super::moment_filter::memory(set)
+                .into_iter()
+                .map(|(l, b)| (l, b, Scale::Texel)),
+        );
     }
     if settings.primal == PrimalMode::ControlVariate {
         buffers.extend(

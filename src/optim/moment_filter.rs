@@ -255,6 +255,18 @@ pub fn reference_levels(
     }
 }
 
+/// The filter's scratch buffers for `set` (label, bytes), in the order of its two pairs
+/// (first, second): each as long as the largest texture. The memory plan counts them and
+/// [`MomentFilter::new`] allocates them.
+pub(crate) fn memory(set: &ParamSet) -> Vec<(String, u64)> {
+    let longest = set.textures.iter().map(|t| t.len()).max().unwrap_or(1) as u64;
+    (0..2)
+        .flat_map(|k| {
+            ["first", "second"].map(|half| (format!("moment filter pair {k} {half}"), 4 * longest))
+        })
+        .collect()
+}
+
 /// The filter over every optimized texture: its pipeline, the two pairs of scratch arrays it
 /// ping-pongs between (each as long as the largest texture), and per texture and level a
 /// uniform and bind group.
@@ -281,14 +293,11 @@ impl MomentFilter {
     ) -> Result<MomentFilter> {
         let layout = gpu.pass_layout("moment_filter", 0)?;
         let pipeline = gpu.compute_pipeline("moment_filter", &[&layout])?;
-        let longest = set.textures.iter().map(|t| t.len()).max().unwrap_or(1) as u64;
-        let pair = |k: usize| {
-            [
-                gpu.storage_zeroed(&format!("moment filter pair {k} first"), longest * 4),
-                gpu.storage_zeroed(&format!("moment filter pair {k} second"), longest * 4),
-            ]
-        };
-        let pairs = [pair(0), pair(1)];
+        let b: Vec<wgpu::Buffer> = memory(set)
+            .iter()
+            .map(|(label, bytes)| gpu.storage_zeroed(label, *bytes))
+            .collect();
+        let pairs = [[b[0].clone(), b[1].clone()], [b[2].clone(), b[3].clone()]];
         let levels = params(set, o, variance_of_mean)
             .into_iter()
             .zip(&set.textures)
