@@ -26,17 +26,6 @@ pub(crate) enum TechniqueArg {
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
-pub(crate) enum MethodArg {
-    /// Plain Monte Carlo: every sample adds its derivative to the texels it touches.
-    Baseline,
-    /// Parameter-space ReSTIR: per-texel reservoirs reused across iterations.
-    Restir,
-    /// A recursive control variate on the gradient: each sample evaluated at the current and
-    /// the previous state corrects the running estimate.
-    Recursive,
-}
-
-#[derive(Clone, Copy, clap::ValueEnum)]
 pub(crate) enum StepArg {
     /// Adam.
     Adam,
@@ -53,22 +42,47 @@ impl StepArg {
     }
 }
 
-/// Choice of gradient estimator, shared by the commands that estimate gradients.
+/// Choice of gradient estimator and its options, shared by the commands that estimate
+/// gradients.
 #[derive(clap::Args)]
 pub(crate) struct EstimatorArgs {
-    /// Gradient estimator (default: the task's `optimizer.method`, else baseline).
-    #[arg(long, value_enum)]
-    pub(crate) method: Option<MethodArg>,
-    #[command(flatten)]
-    pub(crate) restir: RestirArgs,
+    /// Gradient estimator: baseline (plain Monte Carlo), restir (parameter-space ReSTIR) or
+    /// recursive (a recursive control variate on the gradient). Default: the task's
+    /// `optimizer.method`, else baseline.
+    #[arg(long, value_parser = parse_method)]
+    pub(crate) method: Option<optim::Method>,
+    /// An estimator's option over the task's `[optimizer.METHOD]` table, as
+    /// METHOD.KEY=VALUE (`restir.m_cap=16`, `restir.confidence=candidates`,
+    /// `recursive.min_weight=0.2`); repeat for more. docs/guide.md lists the options.
+    #[arg(long = "estimator-option", value_name = "METHOD.KEY=VALUE")]
+    pub(crate) options: Vec<String>,
 }
 
-#[derive(Clone, Copy, clap::ValueEnum)]
-pub(crate) enum ConfidenceArg {
-    /// Gradient samples per pixel (the reference code's convention).
-    Samples,
-    /// Candidates per pixel and texel: 2 techniques x gradient spp x cameras.
-    Candidates,
+fn parse_method(s: &str) -> std::result::Result<optim::Method, String> {
+    s.parse().map_err(|e: psrestir::Error| e.to_string())
+}
+
+impl EstimatorArgs {
+    /// The estimator (`task_method` unless `--method` is given) and the options given,
+    /// refused here (before any scene is loaded) when invalid.
+    pub(crate) fn resolve(
+        &self,
+        task_method: optim::Method,
+    ) -> Result<(optim::Method, optim::EstimatorOptions)> {
+        Ok((
+            self.method.unwrap_or(task_method),
+            self.estimator_options()?,
+        ))
+    }
+
+    /// The options given.
+    pub(crate) fn estimator_options(&self) -> Result<optim::EstimatorOptions> {
+        let mut o = optim::EstimatorOptions::default();
+        for a in &self.options {
+            o.assign(a)?;
+        }
+        Ok(o)
+    }
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -94,67 +108,6 @@ pub(crate) enum ProtocolArg {
     Default,
     /// The paper's: primal 32 spp, gradient 1 spp, nearest filtering.
     Paper,
-}
-
-#[derive(clap::Args)]
-pub(crate) struct RestirArgs {
-    /// ReSTIR: cap on the confidence of the kept sample.
-    #[arg(long, default_value_t = optim::RestirOptions::default().m_cap)]
-    pub(crate) m_cap: f32,
-    /// ReSTIR: confidence of the fresh candidates in the merge.
-    #[arg(long, value_enum, default_value = "samples")]
-    pub(crate) confidence: ConfidenceArg,
-    /// ReSTIR ablation: resample within each iteration only.
-    #[arg(long)]
-    pub(crate) no_temporal: bool,
-    /// ReSTIR ablation: one reservoir per texel over |target| instead of two.
-    #[arg(long)]
-    pub(crate) no_positivization: bool,
-    /// ReSTIR: weight of the last target adjoint in this iteration's (an exponential moving
-    /// average of the adjoints for the resampling targets; 0: this iteration's adjoint).
-    /// Default: 0.9 with the independent primal, 0 with the control variate.
-    #[arg(long)]
-    pub(crate) target_smoothing: Option<f32>,
-    /// ReSTIR: the kept sample's confidence cap follows the learning-rate schedule (reuse
-    /// early, fresh samples late).
-    #[arg(long)]
-    pub(crate) m_cap_schedule: bool,
-}
-
-impl RestirArgs {
-    /// The options, refused here (before any scene is loaded) when invalid.
-    pub(crate) fn resolve(&self) -> Result<optim::RestirOptions> {
-        let o = optim::RestirOptions {
-            m_cap: self.m_cap,
-            confidence: match self.confidence {
-                ConfidenceArg::Samples => optim::Confidence::Samples,
-                ConfidenceArg::Candidates => optim::Confidence::Candidates,
-            },
-            temporal: !self.no_temporal,
-            positivization: !self.no_positivization,
-            verify_paths: false,
-            target_smoothing: self.target_smoothing,
-            m_cap_follows_schedule: self.m_cap_schedule,
-        };
-        o.validate()?;
-        Ok(o)
-    }
-}
-
-impl EstimatorArgs {
-    /// The estimator (`task_method` unless `--method` is given) and ReSTIR's options.
-    pub(crate) fn resolve(
-        &self,
-        task_method: optim::Method,
-    ) -> Result<(optim::Method, optim::RestirOptions)> {
-        let method = match self.method {
-            Some(MethodArg::Restir) => optim::Method::Restir,
-            Some(MethodArg::Baseline) => optim::Method::Baseline,
-            Some(MethodArg::Recursive) => optim::Method::Recursive,
-            None => task_method,
-        };
-        Ok((method, self.restir.resolve()?))
-    }
 }
 
 /// The bundled default task.
@@ -252,13 +205,6 @@ pub(crate) struct OptimizeArgs {
     /// magnitude (overrides the task).
     #[arg(long)]
     pub(crate) step_threshold: Option<f32>,
-    /// The recursive estimator's fixed weight of the fresh term, in (0, 1] (overrides the
-    /// task; default: chosen per parameter by inverse variance).
-    #[arg(long)]
-    pub(crate) recursive_weight: Option<f32>,
-    /// The recursive estimator's lower bound of the adaptive weight (overrides the task).
-    #[arg(long)]
-    pub(crate) recursive_min_weight: Option<f32>,
     /// Filtered moments: levels of the edge-stopping filter over the step's moments, 0 (off)
     /// to 8 (overrides the task's `optimizer.moment_filter.levels`).
     #[arg(long, value_parser = clap::value_parser!(u32).range(0..=8))]
@@ -320,19 +266,23 @@ pub(crate) struct BenchArgs {
     /// nearest filtering).
     #[arg(long, value_enum, default_value = "default")]
     pub(crate) protocol: ProtocolArg,
+    /// The estimator whose gradient error the gradient phase measures against the baseline's.
+    #[arg(long, value_parser = parse_method, default_value = "restir")]
+    pub(crate) gradient_method: optim::Method,
     /// Measure the gradient error only (skip the equal-time optimization).
     #[arg(long)]
     pub(crate) gradient_only: bool,
     /// Measure the equal-time optimization only (skip the primal and gradient-error phases).
     #[arg(long)]
     pub(crate) end_to_end_only: bool,
-    /// Further estimators optimized at equal time after the baseline and ReSTIR (both with
-    /// Adam), as METHOD or METHOD:STEP (steps: adam, variance), either with `+filtered` for
-    /// filtered moments (`baseline+filtered`), comma-separated; `none` for none.
+    /// The estimators optimized at equal time after the baseline with Adam (the reference
+    /// of every ratio), as METHOD or METHOD:STEP (steps: adam, variance), either with
+    /// `+filtered` for filtered moments (`baseline+filtered`), comma-separated; `none` for
+    /// none.
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "recursive:adam,recursive:variance"
+        default_value = "restir,recursive:adam,recursive:variance"
     )]
     pub(crate) contenders: Vec<String>,
     /// Switch off the tasks' priors (multiscale gradient, smoothness prior).
@@ -360,8 +310,10 @@ pub(crate) struct BenchArgs {
     /// and the headline table in README.md (between its `bench:headline` markers).
     #[arg(long)]
     pub(crate) report: bool,
-    #[command(flatten)]
-    pub(crate) restir: RestirArgs,
+    /// An estimator's option for every run of that estimator, as METHOD.KEY=VALUE
+    /// (`restir.m_cap=16`); repeat for more.
+    #[arg(long = "estimator-option", value_name = "METHOD.KEY=VALUE")]
+    pub(crate) options: Vec<String>,
 }
 
 #[derive(Subcommand)]

@@ -8,8 +8,7 @@ use std::mem::size_of;
 #[test]
 fn every_bind_group_declaration_names_its_wgsl_bindings() {
     use crate::gpu::shaders::{bindings, passes};
-    use crate::optim::estimator::{baseline, restir};
-    let decls = [
+    let mut decls = vec![
         crate::render::RENDER_GROUP,
         crate::render::TRACE_RAYS_GROUP,
         crate::optim::loss::LOSS_GROUP,
@@ -19,16 +18,11 @@ fn every_bind_group_declaration_names_its_wgsl_bindings() {
         crate::optim::multiscale::MULTISCALE_GROUP,
         crate::optim::smoothness::SMOOTHNESS_GROUP,
         crate::optim::moment_filter::MOMENT_FILTER_GROUP,
-        baseline::GRADIENT_GROUP,
-        crate::optim::estimator::recursive::GRADIENT_GROUP,
-        crate::optim::estimator::recursive::COMBINE_GROUP,
         crate::optim::variance_step::VARIANCE_STEP_GROUP,
-        restir::CANDIDATES_GROUP,
-        restir::MERGE_GROUP,
-        restir::RESERVOIR_TEST_GROUP,
         crate::render::gpu_scene::TEXTURE_WRAP_TEST_GROUP,
         crate::optim::texture_export::TEXTURE_EXPORT_GROUP,
     ];
+    decls.extend(crate::optim::estimator::groups());
     for d in &decls {
         let wgsl: Vec<String> = bindings(d.pass, d.group)
             .unwrap()
@@ -54,7 +48,7 @@ fn every_bind_group_declaration_names_its_wgsl_bindings() {
     }
 }
 
-fn field_size<T, F>(_: impl Fn(&T) -> &F) -> usize {
+pub(crate) fn field_size<T, F>(_: impl Fn(&T) -> &F) -> usize {
     size_of::<F>()
 }
 
@@ -62,7 +56,7 @@ fn field_size<T, F>(_: impl Fn(&T) -> &F) -> usize {
 /// out: the size, and every member's offset and size by name (members whose names start
 /// with `_` are padding). A WGSL member without a Rust field, a Rust field without a WGSL
 /// member, or two fields swapped fail here, without a GPU.
-fn check_mirror(pass: &str, name: &str, size: usize, fields: &[(&str, usize, usize)]) {
+pub(crate) fn check_mirror(pass: &str, name: &str, size: usize, fields: &[(&str, usize, usize)]) {
     let module = crate::gpu::shaders::validate(pass).unwrap();
     let mut layouter = naga::proc::Layouter::default();
     layouter.update(module.to_ctx()).unwrap();
@@ -97,20 +91,23 @@ fn check_mirror(pass: &str, name: &str, size: usize, fields: &[(&str, usize, usi
     }
 }
 
+/// Check the Rust mirror `$ty` of the WGSL struct `$wgsl` in pass `$pass`, field by field
+/// ([`check_mirror`]); the estimators' folders use it for their own uniforms.
 macro_rules! mirror {
     ($pass:expr, $wgsl:expr, $ty:ty, [$($field:ident),* $(,)?]) => {
-        check_mirror(
+        $crate::contract_tests::check_mirror(
             $pass,
             $wgsl,
-            size_of::<$ty>(),
+            std::mem::size_of::<$ty>(),
             &[$((
                 stringify!($field),
                 std::mem::offset_of!($ty, $field),
-                field_size(|s: &$ty| &s.$field),
+                $crate::contract_tests::field_size(|s: &$ty| &s.$field),
             )),*],
         )
     };
 }
+pub(crate) use mirror;
 
 // The scene's GPU structs, field by field against naga's layout of the WGSL.
 #[test]
@@ -233,50 +230,6 @@ fn scene_mirrors_match_wgsl_field_by_field() {
 #[test]
 fn pass_uniform_mirrors_match_wgsl_field_by_field() {
     mirror!(
-        "gradient",
-        "GradientParams",
-        crate::optim::estimator::baseline::GradientParams,
-        [
-            camera,
-            seed,
-            sample_offset,
-            spp,
-            techniques,
-            stride,
-            inv_spp,
-            adjoint_offset
-        ]
-    );
-    mirror!(
-        "recursive_gradient",
-        "RecursiveGradientParams",
-        crate::optim::estimator::recursive::RecursiveGradientParams,
-        [
-            camera,
-            seed,
-            spp,
-            stride,
-            inv_spp,
-            adjoint_offset,
-            have_prev
-        ]
-    );
-    mirror!(
-        "recursive_combine",
-        "RecursiveCombineParams",
-        crate::optim::estimator::recursive::RecursiveCombineParams,
-        [
-            count,
-            have_prev,
-            fixed_weight,
-            min_weight,
-            beta,
-            bias_f,
-            bias_dl,
-            n_f
-        ]
-    );
-    mirror!(
         "variance_step",
         "VarianceStepParams",
         crate::optim::variance_step::VarianceStepParams,
@@ -356,44 +309,6 @@ fn pass_uniform_mirrors_match_wgsl_field_by_field() {
         "SmoothnessParams",
         crate::optim::smoothness::SmoothnessParams,
         [offset, width, height, channels, texel_offset, scale]
-    );
-    mirror!(
-        "restir_candidates",
-        "CandidateParams",
-        crate::optim::restir::CandidateParams,
-        [
-            camera,
-            seed,
-            spp,
-            stride,
-            inv_spp,
-            camera_index,
-            adjoint_offset,
-            positivize,
-            prev_targets,
-            smoothing,
-            target_cur,
-            target_prev
-        ]
-    );
-    mirror!(
-        "restir_merge",
-        "MergeParams",
-        crate::optim::restir::MergeParams,
-        [
-            n_observed,
-            n_pixels,
-            seed,
-            flags,
-            m_fresh,
-            m_kept,
-            inv_spp,
-            n_textures,
-            stride,
-            target_cur,
-            target_prev,
-            origins
-        ]
     );
     mirror!(
         "primal_cv",

@@ -49,9 +49,9 @@ fn run(cli: Cli) -> Result<()> {
         } => {
             let task_path = task;
             let task = Task::load(&task_path)?;
-            let (method, restir) = estimator.resolve(task.optimizer.method)?;
+            let (method, options) = estimator.resolve(task.optimizer.method)?;
             let gpu = Gpu::new()?;
-            let written = job::run::write_gradient(&gpu, &task, &output, method, restir)
+            let written = job::run::write_gradient(&gpu, &task, &output, method, &options)
                 .with_context(|| format!("estimating the gradient of {}", task_path.display()))?;
             for p in written {
                 println!("wrote {}", p.display());
@@ -290,8 +290,6 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
         step,
         step_clip,
         step_threshold,
-        recursive_weight,
-        recursive_min_weight,
         moment_filter,
         moment_filter_sigma,
         moment_filter_taps,
@@ -319,9 +317,6 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
     let vs = &mut task.optimizer.variance_step;
     vs.clip = step_clip.unwrap_or(vs.clip);
     vs.threshold = step_threshold.unwrap_or(vs.threshold);
-    let rec = &mut task.optimizer.recursive;
-    rec.weight = recursive_weight.or(rec.weight);
-    rec.min_weight = recursive_min_weight.unwrap_or(rec.min_weight);
     if let Some(p) = primal {
         task.optimizer.primal = p.mode();
     }
@@ -343,7 +338,7 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
             bail!("--time-budget must be a positive number of seconds");
         }
     }
-    let (method, restir) = estimator.resolve(task.optimizer.method)?;
+    let (method, estimator_options) = estimator.resolve(task.optimizer.method)?;
     let gpu = Gpu::new()?;
     // Ctrl-C (or SIGTERM) finishes the iteration under way, then writes the checkpoint
     // and the outputs; a second one exits at once.
@@ -361,7 +356,7 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
         &task,
         &RunOptions {
             method,
-            restir,
+            estimator_options,
             iterations,
             time_budget_s: time_budget,
             out,
@@ -389,13 +384,13 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
     if let Some(t) = summary.pass_times {
         let timed = t.total();
         println!(
-            "GPU time per iteration: primal {:.1} ms, loss {:.2} ms, gradient {:.1} ms, merge {:.1} ms, step {:.2} ms{}; \
+            "GPU time per iteration: primal {:.1} ms, loss {:.2} ms, gradient {:.1} ms, combine {:.1} ms, step {:.2} ms{}; \
              the other {:.1} ms of the {:.1} ms per iteration are outside these passes (untimed \
              copies and clears, submission, host work)",
             t.primal_ms,
             t.loss_ms,
             t.gradient_ms,
-            t.merge_ms,
+            t.combine_ms,
             t.adam_ms,
             if t.filter_ms > 0.0 {
                 format!(", moment filter {:.2} ms", t.filter_ms)
@@ -442,8 +437,13 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         primal,
         eval_spp,
         report: to_docs,
-        restir,
+        options,
+        gradient_method,
     } = args;
+    let mut estimator_options = psrestir::optim::EstimatorOptions::default();
+    for a in &options {
+        estimator_options.assign(a)?;
+    }
     let contenders = contenders
         .iter()
         .filter(|c| c.as_str() != "none")
@@ -510,7 +510,8 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         tune_budget_s: tune_budget,
         primal: primal.map(PrimalArg::mode),
         eval_spp,
-        restir: restir.resolve()?,
+        estimator_options,
+        gradient_method,
         out: out.clone(),
         progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
         ..Default::default()

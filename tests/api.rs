@@ -310,7 +310,7 @@ fn a_task_too_large_for_the_device_is_refused_before_allocating() {
         .iter()
         .filter(|&&o| o)
         .count() as u64;
-    let bytes = observed * psrestir::optim::restir::reservoir::WORDS as u64 * 4;
+    let bytes = observed * psrestir::optim::estimator::restir::reservoir::WORDS as u64 * 4;
     assert!(bytes > 1 << 20, "{observed} observed texels fit the device");
     let e = Optimizer::for_problem(&gpu, &p, at(Method::Restir))
         .err()
@@ -457,7 +457,7 @@ fn non_finite_values_are_dropped_and_counted_never_stored() {
         assert!(state.m1.iter().chain(&state.m2).all(|v| v.is_finite()));
         let reservoirs = state
             .estimator
-            .array(psrestir::optim::restir::state_names::RESERVOIRS);
+            .array(psrestir::optim::estimator::restir::state_names::RESERVOIRS);
         assert_eq!(reservoirs.is_some(), method == Method::Restir);
         if let Some(r) = reservoirs {
             // Weight, confidence and value words of every reservoir.
@@ -728,11 +728,13 @@ fn invalid_restir_options_are_refused_by_name() {
         (8.0, f32::NAN, "target_smoothing"),
     ] {
         let s = Settings {
-            restir: psrestir::optim::RestirOptions {
-                m_cap,
-                target_smoothing: Some(target_smoothing),
-                ..Default::default()
-            },
+            estimator_options: psrestir::EstimatorOptions::with(
+                &psrestir::optim::estimator::restir::RestirOptions {
+                    m_cap,
+                    target_smoothing: Some(target_smoothing),
+                    ..Default::default()
+                },
+            ),
             ..settings(Method::Restir)
         };
         let e = Optimizer::for_problem(&gpu, &p, s)

@@ -5,8 +5,8 @@
 mod common;
 
 use psrestir::bench::{bench, resolve_scene, BenchOptions};
-use psrestir::optim::restir::{
-    STATE_BYTES_PER_32_TEXELS, STATE_BYTES_PER_OBSERVED_TEXEL, TARGET_SMOOTHING_INDEPENDENT,
+use psrestir::optim::estimator::restir::{
+    STATE_BYTES_PER_32_TEXELS, STATE_BYTES_PER_OBSERVED_TEXEL,
 };
 use serde_json::Value;
 use std::path::Path;
@@ -68,31 +68,32 @@ fn bench_json_has_every_field_finite_and_in_range() {
         assert!(b > 0.0 && r > 0.0, "{ratio}: {b} {r}");
         assert!((q - r / b).abs() <= 1e-9 * q, "{ratio} {q} vs {r}/{b}");
     };
-    for m in ["gradient_relmse", "image_relmse"] {
-        check_ratio(
-            &format!("{m}_baseline"),
-            &format!("{m}_restir"),
-            &format!("{m}_ratio"),
-        );
-    }
+    // The gradient phase measured ReSTIR (the default) against the baseline.
+    assert_eq!(s["gradient_method"].as_str(), Some("restir"));
+    assert_eq!(json["gradient_method"].as_str(), Some("restir"));
+    check_ratio(
+        "gradient_relmse_baseline",
+        "gradient_relmse_estimator",
+        "gradient_relmse_ratio",
+    );
     check_ratio(
         "gradient_relmse_baseline_equal_iterations",
-        "gradient_relmse_restir",
+        "gradient_relmse_estimator",
         "gradient_relmse_ratio_equal_iterations",
     );
     check_ratio(
         "gradient_relmse_estimator_only_baseline",
-        "gradient_relmse_estimator_only_restir",
+        "gradient_relmse_estimator_only_estimator",
         "gradient_relmse_estimator_only_ratio",
     );
     check_ratio(
         "gradient_relmse_estimator_only_baseline_equal_time",
-        "gradient_relmse_estimator_only_restir",
+        "gradient_relmse_estimator_only_estimator",
         "gradient_relmse_estimator_only_ratio_equal_time",
     );
     check_ratio(
         "gradient_relmse_mean_baseline",
-        "gradient_relmse_mean_restir",
+        "gradient_relmse_mean_estimator",
         "gradient_relmse_mean_ratio",
     );
     // Per texture (the task has two): each texture's part of the equal-iteration errors, the
@@ -107,14 +108,14 @@ fn bench_json_has_every_field_finite_and_in_range() {
             "gradient_relmse_estimator_only_baseline",
         ),
         (
-            "estimator_only_restir",
-            "gradient_relmse_estimator_only_restir",
+            "estimator_only_estimator",
+            "gradient_relmse_estimator_only_estimator",
         ),
         (
             "total_baseline_equal_iterations",
             "gradient_relmse_baseline_equal_iterations",
         ),
-        ("total_restir", "gradient_relmse_restir"),
+        ("total_estimator", "gradient_relmse_estimator"),
     ] {
         let sum: f64 = parts.iter().map(|p| number(p, part)).sum();
         let whole = number(s, scene);
@@ -127,12 +128,12 @@ fn bench_json_has_every_field_finite_and_in_range() {
         for (b, r, q) in [
             (
                 "estimator_only_baseline",
-                "estimator_only_restir",
+                "estimator_only_estimator",
                 "estimator_only_ratio",
             ),
             (
                 "total_baseline_equal_iterations",
-                "total_restir",
+                "total_estimator",
                 "total_ratio_equal_iterations",
             ),
         ] {
@@ -152,55 +153,93 @@ fn bench_json_has_every_field_finite_and_in_range() {
             < 0.5 * number(s, "gradient_relmse_estimator_only_baseline"),
         "the mean of independent baseline estimates gains less than 2x over one"
     );
-    // Both estimators' costs were timed: a ReSTIR iteration is never free, nor 100x a
+    // Both estimators' costs were timed: an iteration of the estimator is never free, nor 100x a
     // baseline iteration.
     let ms = number(s, "ms_per_iteration_ratio");
     assert!(ms > 0.5 && ms < 100.0, "ms_per_iteration_ratio {ms}");
-    // No smoothing given: the bench task's independent primal takes the default target
-    // smoothing, recorded per scene (the top level says none was given).
+    // No option given over the tasks': the report says none.
     assert_eq!(s["primal"].as_str(), Some("independent"));
-    assert_eq!(
-        number(s, "target_smoothing") as f32,
-        TARGET_SMOOTHING_INDEPENDENT
-    );
-    assert!(json["target_smoothing"].is_null());
+    assert_eq!(json["estimator_options"], serde_json::json!({}));
     for k in [
         "texture_rmse_initial",
-        "texture_rmse_baseline",
-        "texture_rmse_restir",
         "texture_rmse_observed_initial",
-        "texture_rmse_observed_baseline",
-        "texture_rmse_observed_restir",
-        "texture_rmse_observed_third_baseline",
-        "texture_rmse_observed_third_restir",
         "observed_fraction",
     ] {
         let x = number(s, k);
         assert!(x > 0.0 && x < 1.0, "{k} {x}");
     }
-    // The image error of the start is the same for both and larger than after optimizing
+    // The image error of the start is the same for all and larger than after optimizing
     // would be hard to promise in one second; only its range is checked.
     assert!(number(s, "image_relmse_initial") > 0.0);
-    for k in ["ms_per_iteration_baseline", "ms_per_iteration_restir"] {
-        let x = number(s, k);
-        assert!(x > 0.0 && x < 60_000.0, "{k} {x}");
-    }
-    for k in ["iterations_baseline", "iterations_restir"] {
-        assert!(number(s, k) >= 1.0, "{k}");
+    // Every run: the baseline with Adam first (the reference of the ratios), then the
+    // default contenders: ReSTIR with Adam, the recursive estimator with Adam and with the
+    // variance-scaled step.
+    let runs = s["runs"].as_array().unwrap();
+    let names: Vec<&str> = runs.iter().map(|r| r["method"].as_str().unwrap()).collect();
+    assert_eq!(names, ["baseline", "restir", "recursive", "recursive"]);
+    let (base, restir) = (&runs[0], &runs[1]);
+    for r in runs {
+        let name = r["name"].as_str().unwrap();
+        for k in [
+            "texture_rmse",
+            "texture_rmse_observed",
+            "texture_rmse_observed_third",
+        ] {
+            let x = number(r, k);
+            assert!(x > 0.0 && x < 1.0, "{name}: {k} {x}");
+        }
+        let ms = number(r, "ms_per_iteration");
+        assert!(ms > 0.0 && ms < 60_000.0, "{name}: ms {ms}");
+        assert!(number(r, "iterations") >= 1.0, "{name}");
+        for (v, over, ratio) in [
+            ("image_relmse", "image_relmse", "image_relmse_ratio"),
+            (
+                "texture_rmse_observed",
+                "texture_rmse_observed",
+                "texture_rmse_observed_ratio",
+            ),
+        ] {
+            let q = number(r, ratio);
+            let want = number(r, v) / number(base, over);
+            assert!(
+                (q - want).abs() <= 1e-9 * want,
+                "{name}: {ratio} {q} vs {want}"
+            );
+        }
+        // Curves start at the initial state and run to the budget.
+        let pts = r["curve"].as_array().unwrap();
+        assert!(pts.len() >= 2, "{name}");
+        assert_eq!(pts[0]["seconds"].as_f64(), Some(0.0));
+        let last = pts.last().unwrap();
+        assert!(last["seconds"].as_f64().unwrap() >= 1.0);
+        assert!(
+            last["image_relmse"].as_f64().is_some(),
+            "{name}: no final image error"
+        );
     }
     // The merge's work, counted between the sampled iterations (2, 10, ...): it evaluates
     // stored paths, at most four per observed texel (the fresh and the kept one of each sign).
-    if number(s, "iterations_restir") >= 10.0 {
-        let e = number(s, "merge_evaluations_per_iteration");
+    // The other estimators count nothing per iteration.
+    let counters = restir["diagnostics_per_iteration"].as_array().unwrap();
+    if number(restir, "iterations") >= 10.0 {
+        let e = counters
+            .iter()
+            .find(|c| c[0] == "merge evaluations")
+            .map(|c| c[1].as_f64().unwrap())
+            .expect("no merge evaluations");
         assert!(
             e > 0.0 && e <= 4.0 * number(s, "observed_texels"),
-            "merge_evaluations_per_iteration {e}"
+            "merge evaluations per iteration {e}"
         );
     }
+    assert!(base["diagnostics_per_iteration"]
+        .as_array()
+        .unwrap()
+        .is_empty());
     // ReSTIR's extra state per texel is exactly the reservoirs and headers of the observed
     // texels and the compaction map (buffers that scale with the image, its target adjoints
     // among them, are not counted per texel).
-    let extra = number(s, "state_bytes_per_texel") - number(s, "state_bytes_per_texel_baseline");
+    let extra = number(restir, "state_bytes_per_texel") - number(base, "state_bytes_per_texel");
     let texels = number(s, "texels");
     let observed = number(s, "observed_texels");
     let expected = (observed * STATE_BYTES_PER_OBSERVED_TEXEL as f64
@@ -210,35 +249,12 @@ fn bench_json_has_every_field_finite_and_in_range() {
         (extra - expected).abs() < 1e-9 * expected,
         "{extra} bytes per texel, expected {expected}"
     );
-    // Curves start at the initial state and run to the budget.
-    for c in ["curve_baseline", "curve_restir"] {
-        let pts = s[c].as_array().unwrap();
-        assert!(pts.len() >= 2, "{c}");
-        assert_eq!(pts[0]["seconds"].as_f64(), Some(0.0));
-        let last = pts.last().unwrap();
-        assert!(last["seconds"].as_f64().unwrap() >= 1.0);
-        assert!(
-            last["image_relmse"].as_f64().is_some(),
-            "{c}: no final image error"
-        );
-    }
 
     let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
     assert!(md.contains("| sphere |"), "{md}");
-    // The further estimators (by default the recursive one with Adam and with the
-    // variance-scaled step) have their rows, with finite ratios over the baseline.
-    let contenders = s["contenders"].as_array().unwrap();
-    assert_eq!(contenders.len(), 2);
-    for c in contenders {
-        for key in [
-            "image_relmse_ratio",
-            "texture_rmse_observed_ratio",
-            "ms_per_iteration",
-        ] {
-            let v = number(c, key);
-            assert!(v.is_finite() && v > 0.0, "{}: {key} {v}", c["name"]);
-        }
-        assert!(md.contains(&format!("| sphere | {} |", c["name"].as_str().unwrap())));
+    // Every run has its rows.
+    for r in runs {
+        assert!(md.contains(&format!("| sphere | {} |", r["name"].as_str().unwrap())));
     }
     // Every table row is whole: it starts and ends on its own line.
     for line in md.lines().filter(|l| l.starts_with('|')) {
@@ -252,7 +268,7 @@ fn bench_json_has_every_field_finite_and_in_range() {
     }
     let scene_dir = dir.path().join("sphere");
     // Three panels: texture RMSE (observed texels), image relMSE, loss.
-    use psrestir::optim::plot::{PANEL_HEIGHT, PLOT_WIDTH};
+    use psrestir::job::plot::{PANEL_HEIGHT, PLOT_WIDTH};
     assert_eq!(
         png(&scene_dir.join("error_vs_time.png")),
         (PLOT_WIDTH, 3 * PANEL_HEIGHT)
@@ -291,9 +307,12 @@ fn bench_tunes_each_estimator_and_reports_the_reconstruction_first() {
     assert_eq!(json["tuned"].as_bool(), Some(true));
     let s = &json["scenes"][0];
     // The gradient phase did not run: its figures are absent (NaN is written as null).
-    assert!(s["gradient_relmse_restir"].is_null());
-    for (method, trials) in [("baseline", 6), ("restir", 11)] {
-        let t = &s[format!("tuned_{method}")];
+    assert!(s["gradient_relmse_estimator"].is_null());
+    let runs = s["runs"].as_array().unwrap();
+    for (k, method, trials) in [(0, "baseline", 6), (1, "restir", 11)] {
+        let run = &runs[k];
+        assert_eq!(run["method"].as_str(), Some(method));
+        let t = &run["tuned"];
         let scores: Vec<f64> = t["trials"]
             .as_array()
             .unwrap()
@@ -318,14 +337,14 @@ fn bench_tunes_each_estimator_and_reports_the_reconstruction_first() {
             scores.contains(&best) && best <= scores[0],
             "{method}: {best} {scores:?}"
         );
-        assert!(!s[format!("settings_{method}")].as_str().unwrap().is_empty());
-        let min = number(s, &format!("texture_rmse_observed_min_{method}"));
-        let end = number(s, &format!("texture_rmse_observed_{method}"));
+        assert!(!run["settings"].as_str().unwrap().is_empty());
+        let min = number(run, "texture_rmse_observed_min");
+        let end = number(run, "texture_rmse_observed");
         assert!(min > 0.0 && min <= end, "{method}: lowest {min}, end {end}");
     }
     // The settings strings name what was chosen.
-    let lr = number(&s["tuned_restir"]["best"], "learning_rate_scale");
-    assert!(s["settings_restir"]
+    let lr = number(&runs[1]["tuned"]["best"], "learning_rate_scale");
+    assert!(runs[1]["settings"]
         .as_str()
         .unwrap()
         .contains(&format!("lr ×{lr}")));
@@ -348,7 +367,7 @@ fn bench_tunes_each_estimator_and_reports_the_reconstruction_first() {
         std::fs::metadata(&cached).unwrap().modified().unwrap(),
         before
     );
-    assert_eq!(read()["scenes"][0]["tuned_restir"], s["tuned_restir"]);
+    assert_eq!(read()["scenes"][0]["runs"][1]["tuned"], runs[1]["tuned"]);
 }
 
 #[test]

@@ -65,7 +65,7 @@ fn check_gradient_on(
         loss: Loss::L2,
         seed: 7,
         method: psrestir::optim::Method::Baseline,
-        restir: Default::default(),
+        estimator_options: Default::default(),
         schedule: Default::default(),
         adam: Default::default(),
         adam_mask: false,
@@ -73,7 +73,6 @@ fn check_gradient_on(
         smoothness: 0.0,
         exposure_learning_rate: None,
         moment_filter: Default::default(),
-        recursive: Default::default(),
         step: Default::default(),
         variance_step: Default::default(),
     };

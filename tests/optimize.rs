@@ -77,7 +77,7 @@ fn setup_with(
         loss: Loss::L2,
         seed: 3,
         method: psrestir::optim::Method::Baseline,
-        restir: Default::default(),
+        estimator_options: Default::default(),
         schedule: Default::default(),
         adam: Default::default(),
         adam_mask: false,
@@ -85,7 +85,6 @@ fn setup_with(
         smoothness: 0.0,
         exposure_learning_rate: None,
         moment_filter: Default::default(),
-        recursive: Default::default(),
         step: Default::default(),
         variance_step: Default::default(),
     };

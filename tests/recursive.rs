@@ -12,7 +12,8 @@ mod common;
 
 use common::*;
 use psrestir::image_io::Image;
-use psrestir::optim::{Method, Optimizer, RecursiveOptions, Settings, StepKind};
+use psrestir::optim::estimator::recursive::RecursiveOptions;
+use psrestir::optim::{Method, Optimizer, Settings, StepKind};
 use psrestir::render::params::ParamSet;
 use psrestir::task::{Filter, Init, Slot, TextureSpec};
 
@@ -66,10 +67,10 @@ fn recursive_fresh_term_is_the_baseline_gradient() {
     )
     .unwrap();
     let mut rec_settings = settings(Method::Recursive, 2, 3);
-    rec_settings.recursive = RecursiveOptions {
+    rec_settings.estimator_options.put(&RecursiveOptions {
         weight: Some(1.0),
         ..Default::default()
-    };
+    });
     let mut rec = Optimizer::new(&gpu, &scene, set, rec_settings, &target).unwrap();
     let (adjoint, _) = base.converged_adjoint(64, 5).unwrap();
     for it in 0..3 {
@@ -174,7 +175,7 @@ fn check_unbiased_along_states(slot: Slot, filter: Filter, options: RecursiveOpt
     // The recursion along the same states, restarted for each run with other seeds (the
     // iteration number picks the seed; its parity picks the adjoint buffer).
     let mut rec_settings = settings(Method::Recursive, 2, 5);
-    rec_settings.recursive = options;
+    rec_settings.estimator_options.put(&options);
     let mut rec = Optimizer::new(&gpu, &scene, set, rec_settings, &target).unwrap();
     let mut per_state: Vec<Vec<Vec<f32>>> = vec![Vec::new(); k_states];
     for run in 0..runs {
@@ -392,7 +393,7 @@ fn successive_recursive_estimates_on_the_default_task() {
     let out = tempfile::tempdir().unwrap();
     let prep = psrestir::job::Problem::from_task(&gpu, &task, out.path(), false).unwrap();
     let settings =
-        |method| psrestir::task::task_settings(&task, &prep.cameras, method, Default::default());
+        |method| psrestir::task::task_settings(&task, &prep.cameras, method, &Default::default());
     let mut base = Optimizer::for_problem(&gpu, &prep, settings(Method::Baseline)).unwrap();
     let (converged, _) = base.converged_adjoint(256, 0xad).unwrap();
     // The reference: 256 gradient spp (128 estimates of the task's 2).

@@ -11,8 +11,9 @@ mod common;
 
 use common::*;
 use psrestir::image_io::Image;
-use psrestir::optim::estimator::compact::{RADIANCE_ERROR, TARGET_ERROR};
-use psrestir::optim::{restir::selection_trial, Method, Optimizer, RestirOptions, Settings};
+use psrestir::optim::estimator::restir::compact::{RADIANCE_ERROR, TARGET_ERROR};
+use psrestir::optim::estimator::restir::{selection_trial, MergeDiagnostics, RestirOptions};
+use psrestir::optim::{EstimatorOptions, Method, Optimizer, Settings};
 use psrestir::render::params::ParamSet;
 use psrestir::task::{Filter, Init, Loss, Slot, TextureSpec};
 
@@ -122,7 +123,7 @@ fn optimizer_on(
         loss: Loss::L2,
         seed,
         method,
-        restir,
+        estimator_options: EstimatorOptions::with(&restir),
         schedule: Default::default(),
         adam: Default::default(),
         adam_mask: false,
@@ -130,7 +131,6 @@ fn optimizer_on(
         smoothness: 0.0,
         exposure_learning_rate: None,
         moment_filter: Default::default(),
-        recursive: Default::default(),
         step: Default::default(),
         variance_step: Default::default(),
     };
@@ -187,7 +187,7 @@ fn without_reuse_restir_equals_the_baseline_for_scalar_textures() {
             loss: Loss::L2,
             seed: 11,
             method: Method::Baseline,
-            restir: opts,
+            estimator_options: EstimatorOptions::with(&opts),
             schedule: Default::default(),
             adam: Default::default(),
             adam_mask: false,
@@ -195,7 +195,6 @@ fn without_reuse_restir_equals_the_baseline_for_scalar_textures() {
             smoothness: 0.0,
             exposure_learning_rate: None,
             moment_filter: Default::default(),
-            recursive: Default::default(),
             step: Default::default(),
             variance_step: Default::default(),
         };
@@ -369,7 +368,7 @@ struct ShiftTrial {
     se: Vec<f64>,
     ref_mean: Vec<f64>,
     ref_se: Vec<f64>,
-    diagnostics: psrestir::optim::MergeDiagnostics,
+    diagnostics: MergeDiagnostics,
 }
 
 fn shift_trial(gpu: &psrestir::gpu::Gpu, filter: Filter, seed: u32) -> ShiftTrial {
@@ -414,7 +413,7 @@ fn shift_trial(gpu: &psrestir::gpu::Gpu, filter: Filter, seed: u32) -> ShiftTria
         se,
         ref_mean,
         ref_se,
-        diagnostics: psrestir::optim::MergeDiagnostics::of(&re).unwrap().unwrap(),
+        diagnostics: MergeDiagnostics::of(&re).unwrap().unwrap(),
     }
 }
 
@@ -505,7 +504,7 @@ fn the_merge_pass_traces_no_ray() {
     for _ in 0..4 {
         re.step().unwrap();
     }
-    let d = psrestir::optim::MergeDiagnostics::of(&re).unwrap().unwrap();
+    let d = MergeDiagnostics::of(&re).unwrap().unwrap();
     assert!(d.evaluations > 0, "{d:?}");
 }
 
@@ -548,7 +547,7 @@ fn stored_paths_keep_the_inputs_no_texture_replaces() {
             re.write_params(if it % 2 == 0 { &a } else { &b }).unwrap();
             re.step().unwrap();
         }
-        let d = psrestir::optim::MergeDiagnostics::of(&re).unwrap().unwrap();
+        let d = MergeDiagnostics::of(&re).unwrap().unwrap();
         eprintln!("{slots:?}: {d:?}");
         assert!(
             d.verified > 100,
@@ -625,7 +624,7 @@ fn gradients_follow_a_sign_change() {
             loss: Loss::L2,
             seed: 5,
             method,
-            restir: RestirOptions::default(),
+            estimator_options: Default::default(),
             schedule: Default::default(),
             adam: Default::default(),
             adam_mask: false,
@@ -633,7 +632,6 @@ fn gradients_follow_a_sign_change() {
             smoothness: 0.0,
             exposure_learning_rate: None,
             moment_filter: Default::default(),
-            recursive: Default::default(),
             step: Default::default(),
             variance_step: Default::default(),
         };
@@ -749,12 +747,7 @@ fn restir_beats_the_baseline_on_the_default_scene_at_low_sampling() {
         for &seed in &seeds {
             let settings = Settings {
                 seed,
-                ..psrestir::task::task_settings(
-                    &task,
-                    &prep.cameras,
-                    method,
-                    RestirOptions::default(),
-                )
+                ..psrestir::task::task_settings(&task, &prep.cameras, method, &Default::default())
             };
             let mut opt =
                 Optimizer::new(&gpu, &prep.scene, prep.set.clone(), settings, &prep.targets)
@@ -793,12 +786,8 @@ fn the_shrunk_default_task_recovers_its_texture() {
     let dir = tempfile::tempdir().unwrap();
     let prep = psrestir::job::Problem::from_task(&gpu, &task, dir.path(), false).unwrap();
     let truth = prep.reference.clone().unwrap();
-    let settings = psrestir::task::task_settings(
-        &task,
-        &prep.cameras,
-        Method::Restir,
-        RestirOptions::default(),
-    );
+    let settings =
+        psrestir::task::task_settings(&task, &prep.cameras, Method::Restir, &Default::default());
     let mut opt =
         Optimizer::new(&gpu, &prep.scene, prep.set.clone(), settings, &prep.targets).unwrap();
     let observed = opt.observed_texels().unwrap().to_vec();
@@ -862,7 +851,12 @@ fn without_priors_at_tuned_settings_neither_estimator_drifts() {
             };
             let settings = Settings {
                 seed,
-                ..psrestir::task::task_settings(&task, &prep.cameras, method, restir)
+                ..psrestir::task::task_settings(
+                    &task,
+                    &prep.cameras,
+                    method,
+                    &EstimatorOptions::with(&restir),
+                )
             };
             let mut opt =
                 Optimizer::new(&gpu, &prep.scene, prep.set.clone(), settings, &prep.targets)
@@ -913,13 +907,13 @@ fn a_restored_state_continues_like_the_original() {
     };
     // With the default target adjoint: the round trip through the GPU buffers (reservoirs,
     // target adjoints and the rest) is exact.
-    let beta = Some(psrestir::optim::restir::TARGET_SMOOTHING_INDEPENDENT);
+    let beta = Some(psrestir::optim::estimator::restir::TARGET_SMOOTHING_INDEPENDENT);
     let mut a = make(beta);
     for _ in 0..6 {
         a.step().unwrap();
     }
     let state = a.state().unwrap();
-    let names = psrestir::optim::restir::state_names::HISTORY;
+    let names = psrestir::optim::estimator::restir::state_names::HISTORY;
     assert!(state.estimator.counter(names).unwrap() > 0);
     let mut b = make(beta);
     b.restore(&state).unwrap();
@@ -1014,7 +1008,7 @@ fn the_target_adjoint_is_a_moving_average_of_the_adjoints() {
         o.estimate_gradient_with_adjoint(0, &a1).unwrap();
         o.estimate_gradient_with_adjoint(1, &a2).unwrap();
         let state = o.state().unwrap();
-        let names = psrestir::optim::restir::state_names::TARGETS;
+        let names = psrestir::optim::estimator::restir::state_names::TARGETS;
         let targets: Vec<f32> =
             bytemuck::cast_slice(state.estimator.array(names).unwrap()).to_vec();
         // Both parities, the even iteration's first.

@@ -5,7 +5,7 @@
 // reuse this split (ReSTIR stores the path, direction and radiance, without the factor).
 #import shared/bvh
 #import shared/surface
-#import shared/compact_path
+#import shared/path_encoding
 
 // Which techniques contribute to area and environment lights (delta lights always use NEE).
 var<private> techniques: u32 = TECH_MIS;
@@ -299,7 +299,7 @@ fn direct_radiance_states(o: vec3f, d: vec3f, both: bool) -> array<vec3f, 2> {
 // sample's incident direction are taken to the shading frame and rounded through the
 // octahedral encoding (about 1e-7), and the derivatives are taken there. With compact_paths
 // (ReSTIR's candidates) the hit's barycentrics, the incident directions and the radiances are
-// rounded as ReSTIR stores them (shared/compact_path.wgsl) before anything is evaluated, so
+// rounded to the compact path encoding (shared/path_encoding.wgsl) before anything is evaluated, so
 // that a stored path (stored_vertex, path_factor) re-evaluates to the same value.
 var<private> compact_paths: bool = false;
 
@@ -311,7 +311,7 @@ struct TechniqueSample {
     // The path as the BRDF sees it.
     vertex: PathVertex,
     // With compact_paths: the fixed-point direction and the RGBE radiance
-    // (shared/compact_path.wgsl).
+    // (shared/path_encoding.wgsl).
     ko: vec2u,
     rgbe: u32,
 }

@@ -1,6 +1,7 @@
-//! The benchmark's gradient-error phase (see the module above): ReSTIR's warm-up, the
-//! equal-time baseline spp, the reference gradient, and the total, estimator-only and
-//! successive-estimate errors of both estimators.
+//! The benchmark's gradient-error phase (see the module above): the warm-up of the estimator
+//! under study ([`BenchOptions::gradient_method`], ReSTIR by default; "the estimator" below),
+//! the equal-time baseline spp, the reference gradient, and the total, estimator-only and
+//! successive-estimate errors of the estimator and the baseline.
 use super::phases::{settings, time_steps};
 use super::*;
 
@@ -23,13 +24,13 @@ fn reference_gradient(r: &mut Optimizer, spp: u32, adjoint: &[f32]) -> Result<Ve
 pub(super) struct GradientPhase {
     pub(super) baseline_spp_equal_time: f64,
     pub(super) total_baseline: f64,
-    pub(super) total_restir: f64,
+    pub(super) total_estimator: f64,
     pub(super) total_baseline_equal_iterations: f64,
     pub(super) only_baseline: f64,
-    pub(super) only_restir: f64,
+    pub(super) only_estimator: f64,
     pub(super) only_baseline_equal_time: f64,
     pub(super) mean_baseline: f64,
-    pub(super) mean_restir: f64,
+    pub(super) mean_estimator: f64,
     pub(super) ms_ratio: f64,
     pub(super) snapshot: GradientSnapshot,
     /// Per optimized texture, its parts of the equal-iteration errors (they add up to the
@@ -42,9 +43,9 @@ pub(super) struct GradientPhase {
 #[derive(Clone, Copy, Default)]
 pub(super) struct TextureParts {
     pub(super) total_baseline_equal_iterations: f64,
-    pub(super) total_restir: f64,
+    pub(super) total_estimator: f64,
     pub(super) only_baseline: f64,
-    pub(super) only_restir: f64,
+    pub(super) only_estimator: f64,
 }
 
 fn add_to(sum: &mut [f64], g: &[f32]) {
@@ -67,27 +68,28 @@ pub(super) fn interpolate_in_inverse_spp(k: f64, s0: u32, e0: f64, e1: f64) -> f
 /// A function that builds an optimizer for the bench: (estimator, gradient spp, seed).
 type NewOptimizer<'a> = dyn Fn(Method, u32, u32) -> Result<Optimizer> + 'a;
 
-/// The baseline's gradient spp that takes the time of one ReSTIR iteration, and ReSTIR's
-/// ms per iteration over the baseline's at `spp`. ReSTIR's time is `ms_restir` when its
+/// The baseline's gradient spp that takes the time of one iteration of the estimator, and
+/// its ms per iteration over the baseline's at `spp`. Its time is `ms_estimator` when its
 /// warm-up timed it, else measured here; the baseline is timed at `spp` and 4 `spp` over
-/// `(untimed, timed)` iterations like ReSTIR's.
+/// `(untimed, timed)` iterations like the estimator's.
 fn equal_time_spp(
     new: &NewOptimizer,
     task: &Task,
+    method: Method,
     spp: u32,
     seed: u32,
     (untimed, timed): (u32, u32),
-    ms_restir: Option<f64>,
+    ms_estimator: Option<f64>,
 ) -> Result<(f64, f64)> {
-    let (untimed, timed) = match ms_restir {
+    let (untimed, timed) = match ms_estimator {
         Some(_) => (untimed, timed),
         None => (1, 3),
     };
     let timed = timed.max(3);
-    let ms_restir = match ms_restir {
+    let ms_estimator = match ms_estimator {
         Some(ms) => ms,
         None => {
-            let mut r = new(Method::Restir, spp, seed)?;
+            let mut r = new(method, spp, seed)?;
             time_steps(&mut r, untimed, timed)?
         }
     };
@@ -125,13 +127,13 @@ fn equal_time_spp(
         }
     };
     let per_spp = (t4 - t1) / (3 * spp) as f64;
-    let k = (spp as f64 + (ms_restir - t1) / per_spp).clamp(1.0, 1024.0);
+    let k = (spp as f64 + (ms_estimator - t1) / per_spp).clamp(1.0, 1024.0);
     log::info!(
-        "{}: ReSTIR {ms_restir:.1} ms/it, baseline {t1:.1} ms/it at {spp} spp \
+        "{}: {method} {ms_estimator:.1} ms/it, baseline {t1:.1} ms/it at {spp} spp \
          (+{per_spp:.1} ms per spp): {k:.2} spp at equal time",
         task.path.display()
     );
-    Ok((k, ms_restir / t1))
+    Ok((k, ms_estimator / t1))
 }
 
 /// Which errors [`GradientPhase::add`] adds to.
@@ -144,37 +146,41 @@ enum Errors {
 }
 
 impl GradientPhase {
-    /// Add one seed's errors of ReSTIR's and the baseline's gradients, `[restir, baseline]`
+    /// Add one seed's errors of the estimator's and the baseline's gradients,
+    /// `[estimator, baseline]`
     /// (the baseline at the task's spp): the whole and each texture's part (its `range`),
     /// each divided by the number of seeds `n`.
     fn add(
         &mut self,
         which: Errors,
-        [restir, baseline]: [&Vec<f32>; 2],
+        [estimator, baseline]: [&Vec<f32>; 2],
         reference: &[f64],
         ranges: &[std::ops::Range<usize>],
         n: f64,
     ) {
         let (r, b) = (
-            gradient_relmse(restir, reference) / n,
+            gradient_relmse(estimator, reference) / n,
             gradient_relmse(baseline, reference) / n,
         );
-        let parts = gradient_relmse_parts(restir, reference, ranges)
+        let parts = gradient_relmse_parts(estimator, reference, ranges)
             .into_iter()
             .zip(gradient_relmse_parts(baseline, reference, ranges));
         let (whole_r, whole_b) = match which {
             Errors::Total => (
-                &mut self.total_restir,
+                &mut self.total_estimator,
                 &mut self.total_baseline_equal_iterations,
             ),
-            Errors::EstimatorOnly => (&mut self.only_restir, &mut self.only_baseline),
+            Errors::EstimatorOnly => (&mut self.only_estimator, &mut self.only_baseline),
         };
         *whole_r += r;
         *whole_b += b;
         for (p, (er, eb)) in self.per_texture.iter_mut().zip(parts) {
             let (pr, pb) = match which {
-                Errors::Total => (&mut p.total_restir, &mut p.total_baseline_equal_iterations),
-                Errors::EstimatorOnly => (&mut p.only_restir, &mut p.only_baseline),
+                Errors::Total => (
+                    &mut p.total_estimator,
+                    &mut p.total_baseline_equal_iterations,
+                ),
+                Errors::EstimatorOnly => (&mut p.only_estimator, &mut p.only_baseline),
             };
             *pr += er / n;
             *pb += eb / n;
@@ -187,13 +193,13 @@ impl GradientPhase {
         for v in [
             &mut g.baseline_spp_equal_time,
             &mut g.total_baseline,
-            &mut g.total_restir,
+            &mut g.total_estimator,
             &mut g.total_baseline_equal_iterations,
             &mut g.only_baseline,
-            &mut g.only_restir,
+            &mut g.only_estimator,
             &mut g.only_baseline_equal_time,
             &mut g.mean_baseline,
-            &mut g.mean_restir,
+            &mut g.mean_estimator,
         ] {
             *v = f64::NAN;
         }
@@ -205,18 +211,19 @@ impl GradientPhase {
         GradientPhase {
             baseline_spp_equal_time: spp as f64,
             total_baseline: 0.0,
-            total_restir: 0.0,
+            total_estimator: 0.0,
             total_baseline_equal_iterations: 0.0,
             only_baseline: 0.0,
-            only_restir: 0.0,
+            only_estimator: 0.0,
             only_baseline_equal_time: 0.0,
             mean_baseline: 0.0,
-            mean_restir: 0.0,
+            mean_estimator: 0.0,
             ms_ratio: f64::NAN,
             snapshot: GradientSnapshot {
                 reference: Vec::new(),
                 baseline: Vec::new(),
-                restir: Vec::new(),
+                estimator: Vec::new(),
+                estimator_name: String::new(),
                 baseline_spp: spp,
             },
             per_texture: vec![TextureParts::default(); n_textures],
@@ -224,7 +231,7 @@ impl GradientPhase {
     }
 }
 
-/// ReSTIR's warm-up: `warmup` steps, the first quarter untimed, the rest timed. Returns
+/// The estimator's warm-up: `warmup` steps, the first quarter untimed, the rest timed. Returns
 /// (untimed, timed, ms per timed step).
 fn warm_up(re: &mut Optimizer, warmup: u32) -> Result<(u32, u32, Option<f64>)> {
     let untimed = (warmup / 4).max(1).min(warmup);
@@ -258,11 +265,12 @@ fn reference_at(
     Ok((converged, reference))
 }
 
-/// An optimizer adds up successive estimates. ReSTIR's share samples (the kept ones), so
-/// their errors are correlated and their mean gains less than a mean of independent
-/// estimates would: the mean of `o.successive` ReSTIR estimates under `converged`, from
-/// `first` (already drawn) on, and the mean of as many independent baseline estimates
-/// (from a baseline that `baseline(salt)` builds at ReSTIR's state).
+/// An optimizer adds up successive estimates. Those of an estimator with reuse share samples
+/// (ReSTIR's kept ones, the recursive estimator's running sum), so their errors are
+/// correlated and their mean gains less than a mean of independent estimates would: the
+/// mean of `o.successive` estimates of the estimator under `converged`, from `first`
+/// (already drawn) on, and the mean of as many independent baseline estimates (from a
+/// baseline that `baseline(salt)` builds at the estimator's state).
 fn successive_means(
     mut re: Optimizer,
     baseline: &dyn Fn(u32) -> Result<Optimizer>,
@@ -272,10 +280,10 @@ fn successive_means(
     first: &[f32],
 ) -> Result<(Vec<f32>, Vec<f32>)> {
     let successive = o.successive;
-    let mut mean_restir = first.iter().map(|&v| v as f64).collect::<Vec<_>>();
+    let mut mean_estimator = first.iter().map(|&v| v as f64).collect::<Vec<_>>();
     for j in 1..successive {
         let g = re.estimate_gradient_with_adjoint(it + o.settle + j, converged)?;
-        add_to(&mut mean_restir, &g);
+        add_to(&mut mean_estimator, &g);
     }
     drop(re);
     let mut mean_baseline = vec![0.0; first.len()];
@@ -289,7 +297,7 @@ fn successive_means(
             .map(|&v| (v / successive as f64) as f32)
             .collect()
     };
-    Ok((mean(mean_restir), mean(mean_baseline)))
+    Ok((mean(mean_estimator), mean(mean_baseline)))
 }
 
 pub(super) fn gradient_phase(
@@ -325,9 +333,9 @@ pub(super) fn gradient_phase(
     for rep in 0..repeats {
         progress.message(format!("gradient error, seed {}/{repeats}", rep + 1));
         let seed = task.seed.wrapping_add(1000 * (rep + 1));
-        // ReSTIR from the initial textures; the later warm-up steps time an iteration.
-        let mut re = new(Method::Restir, spp, seed)?;
-        let (untimed, timed, ms_restir) = warm_up(&mut re, o.warmup)?;
+        // The estimator from the initial textures; the later warm-up steps time an iteration.
+        let mut re = new(o.gradient_method, spp, seed)?;
+        let (untimed, timed, ms_estimator) = warm_up(&mut re, o.warmup)?;
         let state = re.read_params()?;
         let kept = re.state()?;
 
@@ -340,8 +348,15 @@ pub(super) fn gradient_phase(
         let k = match eq_spp {
             Some(k) => k,
             None => {
-                let (k, ms_ratio) =
-                    equal_time_spp(&new, task, spp, seed, (untimed, timed), ms_restir)?;
+                let (k, ms_ratio) = equal_time_spp(
+                    &new,
+                    task,
+                    o.gradient_method,
+                    spp,
+                    seed,
+                    (untimed, timed),
+                    ms_estimator,
+                )?;
                 out.ms_ratio = ms_ratio;
                 eq_spp = Some(k);
                 k
@@ -356,7 +371,7 @@ pub(super) fn gradient_phase(
         ));
         let (converged, reference) = reference_at(&new, o, &state, seed)?;
 
-        // Total: ReSTIR's next gradient with its own primal render, and the baseline's at the
+        // Total: the estimator's next gradient with its own primal render, and the baseline's at the
         // task's spp and around the equal-time spp under the adjoint of that same render
         // (common random numbers). Every figure is still an estimator under the adjoint of
         // one task-spp primal render, so each expected error is what a user gets; sharing
@@ -364,14 +379,15 @@ pub(super) fn gradient_phase(
         // per estimate and seed dominated it (`sphere`, paper protocol, a render of its own
         // for each: the baseline's total error at 1 / 2 / 3 gradient spp was 17.2 / 1.3 /
         // about 7e-8, not falling with the spp, against 3.7e-8 estimator-only at 1 spp).
-        // The baseline continues from ReSTIR's state without the reservoirs: the same
+        // The baseline continues from the estimator's state without its own (ReSTIR's
+        // reservoirs, the recursive running estimate): the same
         // textures (and, with the control-variate primal, the same carried image and
         // statistics).
         let it = re.iteration;
-        let (g_restir_total, _) = re.estimate_gradient(it)?;
+        let (g_estimator_total, _) = re.estimate_gradient(it)?;
         let adjoint_total = re.read_adjoint(it)?;
         re.restore(&kept)?;
-        // A baseline at ReSTIR's state without the reservoirs.
+        // A baseline at the estimator's state without the estimator's own.
         let baseline = |spp: u32, salt: u32| -> Result<Optimizer> {
             let mut b = new(Method::Baseline, spp, seed ^ salt)?;
             b.restore(&crate::optim::OptimizerState {
@@ -390,12 +406,12 @@ pub(super) fn gradient_phase(
             ))
         };
         let g_baseline_total = baseline_at(spp, 0xea, &adjoint_total)?;
-        let errors = [&g_restir_total, &g_baseline_total];
+        let errors = [&g_estimator_total, &g_baseline_total];
         out.add(Errors::Total, errors, &reference, &ranges, n);
         out.total_baseline +=
             interpolate_in_inverse_spp(k, s0, total(s0, 0xe9)?, total(s0 + 1, 0xeb)?) / n;
 
-        // Estimator-only: both under the converged adjoint. ReSTIR first draws `settle` more
+        // Estimator-only: both under the converged adjoint. The estimator first draws `settle` more
         // estimates under it at the same textures, so that its reservoirs hold samples
         // chosen for the integrand it is measured on. Measured right after the warm-up, its
         // reservoirs were filled under the noisy adjoints of its own primal renders, and the
@@ -405,16 +421,16 @@ pub(super) fn gradient_phase(
         for j in 0..o.settle {
             re.estimate_gradient_with_adjoint(it + j, &converged)?;
         }
-        let g_restir_only = re.estimate_gradient_with_adjoint(it + o.settle, &converged)?;
-        let (mean_restir, mean_baseline) = successive_means(
+        let g_estimator_only = re.estimate_gradient_with_adjoint(it + o.settle, &converged)?;
+        let (mean_estimator, mean_baseline) = successive_means(
             re,
             &|salt| baseline(spp, salt),
             &converged,
             it,
             o,
-            &g_restir_only,
+            &g_estimator_only,
         )?;
-        out.mean_restir += gradient_relmse(&mean_restir, &reference) / n;
+        out.mean_estimator += gradient_relmse(&mean_estimator, &reference) / n;
         out.mean_baseline += gradient_relmse(&mean_baseline, &reference) / n;
         let b_only = baseline_at(spp, 0xea, &converged)?;
         let only = |spp, salt| -> Result<f64> {
@@ -423,7 +439,7 @@ pub(super) fn gradient_phase(
                 &reference,
             ))
         };
-        let errors = [&g_restir_only, &b_only];
+        let errors = [&g_estimator_only, &b_only];
         out.add(Errors::EstimatorOnly, errors, &reference, &ranges, n);
         out.only_baseline_equal_time +=
             interpolate_in_inverse_spp(k, s0, only(s0, 0xe9)?, only(s0 + 1, 0xeb)?) / n;
@@ -432,7 +448,8 @@ pub(super) fn gradient_phase(
             out.snapshot = GradientSnapshot {
                 reference: reference.iter().map(|&v| v as f32).collect(),
                 baseline: b_only,
-                restir: g_restir_only,
+                estimator: g_estimator_only,
+                estimator_name: o.gradient_method.name().to_string(),
                 baseline_spp: spp,
             };
         }

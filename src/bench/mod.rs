@@ -36,7 +36,7 @@ use crate::image_io::Image;
 use crate::job::run::rmse;
 use crate::job::Problem;
 use crate::optim::observed::rmse_observed;
-use crate::optim::{Method, Optimizer, PassTimes, RestirOptions, Settings, StepKind};
+use crate::optim::{EstimatorOptions, Method, Optimizer, PassTimes, Settings, StepKind};
 use crate::task::task_settings;
 use crate::task::Task;
 use crate::{Error, Result};
@@ -68,8 +68,8 @@ impl Protocol {
     }
 }
 
-/// A further estimator with its step, optimized beside the baseline and ReSTIR (both with
-/// Adam) in the equal-time phase.
+/// An estimator with its step, optimized in the equal-time phase after the baseline with Adam
+/// (the reference of every ratio).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Contender {
     /// The gradient estimator.
@@ -83,9 +83,21 @@ pub struct Contender {
 }
 
 impl Contender {
-    /// The recursive estimator with Adam and with the variance-scaled step: the bench's
-    /// default contenders.
-    pub const DEFAULT: [Contender; 2] = [
+    /// The reference of every run: the baseline with Adam, unfiltered.
+    pub const BASELINE: Contender = Contender {
+        method: Method::Baseline,
+        step: StepKind::Adam,
+        filtered: false,
+    };
+
+    /// The bench's default contenders: ReSTIR with Adam, the recursive estimator with Adam
+    /// and with the variance-scaled step.
+    pub const DEFAULT: [Contender; 3] = [
+        Contender {
+            method: Method::Restir,
+            step: StepKind::Adam,
+            filtered: false,
+        },
         Contender {
             method: Method::Recursive,
             step: StepKind::Adam,
@@ -98,7 +110,7 @@ impl Contender {
         },
     ];
 
-    /// The baseline or ReSTIR with Adam, unfiltered (the bench's first two).
+    /// An estimator with Adam, unfiltered.
     pub fn adam(method: Method) -> Contender {
         Contender {
             method,
@@ -144,16 +156,7 @@ impl Contender {
             None => (s, false),
         };
         let (m, st) = s.split_once(':').unwrap_or((s, "adam"));
-        let method = match m {
-            "baseline" => Method::Baseline,
-            "restir" => Method::Restir,
-            "recursive" => Method::Recursive,
-            _ => {
-                return Err(format!(
-                    "unknown estimator `{m}` (baseline, restir, recursive)"
-                ))
-            }
-        };
+        let method: Method = m.parse().map_err(|e: Error| e.to_string())?;
         let step = match st {
             "adam" => StepKind::Adam,
             "variance" => StepKind::Variance,
@@ -175,12 +178,15 @@ pub struct BenchOptions {
     pub budget_s: f64,
     /// Multiplier of image and texture sizes.
     pub scale: f64,
-    /// ReSTIR iterations before the gradient error is measured.
+    /// The estimator whose gradient error the gradient phase measures against the
+    /// baseline's (ReSTIR by default: the method the bench's gradient phase was made for).
+    pub gradient_method: Method,
+    /// Iterations of that estimator before the gradient error is measured.
     pub warmup: u32,
-    /// ReSTIR estimates under the converged adjoint, at the textures after the warm-up,
-    /// before its estimator-only error is measured.
+    /// Its estimates under the converged adjoint, at the textures after the warm-up, before
+    /// its estimator-only error is measured.
     pub settle: u32,
-    /// Successive estimates (ReSTIR) and independent ones (baseline) averaged for the
+    /// Successive estimates (the estimator's) and independent ones (baseline) averaged for the
     /// estimator-only error of their mean: 10, about the window of Adam's first moment
     /// (β1 = 0.9), with the 256-spp reference's own error a small part of the baseline's
     /// mean (about 4%).
@@ -202,8 +208,8 @@ pub struct BenchOptions {
     pub eval_spp: u32,
     /// Image-error evaluations along each optimization (start and end included).
     pub curve_points: u32,
-    /// ReSTIR settings.
-    pub restir: RestirOptions,
+    /// The estimators' options over the tasks' (`--estimator-option`).
+    pub estimator_options: EstimatorOptions,
     /// Output folder.
     pub out: PathBuf,
     /// Show a progress bar.
@@ -216,8 +222,8 @@ pub struct BenchOptions {
     pub tune_budget_s: Option<f64>,
     /// The equal-time optimization only (no primal or gradient-error phases).
     pub end_to_end_only: bool,
-    /// Further estimators and steps optimized in the equal-time phase after the baseline and
-    /// ReSTIR (both with Adam), each tuned like them with `tune`.
+    /// The estimators and steps optimized in the equal-time phase after the baseline with
+    /// Adam, each tuned like it with `tune`.
     pub contenders: Vec<Contender>,
 }
 
@@ -226,6 +232,7 @@ impl Default for BenchOptions {
         BenchOptions {
             budget_s: 60.0,
             scale: 1.0,
+            gradient_method: Method::Restir,
             warmup: 20,
             settle: 20,
             successive: 10,
@@ -237,7 +244,7 @@ impl Default for BenchOptions {
             primal: None,
             eval_spp: 64,
             curve_points: 11,
-            restir: RestirOptions::default(),
+            estimator_options: EstimatorOptions::default(),
             out: PathBuf::from("out/bench"),
             progress: true,
             no_priors: false,
@@ -415,10 +422,12 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
     } else {
         o.contenders.len() as u64
     };
+    // The baseline's optimization is the one step of the equal-time phase besides the
+    // contenders'.
     let per_scene = if o.end_to_end_only {
-        3
+        2
     } else {
-        o.repeats.max(1) as u64 + if o.gradient_only { 2 } else { 4 }
+        o.repeats.max(1) as u64 + if o.gradient_only { 2 } else { 3 }
     } + u64::from(o.tune && !o.gradient_only)
         + contenders;
     let progress = Progress::new(o.progress, loaded.len() as u64 * per_scene);
@@ -427,16 +436,15 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         adapter: gpu.describe(),
         budget_s: o.budget_s,
         scale: o.scale,
+        gradient_method: o.gradient_method.name().into(),
         warmup: o.warmup,
         settle: o.settle,
         repeats: o.repeats.max(1),
         reference_spp: o.reference_spp,
         reference_primal_spp: o.reference_primal_spp,
         protocol: o.protocol,
-        confidence: o.restir.confidence.name().into(),
         eval_spp: o.eval_spp,
-        m_cap: o.restir.m_cap,
-        target_smoothing: o.restir.target_smoothing,
+        estimator_options: o.estimator_options.clone(),
         no_priors: o.no_priors,
         tuned: o.tune,
         scenes: Vec::new(),
@@ -447,9 +455,9 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
     // scene's targets render.
     let mut helper = loaded.first().and_then(|task| {
         let mut passes: Vec<&str> = Vec::new();
-        let all = [Method::Baseline, Method::Restir].map(Contender::adam);
+        let all = [Contender::BASELINE, Contender::adam(o.gradient_method)];
         for c in all.iter().chain(&o.contenders) {
-            let mut s = task_settings(task, &[], c.method, o.restir);
+            let mut s = task_settings(task, &[], c.method, &o.estimator_options);
             c.apply(&mut s);
             for p in Optimizer::passes(&s) {
                 if !passes.contains(&p) {
@@ -489,7 +497,7 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
             let tuned = if o.tune {
                 let budget = o.tune_budget_s.unwrap_or(o.budget_s / 3.0);
                 let key = format!(
-                    "{} {}x{} {:?} scale {} priors {} primal {:?} restir {:?} tuning {budget} s, psrestir {}",
+                    "{} {}x{} {:?} scale {} priors {} primal {:?} options {:?} tuning {budget} s, psrestir {}",
                     task.path.display(),
                     task.width,
                     task.height,
@@ -497,14 +505,11 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
                     o.scale,
                     !o.no_priors,
                     o.primal,
-                    o.restir,
+                    o.estimator_options,
                     env!("CARGO_PKG_VERSION"),
                 );
                 let mut t = Vec::new();
-                let all = [Method::Baseline, Method::Restir]
-                    .map(Contender::adam)
-                    .into_iter()
-                    .chain(o.contenders.iter().copied());
+                let all = std::iter::once(Contender::BASELINE).chain(o.contenders.iter().copied());
                 for c in all {
                     let mut s = settings(&prep, task, c.method, o);
                     c.apply(&mut s);
@@ -515,13 +520,13 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
                 progress.done();
                 t
             } else {
-                vec![None; 2 + o.contenders.len()]
+                vec![None; 1 + o.contenders.len()]
             };
             let (r, f) = optimization_phases(gpu, task, &prep, o, tuned, &progress)?;
             (Some(r), Some(f))
         };
         // The primal estimator of both phases (the task's, or the bench's --primal).
-        let primal = settings(&prep, task, Method::Restir, o).primal;
+        let primal = settings(&prep, task, o.gradient_method, o).primal;
         let result = SceneResult {
             name: name.clone(),
             task: task.path.display().to_string(),
@@ -531,22 +536,23 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
             texels: prep.set.textures.iter().map(|t| t.width * t.height).sum(),
             primal_spp: task.optimizer.primal_spp,
             gradient_spp: task.optimizer.gradient_spp,
+            gradient_method: o.gradient_method.name().into(),
             baseline_spp_equal_time: g.baseline_spp_equal_time,
             gradient_relmse_baseline: g.total_baseline,
-            gradient_relmse_restir: g.total_restir,
-            gradient_relmse_ratio: g.total_restir / g.total_baseline,
+            gradient_relmse_estimator: g.total_estimator,
+            gradient_relmse_ratio: g.total_estimator / g.total_baseline,
             gradient_relmse_baseline_equal_iterations: g.total_baseline_equal_iterations,
-            gradient_relmse_ratio_equal_iterations: g.total_restir
+            gradient_relmse_ratio_equal_iterations: g.total_estimator
                 / g.total_baseline_equal_iterations,
             gradient_relmse_estimator_only_baseline: g.only_baseline,
-            gradient_relmse_estimator_only_restir: g.only_restir,
-            gradient_relmse_estimator_only_ratio: g.only_restir / g.only_baseline,
+            gradient_relmse_estimator_only_estimator: g.only_estimator,
+            gradient_relmse_estimator_only_ratio: g.only_estimator / g.only_baseline,
             gradient_relmse_estimator_only_baseline_equal_time: g.only_baseline_equal_time,
-            gradient_relmse_estimator_only_ratio_equal_time: g.only_restir
+            gradient_relmse_estimator_only_ratio_equal_time: g.only_estimator
                 / g.only_baseline_equal_time,
             gradient_relmse_mean_baseline: g.mean_baseline,
-            gradient_relmse_mean_restir: g.mean_restir,
-            gradient_relmse_mean_ratio: g.mean_restir / g.mean_baseline,
+            gradient_relmse_mean_estimator: g.mean_estimator,
+            gradient_relmse_mean_ratio: g.mean_estimator / g.mean_baseline,
             successive_estimates: o.successive,
             gradient_relmse_per_texture: prep
                 .set
@@ -556,17 +562,16 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
                 .map(|(t, p)| TextureGradientErrors {
                     texture: t.name(),
                     estimator_only_baseline: p.only_baseline,
-                    estimator_only_restir: p.only_restir,
-                    estimator_only_ratio: p.only_restir / p.only_baseline,
+                    estimator_only_estimator: p.only_estimator,
+                    estimator_only_ratio: p.only_estimator / p.only_baseline,
                     total_baseline_equal_iterations: p.total_baseline_equal_iterations,
-                    total_restir: p.total_restir,
-                    total_ratio_equal_iterations: p.total_restir
+                    total_estimator: p.total_estimator,
+                    total_ratio_equal_iterations: p.total_estimator
                         / p.total_baseline_equal_iterations,
                 })
                 .collect(),
             ms_per_iteration_ratio: g.ms_ratio,
             primal: primal.name().into(),
-            target_smoothing: o.restir.target_smoothing_for(primal),
             primal_relmse_independent: pp.relmse_independent,
             primal_relmse_control_variate: pp.relmse_control_variate,
             primal_relmse_ratio: pp.relmse_control_variate / pp.relmse_independent,

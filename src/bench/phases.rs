@@ -3,7 +3,7 @@
 use super::*;
 
 pub(super) fn settings(prep: &Problem, task: &Task, method: Method, o: &BenchOptions) -> Settings {
-    let mut s = task_settings(task, &prep.cameras, method, o.restir);
+    let mut s = task_settings(task, &prep.cameras, method, &o.estimator_options);
     if let Some(p) = o.primal {
         s.primal = p;
     }
@@ -150,9 +150,8 @@ pub(super) struct OptimizationRun {
     pub(super) iterations: u32,
     pub(super) ms_per_iteration: f64,
     pub(super) passes: Option<PassTimes>,
-    pub(super) merge_evaluations: Option<f64>,
+    pub(super) counters_per_iteration: Vec<(String, f64)>,
     pub(super) state_bytes_per_texel: f64,
-    pub(super) observed_texels: u64,
     pub(super) final_image: Image,
 }
 
@@ -190,18 +189,17 @@ pub(super) fn optimization_phase(
     let mut curve = Vec::new();
     let mut seconds = 0.0;
     let mut passes: Option<(PassTimes, u32)> = None;
-    // The merge's counter at the last sampled iteration, and the kept paths it evaluated
-    // since the first one with the number of iterations they span.
-    let mut last_count: Option<(u32, u32)> = None;
-    let mut evaluations: Option<(u64, u32)> = None;
+    // The estimator's counters: the first sampled iteration, the last, the sums of their
+    // differences since the first, and their values at the last.
+    type Counted = (
+        u32,
+        u32,
+        Vec<(&'static str, f64)>,
+        crate::optim::estimator::Diagnostics,
+    );
+    let mut counted: Option<Counted> = None;
     let mut last_image = None;
-    let name = if who == Contender::adam(Method::Baseline) {
-        "baseline".to_string()
-    } else if who == Contender::adam(Method::Restir) {
-        "ReSTIR".to_string()
-    } else {
-        who.name()
-    };
+    let name = who.name();
     loop {
         let eval_due = seconds >= o.budget_s * next_eval as f64 / (points - 1) as f64;
         if seconds >= o.budget_s || eval_due {
@@ -231,16 +229,21 @@ pub(super) fn optimization_phase(
                 s.add(&t);
                 *n += 1;
             }
-            // The merge's counter (32 bits on the GPU: it may wrap over a long run, never
-            // between two samples).
-            if let Some(d) = crate::optim::MergeDiagnostics::of(&opt)? {
-                let count = d.evaluations as u32;
-                if let Some((iteration, last)) = last_count {
-                    let (s, n) = evaluations.get_or_insert((0, 0));
-                    *s += count.wrapping_sub(last) as u64;
-                    *n += opt.iteration - iteration;
+            // The estimator's counters (32 bits on the GPU: they may wrap over a long run,
+            // never between two samples), summed as wrapping differences.
+            let now = opt.estimator_counters()?;
+            match &mut counted {
+                None => {
+                    let sums = now.iter().map(|(n, _)| (*n, 0.0)).collect();
+                    counted = Some((opt.iteration, opt.iteration, sums, now));
                 }
-                last_count = Some((opt.iteration, count));
+                Some((_, to, sums, last)) => {
+                    for ((s, (_, v)), (_, l)) in sums.iter_mut().zip(&now).zip(last.iter()) {
+                        s.1 += (*v as u32).wrapping_sub(*l as u32) as f64;
+                    }
+                    *last = now;
+                    *to = opt.iteration;
+                }
             }
         }
         let values = opt.read_params()?;
@@ -269,15 +272,21 @@ pub(super) fn optimization_phase(
         ms_per_iteration: 1000.0 * seconds / iterations.max(1) as f64,
         iterations,
         passes: passes.map(|(s, n)| s.divided(n as f64)),
-        merge_evaluations: evaluations.map(|(s, n)| s as f64 / n as f64),
+        counters_per_iteration: match counted {
+            Some((from, to, sums, _)) if to > from => sums
+                .into_iter()
+                .map(|(n, s)| (n.to_string(), s / (to - from) as f64))
+                .collect(),
+            _ => Vec::new(),
+        },
         state_bytes_per_texel: opt.state_bytes_per_texel(),
-        observed_texels: opt.observed_texels()?.iter().filter(|&&o| o).count() as u64,
         curve,
         final_image,
     })
 }
 
-/// The equal-time optimization of both estimators (phase 2) and the cost (phase 3).
+/// The equal-time optimization of every run (phase 2: the baseline with Adam, then the
+/// contenders) and their cost (phase 3). `tuned` holds each run's search, in that order.
 pub(super) fn optimization_phases(
     gpu: &Gpu,
     task: &Task,
@@ -309,37 +318,14 @@ pub(super) fn optimization_phases(
         learning_rate_factor: None,
         image_relmse: Some(image_initial),
     };
-    tuned.resize(2 + o.contenders.len(), None);
-    let tuned_others = tuned.split_off(2);
-    let (tuned_restir, tuned_baseline) = (tuned.pop().flatten(), tuned.pop().flatten());
-    let best = |t: &Option<tune::Tuned>| t.as_ref().map(|t| t.best);
-    let (tb_best, tr_best) = (best(&tuned_baseline), best(&tuned_restir));
-    let adam = Contender::adam;
-    let base = optimization_phase(
-        gpu,
-        task,
-        prep,
-        o,
-        adam(Method::Baseline),
-        tb_best.as_ref(),
-        progress,
-    )?;
-    let re = optimization_phase(
-        gpu,
-        task,
-        prep,
-        o,
-        adam(Method::Restir),
-        tr_best.as_ref(),
-        progress,
-    )?;
-    let describe = |who: Contender, t: Option<tune::Tunable>| {
-        t.unwrap_or_else(|| {
-            let mut s = settings(prep, task, who.method, o);
-            who.apply(&mut s);
-            tune::Tunable::untuned(&s)
-        })
-        .describe(who.method)
+    let describe = |who: Contender, t: Option<&tune::Tunable>| {
+        t.cloned()
+            .unwrap_or_else(|| {
+                let mut s = settings(prep, task, who.method, o);
+                who.apply(&mut s);
+                tune::Tunable::untuned(&s)
+            })
+            .describe(who.method)
     };
     let min_observed = |r: &OptimizationRun| {
         r.curve
@@ -370,21 +356,29 @@ pub(super) fn optimization_phases(
             .map(|p| p.texture_rmse_observed)
             .unwrap_or(texture_observed_initial)
     };
-    let (tb, tob, ib) = last(&base);
-    let (tr, tor, ir) = last(&re);
     let with_start = |c: &[CurvePoint]| {
         let mut v = vec![start.clone()];
         v.extend_from_slice(c);
         v
     };
-    let mut contenders = Vec::new();
-    for (&who, tuned) in o.contenders.iter().zip(tuned_others) {
-        let t_best = best(&tuned);
-        let run = optimization_phase(gpu, task, prep, o, who, t_best.as_ref(), progress)?;
+    let runs_of = std::iter::once(Contender::BASELINE).chain(o.contenders.iter().copied());
+    tuned.resize(1 + o.contenders.len(), None);
+    let mut runs: Vec<RunResult> = Vec::new();
+    let mut finals = FinalImages {
+        target: prep.targets[0].clone(),
+        runs: Vec::new(),
+    };
+    for (who, tuned) in runs_of.zip(tuned) {
+        let t_best = tuned.as_ref().map(|t| &t.best);
+        let run = optimization_phase(gpu, task, prep, o, who, t_best, progress)?;
         let (t, to, i) = last(&run);
-        contenders.push(ContenderResult {
+        let (ib, tob) = runs
+            .first()
+            .map_or((i, to), |b| (b.image_relmse, b.texture_rmse_observed));
+        runs.push(RunResult {
             name: who.name(),
             key: who.key(),
+            method: who.method.name().to_string(),
             image_relmse: i,
             image_relmse_ratio: i / ib,
             texture_rmse: t,
@@ -395,52 +389,23 @@ pub(super) fn optimization_phases(
             ms_per_iteration: run.ms_per_iteration,
             iterations: run.iterations,
             passes: run.passes,
+            diagnostics_per_iteration: run.counters_per_iteration,
             state_bytes_per_texel: run.state_bytes_per_texel,
             settings: describe(who, t_best),
-            tuned,
+            tuned: tuned.clone(),
             curve: with_start(&run.curve),
         });
+        finals.runs.push((who.name(), run.final_image));
     }
     let result = OptimizationResult {
         image_relmse_initial: image_initial,
-        image_relmse_baseline: ib,
-        image_relmse_restir: ir,
-        image_relmse_ratio: ir / ib,
         texture_rmse_initial: texture_initial,
-        texture_rmse_baseline: tb,
-        texture_rmse_restir: tr,
         texture_rmse_observed_initial: texture_observed_initial,
-        texture_rmse_observed_baseline: tob,
-        texture_rmse_observed_restir: tor,
-        texture_rmse_observed_third_baseline: third(&base),
-        texture_rmse_observed_third_restir: third(&re),
         observed_fraction: observed.iter().filter(|&&b| b).count() as f64
             / observed.len().max(1) as f64,
+        observed_texels: observed.iter().filter(|&&b| b).count() as u64,
         schedule: task.optimizer.schedule.describe(),
-        ms_per_iteration_baseline: base.ms_per_iteration,
-        ms_per_iteration_restir: re.ms_per_iteration,
-        iterations_baseline: base.iterations,
-        iterations_restir: re.iterations,
-        passes_baseline: base.passes,
-        passes_restir: re.passes,
-        merge_evaluations_per_iteration: re.merge_evaluations,
-        state_bytes_per_texel: re.state_bytes_per_texel,
-        state_bytes_per_texel_baseline: base.state_bytes_per_texel,
-        observed_texels: re.observed_texels,
-        texture_rmse_observed_min_baseline: min_observed(&base),
-        texture_rmse_observed_min_restir: min_observed(&re),
-        settings_baseline: describe(adam(Method::Baseline), tb_best),
-        settings_restir: describe(adam(Method::Restir), tr_best),
-        tuned_baseline,
-        tuned_restir,
-        curve_baseline: with_start(&base.curve),
-        curve_restir: with_start(&re.curve),
-        contenders,
-    };
-    let finals = FinalImages {
-        target: prep.targets[0].clone(),
-        baseline: base.final_image,
-        restir: re.final_image,
+        runs,
     };
     Ok((result, finals))
 }

@@ -42,38 +42,42 @@ pub struct SceneResult {
     pub primal_spp: u32,
     /// Gradient spp of an iteration.
     pub gradient_spp: u32,
-    /// Gradient spp the baseline gets in the time of one ReSTIR iteration (fractional: the
-    /// errors at equal time are interpolated in 1/spp between the two whole spp around it).
+    /// The estimator whose gradient error is measured against the baseline's
+    /// ([`super::BenchOptions::gradient_method`]); "the estimator" below.
+    pub gradient_method: String,
+    /// Gradient spp the baseline gets in the time of one iteration of the estimator
+    /// (fractional: the errors at equal time are interpolated in 1/spp between the two whole
+    /// spp around it).
     pub baseline_spp_equal_time: f64,
-    /// Total gradient relMSE (under the adjoint of ReSTIR's task-spp primal render of the
-    /// same iteration) of the baseline at equal time (mean over seeds).
+    /// Total gradient relMSE (under the adjoint of the estimator's task-spp primal render of
+    /// the same iteration) of the baseline at equal time (mean over seeds).
     pub gradient_relmse_baseline: f64,
-    /// Total gradient relMSE of ReSTIR after `warmup` iterations (mean over seeds).
-    pub gradient_relmse_restir: f64,
-    /// restir / baseline, total, equal time.
+    /// Total gradient relMSE of the estimator after `warmup` iterations (mean over seeds).
+    pub gradient_relmse_estimator: f64,
+    /// estimator / baseline, total, equal time.
     pub gradient_relmse_ratio: f64,
     /// Total gradient relMSE of the baseline at the task's spp (equal iterations).
     pub gradient_relmse_baseline_equal_iterations: f64,
-    /// restir / baseline, total, equal iterations.
+    /// estimator / baseline, total, equal iterations.
     pub gradient_relmse_ratio_equal_iterations: f64,
     /// Estimator-only gradient relMSE (converged adjoint) of the baseline at the task's spp.
     pub gradient_relmse_estimator_only_baseline: f64,
-    /// Estimator-only gradient relMSE of ReSTIR (its next iteration under the converged
-    /// adjoint, from the same reservoirs).
-    pub gradient_relmse_estimator_only_restir: f64,
-    /// restir / baseline, estimator-only, equal iterations.
+    /// Estimator-only gradient relMSE of the estimator (its next iteration under the
+    /// converged adjoint, from the same state).
+    pub gradient_relmse_estimator_only_estimator: f64,
+    /// estimator / baseline, estimator-only, equal iterations.
     pub gradient_relmse_estimator_only_ratio: f64,
     /// Estimator-only gradient relMSE of the baseline at equal time.
     pub gradient_relmse_estimator_only_baseline_equal_time: f64,
-    /// restir / baseline, estimator-only, equal time.
+    /// estimator / baseline, estimator-only, equal time.
     pub gradient_relmse_estimator_only_ratio_equal_time: f64,
     /// Estimator-only gradient relMSE of the mean of `successive_estimates` independent
     /// baseline estimates (the task's spp).
     pub gradient_relmse_mean_baseline: f64,
-    /// Estimator-only gradient relMSE of the mean of ReSTIR's next `successive_estimates`
-    /// estimates (successive iterations: they share kept samples).
-    pub gradient_relmse_mean_restir: f64,
-    /// restir / baseline of the means: what survives of the single-estimate ratio when an
+    /// Estimator-only gradient relMSE of the mean of the estimator's next
+    /// `successive_estimates` estimates (successive iterations: they may share samples).
+    pub gradient_relmse_mean_estimator: f64,
+    /// estimator / baseline of the means: what survives of the single-estimate ratio when an
     /// optimizer adds up successive steps.
     pub gradient_relmse_mean_ratio: f64,
     /// How many estimates those means average.
@@ -82,13 +86,11 @@ pub struct SceneResult {
     /// texture's terms over the count of all entries, so that the parts add up to the
     /// scene's figures): which texture the error is in.
     pub gradient_relmse_per_texture: Vec<TextureGradientErrors>,
-    /// Mean wall-clock ms of a ReSTIR and a baseline iteration in the gradient phase (at the
-    /// task's spp, GPU work finished), and their ratio.
+    /// Mean wall-clock ms of an iteration of the estimator over one of the baseline in the
+    /// gradient phase (at the task's spp, GPU work finished).
     pub ms_per_iteration_ratio: f64,
     /// The primal estimator of the gradient and optimization phases.
     pub primal: String,
-    /// ReSTIR's target smoothing with that primal estimator.
-    pub target_smoothing: f32,
     /// relMSE of an independent primal render (the task's primal spp) against a converged
     /// render, at the state after `warmup` iterations (mean over seeds and cameras).
     pub primal_relmse_independent: f64,
@@ -114,15 +116,15 @@ pub struct TextureGradientErrors {
     pub texture: String,
     /// Part of `gradient_relmse_estimator_only_baseline`.
     pub estimator_only_baseline: f64,
-    /// Part of `gradient_relmse_estimator_only_restir`.
-    pub estimator_only_restir: f64,
-    /// restir / baseline of the two parts.
+    /// Part of `gradient_relmse_estimator_only_estimator`.
+    pub estimator_only_estimator: f64,
+    /// estimator / baseline of the two parts.
     pub estimator_only_ratio: f64,
     /// Part of `gradient_relmse_baseline_equal_iterations`.
     pub total_baseline_equal_iterations: f64,
-    /// Part of `gradient_relmse_restir`.
-    pub total_restir: f64,
-    /// restir / baseline of the two parts.
+    /// Part of `gradient_relmse_estimator`.
+    pub total_estimator: f64,
+    /// estimator / baseline of the two parts.
     pub total_ratio_equal_iterations: f64,
 }
 
@@ -131,83 +133,38 @@ pub struct TextureGradientErrors {
 pub struct OptimizationResult {
     /// Image relMSE at the initial textures.
     pub image_relmse_initial: f64,
-    /// Image relMSE after the baseline's budget.
-    pub image_relmse_baseline: f64,
-    /// Image relMSE after ReSTIR's budget.
-    pub image_relmse_restir: f64,
-    /// restir / baseline.
-    pub image_relmse_ratio: f64,
     /// Texture RMSE at the initial textures.
     pub texture_rmse_initial: f64,
-    /// Texture RMSE after the baseline's budget.
-    pub texture_rmse_baseline: f64,
-    /// Texture RMSE after ReSTIR's budget.
-    pub texture_rmse_restir: f64,
     /// Texture RMSE over the observed texels (those a camera sample reaches; the others
     /// keep their initial values) at the start.
     pub texture_rmse_observed_initial: f64,
-    /// ... after the baseline's budget.
-    pub texture_rmse_observed_baseline: f64,
-    /// ... after ReSTIR's budget.
-    pub texture_rmse_observed_restir: f64,
-    /// ... of the baseline at a third of the budget.
-    pub texture_rmse_observed_third_baseline: f64,
-    /// ... of ReSTIR at a third of the budget.
-    pub texture_rmse_observed_third_restir: f64,
     /// Fraction of the texels that are observed.
     pub observed_fraction: f64,
-    /// The learning-rate schedule both estimators followed.
-    pub schedule: String,
-    /// Mean wall-clock milliseconds per baseline iteration (GPU work finished).
-    pub ms_per_iteration_baseline: f64,
-    /// Mean wall-clock milliseconds per ReSTIR iteration.
-    pub ms_per_iteration_restir: f64,
-    /// Iterations the baseline ran within the budget.
-    pub iterations_baseline: u32,
-    /// Iterations ReSTIR ran within the budget.
-    pub iterations_restir: u32,
-    /// Mean GPU time per pass of a baseline iteration (timestamp queries), when available.
-    pub passes_baseline: Option<PassTimes>,
-    /// Mean GPU time per pass of a ReSTIR iteration, when available.
-    pub passes_restir: Option<PassTimes>,
-    /// Kept paths ReSTIR's merge evaluated per iteration, from the second iteration whose pass
-    /// times are sampled to the last (the merge's work; it traces no ray).
-    pub merge_evaluations_per_iteration: Option<f64>,
-    /// Bytes of GPU state per texel of the ReSTIR optimizer (textures, gradient, Adam, and
-    /// the reservoirs and headers of the observed texels with the compaction map).
-    pub state_bytes_per_texel: f64,
-    /// The same for the baseline optimizer.
-    pub state_bytes_per_texel_baseline: f64,
-    /// Texels that the cameras observe (those with reservoirs).
+    /// Texels that the cameras observe.
     pub observed_texels: u64,
-    /// Lowest observed-texel RMSE of the baseline's run (a run that ends well above it
-    /// drifted: it has a floor).
-    pub texture_rmse_observed_min_baseline: f64,
-    /// Lowest observed-texel RMSE of ReSTIR's run.
-    pub texture_rmse_observed_min_restir: f64,
-    /// The baseline's settings in this run (tuned by `--tune`, else the task's).
-    pub settings_baseline: String,
-    /// ReSTIR's settings in this run.
-    pub settings_restir: String,
-    /// The search that chose the baseline's settings (`--tune`).
-    pub tuned_baseline: Option<super::tune::Tuned>,
-    /// The search that chose ReSTIR's settings.
-    pub tuned_restir: Option<super::tune::Tuned>,
-    /// Optimization curve of the baseline.
-    pub curve_baseline: Vec<CurvePoint>,
-    /// Optimization curve of ReSTIR.
-    pub curve_restir: Vec<CurvePoint>,
-    /// The further estimators and steps of [`super::BenchOptions::contenders`], in order.
-    pub contenders: Vec<ContenderResult>,
+    /// The learning-rate schedule every run followed.
+    pub schedule: String,
+    /// Every run, in order: the baseline with Adam first (the reference of every ratio),
+    /// then [`super::BenchOptions::contenders`].
+    pub runs: Vec<RunResult>,
 }
 
-/// The equal-time optimization of one further estimator with its step.
+impl OptimizationResult {
+    /// The reference run: the baseline with Adam.
+    pub fn baseline(&self) -> &RunResult {
+        &self.runs[0]
+    }
+}
+
+/// The equal-time optimization of one estimator with its step.
 #[derive(Clone, Debug, Serialize)]
-pub struct ContenderResult {
+pub struct RunResult {
     /// The estimator and step, e.g. `recursive, variance-scaled step`.
     pub name: String,
     /// Its key in file names (`recursive_variance`).
     pub key: String,
+    /// The gradient estimator's name.
+    pub method: String,
     /// Image relMSE after its budget.
     pub image_relmse: f64,
     /// Over the baseline's (with Adam).
@@ -220,7 +177,7 @@ pub struct ContenderResult {
     pub texture_rmse_observed_ratio: f64,
     /// ... at a third of the budget.
     pub texture_rmse_observed_third: f64,
-    /// Lowest observed-texel RMSE of the run.
+    /// Lowest observed-texel RMSE of the run (a run that ends well above it drifted).
     pub texture_rmse_observed_min: f64,
     /// Mean wall-clock milliseconds per iteration (GPU work finished).
     pub ms_per_iteration: f64,
@@ -228,7 +185,12 @@ pub struct ContenderResult {
     pub iterations: u32,
     /// Mean GPU time per pass, when available.
     pub passes: Option<PassTimes>,
-    /// Bytes of GPU state per texel.
+    /// The estimator's counters ([`crate::optim::estimator::Diagnostics`]) per iteration,
+    /// from the second sampled iteration to the last (e.g. ReSTIR's `evaluations`: the kept
+    /// paths its merge evaluated).
+    pub diagnostics_per_iteration: Vec<(String, f64)>,
+    /// Bytes of GPU state per texel (textures, gradient, the step's state, and the
+    /// estimator's).
     pub state_bytes_per_texel: f64,
     /// Its settings in this run (tuned by `--tune`, else the task's).
     pub settings: String,
@@ -249,9 +211,11 @@ pub struct BenchReport {
     pub budget_s: f64,
     /// Size multiplier.
     pub scale: f64,
-    /// ReSTIR iterations before the gradient error is measured.
+    /// The estimator whose gradient error is measured against the baseline's.
+    pub gradient_method: String,
+    /// Iterations of that estimator before the gradient error is measured.
     pub warmup: u32,
-    /// ReSTIR estimates under the converged adjoint before the estimator-only error.
+    /// Its estimates under the converged adjoint before the estimator-only error.
     pub settle: u32,
     /// Seeds the gradient error is averaged over.
     pub repeats: u32,
@@ -261,15 +225,10 @@ pub struct BenchReport {
     pub reference_primal_spp: u32,
     /// Sampling settings of the scenes.
     pub protocol: Protocol,
-    /// ReSTIR's confidence convention for the fresh candidates.
-    pub confidence: String,
     /// spp of the image-error renders.
     pub eval_spp: u32,
-    /// ReSTIR's confidence cap.
-    pub m_cap: f32,
-    /// ReSTIR's target smoothing as given (the last target adjoint's weight); absent: by the
-    /// primal estimator (each scene's `target_smoothing`).
-    pub target_smoothing: Option<f32>,
+    /// The estimators' options given over the tasks' (`--estimator-option`).
+    pub estimator_options: crate::optim::EstimatorOptions,
     /// The tasks' priors (multiscale gradient, smoothness) were switched off (`--no-priors`).
     pub no_priors: bool,
     /// Each estimator ran at settings chosen by `--tune`.
@@ -287,18 +246,18 @@ pub struct GradientSnapshot {
     pub reference: Vec<f32>,
     /// The baseline's gradient at the task's spp, under the converged adjoint.
     pub baseline: Vec<f32>,
-    /// ReSTIR's gradient under the converged adjoint.
-    pub restir: Vec<f32>,
+    /// The estimator's gradient under the converged adjoint.
+    pub estimator: Vec<f32>,
+    /// The estimator's name.
+    pub estimator_name: String,
     /// The baseline's spp.
     pub baseline_spp: u32,
 }
 
-/// Final renders of the first camera: target, baseline and ReSTIR.
+/// Final renders of the first camera: the target and each run's.
 pub struct FinalImages {
     /// The target.
     pub target: Image,
-    /// Baseline after its budget.
-    pub baseline: Image,
-    /// ReSTIR after its budget.
-    pub restir: Image,
+    /// Each run's after its budget, as (name, image), in the order of the runs.
+    pub runs: Vec<(String, Image)>,
 }

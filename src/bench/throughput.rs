@@ -3,7 +3,7 @@
 //! these figures stay measured rather than quoted.
 use crate::gpu::{Gpu, PipelineTime};
 use crate::job::Problem;
-use crate::optim::{Method, Optimizer, PassTimes, RestirOptions};
+use crate::optim::{Method, Optimizer, PassTimes};
 use crate::render::{RenderSettings, Renderer, Techniques};
 use crate::task::{task_settings, Task};
 use crate::{Error, Result};
@@ -92,8 +92,8 @@ pub fn throughput(gpu: &Gpu, task: &Task, path: &Path, out: &Path) -> Result<Thr
         1e3 * best,
     )];
     let pixels: u64 = prep.cameras.len() as u64 * (task.width as u64 * task.height as u64);
-    for method in [Method::Baseline, Method::Restir, Method::Recursive] {
-        let s = task_settings(task, &prep.cameras, method, RestirOptions::default());
+    for method in Method::ALL {
+        let s = task_settings(task, &prep.cameras, method, &Default::default());
         let (primal_spp, gradient_spp) = (s.primal_spp as u64, s.gradient_spp as u64);
         let mut opt = Optimizer::for_problem(gpu, &prep, s)?;
         opt.prepare()?;
@@ -119,11 +119,11 @@ pub fn throughput(gpu: &Gpu, task: &Task, path: &Path, out: &Path) -> Result<Thr
             gradient_spp * pixels,
             t.gradient_ms,
         ));
-        if t.merge_ms > 0.0 {
+        if t.combine_ms > 0.0 {
             rates.push(Rate::new(
                 format!("{name}: gradient, all passes"),
                 gradient_spp * pixels,
-                t.gradient_ms + t.merge_ms,
+                t.gradient_ms + t.combine_ms,
             ));
         }
     }

@@ -5,11 +5,12 @@
 //! (x0.5, x2, and on in the better direction while it keeps improving, up to x1/8 or x8),
 //! with Adam its β1 (0.5, 0) and β2 (0.99), with the variance-scaled step its clip (× 0.5,
 //! × 2) and threshold (0, twice the task's),
-//! for ReSTIR the M cap (2, 32), whether the cap follows the learning-rate schedule, and the
-//! target smoothing (0, 0.9), for the recursive estimator the lower bound of its adaptive
-//! weight (0.2, 0.5), and with filtered moments the filter's σ (× 0.25, × 4), its own weight
-//! (0.1, 0.5), log space, and with Adam the write-back, and β1 0.2 as well (the filter
-//! averages in space what β1 averages in time). Each trial
+//! with filtered moments the filter's σ (× 0.25, × 4), its own weight (0.1, 0.5), log space,
+//! and with Adam the write-back, and β1 0.2 as well (the filter averages in space what β1
+//! averages in time), and last the estimator's own options as it lists them
+//! ([`EstimatorOptions::tuning`]: for ReSTIR the M cap (2, 32), whether the cap follows the
+//! learning-rate schedule and the target smoothing (0, 0.9); for the recursive estimator the
+//! lower bound of its adaptive weight (0.2, 0.5)). Each trial
 //! optimizes for the tuning budget from the initial textures with the seed
 //! [`TUNE_SEED_OFFSET`] away from the task's; its score is the observed-texel RMSE at the
 //! end (the headline's measure). A value is kept only when it lowers the score by more than
@@ -19,7 +20,7 @@
 use super::*;
 use crate::optim::adam::AdamOptions;
 use crate::optim::moment_filter::MomentFilterOptions;
-use crate::optim::{StepKind, Stop};
+use crate::optim::{EstimatorOptions, StepKind, Stop};
 use serde::Deserialize;
 use std::fmt::Write as _;
 
@@ -30,18 +31,15 @@ pub const TUNE_SEED_OFFSET: u32 = 7919;
 pub const MIN_GAIN: f64 = 0.01;
 
 /// Settings of one estimator that the search chooses.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Tunable {
     /// Factor of every texture's learning rate.
     pub learning_rate_scale: f32,
     /// Adam's decays and epsilon.
     pub adam: AdamOptions,
-    /// ReSTIR's M cap.
-    pub m_cap: f32,
-    /// ReSTIR: the M cap follows the learning-rate schedule.
-    pub m_cap_follows_schedule: bool,
-    /// ReSTIR's target smoothing (None: by the primal estimator).
-    pub target_smoothing: Option<f32>,
+    /// The estimator's options table (its part of [`EstimatorOptions`]).
+    #[serde(default)]
+    pub estimator: toml::Table,
     /// The step (not searched: the bench tunes each estimator with each step).
     #[serde(default)]
     pub step: StepKind,
@@ -51,9 +49,6 @@ pub struct Tunable {
     /// The variance-scaled step's threshold, in standard deviations.
     #[serde(default = "default_threshold")]
     pub variance_threshold: f32,
-    /// The recursive estimator's lower bound of its adaptive weight.
-    #[serde(default = "default_min_weight")]
-    pub recursive_min_weight: f32,
     /// The moment filter (not searched when off).
     #[serde(default)]
     pub moment_filter: MomentFilterOptions,
@@ -67,23 +62,16 @@ fn default_threshold() -> f32 {
     crate::optim::VarianceStepOptions::default().threshold
 }
 
-fn default_min_weight() -> f32 {
-    crate::optim::RecursiveOptions::default().min_weight
-}
-
 impl Tunable {
     /// The task's and the bench options' settings.
     pub fn untuned(settings: &Settings) -> Tunable {
         Tunable {
             learning_rate_scale: 1.0,
             adam: settings.adam,
-            m_cap: settings.restir.m_cap,
-            m_cap_follows_schedule: settings.restir.m_cap_follows_schedule,
-            target_smoothing: settings.restir.target_smoothing,
+            estimator: settings.estimator_options.table(settings.method),
             step: settings.step,
             variance_clip: settings.variance_step.clip,
             variance_threshold: settings.variance_step.threshold,
-            recursive_min_weight: settings.recursive.min_weight,
             moment_filter: settings.moment_filter,
         }
     }
@@ -91,13 +79,13 @@ impl Tunable {
     /// Put these settings into `settings`.
     pub fn apply(&self, settings: &mut Settings) {
         settings.adam = self.adam;
-        settings.restir.m_cap = self.m_cap;
-        settings.restir.m_cap_follows_schedule = self.m_cap_follows_schedule;
-        settings.restir.target_smoothing = self.target_smoothing;
+        let method = settings.method;
+        settings
+            .estimator_options
+            .set_table(method, self.estimator.clone());
         settings.step = self.step;
         settings.variance_step.clip = self.variance_clip;
         settings.variance_step.threshold = self.variance_threshold;
-        settings.recursive.min_weight = self.recursive_min_weight;
         settings.moment_filter = self.moment_filter;
     }
 
@@ -120,9 +108,6 @@ impl Tunable {
                 self.learning_rate_scale, self.variance_clip, self.variance_threshold
             ),
         };
-        if method == Method::Recursive {
-            let _ = write!(s, ", weight ≥ {}", self.recursive_min_weight);
-        }
         let f = &self.moment_filter;
         if f.enabled() {
             let _ = write!(
@@ -137,19 +122,11 @@ impl Tunable {
                 if f.write_back { " written back" } else { "" }
             );
         }
-        if method == Method::Restir {
-            let _ = write!(
-                s,
-                ", M cap {}{}, target smoothing {}",
-                self.m_cap,
-                if self.m_cap_follows_schedule {
-                    " (follows the schedule)"
-                } else {
-                    ""
-                },
-                self.target_smoothing
-                    .map_or("by primal".to_string(), |b| b.to_string())
-            );
+        let mut o = EstimatorOptions::default();
+        o.set_table(method, self.estimator.clone());
+        let own = o.describe(method);
+        if !own.is_empty() {
+            let _ = write!(s, ", {own}");
         }
         s
     }
@@ -200,7 +177,7 @@ fn coordinates(method: Method, step: StepKind, filtered: bool) -> Vec<Coordinate
         [0.5, 2.0]
             .map(|f| Tunable {
                 learning_rate_scale: b.learning_rate_scale * f,
-                ..*b
+                ..b.clone()
             })
             .to_vec()
     });
@@ -210,7 +187,7 @@ fn coordinates(method: Method, step: StepKind, filtered: bool) -> Vec<Coordinate
             [0.5, 2.0]
                 .map(|f| Tunable {
                     variance_clip: b.variance_clip * f,
-                    ..*b
+                    ..b.clone()
                 })
                 .to_vec()
         }));
@@ -218,17 +195,7 @@ fn coordinates(method: Method, step: StepKind, filtered: bool) -> Vec<Coordinate
             [0.0, 2.0 * b.variance_threshold.max(0.5)]
                 .map(|variance_threshold| Tunable {
                     variance_threshold,
-                    ..*b
-                })
-                .to_vec()
-        }));
-    }
-    if method == Method::Recursive {
-        c.push(Box::new(|b: &Tunable| {
-            [0.2, 0.5]
-                .map(|w| Tunable {
-                    recursive_min_weight: w,
-                    ..*b
+                    ..b.clone()
                 })
                 .to_vec()
         }));
@@ -237,7 +204,7 @@ fn coordinates(method: Method, step: StepKind, filtered: bool) -> Vec<Coordinate
         c.push(Box::new(|b: &Tunable| {
             [0.25, 4.0]
                 .map(|f| {
-                    let mut t = *b;
+                    let mut t = b.clone();
                     t.moment_filter.sigma *= f;
                     t
                 })
@@ -246,24 +213,38 @@ fn coordinates(method: Method, step: StepKind, filtered: bool) -> Vec<Coordinate
         c.push(Box::new(|b: &Tunable| {
             [0.1, 0.5]
                 .map(|own_weight| {
-                    let mut t = *b;
+                    let mut t = b.clone();
                     t.moment_filter.own_weight = own_weight;
                     t
                 })
                 .to_vec()
         }));
         c.push(Box::new(|b: &Tunable| {
-            let mut t = *b;
+            let mut t = b.clone();
             t.moment_filter.log_space = !t.moment_filter.log_space;
             vec![t]
         }));
     }
+    let own = |c: &mut Vec<Coordinate>| {
+        for axis in EstimatorOptions::tuning(method) {
+            c.push(Box::new(move |b: &Tunable| {
+                axis(&b.estimator)
+                    .into_iter()
+                    .map(|estimator| Tunable {
+                        estimator,
+                        ..b.clone()
+                    })
+                    .collect()
+            }));
+        }
+    };
     if step == StepKind::Variance {
+        own(&mut c);
         return c;
     }
     if filtered {
         c.push(Box::new(|b: &Tunable| {
-            let mut t = *b;
+            let mut t = b.clone();
             t.moment_filter.write_back = !t.moment_filter.write_back;
             vec![t]
         }));
@@ -279,7 +260,7 @@ fn coordinates(method: Method, step: StepKind, filtered: bool) -> Vec<Coordinate
                 .iter()
                 .map(|&beta1| Tunable {
                     adam: AdamOptions { beta1, ..b.adam },
-                    ..*b
+                    ..b.clone()
                 })
                 .collect()
         }),
@@ -289,29 +270,11 @@ fn coordinates(method: Method, step: StepKind, filtered: bool) -> Vec<Coordinate
                     beta2: 0.99,
                     ..b.adam
                 },
-                ..*b
+                ..b.clone()
             }]
         }),
     ]);
-    if method == Method::Restir {
-        c.push(Box::new(|b: &Tunable| {
-            [2.0, 32.0].map(|m_cap| Tunable { m_cap, ..*b }).to_vec()
-        }));
-        c.push(Box::new(|b: &Tunable| {
-            vec![Tunable {
-                m_cap_follows_schedule: !b.m_cap_follows_schedule,
-                ..*b
-            }]
-        }));
-        c.push(Box::new(|b: &Tunable| {
-            [0.0, crate::optim::restir::TARGET_SMOOTHING_INDEPENDENT]
-                .map(|s| Tunable {
-                    target_smoothing: Some(s),
-                    ..*b
-                })
-                .to_vec()
-        }));
-    }
+    own(&mut c);
     c
 }
 
@@ -384,7 +347,7 @@ pub(super) fn tune(
     progress.message(format!("{}: tuning, {}", who, best.describe(method)));
     let mut best_score = trial(gpu, prep, settings, &best, budget_s)?;
     let mut trials = vec![Trial {
-        settings: best,
+        settings: best.clone(),
         score: best_score,
     }];
     let mut try_one = |candidate: Tunable, best: &mut Tunable, best_score: &mut f64| {
@@ -395,7 +358,7 @@ pub(super) fn tune(
             candidate.describe(method)
         ));
         trials.push(Trial {
-            settings: candidate,
+            settings: candidate.clone(),
             score,
         });
         let better = score < *best_score * (1.0 - MIN_GAIN);
@@ -409,7 +372,7 @@ pub(super) fn tune(
         .into_iter()
         .enumerate()
     {
-        let base = best;
+        let base = best.clone();
         for candidate in coordinate(&base) {
             try_one(candidate, &mut best, &mut best_score)?;
         }
@@ -419,7 +382,7 @@ pub(super) fn tune(
             while (0.125..=8.0).contains(&(best.learning_rate_scale * step)) {
                 let next = Tunable {
                     learning_rate_scale: best.learning_rate_scale * step,
-                    ..best
+                    ..best.clone()
                 };
                 if !try_one(next, &mut best, &mut best_score)? {
                     break;
@@ -440,7 +403,7 @@ pub(super) fn tune(
         "{}: tuned {}: {} (observed-texel RMSE {best_score:.4} on the tuning seed, {} trials)",
         dir.file_name().unwrap_or_default().to_string_lossy(),
         who,
-        best.describe(method),
+        tuned.best.describe(method),
         tuned.trials.len()
     );
     Ok(tuned)

@@ -16,80 +16,127 @@ use std::borrow::Cow;
 /// A generator of WGSL source.
 pub type Generator = fn() -> String;
 
-/// WGSL written by Rust: (name under `gen/`, generator).
-pub const GENERATED: &[(&str, Generator)] = &[
-    ("gen/abi", crate::gpu::abi::wgsl),
-    (
-        "gen/recursive",
-        crate::optim::estimator::recursive::abi::wgsl,
-    ),
-];
+/// WGSL written by Rust: (name under `gen/`, generator). The estimators add theirs
+/// (`optim::estimator::GENERATED`).
+pub const GENERATED: &[(&str, Generator)] = &[("gen/abi", crate::gpu::abi::wgsl)];
 
-macro_rules! sources {
-    ($($name:literal),* ; $($pass:literal in $dir:literal),* $(,)?) => {
-        &[
-            $(($name, include_str!(concat!("../../shaders/", $name, ".wgsl"))),)*
-            $(($pass, include_str!(concat!("../", $dir, "/", $pass, ".wgsl"))),)*
-        ]
-    };
+/// WGSL declaring `constants` (WGSL name, value) as `u32`s, generated from the Rust file
+/// `from`.
+pub fn constants_wgsl(from: &str, constants: &[(&str, u32)]) -> String {
+    let mut s = format!("// Generated from {from}; edit the Rust side.\n");
+    for (name, v) in constants {
+        s.push_str(&format!("const {name}: u32 = {v}u;\n"));
+    }
+    s
 }
 
-/// Every WGSL file of the project: (path under `shaders/` without extension, source), then
-/// the passes that live in an estimator's folder (`name in "folder under src/"`).
-pub const SOURCES: &[(&str, &str)] = sources!(
-    "shared/types",
-    "shared/rng",
-    "shared/sampling",
-    "shared/scene",
-    "shared/triangle",
-    "shared/bvh",
-    "shared/bvh_ray_query",
-    "shared/wrap",
-    "shared/texture",
-    "shared/brdf",
-    "shared/lights",
-    "shared/camera",
-    "shared/params",
-    "shared/integrator",
-    "shared/reservoir_slots",
-    "shared/reservoir",
-    "shared/adjoint_pixel",
-    "shared/surface",
-    "shared/compact_path",
-    "render",
-    "trace_rays",
-    "loss",
-    "adam",
-    "texture_wrap_test",
-    "texture_export",
-    "observed_texels",
-    "primal_cv",
-    "multiscale_gradient",
-    "smoothness",
-    "moment_filter",
-    "variance_step";
-    "gradient" in "optim/estimator/baseline",
-    "restir_candidates" in "optim/estimator/restir",
-    "restir_merge" in "optim/estimator/restir",
-    "reservoir_test" in "optim/estimator/restir",
-    "recursive_gradient" in "optim/estimator/recursive",
-    "recursive_combine" in "optim/estimator/recursive",
-);
+/// Every WGSL file under `shaders/`: (path under `shaders/` without extension, source).
+pub const SHADERS: &[(&str, &str)] = &[
+    (
+        "shared/types",
+        include_str!("../../shaders/shared/types.wgsl"),
+    ),
+    ("shared/rng", include_str!("../../shaders/shared/rng.wgsl")),
+    (
+        "shared/sampling",
+        include_str!("../../shaders/shared/sampling.wgsl"),
+    ),
+    (
+        "shared/scene",
+        include_str!("../../shaders/shared/scene.wgsl"),
+    ),
+    (
+        "shared/triangle",
+        include_str!("../../shaders/shared/triangle.wgsl"),
+    ),
+    ("shared/bvh", include_str!("../../shaders/shared/bvh.wgsl")),
+    (
+        "shared/bvh_ray_query",
+        include_str!("../../shaders/shared/bvh_ray_query.wgsl"),
+    ),
+    (
+        "shared/wrap",
+        include_str!("../../shaders/shared/wrap.wgsl"),
+    ),
+    (
+        "shared/texture",
+        include_str!("../../shaders/shared/texture.wgsl"),
+    ),
+    (
+        "shared/brdf",
+        include_str!("../../shaders/shared/brdf.wgsl"),
+    ),
+    (
+        "shared/lights",
+        include_str!("../../shaders/shared/lights.wgsl"),
+    ),
+    (
+        "shared/camera",
+        include_str!("../../shaders/shared/camera.wgsl"),
+    ),
+    (
+        "shared/params",
+        include_str!("../../shaders/shared/params.wgsl"),
+    ),
+    (
+        "shared/integrator",
+        include_str!("../../shaders/shared/integrator.wgsl"),
+    ),
+    (
+        "shared/adjoint_pixel",
+        include_str!("../../shaders/shared/adjoint_pixel.wgsl"),
+    ),
+    (
+        "shared/surface",
+        include_str!("../../shaders/shared/surface.wgsl"),
+    ),
+    (
+        "shared/path_encoding",
+        include_str!("../../shaders/shared/path_encoding.wgsl"),
+    ),
+    ("render", include_str!("../../shaders/render.wgsl")),
+    ("trace_rays", include_str!("../../shaders/trace_rays.wgsl")),
+    ("loss", include_str!("../../shaders/loss.wgsl")),
+    (
+        "texture_wrap_test",
+        include_str!("../../shaders/texture_wrap_test.wgsl"),
+    ),
+    (
+        "texture_export",
+        include_str!("../../shaders/texture_export.wgsl"),
+    ),
+    (
+        "observed_texels",
+        include_str!("../../shaders/observed_texels.wgsl"),
+    ),
+    ("primal_cv", include_str!("../../shaders/primal_cv.wgsl")),
+];
+
+/// Every WGSL file: those under `shaders/`, then the steps', the priors' and the
+/// estimators', which lie beside their drivers (a pass is named after its file; an
+/// estimator's other modules are imported as `<method>/<file stem>`).
+pub fn sources() -> impl Iterator<Item = (&'static str, &'static str)> {
+    let folders = [crate::optim::step::WGSL, crate::optim::prior::WGSL];
+    SHADERS.iter().copied().chain(
+        folders
+            .into_iter()
+            .chain(crate::optim::estimator::WGSL)
+            .flat_map(|files| files.iter().copied()),
+    )
+}
 
 /// The passes (top-level WGSL files with an entry point `main`).
 pub fn passes() -> impl Iterator<Item = &'static str> {
-    SOURCES
-        .iter()
-        .map(|(n, _)| *n)
-        .filter(|n| !n.starts_with("shared/"))
+    sources().map(|(n, _)| n).filter(|n| !n.contains('/'))
 }
 
 fn source(name: &str) -> Option<Cow<'static, str>> {
-    if let Some((_, s)) = SOURCES.iter().find(|(n, _)| *n == name) {
-        return Some(Cow::Borrowed(*s));
+    if let Some((_, s)) = sources().find(|(n, _)| *n == name) {
+        return Some(Cow::Borrowed(s));
     }
     GENERATED
         .iter()
+        .chain(crate::optim::estimator::GENERATED)
         .find(|(n, _)| *n == name)
         .map(|(_, f)| Cow::Owned(f()))
 }
@@ -338,7 +385,7 @@ mod tests {
             }
         }
         for f in files {
-            assert!(source(&f).is_some(), "shaders/{f}.wgsl is not in SOURCES");
+            assert!(source(&f).is_some(), "shaders/{f}.wgsl is not in SHADERS");
         }
         // The passes in the estimators' folders (a pass's name is its file's stem).
         let estimators = concat!(env!("CARGO_MANIFEST_DIR"), "/src/optim/estimator");
@@ -352,7 +399,12 @@ mod tests {
                 let p = f.unwrap().path();
                 if p.extension().is_some_and(|x| x == "wgsl") {
                     let stem = p.file_stem().unwrap().to_string_lossy().to_string();
-                    assert!(source(&stem).is_some(), "{} is not in SOURCES", p.display());
+                    let dir = d.file_name().unwrap().to_string_lossy().to_string();
+                    assert!(
+                        source(&stem).is_some() || source(&format!("{dir}/{stem}")).is_some(),
+                        "{} is not in its estimator's WGSL list",
+                        p.display()
+                    );
                     found += 1;
                 }
             }
@@ -361,6 +413,47 @@ mod tests {
             found >= 6,
             "only {found} WGSL files in the estimators' folders"
         );
+    }
+
+    /// The constants every generated module declares.
+    fn generated_constants() -> Vec<(&'static str, String)> {
+        let mut out = Vec::new();
+        for (module, f) in GENERATED.iter().chain(crate::optim::estimator::GENERATED) {
+            for line in f().lines() {
+                if let Some(rest) = line.strip_prefix("const ") {
+                    out.push((*module, rest.split(':').next().unwrap().to_string()));
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn generated_constants_are_unique_and_no_wgsl_file_defines_one() {
+        let consts = generated_constants();
+        assert!(consts.len() > 40, "{} constants", consts.len());
+        let mut names: Vec<&str> = consts.iter().map(|(_, n)| n.as_str()).collect();
+        names.sort();
+        let n = names.len();
+        names.dedup();
+        assert_eq!(names.len(), n, "a constant is generated twice");
+        for (file, source) in sources() {
+            for (module, name) in &consts {
+                assert!(
+                    !source.contains(&format!("const {name}:")),
+                    "{file}.wgsl defines {name}, which {module} generates"
+                );
+            }
+            // A statistics buffer (`stats`, `gstats`, `loss_stats`, ...) indexed by a digit.
+            for (i, _) in source.match_indices("stats[") {
+                let next = source[i + 6..].chars().next().unwrap_or(' ');
+                assert!(
+                    !next.is_ascii_digit(),
+                    "{file}.wgsl indexes a statistics buffer by a literal: {}",
+                    &source[i.saturating_sub(20)..(i + 10).min(source.len())]
+                );
+            }
+        }
     }
 
     #[test]

@@ -1,7 +1,9 @@
 //! Running a task: the [`Problem`] a task file describes (scene, textures, cameras, targets),
 //! and [`run::run`], the optimization with progress, metrics, checkpoints and outputs. It sits
 //! above [`crate::optim`] (the optimizer knows nothing of task files) and [`crate::task`].
+pub mod export;
 mod metrics;
+pub mod plot;
 pub mod problem;
 pub mod run;
 

@@ -32,8 +32,8 @@ pub struct RunOptions {
     pub progress: bool,
     /// Gradient estimator.
     pub method: crate::optim::Method,
-    /// ReSTIR options.
-    pub restir: crate::optim::RestirOptions,
+    /// Estimators' options over the task's tables (`--estimator-option`).
+    pub estimator_options: crate::optim::EstimatorOptions,
     /// Set (e.g. from a Ctrl-C handler) to stop after the iteration under way: the run then
     /// writes its checkpoint and outputs as at a normal end and returns with `interrupted`.
     pub interrupt: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
@@ -212,17 +212,28 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
          their shaders; later runs load them from its cache)"
     );
     // The optimizer's passes compile on a second device while this one renders the targets.
-    let passes = Optimizer::passes(&task_settings(task, &[], opts.method, opts.restir));
+    let passes = Optimizer::passes(&task_settings(
+        task,
+        &[],
+        opts.method,
+        &opts.estimator_options,
+    ));
     let helper = gpu.compile_elsewhere(&passes);
     // On an error the helper is left to finish alone (its work is a cache for later runs).
     let prep = Problem::from_task(gpu, task, &out, opts.resume)?;
     if let Some(h) = helper {
         let _ = h.join();
     }
-    let settings = task_settings(task, &prep.cameras, opts.method, opts.restir);
+    let settings = task_settings(task, &prep.cameras, opts.method, &opts.estimator_options);
+    let own = settings.estimator_options.describe(settings.method);
     log::info!(
-        "gradient estimator: {}; step: {}",
+        "gradient estimator: {}{}; step: {}",
         settings.method.name(),
+        if own.is_empty() {
+            String::new()
+        } else {
+            format!(" ({own})")
+        },
         settings.step.name()
     );
     let initial_rmse = prep.reference.as_ref().map(|r| rmse(&prep.set.values, r));
@@ -446,7 +457,7 @@ fn write_outputs(
             camera_file_name(&prep.scene, cam)
         )))?;
     }
-    crate::optim::export::write_glb(
+    crate::job::export::write_glb(
         &task.resolve(&task.scene),
         &out.join("optimized.glb"),
         &prep.scene,
@@ -459,7 +470,7 @@ fn write_outputs(
 /// with the learning-rate schedule on the right axis), and the texture RMSE (all and
 /// observed texels) when the ground truth is known.
 pub fn plot_metrics(path: &Path, task: &Task, rows: &[MetricRow], truth: bool) -> Result<()> {
-    use crate::optim::plot::{Panel, Series};
+    use crate::job::plot::{Panel, Series};
     let series = |name: &str, color, f: &dyn Fn(&MetricRow) -> Option<f64>| Series {
         name: name.into(),
         color,
@@ -501,7 +512,7 @@ pub fn plot_metrics(path: &Path, task: &Task, rows: &[MetricRow], truth: bool) -
             secondary: None,
         });
     }
-    crate::optim::plot::plot(path, "seconds of optimization", &panels)
+    crate::job::plot::plot(path, "seconds of optimization", &panels)
 }
 
 /// `observed_TEXTURE.png` per texture: white where a camera sample reaches the texel, black
@@ -534,11 +545,11 @@ pub fn write_gradient(
     task: &Task,
     dir: &Path,
     method: crate::optim::Method,
-    restir: crate::optim::RestirOptions,
+    options: &crate::optim::EstimatorOptions,
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
     let prep = Problem::from_task(gpu, task, dir, false)?;
-    let settings = task_settings(task, &prep.cameras, method, restir);
+    let settings = task_settings(task, &prep.cameras, method, options);
     let mut opt = Optimizer::for_problem(gpu, &prep, settings)?;
     let (grad, _) = opt.estimate_gradient(0)?;
     let mut written = Vec::new();

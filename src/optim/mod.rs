@@ -2,21 +2,16 @@
 //! ([`estimator`]: the baseline, or ReSTIR's candidate and merge passes), and Adam, as one
 //! submission per iteration.
 
-pub mod adam;
 mod cameras;
 pub mod checkpoint;
 pub mod estimator;
-pub mod export;
 pub mod loss;
-pub mod moment_filter;
-pub mod multiscale;
 pub mod observed;
-pub mod plot;
 pub mod primal;
+pub mod prior;
 pub mod schedule;
-pub mod smoothness;
+pub mod step;
 pub mod texture_export;
-pub mod variance_step;
 
 mod measure;
 mod memory;
@@ -39,18 +34,13 @@ use crate::render::{camera_info, Renderer, Techniques};
 use crate::scene::Scene;
 use crate::{Error, Result};
 use cameras::{camera_passes, check_inputs, CameraPasses, CameraSetup, Stats};
-pub use estimator::restir::{self, MergeDiagnostics};
 use estimator::Estimator;
-pub use estimator::{Confidence, EstimatorState, Method, RecursiveOptions, RestirOptions};
+pub use estimator::{EstimatorOptions, EstimatorState, Method};
 pub use primal::{ControlVariateSnapshot, PrimalMode};
+pub use prior::{multiscale, smoothness};
 pub use schedule::{Schedule, ScheduleKind};
-pub use variance_step::{StepKind, VarianceStepOptions};
-
-/// The step the optimizer takes with each gradient estimate.
-enum StepPass {
-    Adam(adam::AdamPass),
-    Variance(variance_step::VarianceStepPass),
-}
+pub use step::variance_step::VarianceStepOptions;
+pub use step::{adam, moment_filter, variance_step, StepKind};
 
 /// The optimizer: a scene on the GPU with its optimized textures, targets, and the passes.
 pub struct Optimizer {
@@ -73,7 +63,7 @@ pub struct Optimizer {
     /// Exposures and their optimizer state.
     exposure: ExposureState,
     grid: (u32, u32),
-    step: StepPass,
+    step: Box<dyn step::Step>,
     accum: wgpu::Buffer,
     /// The primal samples under the previous textures (control variate).
     accum_prev: wgpu::Buffer,
@@ -184,49 +174,25 @@ impl Optimizer {
             accum_prev: &accum_prev,
             stats: &stats,
         });
-        let mf = &settings.moment_filter;
-        let filter = if mf.enabled() {
-            // The variance step's second array is the variance of its estimate.
-            let of_mean = settings.step == StepKind::Variance;
-            let (p, o) = (&params.values, &observed.1);
-            let f = moment_filter::MomentFilter::new(gpu, &set, (mf, of_mean), p, o)?;
-            Some(f)
-        } else {
-            None
-        };
-        let filter_dispatches = filter.as_ref().map_or(0, |f| f.dispatches());
-        let step = match settings.step {
-            StepKind::Adam => StepPass::Adam(adam::AdamPass::new(
-                gpu,
-                &set,
-                (settings.adam, settings.adam_mask),
-                filter,
-                adam::AdamBuffers {
-                    grad: &grad,
-                    params: &params.values,
-                    moments: &moments,
-                    stats: &stats.adam,
-                },
-            )?),
-            StepKind::Variance => StepPass::Variance(variance_step::VarianceStepPass::new(
-                gpu,
-                &set,
-                (settings.variance_step, settings.adam_mask),
-                filter,
-                variance_step::StepBuffers {
-                    grad: &grad,
-                    params: &params.values,
-                    moments: &moments,
-                    // The estimator's variance is that of its own estimate; the multiscale
-                    // gradient averages it over blocks, so the step then tracks the
-                    // variance of what it is given.
-                    variance: estimator
-                        .variance()
-                        .filter(|_| settings.multiscale_levels == 0),
-                    stats: &stats.adam,
-                },
-            )?),
-        };
+        let step = step::build(
+            gpu,
+            &set,
+            &settings,
+            &observed.1,
+            &step::StepBuffers {
+                grad: &grad,
+                params: &params.values,
+                moments: &moments,
+                // The estimator's variance is that of its own estimate; the multiscale
+                // gradient averages it over blocks, so the step then tracks the variance
+                // of what it is given.
+                variance: estimator
+                    .variance()
+                    .filter(|_| settings.multiscale_levels == 0),
+                stats: &stats.adam,
+            },
+        )?;
+        let filter_dispatches = step.filter().map_or(0, |f| f.dispatches());
         // Primal, control variate and loss per camera, the estimator's passes (at most two
         // per camera), smoothness, multiscale and the step (two dispatches with the moment
         // filter) per texture, and the filter's levels.
@@ -356,11 +322,7 @@ impl Optimizer {
     /// compiles them while the targets render; a test checks the list against what an
     /// optimizer creates.
     pub fn passes(settings: &Settings) -> Vec<&'static str> {
-        let mut p: Vec<&'static str> = match settings.method {
-            Method::Baseline => vec!["gradient"],
-            Method::Restir => vec!["restir_candidates", "restir_merge"],
-            Method::Recursive => vec!["recursive_gradient", "recursive_combine"],
-        };
+        let mut p = estimator::passes(settings.method);
         p.push("observed_texels");
         if settings.primal == primal::PrimalMode::ControlVariate {
             p.push("primal_cv");
@@ -406,14 +368,9 @@ impl Optimizer {
         }
         self.encode_multiscale(&mut enc, self.iteration);
         let factor = self.settings.schedule.factor(self.iteration, self.progress);
-        self.last_learning_rates = match &mut self.step {
-            StepPass::Adam(a) => {
-                a.encode(&self.gpu, &mut enc, &self.set, factor, t, &mut self.timer)
-            }
-            StepPass::Variance(v) => {
-                v.encode(&self.gpu, &mut enc, &self.set, factor, t, &mut self.timer)
-            }
-        };
+        self.last_learning_rates =
+            self.step
+                .encode(&self.gpu, &mut enc, &self.set, factor, t, &mut self.timer);
         self.timer.resolve(&mut enc);
         self.gpu.queue.submit([enc.finish()]);
         self.finish_iteration(true);
@@ -534,10 +491,19 @@ impl Optimizer {
         }))
     }
 
-    /// What the gradient estimator counted since the optimizer was made, by name (see
-    /// [`MergeDiagnostics::of`] for ReSTIR's).
+    /// What the gradient estimator counted since the optimizer was made, by name (each
+    /// estimator documents its names).
     pub fn estimator_diagnostics(&self) -> Result<estimator::Diagnostics> {
         self.estimator.diagnostics(&self.gpu)
+    }
+
+    /// The estimator's [`estimator_diagnostics`](Self::estimator_diagnostics) that are
+    /// counters (a rate per iteration means something), with their values.
+    pub fn estimator_counters(&self) -> Result<estimator::Diagnostics> {
+        let names = self.estimator.counters();
+        let mut d = self.estimator.diagnostics(&self.gpu)?;
+        d.retain(|(n, _)| names.contains(n));
+        Ok(d)
     }
 
     /// Render camera `k` of the task (index into `settings.cameras`) at the current textures.

@@ -1,6 +1,6 @@
 //! What an optimization samples and how it stops: [`Settings`], [`Stop`], [`Progress`].
 
-use super::{Method, PrimalMode, RecursiveOptions, RestirOptions, Schedule};
+use super::{EstimatorOptions, Method, PrimalMode, Schedule};
 use super::{StepKind, VarianceStepOptions};
 use crate::vocab::Loss;
 
@@ -29,10 +29,8 @@ pub struct Settings {
     pub seed: u32,
     /// Gradient estimator.
     pub method: Method,
-    /// ReSTIR options (used when `method` is ReSTIR).
-    pub restir: RestirOptions,
-    /// The recursive estimator's options (used when `method` is recursive).
-    pub recursive: RecursiveOptions,
+    /// Each estimator's options, a table per method name (the one of `method` is used).
+    pub estimator_options: EstimatorOptions,
     /// The step taken with each gradient estimate: Adam, or the variance-scaled step.
     pub step: StepKind,
     /// The variance-scaled step's options (used when `step` is `Variance`).
@@ -76,8 +74,7 @@ impl Settings {
             loss: Loss::L2,
             seed: 1,
             method: Method::default(),
-            restir: RestirOptions::default(),
-            recursive: RecursiveOptions::default(),
+            estimator_options: EstimatorOptions::default(),
             step: StepKind::default(),
             variance_step: VarianceStepOptions::default(),
             schedule: Schedule::constant(),
@@ -118,9 +115,7 @@ impl Settings {
         if let Err((key, msg)) = self.adam.check() {
             return bad(&format!("optimizer.adam.{key}"), msg);
         }
-        if let Err((key, msg)) = self.recursive.check() {
-            return bad(&format!("optimizer.recursive.{key}"), msg);
-        }
+        self.estimator_options.check()?;
         if let Err((key, msg)) = self.variance_step.check() {
             return bad(&format!("optimizer.variance_step.{key}"), msg);
         }
@@ -151,9 +146,7 @@ impl Settings {
                 );
             }
         }
-        self.restir
-            .validate()
-            .map_err(|e| ("restir".to_string(), e.to_string()))
+        Ok(())
     }
 }
 
@@ -254,14 +247,34 @@ mod tests {
                 "optimizer.schedule.final",
                 Box::new(|s| s.schedule.final_factor = 0.0),
             ),
-            ("restir", Box::new(|s| s.restir.m_cap = 0.0)),
+            (
+                "optimizer.restir.m_cap",
+                Box::new(|s| s.estimator_options.set(Method::Restir, "m_cap", 0.0.into())),
+            ),
+            (
+                "optimizer.restir",
+                Box::new(|s| {
+                    s.estimator_options
+                        .set(Method::Restir, "m_capp", 8.0.into())
+                }),
+            ),
             (
                 "optimizer.recursive.weight",
-                Box::new(|s| s.recursive.weight = Some(0.0)),
+                Box::new(|s| {
+                    s.estimator_options
+                        .set(Method::Recursive, "weight", 0.0.into())
+                }),
             ),
             (
                 "optimizer.recursive.min_weight",
-                Box::new(|s| s.recursive.min_weight = 2.0),
+                Box::new(|s| {
+                    s.estimator_options
+                        .set(Method::Recursive, "min_weight", 2.0.into())
+                }),
+            ),
+            (
+                "optimizer.baseline.m_cap",
+                Box::new(|s| s.estimator_options.set(Method::Baseline, "m_cap", 8.into())),
             ),
             (
                 "optimizer.variance_step.clip",

@@ -24,10 +24,12 @@ pub struct FaultCounts {
     /// Pixels whose loss or adjoint was not finite (e.g. a NaN in the target), counted once
     /// per iteration and camera, and left out of the loss and the gradient.
     pub dropped_pixels: u32,
-    /// ReSTIR candidates whose reservoir lock was not taken within the bound.
-    pub lost_offers: u32,
-    /// Non-finite values of stored ReSTIR paths dropped by the merge.
-    pub dropped_replays: u32,
+    /// Samples an estimator could not keep because its lock was not taken within the bound
+    /// (ReSTIR's candidates offered to a reservoir).
+    pub lost_kept: u32,
+    /// Non-finite values of kept samples an estimator dropped when it used them again
+    /// (ReSTIR's stored paths in the merge).
+    pub dropped_kept: u32,
 }
 
 /// The textures and adjoint images of the last iteration, which the next one evaluates kept

@@ -9,7 +9,7 @@ pub(crate) enum PassKind {
     Primal,
     Loss,
     Gradient,
-    Merge,
+    Combine,
     Adam,
     Filter,
 }
@@ -21,10 +21,12 @@ pub struct PassTimes {
     pub primal_ms: f64,
     /// Loss and adjoint.
     pub loss_ms: f64,
-    /// Gradient passes (baseline), or ReSTIR's candidate passes.
+    /// The estimator's sampling passes (the baseline's gradient, ReSTIR's candidates, the
+    /// recursive estimator's gradient).
     pub gradient_ms: f64,
-    /// ReSTIR's merge pass.
-    pub merge_ms: f64,
+    /// The estimator's pass that combines the iteration's samples with what it kept
+    /// (ReSTIR's merge, the recursive estimator's combination), if it has one.
+    pub combine_ms: f64,
     /// The step (Adam or the variance step), with the priors' passes before it when they
     /// are on.
     pub adam_ms: f64,
@@ -38,7 +40,7 @@ impl PassTimes {
         self.primal_ms += other.primal_ms;
         self.loss_ms += other.loss_ms;
         self.gradient_ms += other.gradient_ms;
-        self.merge_ms += other.merge_ms;
+        self.combine_ms += other.combine_ms;
         self.adam_ms += other.adam_ms;
         self.filter_ms += other.filter_ms;
     }
@@ -49,7 +51,7 @@ impl PassTimes {
             primal_ms: self.primal_ms / n,
             loss_ms: self.loss_ms / n,
             gradient_ms: self.gradient_ms / n,
-            merge_ms: self.merge_ms / n,
+            combine_ms: self.combine_ms / n,
             adam_ms: self.adam_ms / n,
             filter_ms: self.filter_ms / n,
         }
@@ -60,7 +62,7 @@ impl PassTimes {
         self.primal_ms
             + self.loss_ms
             + self.gradient_ms
-            + self.merge_ms
+            + self.combine_ms
             + self.adam_ms
             + self.filter_ms
     }
@@ -135,7 +137,7 @@ impl PassTimer {
                 PassKind::Primal => t.primal_ms += ms,
                 PassKind::Loss => t.loss_ms += ms,
                 PassKind::Gradient => t.gradient_ms += ms,
-                PassKind::Merge => t.merge_ms += ms,
+                PassKind::Combine => t.combine_ms += ms,
                 PassKind::Adam => t.adam_ms += ms,
                 PassKind::Filter => t.filter_ms += ms,
             }

@@ -35,10 +35,19 @@
 //! beta2 = 0.999
 //! eps = 1e-8
 //!
-//! [optimizer.recursive]           # the recursive estimator (these are the defaults)
+//! [optimizer.recursive]           # an estimator's options (these are the recursive one's defaults)
 //! # weight = 0.1                  # fixed weight of the fresh term; absent: by inverse variance
 //! min_weight = 0.05               # lower bound of the adaptive weight
 //! beta = 0.9                      # decay of its moving variances
+//!
+//! [optimizer.restir]              # ReSTIR's options (these are the defaults)
+//! m_cap = 8.0                     # confidence cap of the kept samples
+//! confidence = "samples"          # of the fresh candidates: or "candidates"
+//! temporal = true                 # reuse across iterations
+//! positivization = true           # two reservoirs per texel
+//! # target_smoothing = 0.9        # absent: 0.9 with the independent primal, 0 with the control variate
+//! m_cap_follows_schedule = false  # the cap times the learning-rate schedule's factor
+//! verify_paths = false            # self-check of the stored paths (diagnostic)
 //!
 //! [optimizer.variance_step]       # the variance-scaled step (these are the defaults)
 //! clip = 1.0                      # the largest step, in learning rates
@@ -65,6 +74,7 @@
 //! init = [0.5, 0.5, 0.5]          # one value for roughness and metallic
 //! learning_rate = 0.02
 //! ```
+use crate::optim::EstimatorOptions;
 pub use crate::vocab::{check_texture, Filter, Init, Loss, Slot, TextureSpec, ROUGHNESS_FLOOR};
 use crate::{Error, Result};
 use serde::Deserialize;
@@ -169,7 +179,6 @@ fn default_target_spp() -> u32 {
 
 /// Optimizer settings.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
 pub struct OptimizerSpec {
     /// Iterations to run (at most).
     pub iterations: Option<u32>,
@@ -191,9 +200,6 @@ pub struct OptimizerSpec {
     /// overrides it.
     #[serde(default)]
     pub method: crate::optim::Method,
-    /// The recursive estimator's options (`[optimizer.recursive]`).
-    #[serde(default)]
-    pub recursive: crate::optim::RecursiveOptions,
     /// The step taken with each gradient: "adam" (the default) or "variance".
     #[serde(default)]
     pub step: crate::optim::StepKind,
@@ -247,6 +253,36 @@ pub struct OptimizerSpec {
     /// Samples per pixel of the evaluation renders.
     #[serde(default = "default_eval_spp")]
     pub eval_spp: u32,
+    /// Each estimator's options: the tables `[optimizer.<method>]` (`[optimizer.restir]`,
+    /// `[optimizer.recursive]`), passed on to the estimator, which reads and checks its own.
+    /// Any other key is refused when the task is checked.
+    #[serde(flatten)]
+    pub estimators: std::collections::BTreeMap<String, toml::Value>,
+}
+
+impl OptimizerSpec {
+    /// The estimators' option tables (an error names a key that is neither an option nor
+    /// an estimator's table).
+    pub fn estimator_options(&self) -> std::result::Result<EstimatorOptions, (String, String)> {
+        let mut o = EstimatorOptions::default();
+        for (name, value) in &self.estimators {
+            let key = format!("optimizer.{name}");
+            let method = crate::optim::Method::by_name(name).ok_or_else(|| {
+                (
+                    key.clone(),
+                    format!(
+                        "unknown key (nor the options of an estimator: {})",
+                        crate::optim::Method::names().join(", ")
+                    ),
+                )
+            })?;
+            match value {
+                toml::Value::Table(t) => o.set_table(method, t.clone()),
+                _ => return Err((key, "must be a table of the estimator's options".into())),
+            }
+        }
+        Ok(o)
+    }
 }
 
 fn default_checkpoint_s() -> f64 {
@@ -544,14 +580,12 @@ impl Task {
     }
 
     fn check(&self) -> Result<()> {
-        // The optimizer's settings as this task gives them (the estimator's options come
-        // from the command line or the library, and are checked there).
-        let mut settings = task_settings(
-            self,
-            &[],
-            crate::optim::Method::Baseline,
-            Default::default(),
-        );
+        // The optimizer's settings as this task gives them (options the command line adds
+        // are checked where it reads them).
+        self.optimizer
+            .estimator_options()
+            .map_err(|(key, msg)| self.bad(&key, msg))?;
+        let mut settings = task_settings(self, &[], self.optimizer.method, &Default::default());
         settings.exposure_learning_rate = Some(self.optimizer.exposure_learning_rate);
         settings
             .validate()
@@ -644,12 +678,14 @@ impl Task {
     }
 }
 
-/// The optimizer settings a task asks for, with the given estimator.
+/// The optimizer settings a task asks for, with the given estimator and the estimators'
+/// options `extra` over the task's (option by option). A task whose tables are not
+/// estimators' (refused when it loads) contributes none.
 pub fn task_settings(
     task: &Task,
     cameras: &[usize],
     method: crate::optim::Method,
-    restir: crate::optim::RestirOptions,
+    extra: &EstimatorOptions,
 ) -> crate::optim::Settings {
     crate::optim::Settings {
         width: task.width,
@@ -662,8 +698,11 @@ pub fn task_settings(
         loss: task.optimizer.loss,
         seed: task.seed,
         method,
-        restir,
-        recursive: task.optimizer.recursive,
+        estimator_options: task
+            .optimizer
+            .estimator_options()
+            .unwrap_or_default()
+            .merged(extra),
         step: task.optimizer.step,
         variance_step: task.optimizer.variance_step,
         schedule: task.optimizer.schedule.clone(),

@@ -2,16 +2,23 @@
 //! plot, the gradients side by side and the final renders side by side.
 use super::{BenchReport, CurvePoint, FinalImages, GradientSnapshot, SceneResult};
 use crate::image_io::write_atomic;
+use crate::job::plot::{captioned_row, plot, save_png, Panel, Series};
 use crate::job::run::{false_color, gradient_scalars};
 use crate::job::Problem;
-use crate::optim::plot::{captioned_row, plot, save_png, Panel, Series};
 use crate::{Error, Result};
 use image::{Rgb, RgbImage};
 use std::fmt::Write as _;
 use std::path::Path;
 
-const BASELINE: [u8; 3] = [220, 110, 20];
-const RESTIR: [u8; 3] = [30, 90, 200];
+/// The curves' colours, one per run in order (the baseline's first), repeating.
+const COLORS: [[u8; 3]; 6] = [
+    [220, 110, 20],
+    [30, 90, 200],
+    [40, 160, 70],
+    [170, 50, 160],
+    [200, 40, 40],
+    [90, 90, 90],
+];
 
 /// Rows stacked vertically.
 fn stack(rows: &[RgbImage]) -> RgbImage {
@@ -76,10 +83,12 @@ pub fn write_scene_files(
         title: title.into(),
         y_label: y.into(),
         log_y: true,
-        series: vec![
-            series("baseline", BASELINE, &opt.curve_baseline, f),
-            series("ReSTIR", RESTIR, &opt.curve_restir, f),
-        ],
+        series: opt
+            .runs
+            .iter()
+            .enumerate()
+            .map(|(i, c)| series(&c.name, COLORS[i % COLORS.len()], &c.curve, f))
+            .collect(),
         secondary: None,
     };
     let mut texture = panel(
@@ -92,7 +101,7 @@ pub fn write_scene_files(
         vec![series(
             "schedule",
             [120, 120, 120],
-            &opt.curve_restir,
+            &opt.baseline().curve,
             &|p| p.learning_rate_factor,
         )],
     ));
@@ -109,16 +118,16 @@ pub fn write_scene_files(
     )?;
     save_png(
         &dir.join("final.png"),
-        &captioned_row(&[
-            ("target".into(), srgb(&finals.target)),
-            ("baseline".into(), srgb(&finals.baseline)),
-            ("ReSTIR".into(), srgb(&finals.restir)),
-        ])?,
+        &captioned_row(
+            &std::iter::once(("target".to_string(), srgb(&finals.target)))
+                .chain(finals.runs.iter().map(|(n, img)| (n.clone(), srgb(img))))
+                .collect::<Vec<_>>(),
+        )?,
     )
 }
 
-/// `gradients.png`: the reference and both estimators' gradients under the converged
-/// adjoint, side by side.
+/// `gradients.png`: the reference, the baseline's and the studied estimator's gradients
+/// under the converged adjoint, side by side.
 fn write_gradients(dir: &Path, prep: &Problem, g: &GradientSnapshot) -> Result<()> {
     if g.reference.is_empty() {
         // Not measured (--end-to-end-only).
@@ -148,7 +157,10 @@ fn write_gradients(dir: &Path, prep: &Problem, g: &GradientSnapshot) -> Result<(
                 format!("baseline {} spp", g.baseline_spp),
                 gradient_tile(prep, &g.baseline, i, scale),
             ),
-            ("ReSTIR".into(), gradient_tile(prep, &g.restir, i, scale)),
+            (
+                g.estimator_name.clone(),
+                gradient_tile(prep, &g.estimator, i, scale),
+            ),
         ])?);
     }
     save_png(&dir.join("gradients.png"), &stack(&rows))
@@ -156,7 +168,7 @@ fn write_gradients(dir: &Path, prep: &Problem, g: &GradientSnapshot) -> Result<(
 
 mod tables;
 pub use tables::{
-    contender_table, curve_table, gradient_table, optimization_table, primal_table, settings_table,
+    curve_table, gradient_table, optimization_table, primal_table, settings_table,
     successive_table, texture_table,
 };
 use tables::{ratio, sci};
@@ -167,10 +179,10 @@ fn reconstruction_markdown(r: &BenchReport) -> String {
     md.push_str(&optimization_table(r));
     let _ = writeln!(
         md,
-        "\nBoth estimators optimize each scene from the same start for {} s of step time \
+        "\nEvery estimator optimizes each scene from the same start for {} s of step time \
          (evaluation renders not counted); image relMSE from {}-spp renders of every camera \
          against its target, texture RMSE against the ground truth over the texels a camera \
-         sees. Ratios are ReSTIR / baseline. {} {}\n",
+         sees. Ratios are over the baseline with Adam. {} {}\n",
         r.budget_s,
         r.eval_spp,
         if r.no_priors {
@@ -181,18 +193,10 @@ fn reconstruction_markdown(r: &BenchReport) -> String {
         if r.tuned {
             "Each estimator runs at its own settings, chosen by `--tune` on another seed:"
         } else {
-            "Both run at the tasks' settings:"
+            "All run at the tasks' settings:"
         }
     );
     md.push_str(&settings_table(r));
-    let contenders = contender_table(r);
-    if !contenders.is_empty() {
-        md.push_str(
-            "\n### Further estimators and steps\n\nThe same budget from the same start; \
-             ratios over the baseline with Adam above.\n\n",
-        );
-        md.push_str(&contenders);
-    }
     md.push_str("\n### Observed-texel RMSE along the run\n\n");
     md.push_str(&curve_table(r));
     md.push_str(
@@ -210,11 +214,6 @@ pub fn table(r: &BenchReport) -> String {
         s.push('\n');
         s.push_str(&settings_table(r));
         s.push('\n');
-        let contenders = contender_table(r);
-        if !contenders.is_empty() {
-            s.push_str(&contenders);
-            s.push('\n');
-        }
         s.push_str(&curve_table(r));
         s.push('\n');
     }
@@ -233,41 +232,25 @@ pub fn table(r: &BenchReport) -> String {
     s
 }
 
-/// The per-pass GPU times (markdown), for every estimator of the equal-time phase.
+/// The per-pass GPU times (markdown), for every run of the equal-time phase.
 pub fn pass_table(r: &BenchReport) -> String {
     let mut s = String::from(
-        "| scene | estimator | primal | loss | gradient / candidates | merge | step | moment filter | iteration | outside the passes | state B/texel | merge evaluations/it |\n\
+        "| scene | estimator, step | primal | loss | gradient | combine | step | moment filter | iteration | outside the passes | state B/texel | estimator's counters per iteration |\n\
          |---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for x in &r.scenes {
         let Some(o) = &x.optimization else { continue };
-        let mut rows = vec![
-            (
-                "baseline".to_string(),
-                &o.passes_baseline,
-                o.state_bytes_per_texel_baseline,
-                o.ms_per_iteration_baseline,
-                None,
-            ),
-            (
-                "ReSTIR".to_string(),
-                &o.passes_restir,
-                o.state_bytes_per_texel,
-                o.ms_per_iteration_restir,
-                o.merge_evaluations_per_iteration,
-            ),
-        ];
-        for c in &o.contenders {
-            rows.push((
-                c.name.clone(),
-                &c.passes,
-                c.state_bytes_per_texel,
-                c.ms_per_iteration,
-                None,
-            ));
-        }
-        for (name, p, bytes, ms, evaluations) in rows {
-            let evaluations = evaluations.map_or("–".into(), |e| format!("{e:.0}"));
+        for c in &o.runs {
+            let (name, ms, bytes) = (&c.name, c.ms_per_iteration, c.state_bytes_per_texel);
+            let counters = if c.diagnostics_per_iteration.is_empty() {
+                "–".to_string()
+            } else {
+                c.diagnostics_per_iteration
+                    .iter()
+                    .map(|(n, v)| format!("{n} {v:.0}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
             let dash_if_zero = |v: f64, digits: usize| {
                 if v > 0.0 {
                     format!("{v:.digits$}")
@@ -275,16 +258,16 @@ pub fn pass_table(r: &BenchReport) -> String {
                     "–".into()
                 }
             };
-            match p {
+            match &c.passes {
                 Some(p) => {
                     let _ = writeln!(
                         s,
-                        "| {} | {name} | {:.1} | {:.1} | {:.1} | {} | {:.1} | {} | {ms:.1} | {:.1} | {bytes:.0} | {evaluations} |",
+                        "| {} | {name} | {:.1} | {:.1} | {:.1} | {} | {:.1} | {} | {ms:.1} | {:.1} | {bytes:.0} | {counters} |",
                         x.name,
                         p.primal_ms,
                         p.loss_ms,
                         p.gradient_ms,
-                        dash_if_zero(p.merge_ms, 1),
+                        dash_if_zero(p.combine_ms, 1),
                         p.adam_ms,
                         dash_if_zero(p.filter_ms, 2),
                         ms - p.total()
@@ -293,7 +276,7 @@ pub fn pass_table(r: &BenchReport) -> String {
                 None => {
                     let _ = writeln!(
                         s,
-                        "| {} | {name} | – | – | – | – | – | – | {ms:.1} | – | {bytes:.0} | {evaluations} |",
+                        "| {} | {name} | – | – | – | – | – | – | {ms:.1} | – | {bytes:.0} | {counters} |",
                         x.name
                     );
                 }
@@ -311,33 +294,35 @@ pub fn write_report(out: &Path, r: &BenchReport) -> Result<()> {
     write_atomic(&out.join("report.md"), report_markdown(r).as_bytes())
 }
 
-/// The headline (markdown): per scene, the reconstruction at equal time, image relMSE and
-/// observed-texel RMSE at the end of each estimator's budget, with the adapter it ran on.
+/// The headline (markdown): per scene and run, the reconstruction at equal time, image
+/// relMSE and observed-texel RMSE at the end of each run's budget with their ratios over the
+/// baseline with Adam, with the adapter it ran on.
 pub fn headline_table(r: &BenchReport) -> String {
-    let mut s = String::new();
-    s.push_str(
-        "| scene | image relMSE: baseline | ReSTIR | ratio | texture RMSE (observed texels): \
-         initial | baseline | ReSTIR | ratio |\n|---|---|---|---|---|---|---|---|\n",
+    let mut s = String::from(
+        "| scene | estimator, step | image relMSE | ÷ baseline | texture RMSE (observed \
+         texels) | ÷ baseline |\n|---|---|---|---|---|---|\n",
     );
     for x in &r.scenes {
         let Some(o) = &x.optimization else { continue };
         let _ = writeln!(
             s,
-            "| {} | {} | {} | **{}** | {:.4} | {:.4} | {:.4} | **{}** |",
+            "| {} | initial | {} | | {:.4} | |",
             x.name,
-            sci(o.image_relmse_baseline),
-            sci(o.image_relmse_restir),
-            ratio(o.image_relmse_ratio),
+            sci(o.image_relmse_initial),
             o.texture_rmse_observed_initial,
-            o.texture_rmse_observed_baseline,
-            o.texture_rmse_observed_restir,
-            ratio(o.texture_rmse_observed_restir / o.texture_rmse_observed_baseline),
         );
-    }
-    let contenders = contender_table(r);
-    if !contenders.is_empty() {
-        s.push('\n');
-        s.push_str(&contenders);
+        for c in &o.runs {
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | **{}** | {:.4} | **{}** |",
+                x.name,
+                c.name,
+                sci(c.image_relmse),
+                ratio(c.image_relmse_ratio),
+                c.texture_rmse_observed,
+                ratio(c.texture_rmse_observed_ratio),
+            );
+        }
     }
     let _ = write!(
         s,
@@ -417,30 +402,22 @@ pub fn report_markdown(r: &BenchReport) -> String {
     let _ = writeln!(md, "# psrestir benchmark\n");
     let _ = writeln!(
         md,
-        "psrestir {} on `{}`; protocol `{:?}`; size scale {}; gradient error after {} ReSTIR \
+        "psrestir {} on `{}`; protocol `{:?}`; size scale {}; gradient error of {} after {} \
          iterations (estimator-only: {} more estimates under the converged adjoint), mean of \
          {} seeds, against a reference of {} gradient spp under a {}-spp converged adjoint; \
-         ReSTIR M cap {}, fresh confidence `{}`, target smoothing {}; {} s of optimization \
-         per estimator and \
+         estimators' options over the tasks': {}; {} s of optimization per estimator and \
          scene; image error from {}-spp renders.\n",
         r.version,
         r.adapter,
         r.protocol,
         r.scale,
+        r.gradient_method,
         r.warmup,
         r.settle,
         r.repeats,
         r.reference_spp,
         r.reference_primal_spp,
-        r.m_cap,
-        r.confidence,
-        match r.target_smoothing {
-            Some(b) => b.to_string(),
-            None => format!(
-                "{} (independent primal) or 0 (control variate)",
-                crate::optim::restir::TARGET_SMOOTHING_INDEPENDENT
-            ),
-        },
+        r.estimator_options.summary(),
         r.budget_s,
         r.eval_spp,
     );
@@ -450,7 +427,7 @@ pub fn report_markdown(r: &BenchReport) -> String {
     // Absent with --end-to-end-only.
     if r.scenes
         .iter()
-        .any(|x| x.gradient_relmse_restir.is_finite())
+        .any(|x| x.gradient_relmse_estimator.is_finite())
     {
         md.push_str("## Primal image error\n\n");
         md.push_str(&primal_table(r));
@@ -461,9 +438,9 @@ pub fn report_markdown(r: &BenchReport) -> String {
         md.push_str("## Gradient error\n\n");
         md.push_str(&gradient_table(r));
         md.push_str(
-            "\nRatios are ReSTIR / baseline (below 1: ReSTIR is better). Estimator-only: both \
-             estimators under the converged adjoint, ReSTIR after the estimates under it named \
-             above; total: both under the adjoint of one primal render at the protocol's spp, the same \
+            "\nRatios are the estimator's over the baseline's (below 1: the estimator is better). \
+             Estimator-only: both under the converged adjoint, the estimator after the \
+             estimates under it named above; total: both under the adjoint of one primal render at the protocol's spp, the same \
              render for both (common random numbers: both see the same render's noise). The paper (RTX 2080 Ti, 1400² images, 2048² textures) reports gradient relMSE \
              0.23–0.32× and final image relMSE 0.18–0.73× at equal time.\n\n",
         );
@@ -477,14 +454,17 @@ pub fn report_markdown(r: &BenchReport) -> String {
         md.push_str(&successive_table(r));
         md.push_str(
             "\nAn optimizer adds up its successive steps. The baseline's estimates are \
-             independent, so the error of their mean falls as 1/n; ReSTIR's successive estimates \
-             share kept samples, so theirs falls more slowly. The mean of n successive \
+             independent, so the error of their mean falls as 1/n; successive estimates of an \
+             estimator with reuse share samples (ReSTIR's kept ones, the recursive estimator's \
+             running sum), so theirs falls more slowly. The mean of n successive \
              estimates, both under the converged adjoint at the same textures, against the mean \
              of n independent baseline estimates.\n\n",
         );
     }
     if r.scenes.iter().any(|x| x.optimization.is_some()) {
-        md.push_str("## GPU time per pass (ms, timestamp queries), state and merge work\n\n");
+        md.push_str(
+            "## GPU time per pass (ms, timestamp queries), state and the estimators' counters\n\n",
+        );
         md.push_str(&pass_table(r));
         md.push_str(
             "\nIteration: the wall-clock mean of a timed step (GPU work finished); outside the \

@@ -22,26 +22,27 @@ pub(super) fn ratio(v: f64) -> String {
 pub fn gradient_table(r: &BenchReport) -> String {
     let mut s = String::new();
     s.push_str(
-        "| scene | spp primal / gradient | ms/it ratio | baseline spp (equal time) | \
-         estimator-only, equal iterations: baseline | ReSTIR | ratio | equal time ratio | \
-         total, equal iterations: baseline | ReSTIR | ratio | equal time ratio |\n",
+        "| scene | estimator | spp primal / gradient | ms/it ratio | baseline spp (equal time) | \
+         estimator-only, equal iterations: baseline | estimator | ratio | equal time ratio | \
+         total, equal iterations: baseline | estimator | ratio | equal time ratio |\n",
     );
-    s.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    s.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for x in &r.scenes {
         let _ = writeln!(
             s,
-            "| {} | {} / {} | {} | {} | {} | {} | **{}** | **{}** | {} | {} | **{}** | **{}** |",
+            "| {} | {} | {} / {} | {} | {} | {} | {} | **{}** | **{}** | {} | {} | **{}** | **{}** |",
             x.name,
+            x.gradient_method,
             x.primal_spp,
             x.gradient_spp,
             ratio(x.ms_per_iteration_ratio),
             ratio(x.baseline_spp_equal_time),
             sci(x.gradient_relmse_estimator_only_baseline),
-            sci(x.gradient_relmse_estimator_only_restir),
+            sci(x.gradient_relmse_estimator_only_estimator),
             ratio(x.gradient_relmse_estimator_only_ratio),
             ratio(x.gradient_relmse_estimator_only_ratio_equal_time),
             sci(x.gradient_relmse_baseline_equal_iterations),
-            sci(x.gradient_relmse_restir),
+            sci(x.gradient_relmse_estimator),
             ratio(x.gradient_relmse_ratio_equal_iterations),
             ratio(x.gradient_relmse_ratio),
         );
@@ -53,8 +54,8 @@ pub fn gradient_table(r: &BenchReport) -> String {
 /// equal-iteration errors of the gradient table.
 pub fn texture_table(r: &BenchReport) -> String {
     let mut s = String::from(
-        "| scene | texture | estimator-only: baseline | ReSTIR | ratio | total: baseline | \
-         ReSTIR | ratio |\n|---|---|---|---|---|---|---|---|\n",
+        "| scene | texture | estimator-only: baseline | estimator | ratio | total: baseline | \
+         estimator | ratio |\n|---|---|---|---|---|---|---|---|\n",
     );
     for x in &r.scenes {
         for t in &x.gradient_relmse_per_texture {
@@ -64,10 +65,10 @@ pub fn texture_table(r: &BenchReport) -> String {
                 x.name,
                 t.texture,
                 sci(t.estimator_only_baseline),
-                sci(t.estimator_only_restir),
+                sci(t.estimator_only_estimator),
                 ratio(t.estimator_only_ratio),
                 sci(t.total_baseline_equal_iterations),
-                sci(t.total_restir),
+                sci(t.total_estimator),
                 ratio(t.total_ratio_equal_iterations),
             );
         }
@@ -79,18 +80,19 @@ pub fn texture_table(r: &BenchReport) -> String {
 /// estimators under the converged adjoint.
 pub fn successive_table(r: &BenchReport) -> String {
     let mut s = String::from(
-        "| scene | estimates | one estimate: ratio | mean of them: baseline | ReSTIR | ratio |\n\
-         |---|---|---|---|---|---|\n",
+        "| scene | estimator | estimates | one estimate: ratio | mean of them: baseline | \
+         estimator | ratio |\n|---|---|---|---|---|---|---|\n",
     );
     for x in &r.scenes {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {} | **{}** |",
+            "| {} | {} | {} | {} | {} | {} | **{}** |",
             x.name,
+            x.gradient_method,
             x.successive_estimates,
             ratio(x.gradient_relmse_estimator_only_ratio),
             sci(x.gradient_relmse_mean_baseline),
-            sci(x.gradient_relmse_mean_restir),
+            sci(x.gradient_relmse_mean_estimator),
             ratio(x.gradient_relmse_mean_ratio),
         );
     }
@@ -125,101 +127,62 @@ pub fn primal_table(r: &BenchReport) -> String {
     s
 }
 
-/// The equal-time optimization table (markdown).
+/// The equal-time optimization table (markdown): every run of every scene, the baseline with
+/// Adam first, with ratios over it.
 pub fn optimization_table(r: &BenchReport) -> String {
-    let mut s = String::new();
-    s.push_str(
-        "| scene | image relMSE initial | baseline | ReSTIR | ratio | texture RMSE (observed) \
-         initial | baseline | ReSTIR | at 1/3 baseline | ReSTIR | texture RMSE (all) baseline | \
-         ReSTIR | ms/it baseline | ReSTIR | iterations baseline | ReSTIR |\n",
-    );
-    s.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
-    for x in &r.scenes {
-        let Some(o) = &x.optimization else { continue };
-        let _ = writeln!(
-            s,
-            "| {} | {} | {} | {} | **{}** | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.0} | {:.0} | {} | {} |",
-            x.name,
-            sci(o.image_relmse_initial),
-            sci(o.image_relmse_baseline),
-            sci(o.image_relmse_restir),
-            ratio(o.image_relmse_ratio),
-            o.texture_rmse_observed_initial,
-            o.texture_rmse_observed_baseline,
-            o.texture_rmse_observed_restir,
-            o.texture_rmse_observed_third_baseline,
-            o.texture_rmse_observed_third_restir,
-            o.texture_rmse_baseline,
-            o.texture_rmse_restir,
-            o.ms_per_iteration_baseline,
-            o.ms_per_iteration_restir,
-            o.iterations_baseline,
-            o.iterations_restir,
-        );
-    }
-    s
-}
-
-/// The further estimators and steps (`BenchOptions::contenders`) at equal time, with ratios
-/// over the baseline with Adam (empty when there are none).
-pub fn contender_table(r: &BenchReport) -> String {
-    let rows: Vec<_> = r
-        .scenes
-        .iter()
-        .filter_map(|x| x.optimization.as_ref().map(|o| (x, o)))
-        .flat_map(|(x, o)| o.contenders.iter().map(move |c| (x, o, c)))
-        .collect();
-    if rows.is_empty() {
-        return String::new();
-    }
     let mut s = String::from(
         "| scene | estimator, step | image relMSE | ÷ baseline | texture RMSE (observed) | \
-         ÷ baseline | at 1/3 | end / lowest | ms/it | iterations | settings |\n\
+         ÷ baseline | at 1/3 | end / lowest | texture RMSE (all) | ms/it | iterations |\n\
          |---|---|---|---|---|---|---|---|---|---|---|\n",
     );
-    for (x, _, c) in rows {
+    for x in &r.scenes {
+        let Some(o) = &x.optimization else { continue };
         let _ = writeln!(
             s,
-            "| {} | {} | {} | **{}** | {:.4} | **{}** | {:.4} | {} | {:.0} | {} | {} |",
+            "| {} | initial | {} | | {:.4} | | | | {:.4} | | |",
             x.name,
-            c.name,
-            sci(c.image_relmse),
-            ratio(c.image_relmse_ratio),
-            c.texture_rmse_observed,
-            ratio(c.texture_rmse_observed_ratio),
-            c.texture_rmse_observed_third,
-            ratio(c.texture_rmse_observed / c.texture_rmse_observed_min),
-            c.ms_per_iteration,
-            c.iterations,
-            c.settings
+            sci(o.image_relmse_initial),
+            o.texture_rmse_observed_initial,
+            o.texture_rmse_initial,
         );
+        for c in &o.runs {
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | **{}** | {:.4} | **{}** | {:.4} | {} | {:.4} | {:.0} | {} |",
+                x.name,
+                c.name,
+                sci(c.image_relmse),
+                ratio(c.image_relmse_ratio),
+                c.texture_rmse_observed,
+                ratio(c.texture_rmse_observed_ratio),
+                c.texture_rmse_observed_third,
+                ratio(c.texture_rmse_observed / c.texture_rmse_observed_min),
+                c.texture_rmse,
+                c.ms_per_iteration,
+                c.iterations,
+            );
+        }
     }
     s
 }
 
-/// Each estimator's settings in the run (tuned or the task's) and, with `--tune`, the
-/// search's score on its own seed.
+/// Each run's settings (tuned or the task's) and, with `--tune`, the search's score on its
+/// own seed.
 pub fn settings_table(r: &BenchReport) -> String {
-    let mut s = String::from(
-        "| scene | baseline settings | tuning score | ReSTIR settings | tuning score |\n\
-         |---|---|---|---|---|\n",
-    );
+    let mut s =
+        String::from("| scene | estimator, step | settings | tuning score |\n|---|---|---|---|\n");
     for x in &r.scenes {
         let Some(o) = &x.optimization else { continue };
-        let score = |t: &Option<crate::bench::tune::Tuned>| {
-            t.as_ref().map_or("–".to_string(), |t| {
+        for c in &o.runs {
+            let score = c.tuned.as_ref().map_or("–".to_string(), |t| {
                 format!("{:.4} ({} trials)", t.score, t.trials.len())
-            })
-        };
-        let _ = writeln!(
-            s,
-            "| {} | {} | {} | {} | {} |",
-            x.name,
-            o.settings_baseline,
-            score(&o.tuned_baseline),
-            o.settings_restir,
-            score(&o.tuned_restir)
-        );
+            });
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {} |",
+                x.name, c.name, c.settings, score
+            );
+        }
     }
     s
 }
@@ -233,23 +196,11 @@ pub fn curve_table(r: &BenchReport) -> String {
     );
     for x in &r.scenes {
         let Some(o) = &x.optimization else { continue };
-        let runs = [
-            (
-                "baseline".to_string(),
-                &o.curve_baseline,
-                o.texture_rmse_observed_min_baseline,
-            ),
-            (
-                "ReSTIR".to_string(),
-                &o.curve_restir,
-                o.texture_rmse_observed_min_restir,
-            ),
-        ];
-        let others = o
-            .contenders
+        let runs = o
+            .runs
             .iter()
             .map(|c| (c.name.clone(), &c.curve, c.texture_rmse_observed_min));
-        for (name, curve, min) in runs.into_iter().chain(others) {
+        for (name, curve, min) in runs {
             let at = |f: f64| {
                 curve
                     .iter()

@@ -16,15 +16,14 @@
 pub mod baseline;
 pub mod recursive;
 pub mod restir;
-pub use restir::compact;
 
 use super::{FaultCounts, PassTimer, Settings};
 use crate::gpu::Gpu;
 use crate::render::layout::GpuCameraInfo;
 use crate::render::{GpuScene, Techniques};
 use crate::Result;
-pub use recursive::RecursiveOptions;
-pub use restir::{Confidence, RestirOptions};
+use recursive::RecursiveOptions;
+use restir::RestirOptions;
 
 /// The gradient estimator. The default is the one that ends lower on the bundled default task
 /// at equal time, each at its own best settings (docs/studies.md, "Which estimator is the
@@ -42,7 +41,10 @@ pub enum Method {
 }
 
 impl Method {
-    /// The name used on the command line and in reports.
+    /// Every estimator, in the order reports list them.
+    pub const ALL: [Method; 3] = [Method::Baseline, Method::Restir, Method::Recursive];
+
+    /// The name used on the command line, in task files and in reports.
     pub fn name(self) -> &'static str {
         match self {
             Method::Baseline => "baseline",
@@ -50,6 +52,231 @@ impl Method {
             Method::Recursive => "recursive",
         }
     }
+
+    /// Every estimator's name.
+    pub fn names() -> Vec<&'static str> {
+        Method::ALL.iter().map(|m| m.name()).collect()
+    }
+
+    /// The estimator called `name`.
+    pub fn by_name(name: &str) -> Option<Method> {
+        Method::ALL.into_iter().find(|m| m.name() == name)
+    }
+}
+
+impl std::str::FromStr for Method {
+    type Err = crate::Error;
+    fn from_str(s: &str) -> Result<Method> {
+        Method::by_name(s).ok_or_else(|| {
+            crate::Error::Invalid(format!(
+                "unknown gradient estimator `{s}` (one of: {})",
+                Method::names().join(", ")
+            ))
+        })
+    }
+}
+
+impl std::fmt::Display for Method {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// An estimator's options as its folder defines them: read from and written to that
+/// estimator's table in [`EstimatorOptions`] (missing keys take their defaults).
+pub trait Options:
+    Clone + Default + serde::Serialize + serde::de::DeserializeOwned + std::fmt::Debug
+{
+    /// The estimator they belong to.
+    const METHOD: Method;
+    /// An error naming the option (its key in the table) and what is wrong.
+    fn check(&self) -> std::result::Result<(), (String, String)>;
+    /// A short description for reports (empty: nothing to say), e.g. `M cap 8`.
+    fn describe(&self) -> String;
+}
+
+/// Every estimator's options, one table of TOML values per method name: the task file's
+/// `[optimizer.<method>]` tables, with the command line's `--estimator-option
+/// METHOD.KEY=VALUE` on top. The optimizer, the job and the bench only pass the tables on;
+/// each estimator reads its own ([`Options`]) and [`EstimatorOptions::check`] asks each to
+/// check its table.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+#[serde(transparent)]
+pub struct EstimatorOptions {
+    tables: std::collections::BTreeMap<String, toml::Table>,
+}
+
+impl EstimatorOptions {
+    /// Options with one estimator's table: `options`.
+    pub fn with<T: Options>(options: &T) -> EstimatorOptions {
+        let mut o = EstimatorOptions::default();
+        o.put(options);
+        o
+    }
+
+    /// `method`'s table (empty: every option at its default).
+    pub fn table(&self, method: Method) -> toml::Table {
+        self.tables.get(method.name()).cloned().unwrap_or_default()
+    }
+
+    /// Replace `method`'s table.
+    pub fn set_table(&mut self, method: Method, table: toml::Table) {
+        self.tables.insert(method.name().to_string(), table);
+    }
+
+    /// These tables with `over`'s options on top, option by option.
+    pub fn merged(mut self, over: &EstimatorOptions) -> EstimatorOptions {
+        for (name, table) in &over.tables {
+            let mine = self.tables.entry(name.clone()).or_default();
+            for (k, v) in table {
+                mine.insert(k.clone(), v.clone());
+            }
+        }
+        self
+    }
+
+    /// Set one option of `method`'s table.
+    pub fn set(&mut self, method: Method, key: &str, value: toml::Value) {
+        self.tables
+            .entry(method.name().to_string())
+            .or_default()
+            .insert(key.to_string(), value);
+    }
+
+    /// Apply `METHOD.KEY=VALUE` (the value as TOML, or else as a string: `restir.m_cap=16`,
+    /// `restir.confidence=candidates`).
+    pub fn assign(&mut self, assignment: &str) -> Result<()> {
+        let bad = |why: String| {
+            crate::Error::Invalid(format!("--estimator-option `{assignment}`: {why}"))
+        };
+        let (path, value) = assignment
+            .split_once('=')
+            .ok_or_else(|| bad("expected METHOD.KEY=VALUE".into()))?;
+        let (method, key) = path
+            .trim()
+            .split_once('.')
+            .ok_or_else(|| bad("expected METHOD.KEY=VALUE".into()))?;
+        let method = method.parse::<Method>().map_err(|e| bad(e.to_string()))?;
+        let value = value.trim();
+        let value = toml::from_str::<toml::Table>(&format!("v = {value}"))
+            .ok()
+            .and_then(|mut t| t.remove("v"))
+            .unwrap_or_else(|| toml::Value::String(value.to_string()));
+        self.set(method, key.trim(), value);
+        self.check_one(method)
+            .map_err(|(key, msg)| bad(format!("{key} {msg}")))
+    }
+
+    /// The options of `T`'s estimator, parsed from its table.
+    pub fn get<T: Options>(&self) -> std::result::Result<T, (String, String)> {
+        let key = format!("optimizer.{}", T::METHOD.name());
+        let o = T::deserialize(toml::Value::Table(self.table(T::METHOD)))
+            .map_err(|e| (key.clone(), e.to_string().trim().replace('\n', " ")))?;
+        o.check().map_err(|(k, m)| (format!("{key}.{k}"), m))?;
+        Ok(o)
+    }
+
+    /// Replace the table of `T`'s estimator by `options`.
+    pub fn put<T: Options>(&mut self, options: &T) {
+        let table = match toml::Value::try_from(options) {
+            Ok(toml::Value::Table(t)) => t,
+            _ => unreachable!("an estimator's options serialize to a table"),
+        };
+        self.set_table(T::METHOD, table);
+    }
+
+    /// Check `method`'s table: an error names the task-file key and what is wrong.
+    pub fn check_one(&self, method: Method) -> std::result::Result<(), (String, String)> {
+        match method {
+            Method::Baseline => {
+                let t = self.table(method);
+                match t.keys().next() {
+                    Some(k) => Err((
+                        format!("optimizer.baseline.{k}"),
+                        "is not an option: the baseline has none".into(),
+                    )),
+                    None => Ok(()),
+                }
+            }
+            Method::Restir => self.get::<RestirOptions>().map(|_| ()),
+            Method::Recursive => self.get::<RecursiveOptions>().map(|_| ()),
+        }
+    }
+
+    /// Check every table.
+    pub fn check(&self) -> std::result::Result<(), (String, String)> {
+        for name in self.tables.keys() {
+            let method = Method::by_name(name).ok_or_else(|| {
+                (
+                    format!("optimizer.{name}"),
+                    format!("is no gradient estimator ({})", Method::names().join(", ")),
+                )
+            })?;
+            self.check_one(method)?;
+        }
+        Ok(())
+    }
+
+    /// Every table as `METHOD.KEY=VALUE` assignments, comma-separated (`none` without any).
+    pub fn summary(&self) -> String {
+        let all: Vec<String> = self
+            .tables
+            .iter()
+            .flat_map(|(m, t)| t.iter().map(move |(k, v)| format!("{m}.{k}={v}")))
+            .collect();
+        if all.is_empty() {
+            "none".into()
+        } else {
+            all.join(", ")
+        }
+    }
+
+    /// A short description of `method`'s options for reports (empty for none).
+    pub fn describe(&self, method: Method) -> String {
+        fn d<T: Options>(o: &EstimatorOptions) -> String {
+            o.get::<T>().map(|t| t.describe()).unwrap_or_default()
+        }
+        match method {
+            Method::Baseline => String::new(),
+            Method::Restir => d::<RestirOptions>(self),
+            Method::Recursive => d::<RecursiveOptions>(self),
+        }
+    }
+
+    /// The values `bench --tune` tries for `method`'s own options: for each option searched,
+    /// the tables to try around `best`'s (in search order).
+    pub fn tuning(method: Method) -> Vec<TuningAxis> {
+        match method {
+            Method::Baseline => Vec::new(),
+            Method::Restir => typed_axes(restir::tuning()),
+            Method::Recursive => typed_axes(recursive::tuning()),
+        }
+    }
+}
+
+/// One option an estimator's search varies: the tables to try around the best so far.
+pub type TuningAxis = Box<dyn Fn(&toml::Table) -> Vec<toml::Table>>;
+
+/// An axis over typed options: the candidates a function of the options gives.
+pub type TypedAxis<T> = fn(&T) -> Vec<T>;
+
+fn typed_axes<T: Options + 'static>(axes: Vec<TypedAxis<T>>) -> Vec<TuningAxis> {
+    axes.into_iter()
+        .map(|axis| -> TuningAxis {
+            Box::new(move |table: &toml::Table| {
+                let mut o = EstimatorOptions::default();
+                o.set_table(T::METHOD, table.clone());
+                let best = o.get::<T>().unwrap_or_default();
+                axis(&best)
+                    .iter()
+                    .map(|c| {
+                        o.put(c);
+                        o.table(T::METHOD)
+                    })
+                    .collect()
+            })
+        })
+        .collect()
 }
 
 /// The part of an estimator's state that carries over to the next iteration, as the optimizer
@@ -181,6 +408,12 @@ pub(crate) trait Estimator {
     fn diagnostics(&self, _gpu: &Gpu) -> Result<Diagnostics> {
         Ok(Vec::new())
     }
+    /// Which of its [`Estimator::diagnostics`] are counters (they rise by the work of each
+    /// iteration, so that a rate per iteration means something; 32 bits on the GPU, they may
+    /// wrap); the others are levels.
+    fn counters(&self) -> &'static [&'static str] {
+        &[]
+    }
 }
 
 /// The estimator of `settings.method`.
@@ -190,6 +423,31 @@ pub(crate) fn build(setup: &Setup) -> Result<Box<dyn Estimator>> {
         Method::Restir => Box::new(restir::Restir::new(setup)?),
         Method::Recursive => Box::new(recursive::Recursive::new(setup)?),
     })
+}
+
+/// Every estimator's WGSL files: (name, source), a pass named after its file, another module
+/// as `<method>/<file stem>` (what `#import` names).
+pub(crate) const WGSL: [&[(&str, &str)]; 3] = [baseline::WGSL, restir::WGSL, recursive::WGSL];
+
+/// The WGSL the estimators generate from their Rust (`gen/<method>`).
+pub(crate) const GENERATED: &[(&str, crate::gpu::shaders::Generator)] = &[
+    ("gen/restir", restir::abi::wgsl),
+    ("gen/recursive", recursive::abi::wgsl),
+];
+
+/// Every estimator's bind-group declarations (for the contract test).
+#[cfg(test)]
+pub(crate) fn groups() -> Vec<crate::gpu::GroupDecl> {
+    [baseline::GROUPS, restir::GROUPS, recursive::GROUPS].concat()
+}
+
+/// The passes (WGSL files) `method` creates, the slowest to compile first.
+pub(crate) fn passes(method: Method) -> Vec<&'static str> {
+    match method {
+        Method::Baseline => baseline::PASSES.to_vec(),
+        Method::Restir => restir::PASSES.to_vec(),
+        Method::Recursive => recursive::PASSES.to_vec(),
+    }
 }
 
 /// The most cameras `method` can use in one optimization (None: no limit of its own).
@@ -214,5 +472,175 @@ pub(crate) fn memory(
         Method::Baseline => Vec::new(),
         Method::Restir => restir::memory(n_texels, n_observed, n_pixels),
         Method::Recursive => recursive::memory(n_params),
+    }
+}
+
+#[cfg(test)]
+mod seam_tests {
+    //! The seam between the estimators and the rest: outside its folder no source file names
+    //! an estimator's internals. The registry above (this file) is the one place that
+    //! names each folder's items; everything else sees a method's name and its options table.
+    use std::collections::BTreeSet;
+    use std::path::{Path, PathBuf};
+
+    fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                rust_files(&p, out);
+            } else if p.extension().is_some_and(|x| x == "rs" || x == "wgsl") {
+                out.push(p);
+            }
+        }
+    }
+
+    /// `source` without comments and string literals (what names code, not what talks about it).
+    fn code_of(source: &str) -> String {
+        let mut out = String::new();
+        for line in source.lines() {
+            let mut in_string = false;
+            let mut prev = ' ';
+            let mut kept = String::new();
+            let chars: Vec<char> = line.chars().collect();
+            let mut i = 0;
+            while i < chars.len() {
+                let c = chars[i];
+                if !in_string && c == '/' && chars.get(i + 1) == Some(&'/') {
+                    break;
+                }
+                if c == '"' && prev != '\\' {
+                    in_string = !in_string;
+                } else if !in_string {
+                    kept.push(c);
+                }
+                prev = c;
+                i += 1;
+            }
+            out.push_str(&kept);
+            out.push('\n');
+        }
+        out
+    }
+
+    /// The name an item declaration on `line` introduces (`pub struct X`, `pub(crate) fn y_z`,
+    /// `pub const Z`, `pub mod m`, ...). A function whose name is one word (`new`, `of`,
+    /// `memory`) is too common to find by name; it is found by its path (`restir::memory`).
+    fn declared(line: &str, public_only: bool) -> Option<String> {
+        let t = line.trim_start();
+        let public = t
+            .strip_prefix("pub(crate) ")
+            .or_else(|| t.strip_prefix("pub(super) "))
+            .or_else(|| t.strip_prefix("pub "));
+        let t = match public {
+            Some(t) => t,
+            None if public_only => return None,
+            None => t,
+        };
+        let t = t.strip_prefix("unsafe ").unwrap_or(t);
+        for kw in [
+            "struct ", "enum ", "fn ", "const ", "static ", "mod ", "type ", "trait ",
+        ] {
+            if let Some(rest) = t.strip_prefix(kw) {
+                let name: String = rest
+                    .chars()
+                    .take_while(|c| c.is_alphanumeric() || *c == '_')
+                    .collect();
+                let one_word = kw == "fn " && !name.contains('_');
+                return (!name.is_empty() && !one_word).then_some(name);
+            }
+        }
+        None
+    }
+
+    fn has_word(code: &str, word: &str) -> bool {
+        code.match_indices(word).any(|(i, _)| {
+            let before = code[..i].chars().next_back();
+            let after = code[i + word.len()..].chars().next();
+            let boundary = |c: Option<char>| !c.is_some_and(|c| c.is_alphanumeric() || c == '_');
+            boundary(before) && boundary(after)
+        })
+    }
+
+    #[test]
+    fn outside_its_folder_no_source_names_an_estimators_internals() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let mut files = Vec::new();
+        rust_files(&root.join("src"), &mut files);
+        rust_files(&root.join("shaders"), &mut files);
+        let here = root.join("src/optim/estimator");
+        let registry = here.join("mod.rs");
+        let sources: Vec<(PathBuf, String)> = files
+            .iter()
+            .map(|p| (p.clone(), std::fs::read_to_string(p).unwrap()))
+            .collect();
+        let mut checked = 0;
+        let mut violations = Vec::new();
+        for method in super::Method::ALL {
+            let name = method.name();
+            let folder = here.join(name);
+            let inside = |p: &Path| p.starts_with(&folder);
+            // Every name the folder declares public that no file outside it declares too
+            // (those are the shared interface, `PASSES`, `WGSL`, or names of its own there).
+            let decl = |pred: &dyn Fn(&Path) -> bool, public_only: bool| -> BTreeSet<String> {
+                sources
+                    .iter()
+                    .filter(|(p, _)| pred(p))
+                    .flat_map(|(_, s)| {
+                        s.lines()
+                            .filter_map(|l| declared(l, public_only))
+                            .collect::<Vec<_>>()
+                    })
+                    .collect()
+            };
+            let own = decl(&|p| inside(p), true);
+            let elsewhere = decl(&|p| !inside(p), false);
+            // The struct named like the method is its name's variant elsewhere
+            // (`Method::Restir`): not an internal.
+            let variant = format!("{:?}", method);
+            let mut internal: Vec<String> = own
+                .difference(&elsewhere)
+                .filter(|n| **n != variant)
+                .cloned()
+                .collect();
+            // The folder's modules by path, its WGSL modules and generated constants by
+            // their import names.
+            internal.push(format!("{name}::"));
+            let wgsl_import = format!("#import {name}/");
+            let gen_import = format!("#import gen/{name}");
+            for (p, source) in &sources {
+                if inside(p) || *p == registry {
+                    continue;
+                }
+                let is_wgsl = p.extension().is_some_and(|x| x == "wgsl");
+                let shown = p.strip_prefix(root).unwrap().display();
+                if is_wgsl {
+                    if source.contains(&wgsl_import) || source.contains(&gen_import) {
+                        violations.push(format!("{shown} imports {name}'s WGSL"));
+                    }
+                    continue;
+                }
+                let code = code_of(source);
+                for item in &internal {
+                    let found = if let Some(path) = item.strip_suffix("::") {
+                        code.contains(&format!("{path}::"))
+                            && has_word(&code.replace("::", " :: "), path)
+                    } else {
+                        has_word(&code, item)
+                    };
+                    if found {
+                        violations.push(format!("{shown} names `{item}` ({name})"));
+                    }
+                }
+                checked += 1;
+            }
+            assert!(own.len() > 3, "{name}: {} declarations found", own.len());
+        }
+        assert!(
+            violations.is_empty(),
+            "outside its folder a source names an estimator's internals (go through the \
+             registry, src/optim/estimator/mod.rs, or the Estimator trait):\n{}",
+            violations.join("\n")
+        );
+        assert!(checked > 100, "only {checked} files checked");
     }
 }

@@ -12,6 +12,12 @@ use crate::render::{Techniques, WORKGROUP};
 use crate::Result;
 use bytemuck::{Pod, Zeroable};
 
+/// Its WGSL: (name, source) of its passes and of the modules they import.
+pub(crate) const WGSL: &[(&str, &str)] = &[("gradient", include_str!("gradient.wgsl"))];
+
+/// The passes it creates, the slowest to compile first.
+pub(crate) const PASSES: [&str; 1] = ["gradient"];
+
 /// Group 1 of `gradient.wgsl`.
 pub(crate) const GRADIENT_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
     pass: "gradient",
@@ -159,5 +165,34 @@ impl Estimator for Baseline {
             cam.params.techniques = techniques.bits();
         }
         Ok(())
+    }
+}
+
+/// Its bind groups, for the contract test (`crate::contract_tests`).
+#[cfg(test)]
+pub(crate) const GROUPS: &[crate::gpu::GroupDecl] = &[GRADIENT_GROUP];
+
+#[cfg(test)]
+mod contract_tests {
+    use crate::contract_tests::mirror;
+
+    // Its uniforms, field by field against naga's layout of its WGSL.
+    #[test]
+    fn uniform_mirrors_match_wgsl_field_by_field() {
+        mirror!(
+            "gradient",
+            "GradientParams",
+            super::GradientParams,
+            [
+                camera,
+                seed,
+                sample_offset,
+                spp,
+                techniques,
+                stride,
+                inv_spp,
+                adjoint_offset
+            ]
+        );
     }
 }

@@ -26,6 +26,18 @@ use crate::render::WORKGROUP;
 use crate::{Error, Result};
 use bytemuck::{Pod, Zeroable};
 
+/// Its WGSL: (name, source) of its passes and of the modules they import.
+pub(crate) const WGSL: &[(&str, &str)] = &[
+    (
+        "recursive_gradient",
+        include_str!("recursive_gradient.wgsl"),
+    ),
+    ("recursive_combine", include_str!("recursive_combine.wgsl")),
+];
+
+/// The passes it creates, the slowest to compile first.
+pub(crate) const PASSES: [&str; 2] = ["recursive_gradient", "recursive_combine"];
+
 /// The GPU contract of this estimator: constants that its Rust and WGSL share.
 pub mod abi {
     /// `rstats` slot: gradient samples drawn.
@@ -48,13 +60,7 @@ pub mod abi {
 
     /// The WGSL of `gen/recursive`.
     pub fn wgsl() -> String {
-        let mut s = String::from(
-            "// Generated from src/optim/estimator/recursive/mod.rs; edit the Rust side.\n",
-        );
-        for (name, v) in CONSTANTS {
-            s.push_str(&format!("const {name}: u32 = {v}u;\n"));
-        }
-        s
+        crate::gpu::shaders::constants_wgsl("src/optim/estimator/recursive/mod.rs", CONSTANTS)
     }
 }
 
@@ -81,22 +87,41 @@ impl Default for RecursiveOptions {
     }
 }
 
-impl RecursiveOptions {
-    /// An error naming the field that is out of range.
-    pub fn check(&self) -> std::result::Result<(), (&'static str, &'static str)> {
+impl crate::optim::estimator::Options for RecursiveOptions {
+    const METHOD: crate::optim::Method = crate::optim::Method::Recursive;
+
+    fn check(&self) -> std::result::Result<(), (String, String)> {
+        let bad = |k: &str, m: &str| Err((k.to_string(), m.to_string()));
         if let Some(a) = self.weight {
             if !(a > 0.0 && a <= 1.0) {
-                return Err(("weight", "must be in (0, 1]"));
+                return bad("weight", "must be in (0, 1]");
             }
         }
         if !(self.min_weight > 0.0 && self.min_weight <= 1.0) {
-            return Err(("min_weight", "must be in (0, 1]"));
+            return bad("min_weight", "must be in (0, 1]");
         }
         if !(0.0..1.0).contains(&self.beta) {
-            return Err(("beta", "must be in [0, 1)"));
+            return bad("beta", "must be in [0, 1)");
         }
         Ok(())
     }
+
+    fn describe(&self) -> String {
+        match self.weight {
+            Some(a) => format!("weight {a}"),
+            None => format!("weight ≥ {}", self.min_weight),
+        }
+    }
+}
+
+/// What `bench --tune` searches for the recursive estimator: the lower bound of its adaptive
+/// weight (0.2, 0.5).
+pub(crate) fn tuning() -> Vec<crate::optim::estimator::TypedAxis<RecursiveOptions>> {
+    vec![|b| {
+        [0.2, 0.5]
+            .map(|min_weight| RecursiveOptions { min_weight, ..*b })
+            .to_vec()
+    }]
 }
 
 /// Group 1 of `recursive_gradient.wgsl`.
@@ -215,7 +240,11 @@ pub(crate) struct Recursive {
 impl Recursive {
     pub(crate) fn new(s: &Setup) -> Result<Recursive> {
         let gpu = s.gpu;
-        let options = s.settings.recursive;
+        let options: RecursiveOptions = s
+            .settings
+            .estimator_options
+            .get()
+            .map_err(|(key, msg)| crate::Error::Invalid(format!("{key} {msg}")))?;
         let layout = gpu.pass_layout("recursive_gradient", 1)?;
         let gradient = gpu.compute_pipeline("recursive_gradient", &[&s.scene.layout, &layout])?;
         let combine_layout = gpu.pass_layout("recursive_combine", 0)?;
@@ -349,7 +378,7 @@ impl Estimator for Recursive {
             &self.combine,
             &[&self.combine_group],
             self.combine_grid,
-            timer.next(PassKind::Merge),
+            timer.next(PassKind::Combine),
         );
         self.n_f = self.n_f.saturating_add(1);
         self.n_dl = self.n_dl.saturating_add(have_prev);
@@ -449,5 +478,48 @@ impl Estimator for Recursive {
             ("fresh updates", self.n_f as f64),
             ("difference updates", self.n_dl as f64),
         ])
+    }
+}
+
+/// Its bind groups, for the contract test (`crate::contract_tests`).
+#[cfg(test)]
+pub(crate) const GROUPS: &[crate::gpu::GroupDecl] = &[GRADIENT_GROUP, COMBINE_GROUP];
+
+#[cfg(test)]
+mod contract_tests {
+    use crate::contract_tests::mirror;
+
+    // Its uniforms, field by field against naga's layout of its WGSL.
+    #[test]
+    fn uniform_mirrors_match_wgsl_field_by_field() {
+        mirror!(
+            "recursive_gradient",
+            "RecursiveGradientParams",
+            super::RecursiveGradientParams,
+            [
+                camera,
+                seed,
+                spp,
+                stride,
+                inv_spp,
+                adjoint_offset,
+                have_prev
+            ]
+        );
+        mirror!(
+            "recursive_combine",
+            "RecursiveCombineParams",
+            super::RecursiveCombineParams,
+            [
+                count,
+                have_prev,
+                fixed_weight,
+                min_weight,
+                beta,
+                bias_f,
+                bias_dl,
+                n_f
+            ]
+        );
     }
 }

@@ -15,7 +15,7 @@
 //! radiance, so a stored path re-evaluates exactly to what its candidate was worth; the
 //! rounding only moves the point, direction and radiance a sample is evaluated at by these
 //! amounts. The previous-state target only enters the MIS weights.
-use crate::gpu::abi::reservoir;
+use super::abi::reservoir;
 pub use crate::render::layout::oct_encode;
 
 /// Largest error of a rounded barycentric: a step of 2^-20 (half a step, but a whole one for

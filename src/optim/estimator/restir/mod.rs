@@ -20,6 +20,8 @@
 //!    identity shift in path space, sign routing), writes the merged reservoirs and the
 //!    gradient sum over signs of v(y) W. It traces no ray.
 pub mod compact;
+mod options;
+mod params;
 mod reservoir_test;
 
 use super::{Diagnostics, Estimator, EstimatorState, Frame, Method, Setup};
@@ -27,54 +29,23 @@ use crate::gpu::encode_timed_pass;
 use crate::gpu::{grid_2d, Gpu};
 use crate::optim::Scale;
 use crate::optim::{pass_seed, FaultCounts, PassKind, PassTimer, Seeds};
-use crate::render::layout::GpuCameraInfo;
 use crate::render::WORKGROUP;
 use crate::{Error, Result};
-use bytemuck::{Pod, Zeroable};
 
-/// Group 1 of `restir_candidates.wgsl`.
-pub(crate) const CANDIDATES_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
-    pass: "restir_candidates",
-    group: 1,
-    names: &[
-        "cp",
-        "adjoint",
-        "slots0",
-        "slots1",
-        "slots2",
-        "slots3",
-        "headers",
-        "cstats",
-        "targets",
-        "observed_map",
-    ],
-};
-/// Group 1 of `restir_merge.wgsl`.
-pub(crate) const MERGE_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
-    pass: "restir_merge",
-    group: 1,
-    names: &[
-        "mp",
-        "adjoint",
-        "targets",
-        "slots0",
-        "slots1",
-        "slots2",
-        "slots3",
-        "headers",
-        "grad",
-        "mstats",
-        "observed_list",
-    ],
-};
-
-pub use crate::gpu::abi::reservoir;
+pub mod abi;
+pub use abi::reservoir;
+pub(crate) use options::tuning;
+pub use options::{Confidence, RestirOptions, TARGET_SMOOTHING_INDEPENDENT};
+#[cfg(test)]
+pub(crate) use params::GROUPS;
+pub use params::{CandidateParams, MergeParams};
+pub(crate) use params::{CANDIDATES_GROUP, MERGE_GROUP};
 pub use reservoir_test::selection_trial;
 #[cfg(test)]
 pub(crate) use reservoir_test::RESERVOIR_TEST_GROUP;
 
 /// Cameras a ReSTIR optimizer can use (the camera index has three bits in a reservoir).
-pub const MAX_CAMERAS: usize = crate::gpu::abi::MAX_CAMERAS as usize;
+pub const MAX_CAMERAS: usize = abi::MAX_CAMERAS as usize;
 
 /// Bytes of ReSTIR state per observed texel: four reservoir slots (the kept positive and
 /// negative reservoirs and the fresh ones, [`reservoir::WORDS`] words each), a header word
@@ -92,155 +63,34 @@ pub const STATE_BYTES_PER_32_TEXELS: u64 = 8;
 /// (RGBA f32 each).
 pub const STATE_BYTES_PER_PIXEL: u64 = 2 * 16;
 
-use crate::gpu::abi::merge_flag::{
+use abi::merge_flag::{
     HAVE_PREV as FLAG_HAVE_PREV, POSITIVIZE as FLAG_POSITIVIZE, TEMPORAL as FLAG_TEMPORAL,
     VERIFY as FLAG_VERIFY,
 };
-const MERGE_STAT_EVALUATIONS: usize = crate::gpu::abi::stat::MERGE_EVALUATIONS as usize;
-const MERGE_STAT_DROPPED: usize = crate::gpu::abi::stat::MERGE_DROPPED as usize;
-const MERGE_STAT_VERIFIED: usize = crate::gpu::abi::stat::MERGE_VERIFIED as usize;
-const MERGE_STAT_VERIFY_MAX_ERROR: usize = crate::gpu::abi::stat::MERGE_VERIFY_MAX_ERROR as usize;
-const CANDIDATE_STAT_LOST: usize = crate::gpu::abi::stat::CANDIDATE_LOST as usize;
-const CANDIDATE_STAT_DROPPED: usize = crate::gpu::abi::stat::CANDIDATE_DROPPED as usize;
-const CANDIDATE_STAT_UNMAPPED: usize = crate::gpu::abi::stat::CANDIDATE_UNMAPPED as usize;
 
-/// Confidence of the fresh candidates in the merge (the kept sample's is min(M, M-cap)).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum Confidence {
-    /// Gradient samples per pixel (the reference code's M_c = spp; the pixel count cancels).
-    #[default]
-    Samples,
-    /// Candidates per pixel and texel: 2 techniques x gradient spp x cameras.
-    Candidates,
-}
+/// Its WGSL: (name, source) of its passes and of the modules they import.
+pub(crate) const WGSL: &[(&str, &str)] = &[
+    ("restir_candidates", include_str!("restir_candidates.wgsl")),
+    ("restir_merge", include_str!("restir_merge.wgsl")),
+    ("reservoir_test", include_str!("reservoir_test.wgsl")),
+    ("restir/reservoir", include_str!("reservoir.wgsl")),
+    (
+        "restir/reservoir_slots",
+        include_str!("reservoir_slots.wgsl"),
+    ),
+    ("restir/compact_path", include_str!("compact_path.wgsl")),
+    ("restir/target", include_str!("target.wgsl")),
+];
 
-impl Confidence {
-    /// The name used on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            Confidence::Samples => "samples",
-            Confidence::Candidates => "candidates",
-        }
-    }
-}
-
-/// How the ReSTIR estimator reuses samples.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RestirOptions {
-    /// Cap on the confidence of the kept samples (the knob between reuse and staleness): they
-    /// weigh min(M_c x merges so far, m_cap) against the fresh candidates' M_c.
-    pub m_cap: f32,
-    /// Confidence of the fresh candidates.
-    pub confidence: Confidence,
-    /// Temporal reuse across iterations; without it, resampling within the iteration only.
-    pub temporal: bool,
-    /// Two reservoirs per texel (positive and negative part of the target); without it, one
-    /// over |target|.
-    pub positivization: bool,
-    /// Self-check of the stored paths: the merge also evaluates every kept path under the
-    /// state it was drawn at and records the largest relative difference from its stored
-    /// factor ([`MergeDiagnostics`]). Costs one more BRDF evaluation per kept sample.
-    pub verify_paths: bool,
-    /// Weight of the last iteration's target adjoint in this one's, in [0, 1): the
-    /// resampling targets use an exponential moving average of the adjoints (0: this
-    /// iteration's adjoint, as the values do), so that they change less between iterations
-    /// than a noisy primal's adjoint does. The values, and so the estimate, always use the
-    /// iteration's own adjoint. `None`: by the primal estimator, [`TARGET_SMOOTHING_INDEPENDENT`]
-    /// with the independent primal and 0 with the control variate, whose image is already a
-    /// recursive average (a second one only adds lag: measured worse on `vase` and `sphere`).
-    pub target_smoothing: Option<f32>,
-    /// Reuse on a schedule: the kept samples' confidence cap is `m_cap` times the
-    /// learning-rate schedule's factor at the iteration (so with a decaying schedule early
-    /// iterations reuse fully and late ones average mostly fresh samples); without a schedule
-    /// it changes nothing.
-    pub m_cap_follows_schedule: bool,
-}
-
-impl Default for RestirOptions {
-    fn default() -> Self {
-        RestirOptions {
-            m_cap: 8.0,
-            confidence: Confidence::default(),
-            temporal: true,
-            positivization: true,
-            verify_paths: false,
-            target_smoothing: None,
-            m_cap_follows_schedule: false,
-        }
-    }
-}
-
-impl RestirOptions {
-    /// An error naming the option when `m_cap` is not a positive number or a given
-    /// `target_smoothing` is outside [0, 1).
-    pub fn validate(&self) -> Result<()> {
-        if !(self.m_cap.is_finite() && self.m_cap > 0.0) {
-            return Err(Error::Invalid(format!(
-                "ReSTIR's m_cap (--m-cap) must be a positive number, not {}",
-                self.m_cap
-            )));
-        }
-        if let Some(b) = self.target_smoothing.filter(|b| !(0.0..1.0).contains(b)) {
-            return Err(Error::Invalid(format!(
-                "ReSTIR's target_smoothing (--target-smoothing) must be in [0, 1), not {b}"
-            )));
-        }
-        Ok(())
-    }
-
-    /// The target smoothing used with the primal estimator `primal`.
-    pub fn target_smoothing_for(&self, primal: crate::optim::PrimalMode) -> f32 {
-        self.target_smoothing.unwrap_or(match primal {
-            crate::optim::PrimalMode::Independent => TARGET_SMOOTHING_INDEPENDENT,
-            crate::optim::PrimalMode::ControlVariate => 0.0,
-        })
-    }
-}
-
-/// [`RestirOptions::target_smoothing`] by default with the independent primal.
-pub const TARGET_SMOOTHING_INDEPENDENT: f32 = 0.9;
-
-/// `CandidateParams` in restir_candidates.wgsl (a test checks the layout).
-/// The fields are documented in the WGSL twin.
-#[allow(missing_docs)]
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct CandidateParams {
-    pub camera: GpuCameraInfo,
-    pub seed: u32,
-    pub spp: u32,
-    pub stride: u32,
-    pub inv_spp: f32,
-    pub camera_index: u32,
-    pub adjoint_offset: u32,
-    pub positivize: u32,
-    pub prev_targets: u32,
-    pub smoothing: f32,
-    pub target_cur: u32,
-    pub target_prev: u32,
-    pub _pad: u32,
-}
-
-/// `MergeParams` in restir_merge.wgsl (a test checks the layout).
-/// The fields are documented in the WGSL twin.
-#[allow(missing_docs)]
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct MergeParams {
-    pub n_observed: u32,
-    pub n_pixels: u32,
-    pub seed: u32,
-    pub flags: u32,
-    pub m_fresh: f32,
-    pub m_kept: f32,
-    pub inv_spp: f32,
-    pub n_textures: u32,
-    pub stride: u32,
-    pub target_cur: u32,
-    pub target_prev: u32,
-    pub _pad: u32,
-    pub origins: [[f32; 4]; MAX_CAMERAS],
-}
+/// The passes it creates, the slowest to compile first.
+pub(crate) const PASSES: [&str; 2] = ["restir_candidates", "restir_merge"];
+const MERGE_STAT_EVALUATIONS: usize = abi::stat::MERGE_EVALUATIONS as usize;
+const MERGE_STAT_DROPPED: usize = abi::stat::MERGE_DROPPED as usize;
+const MERGE_STAT_VERIFIED: usize = abi::stat::MERGE_VERIFIED as usize;
+const MERGE_STAT_VERIFY_MAX_ERROR: usize = abi::stat::MERGE_VERIFY_MAX_ERROR as usize;
+const CANDIDATE_STAT_LOST: usize = abi::stat::CANDIDATE_LOST as usize;
+const CANDIDATE_STAT_DROPPED: usize = abi::stat::CANDIDATE_DROPPED as usize;
+const CANDIDATE_STAT_UNMAPPED: usize = abi::stat::CANDIDATE_UNMAPPED as usize;
 
 /// Names in the ReSTIR estimator's [`EstimatorState`]: the kept reservoirs (two per texel,
 /// sign 0 then sign 1, [`reservoir::WORDS`] words each), the target adjoints of both parities
@@ -441,7 +291,11 @@ impl Restir {
     pub(crate) fn new(s: &Setup) -> Result<Restir> {
         Self::check_setup(s)?;
         let gpu = s.gpu;
-        let o = s.settings.restir;
+        let o: RestirOptions = s
+            .settings
+            .estimator_options
+            .get()
+            .map_err(|(key, msg)| Error::Invalid(format!("{key} {msg}")))?;
         let n_cams = s.cameras.len();
         let smoothing = o.target_smoothing_for(s.settings.primal);
         let n_pixels = s.settings.width * s.settings.height;
@@ -672,7 +526,7 @@ impl Estimator for Restir {
             &self.merge_pipeline,
             &[frame.scene_group, &self.merge_groups[parity]],
             self.merge_grid,
-            timer.next(PassKind::Merge),
+            timer.next(PassKind::Combine),
         );
     }
 
@@ -691,9 +545,9 @@ impl Estimator for Restir {
     fn faults(&self, gpu: &Gpu, f: &mut FaultCounts) -> Result<()> {
         let c: Vec<u32> = gpu.read_pod(&self.candidate_stats)?;
         let m: Vec<u32> = gpu.read_pod(&self.merge_stats)?;
-        f.lost_offers += c[CANDIDATE_STAT_LOST];
+        f.lost_kept += c[CANDIDATE_STAT_LOST];
         f.dropped_gradient += c[CANDIDATE_STAT_DROPPED];
-        f.dropped_replays += m[MERGE_STAT_DROPPED];
+        f.dropped_kept += m[MERGE_STAT_DROPPED];
         Ok(())
     }
 
@@ -798,6 +652,10 @@ impl Estimator for Restir {
 
     fn diagnostics(&self, gpu: &Gpu) -> Result<Diagnostics> {
         Ok(self.merge_diagnostics(gpu)?.named())
+    }
+
+    fn counters(&self) -> &'static [&'static str] {
+        &[MergeDiagnostics::EVALUATIONS, MergeDiagnostics::UNMAPPED]
     }
 }
 

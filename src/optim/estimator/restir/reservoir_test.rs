@@ -1,6 +1,6 @@
 //! The reservoir selection test pass (`reservoir_test.wgsl` in this folder): the streaming update of
 //! shaders/shared/reservoir.wgsl run on the GPU, for the chi-square test of its selection.
-use crate::gpu::abi::reservoir;
+use super::abi::reservoir;
 use crate::gpu::{grid_2d, Gpu};
 use crate::render::WORKGROUP;
 use crate::{Error, Result};

@@ -3,7 +3,8 @@
 // invocations hit each reservoir at once (slot 0 of observed texel r, sign 0's lock). The
 // test checks the selection frequencies.
 #import shared/rng
-#import shared/reservoir
+#import gen/restir
+#import restir/reservoir
 
 struct ReservoirTestParams {
     n_candidates: u32,

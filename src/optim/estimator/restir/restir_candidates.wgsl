@@ -3,10 +3,10 @@
 // is the path-space integrand adjoint x e, with e = d(BRDF cos L_i)/d(texel) per image
 // channel (shared/surface.wgsl, path_factor); its target q is target_of(the target adjoint x
 // e) (shared/params.wgsl). The target adjoint is an exponential moving average of
-// the adjoints (cp.smoothing; shared/reservoir.wgsl), which this pass forms for every pixel.
+// the adjoints (cp.smoothing; reservoir.wgsl), which this pass forms for every pixel.
 // A candidate is offered to the texel's positive reservoir when q > 0, to the negative one
 // when q < 0 (or to one reservoir without positivization) with the resampling weight |q| x
-// MIS weight / density, and the reservoir keeps the path (shared/compact_path.wgsl; the
+// MIS weight / density, and the reservoir keeps the path (compact_path.wgsl; the
 // samples are taken at the rounded hit, directions and radiances that it stores). Only
 // observed texels have reservoirs (observed_map); a candidate for another texel is dropped
 // and counted (CANDIDATE_STAT_UNMAPPED: the observed-texel pass's strata missed it).
@@ -18,7 +18,10 @@
 #import shared/camera
 #import shared/adjoint_pixel
 #import shared/integrator
-#import shared/reservoir
+#import gen/restir
+#import restir/compact_path
+#import restir/reservoir
+#import restir/target
 
 // Mirrored by CandidateParams in src/optim/estimator/restir/mod.rs.
 struct CandidateParams {
@@ -43,16 +46,16 @@ struct CandidateParams {
 
 @group(1) @binding(0) var<uniform> cp: CandidateParams;
 @group(1) @binding(1) var<storage, read> adjoint: array<vec4f>;
-// Slot k of every observed texel's reservoirs (shared/reservoir.wgsl) and the texels'
+// Slot k of every observed texel's reservoirs (reservoir.wgsl) and the texels'
 // headers, which say which slots hold the kept reservoirs and carry the locks.
 @group(1) @binding(2) var<storage, read_write> slots0: array<atomic<u32>>;
 @group(1) @binding(3) var<storage, read_write> slots1: array<atomic<u32>>;
 @group(1) @binding(4) var<storage, read_write> slots2: array<atomic<u32>>;
 @group(1) @binding(5) var<storage, read_write> slots3: array<atomic<u32>>;
 @group(1) @binding(6) var<storage, read_write> headers: array<atomic<u32>>;
-// CANDIDATE_STAT_* slots (generated from src/gpu/abi.rs).
+// CANDIDATE_STAT_* slots (generated from abi.rs).
 @group(1) @binding(7) var<storage, read_write> cstats: array<atomic<u32>, 4>;
-// The target adjoints (shared/reservoir.wgsl), both parities: the last iteration's, and this
+// The target adjoints (reservoir.wgsl), both parities: the last iteration's, and this
 // one's, which this pass forms.
 @group(1) @binding(8) var<storage, read_write> targets: array<vec4f>;
 // The compaction map: per 32 texels, which are observed (bits) and how many observed texels

@@ -15,7 +15,7 @@
 // was drawn) stays a valid path with the same value of everything but the BRDF and the
 // adjoint. The shift is the identity in path space (Jacobian 1): a stored sample, fresh or
 // kept, is evaluated under the current textures from its compact form
-// (shared/compact_path.wgsl): the hit is rebuilt from its triangle and barycentrics and the
+// (compact_path.wgsl): the hit is rebuilt from its triangle and barycentrics and the
 // camera's position (texture coordinates, shading frame, outgoing direction, the glTF
 // material's inputs there), and one BRDF-with-derivative evaluation gives its factor e; its
 // value is the pixel's adjoint times e, its target target_of(the pixel's target adjoint
@@ -26,14 +26,16 @@
 // traces a ray: shared/bvh is not part of this pass (a test checks the composed module).
 // MIS: balance heuristic with confidences over the inputs' own targets.
 // Selection is in place: a texel's four reservoir slots hold its two kept reservoirs and the
-// two fresh ones (shared/reservoir.wgsl); the merged reservoir of sign s is whichever input
+// two fresh ones (reservoir.wgsl); the merged reservoir of sign s is whichever input
 // it selected, where it already lies, with its W and its target rewritten, and the texel's
 // header says which slot that is. The two slots the new header leaves free get W = 0 for the
 // next iteration's candidates. One invocation per observed texel (observed_list).
 #import shared/rng
-#import shared/compact_path
-#import shared/reservoir_slots
+#import restir/compact_path
+#import restir/target
+#import restir/reservoir_slots
 #import gen/abi
+#import gen/restir
 
 // Mirrored by MergeParams in src/optim/estimator/restir/mod.rs. flags: MERGE_FLAG_* (generated).
 struct MergeParams {
@@ -58,7 +60,7 @@ struct MergeParams {
 
 @group(1) @binding(0) var<uniform> mp: MergeParams;
 @group(1) @binding(1) var<storage, read> adjoint: array<vec4f>;
-// The target adjoints of this iteration and the last (shared/reservoir.wgsl).
+// The target adjoints of this iteration and the last (reservoir.wgsl).
 @group(1) @binding(2) var<storage, read> targets: array<vec4f>;
 // Slot k of every observed texel's reservoirs, and their headers (each observed texel's
 // invocation owns its four slots and its header).
@@ -68,7 +70,7 @@ struct MergeParams {
 @group(1) @binding(6) var<storage, read_write> slots3: array<u32>;
 @group(1) @binding(7) var<storage, read_write> headers: array<u32>;
 @group(1) @binding(8) var<storage, read_write> grad: array<f32>;
-// MERGE_STAT_* slots (generated from src/gpu/abi.rs).
+// MERGE_STAT_* slots (generated from abi.rs).
 @group(1) @binding(9) var<storage, read_write> mstats: array<atomic<u32>, 4>;
 // The texel (index into all optimized texels) of each observed texel.
 @group(1) @binding(10) var<storage, read> observed_list: array<u32>;
@@ -169,9 +171,9 @@ fn set_w(k: u32, i: u32, w: f32) {
 fn set_q_prev(k: u32, i: u32, q: f32) {
     let b = i * RESERVOIR_WORDS;
     let h = bf16_pack(q);
-    let low = (1u << RES_OCT_BITS) - 1u;
-    set_slot_word(k, b + RES_WI_X, (slot_word(k, b + RES_WI_X) & low) | ((h & 0xffu) << RES_OCT_BITS));
-    set_slot_word(k, b + RES_WI_Y, (slot_word(k, b + RES_WI_Y) & low) | ((h >> 8u) << RES_OCT_BITS));
+    let low = (1u << PATH_OCT_BITS) - 1u;
+    set_slot_word(k, b + RES_WI_X, (slot_word(k, b + RES_WI_X) & low) | ((h & 0xffu) << PATH_OCT_BITS));
+    set_slot_word(k, b + RES_WI_Y, (slot_word(k, b + RES_WI_Y) & low) | ((h >> 8u) << PATH_OCT_BITS));
 }
 
 // Target of reservoir sign s (0 positive, 1 negative) for signed target q; |q| without

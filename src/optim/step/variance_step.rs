@@ -1,5 +1,5 @@
 //! The variance-scaled step (after Bálint et al. 2023): the pass of
-//! shaders/variance_step.wgsl (`VarianceStepPass`, one dispatch per optimized texture), its
+//! variance_step.wgsl (`VarianceStepPass`, one dispatch per optimized texture), its
 //! options and its CPU reference. With z = d / (√Var(d) + eps), where d is the gradient
 //! estimate and Var(d) its variance (the estimator's own where it tracks one, the recursive
 //! estimator's, otherwise a moving variance of the gradient), each scalar moves by
@@ -8,34 +8,12 @@
 //! larger step; the threshold keeps only the part of the estimate that exceeds its noise, so
 //! that scalars the images hardly determine do not drift, and a lower-variance estimate gets
 //! closer to the optimum before its steps stop.
+use super::moment_filter::MomentFilter;
+use super::{StepBuffers, TextureSteps};
 use crate::gpu::Gpu;
-use crate::optim::adam::TextureSteps;
-use crate::optim::moment_filter::MomentFilter;
 use crate::optim::PassTimer;
 use crate::render::params::{ParamSet, ParamTexture};
 use crate::Result;
-
-/// Which step the optimizer takes with the gradient estimate (the task file's
-/// `optimizer.step`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum StepKind {
-    /// Adam (first and second moments).
-    #[default]
-    Adam,
-    /// The variance-scaled step: no first moment, the estimate's variance in the denominator.
-    Variance,
-}
-
-impl StepKind {
-    /// The name used on the command line and in reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            StepKind::Adam => "adam",
-            StepKind::Variance => "variance",
-        }
-    }
-}
 
 /// The variance-scaled step's options (the task file's `[optimizer.variance_step]`).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
@@ -159,17 +137,6 @@ pub(crate) const VARIANCE_STEP_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupD
     ],
 };
 
-/// What the variance-scaled step binds.
-pub(crate) struct StepBuffers<'a> {
-    pub grad: &'a wgpu::Buffer,
-    pub params: &'a wgpu::Buffer,
-    pub moments: &'a [wgpu::Buffer; 2],
-    /// The estimator's variance, or None (a moving variance of the gradient; a small unused
-    /// buffer is bound in its place).
-    pub variance: Option<&'a wgpu::Buffer>,
-    pub stats: &'a wgpu::Buffer,
-}
-
 /// The variance-scaled step's pass: one or two dispatches per optimized texture (see
 /// [`TextureSteps`]).
 pub(crate) struct VarianceStepPass(TextureSteps<VarianceStepParams>);
@@ -180,7 +147,7 @@ impl VarianceStepPass {
         set: &ParamSet,
         (options, mask): (VarianceStepOptions, bool),
         filter: Option<MomentFilter>,
-        b: StepBuffers,
+        b: &StepBuffers,
     ) -> Result<VarianceStepPass> {
         let layout = gpu.pass_layout("variance_step", 0)?;
         let pipeline = gpu.compute_pipeline("variance_step", &[&layout])?;
@@ -253,9 +220,22 @@ impl VarianceStepPass {
             p.count
         })
     }
+}
 
-    /// The moment filter, when the step has one.
-    pub(crate) fn filter(&self) -> Option<&MomentFilter> {
+impl super::Step for VarianceStepPass {
+    fn encode(
+        &mut self,
+        gpu: &Gpu,
+        enc: &mut wgpu::CommandEncoder,
+        set: &ParamSet,
+        factor: f32,
+        t: u32,
+        timer: &mut PassTimer,
+    ) -> Vec<f32> {
+        VarianceStepPass::encode(self, gpu, enc, set, factor, t, timer)
+    }
+
+    fn filter(&self) -> Option<&MomentFilter> {
         self.0.filter.as_ref()
     }
 }

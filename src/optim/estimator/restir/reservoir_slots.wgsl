@@ -1,9 +1,10 @@
 // Where a texel's reservoirs lie: RESERVOIR_SLOTS slots per observed texel and a header word
-// (the layout is generated from src/gpu/abi.rs, gen/abi). The header names two distinct
+// (the layout is generated from abi.rs, gen/restir). The header names two distinct
 // slots, those of the positive (sign 0) and the negative (sign 1) reservoir; the other two
 // are free for the next iteration's fresh candidates. Bits from HEADER_LOCK_SHIFT on are the
 // candidate pass's locks.
 #import gen/abi
+#import gen/restir
 
 // The slot of sign s's reservoir in header h.
 fn header_slot(h: u32, s: u32) -> u32 {

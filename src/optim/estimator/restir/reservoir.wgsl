@@ -1,12 +1,13 @@
 #import shared/types
 #import gen/abi
-#import shared/reservoir_slots
+#import gen/restir
+#import restir/reservoir_slots
 
 // Streaming reservoir updates for parameter-space ReSTIR. A reservoir holds one path in
-// RESERVOIR_WORDS words (the layout, RES_*, is generated from src/gpu/abi.rs): the camera
+// RESERVOIR_WORDS words (the layout, RES_*, is generated from abi.rs): the camera
 // sample that started it (pixel, camera, technique in RES_INFO), its weight sum (fresh
 // reservoirs) or unbiased contribution weight W (merged), and the path in its compact form
-// (shared/compact_path.wgsl: the camera ray's hit, the incident direction in the hit's
+// (compact_path.wgsl: the camera ray's hit, the incident direction in the hit's
 // shading frame, the incident radiance) with the path's target under the previous state:
 // for a fresh path the candidate pass computes it, for a merged one the merge stores the
 // target it had there, which is its target under the previous state at the next merge.
@@ -39,7 +40,7 @@ const LOCK_BOUND: u32 = 4194304u;
 struct Candidate {
     // Pixel | camera << INFO_CAMERA_SHIFT | technique << INFO_TECH_SHIFT (0 light, 1 BSDF).
     info: u32,
-    // The path's words after RES_W (shared/compact_path.wgsl, path_words), with its target
+    // The path's words after RES_W (compact_path.wgsl, path_words), with its target
     // under the previous iteration's textures and target adjoint (0 when the merge will not
     // reuse).
     words: array<u32, 5>,

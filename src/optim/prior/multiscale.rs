@@ -106,7 +106,7 @@ impl Multiscale {
         enc: &mut wgpu::CommandEncoder,
         seed: u32,
         iteration: u32,
-        timer: &mut super::timing::PassTimer,
+        timer: &mut crate::optim::timing::PassTimer,
     ) {
         let (sx, sy) = shift(seed, iteration);
         for (u, g, p) in &mut self.textures {
@@ -117,7 +117,7 @@ impl Multiscale {
                 (p.width + sx).div_ceil(TILE),
                 (p.height + sy).div_ceil(TILE),
             );
-            let timing = timer.next(super::timing::PassKind::Adam);
+            let timing = timer.next(crate::optim::timing::PassKind::Adam);
             encode_timed_pass(
                 enc,
                 "multiscale_gradient",
@@ -130,7 +130,7 @@ impl Multiscale {
     }
 }
 
-impl super::Optimizer {
+impl crate::optim::Optimizer {
     /// Build the pass at the first call when the settings ask for it (it needs the observed
     /// texels, which take a render of their own).
     pub(crate) fn prepare_multiscale(&mut self) -> Result<()> {

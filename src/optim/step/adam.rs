@@ -1,12 +1,11 @@
 //! Adam: the constants, the pass of shaders/adam.wgsl (`AdamPass`, one or two dispatches per
 //! optimized texture), its CPU reference, and what it shares with the variance-scaled step
 //! (`TextureSteps`).
-use crate::gpu::abi::step_phase;
-use crate::gpu::{encode_timed_pass, grid_2d, Gpu};
-use crate::optim::moment_filter::MomentFilter;
-use crate::optim::{PassKind, PassTimer};
+use super::moment_filter::MomentFilter;
+use super::{StepBuffers, TextureSteps};
+use crate::gpu::Gpu;
+use crate::optim::PassTimer;
 use crate::render::params::{ParamSet, ParamTexture};
-use crate::render::WORKGROUP;
 use crate::Result;
 
 /// First-moment decay.
@@ -157,21 +156,13 @@ pub(crate) const ADAM_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
 /// The Adam pass: one or two dispatches per optimized texture (see [`TextureSteps`]).
 pub(crate) struct AdamPass(TextureSteps<AdamParams>);
 
-/// What the Adam pass binds.
-pub(crate) struct AdamBuffers<'a> {
-    pub grad: &'a wgpu::Buffer,
-    pub params: &'a wgpu::Buffer,
-    pub moments: &'a [wgpu::Buffer; 2],
-    pub stats: &'a wgpu::Buffer,
-}
-
 impl AdamPass {
     pub(crate) fn new(
         gpu: &Gpu,
         set: &ParamSet,
         (options, mask): (AdamOptions, bool),
         filter: Option<MomentFilter>,
-        b: AdamBuffers,
+        b: &StepBuffers,
     ) -> Result<AdamPass> {
         let layout = gpu.pass_layout("adam", 0)?;
         let pipeline = gpu.compute_pipeline("adam", &[&layout])?;
@@ -236,101 +227,22 @@ impl AdamPass {
             p.count
         })
     }
-
-    /// The moment filter, when the step has one.
-    pub(crate) fn filter(&self) -> Option<&MomentFilter> {
-        self.0.filter.as_ref()
-    }
 }
 
-/// A step pass (Adam or the variance-scaled step) over every optimized texture: per texture
-/// one dispatch (phase [`step_phase::FUSED`]), or with the moment filter two around it
-/// ([`step_phase::PAIR`], the filter's levels, [`step_phase::FILTERED`]), each with its
-/// uniform, bind group and parameters.
-pub(crate) struct TextureSteps<P> {
-    label: &'static str,
-    pipeline: wgpu::ComputePipeline,
-    textures: Vec<Vec<(wgpu::Buffer, wgpu::BindGroup, P)>>,
-    pub(crate) filter: Option<MomentFilter>,
-}
-
-impl<P: bytemuck::Pod> TextureSteps<P> {
-    /// The dispatches of pass `label` for every texture of `set`: `make` gives a texture's
-    /// parameters in a phase, `bind` the bind group of a uniform with the filter's pair (a
-    /// small unused pair without the filter).
-    pub(crate) fn new(
-        gpu: &Gpu,
-        label: &'static str,
-        pipeline: wgpu::ComputePipeline,
-        set: &ParamSet,
-        filter: Option<MomentFilter>,
-        make: impl Fn(&ParamTexture, u32) -> P,
-        bind: impl Fn(&str, &wgpu::Buffer, &[wgpu::Buffer; 2]) -> wgpu::BindGroup,
-    ) -> TextureSteps<P> {
-        let unused = || {
-            [
-                gpu.storage_zeroed(&format!("{label} unused pair first"), 16),
-                gpu.storage_zeroed(&format!("{label} unused pair second"), 16),
-            ]
-        };
-        let phases: Vec<(u32, [wgpu::Buffer; 2])> = match &filter {
-            None => vec![(step_phase::FUSED, unused())],
-            Some(f) => vec![
-                (step_phase::PAIR, f.input().clone()),
-                (step_phase::FILTERED, f.output().clone()),
-            ],
-        };
-        let textures = set
-            .textures
-            .iter()
-            .map(|t| {
-                phases
-                    .iter()
-                    .map(|(phase, pair)| {
-                        let p = make(t, *phase);
-                        let name = format!("{label} params {} phase {phase}", t.name());
-                        let u = gpu.uniform(&name, bytemuck::bytes_of(&p));
-                        (u.clone(), bind(label, &u, pair), p)
-                    })
-                    .collect()
-            })
-            .collect();
-        TextureSteps {
-            label,
-            pipeline,
-            textures,
-            filter,
-        }
-    }
-
-    /// Record the step of every texture: `prepare` sets a texture's uniform for the learning
-    /// rate it is given (the texture's rate times `factor`) and returns its number of
-    /// entries. Returns the learning rates used, one per texture.
-    pub(crate) fn encode(
+impl super::Step for AdamPass {
+    fn encode(
         &mut self,
         gpu: &Gpu,
         enc: &mut wgpu::CommandEncoder,
         set: &ParamSet,
         factor: f32,
+        t: u32,
         timer: &mut PassTimer,
-        mut prepare: impl FnMut(&mut P, f32) -> u32,
     ) -> Vec<f32> {
-        let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
-        let mut rates = Vec::with_capacity(self.textures.len());
-        for (k, (dispatches, tex)) in self.textures.iter_mut().zip(&set.textures).enumerate() {
-            let lr = tex.learning_rate * factor;
-            rates.push(lr);
-            for (j, (u, g, p)) in dispatches.iter_mut().enumerate() {
-                let count = prepare(p, lr);
-                gpu.queue.write_buffer(u, 0, bytemuck::bytes_of(p));
-                let grid = grid_2d(count, WORKGROUP, max_dim);
-                let timing = timer.next(PassKind::Adam);
-                encode_timed_pass(enc, self.label, &self.pipeline, &[g], grid, timing);
-                if let (0, Some(f)) = (j, &self.filter) {
-                    f.encode(enc, k, timer);
-                }
-            }
-        }
-        rates
+        AdamPass::encode(self, gpu, enc, set, factor, t, timer)
+    }
+
+    fn filter(&self) -> Option<&MomentFilter> {
+        self.0.filter.as_ref()
     }
 }

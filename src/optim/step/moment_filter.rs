@@ -367,7 +367,7 @@ impl MomentFilter {
     }
 }
 
-impl super::Optimizer {
+impl crate::optim::Optimizer {
     /// The moment filter on the GPU applied to `pair` (two arrays laid out like the
     /// parameters), guided by the current textures: texture by texture, the pair is written to
     /// the filter's input, filtered and read back. For tests against [`reference()`]; an error
@@ -379,10 +379,7 @@ impl super::Optimizer {
                 "apply_moment_filter: the pair must have {n} values each"
             )));
         }
-        let filter = match &self.step {
-            super::StepPass::Adam(a) => a.filter(),
-            super::StepPass::Variance(v) => v.filter(),
-        };
+        let filter = self.step.filter();
         let f = filter.ok_or_else(|| {
             crate::Error::Invalid("apply_moment_filter: the settings have no moment filter".into())
         })?;

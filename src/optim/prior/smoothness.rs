@@ -176,19 +176,23 @@ impl Smoothness {
     }
 
     /// Record the pass over every texture.
-    pub fn encode(&self, enc: &mut wgpu::CommandEncoder, timer: &mut super::timing::PassTimer) {
+    pub fn encode(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        timer: &mut crate::optim::timing::PassTimer,
+    ) {
         for (g, p) in &self.textures {
             let grid = (
                 p.width.div_ceil(WORKGROUP_SIDE),
                 p.height.div_ceil(WORKGROUP_SIDE),
             );
-            let timing = timer.next(super::timing::PassKind::Adam);
+            let timing = timer.next(crate::optim::timing::PassKind::Adam);
             encode_timed_pass(enc, "smoothness", &self.pipeline, &[g], grid, timing);
         }
     }
 }
 
-impl super::Optimizer {
+impl crate::optim::Optimizer {
     /// Build the pass at the first call when the settings ask for it (it needs the observed
     /// texels, which take a render of their own).
     pub(crate) fn prepare_smoothness(&mut self) -> Result<()> {

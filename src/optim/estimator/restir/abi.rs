@@ -1,0 +1,145 @@
+//! ReSTIR's part of the GPU contract: the reservoir layout, the camera limit, the merge flags
+//! and the counter slots of its passes' statistics buffers, defined once, here, and generated
+//! into WGSL as `gen/restir` (its passes and WGSL modules say `#import gen/restir`).
+
+/// ReSTIR's reservoirs in their compact form: word offsets within a reservoir, the packing
+/// of its words, a texel's slots and header (WGSL: `RES_*`, `INFO_*`, `RESERVOIR_WORDS`,
+/// `RESERVOIR_SLOTS`, `HEADER_*`). A reservoir stores its path as the camera ray's hit
+/// (triangle and barycentrics), the incident direction in the hit's shading frame and the
+/// incident radiance; everything else the BRDF needs is rebuilt from the scene
+/// (`compact_path.wgsl` here, with `shared/path_encoding.wgsl`; the precision of each
+/// encoding is stated in [`super::compact`]).
+pub mod reservoir {
+    /// Pixel | camera << CAMERA_SHIFT | technique << TECH_SHIFT.
+    pub const INFO: u32 = 0;
+    /// Weight sum (fresh reservoirs) or unbiased contribution weight W (merged), f32.
+    pub const W: u32 = 1;
+    /// Triangle index (TRI_BITS) and the low bits of the first barycentric.
+    pub const TRI: u32 = 2;
+    /// The high bits of the first barycentric and the second one.
+    pub const BARY: u32 = 3;
+    /// The incident direction's first octahedral coordinate (24 bits) and the low byte of
+    /// the target under the previous state (bfloat16).
+    pub const WI_X: u32 = 4;
+    /// The second octahedral coordinate (24 bits) and the high byte of that target.
+    pub const WI_Y: u32 = 5;
+    /// Incident radiance, RGB with a shared exponent (RGBE, 8 bits each).
+    pub const RADIANCE: u32 = 6;
+    /// Words per reservoir.
+    pub const WORDS: u32 = 7;
+    /// Bits of the triangle index (ReSTIR handles scenes of up to 2^24 triangles).
+    pub const TRI_BITS: u32 = 24;
+    pub use crate::gpu::abi::path_encoding::{BARY_BITS, OCT_BITS};
+    /// Bits of the pixel index (images up to 8192 x 8192 = 2^26 pixels).
+    pub const CAMERA_SHIFT: u32 = 26;
+    /// Camera index mask after the shift.
+    pub const CAMERA_MASK: u32 = 7;
+    /// Pixel index mask.
+    pub const PIXEL_MASK: u32 = (1 << CAMERA_SHIFT) - 1;
+    /// The technique bit: 0 light sampling, 1 BSDF sampling.
+    pub const TECH_SHIFT: u32 = 29;
+    /// Reservoir slots per texel: its two kept reservoirs and the two fresh ones. Slot k of
+    /// every observed texel lies in its own buffer (`slots<k>`), so that no binding holds
+    /// more than a quarter of the state.
+    pub const SLOTS: u32 = 4;
+    /// Bits of a slot index in a texel's header (sign 0's slot, then sign 1's).
+    pub const HEADER_SLOT_BITS: u32 = 2;
+    /// Slot index mask after the shift.
+    pub const HEADER_SLOT_MASK: u32 = (1 << HEADER_SLOT_BITS) - 1;
+    /// The header's lock bit of sign 0's fresh reservoir (sign 1's is the next bit): the
+    /// candidate pass takes it while it writes that reservoir.
+    pub const HEADER_LOCK_SHIFT: u32 = 2 * HEADER_SLOT_BITS;
+    /// The header of a texel whose reservoirs lie in slots 0 (sign 0) and 1 (sign 1).
+    pub const HEADER_FIRST_TWO: u32 = 1 << HEADER_SLOT_BITS;
+    /// Marks a texel no camera observes in the compaction map's lookups (u32::MAX).
+    pub const UNOBSERVED: u32 = u32::MAX;
+
+    /// The slot of sign `sign`'s reservoir in header `h`.
+    pub fn header_slot(h: u32, sign: u32) -> u32 {
+        (h >> (HEADER_SLOT_BITS * sign)) & HEADER_SLOT_MASK
+    }
+}
+
+/// Cameras a ReSTIR optimizer can use (the camera index has three bits in a reservoir).
+pub const MAX_CAMERAS: u32 = reservoir::CAMERA_MASK + 1;
+
+/// Flags of ReSTIR's merge pass (WGSL `MERGE_FLAG_*`).
+pub mod merge_flag {
+    /// Temporal reuse: the kept reservoirs take part.
+    pub const TEMPORAL: u32 = 1;
+    /// Two reservoirs per texel (positive and negative parts).
+    pub const POSITIVIZE: u32 = 2;
+    /// The previous iteration's state exists.
+    pub const HAVE_PREV: u32 = 4;
+    /// Check stored paths against their stored factors (tests).
+    pub const VERIFY: u32 = 8;
+}
+
+/// Counter slots of the candidate pass's (`cstats`) and the merge's (`mstats`) statistics.
+pub mod stat {
+    /// `restir_candidates.wgsl`: candidates offered.
+    pub const CANDIDATE_OFFERED: u32 = 0;
+    /// `restir_candidates.wgsl`: offers whose lock loop ran out.
+    pub const CANDIDATE_LOST: u32 = 1;
+    /// `restir_candidates.wgsl`: non-finite candidates dropped.
+    pub const CANDIDATE_DROPPED: u32 = 2;
+    /// `restir_candidates.wgsl`: candidates for texels outside the compaction map (texels
+    /// that the observed-texel pass's strata missed), dropped.
+    pub const CANDIDATE_UNMAPPED: u32 = 3;
+    /// `restir_merge.wgsl`: kept paths evaluated.
+    pub const MERGE_EVALUATIONS: u32 = 0;
+    /// `restir_merge.wgsl`: non-finite values dropped.
+    pub const MERGE_DROPPED: u32 = 1;
+    /// `restir_merge.wgsl`: paths verified (tests).
+    pub const MERGE_VERIFIED: u32 = 2;
+    /// `restir_merge.wgsl`: largest verification error (f32 bits).
+    pub const MERGE_VERIFY_MAX_ERROR: u32 = 3;
+}
+
+/// (WGSL name, value) of every constant.
+pub const CONSTANTS: &[(&str, u32)] = &[
+    ("RESERVOIR_WORDS", reservoir::WORDS),
+    ("RES_INFO", reservoir::INFO),
+    ("RES_W", reservoir::W),
+    ("RES_TRI", reservoir::TRI),
+    ("RES_BARY", reservoir::BARY),
+    ("RES_WI_X", reservoir::WI_X),
+    ("RES_WI_Y", reservoir::WI_Y),
+    ("RES_RADIANCE", reservoir::RADIANCE),
+    ("RES_TRI_BITS", reservoir::TRI_BITS),
+    ("RESERVOIR_SLOTS", reservoir::SLOTS),
+    ("HEADER_SLOT_BITS", reservoir::HEADER_SLOT_BITS),
+    ("HEADER_SLOT_MASK", reservoir::HEADER_SLOT_MASK),
+    ("HEADER_LOCK_SHIFT", reservoir::HEADER_LOCK_SHIFT),
+    ("INFO_CAMERA_SHIFT", reservoir::CAMERA_SHIFT),
+    ("INFO_CAMERA_MASK", reservoir::CAMERA_MASK),
+    ("INFO_PIXEL_MASK", reservoir::PIXEL_MASK),
+    ("INFO_TECH_SHIFT", reservoir::TECH_SHIFT),
+    ("UNOBSERVED", reservoir::UNOBSERVED),
+    ("MAX_CAMERAS", MAX_CAMERAS),
+    ("MERGE_FLAG_TEMPORAL", merge_flag::TEMPORAL),
+    ("MERGE_FLAG_POSITIVIZE", merge_flag::POSITIVIZE),
+    ("MERGE_FLAG_HAVE_PREV", merge_flag::HAVE_PREV),
+    ("MERGE_FLAG_VERIFY", merge_flag::VERIFY),
+    ("CANDIDATE_STAT_OFFERED", stat::CANDIDATE_OFFERED),
+    ("CANDIDATE_STAT_LOST", stat::CANDIDATE_LOST),
+    ("CANDIDATE_STAT_DROPPED", stat::CANDIDATE_DROPPED),
+    ("CANDIDATE_STAT_UNMAPPED", stat::CANDIDATE_UNMAPPED),
+    ("MERGE_STAT_EVALUATIONS", stat::MERGE_EVALUATIONS),
+    ("MERGE_STAT_DROPPED", stat::MERGE_DROPPED),
+    ("MERGE_STAT_VERIFIED", stat::MERGE_VERIFIED),
+    ("MERGE_STAT_VERIFY_MAX_ERROR", stat::MERGE_VERIFY_MAX_ERROR),
+];
+
+/// The WGSL of `gen/restir`.
+pub fn wgsl() -> String {
+    crate::gpu::shaders::constants_wgsl("src/optim/estimator/restir/abi.rs", CONSTANTS)
+}
+
+// The layout fits its words.
+const _: () = {
+    assert!(MAX_CAMERAS == 8);
+    assert!(reservoir::TRI_BITS + 2 * reservoir::BARY_BITS == 64);
+    assert!(reservoir::HEADER_LOCK_SHIFT + 2 <= 32);
+    assert!(reservoir::TECH_SHIFT > reservoir::CAMERA_SHIFT + 2);
+};

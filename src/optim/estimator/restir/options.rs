@@ -1,0 +1,141 @@
+//! ReSTIR's options: the task file's `[optimizer.restir]`, `--estimator-option
+//! restir.KEY=VALUE` on the command line, and what `bench --tune` searches.
+
+/// Confidence of the fresh candidates in the merge (the kept sample's is min(M, M-cap)).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Confidence {
+    /// Gradient samples per pixel (the reference code's M_c = spp; the pixel count cancels).
+    #[default]
+    Samples,
+    /// Candidates per pixel and texel: 2 techniques x gradient spp x cameras.
+    Candidates,
+}
+
+impl Confidence {
+    /// The name used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Confidence::Samples => "samples",
+            Confidence::Candidates => "candidates",
+        }
+    }
+}
+
+/// How the ReSTIR estimator reuses samples: the options table `[optimizer.restir]` of a task
+/// file, `--estimator-option restir.KEY=VALUE` on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RestirOptions {
+    /// Cap on the confidence of the kept samples (the knob between reuse and staleness): they
+    /// weigh min(M_c x merges so far, m_cap) against the fresh candidates' M_c.
+    pub m_cap: f32,
+    /// Confidence of the fresh candidates.
+    pub confidence: Confidence,
+    /// Temporal reuse across iterations; without it, resampling within the iteration only.
+    pub temporal: bool,
+    /// Two reservoirs per texel (positive and negative part of the target); without it, one
+    /// over |target|.
+    pub positivization: bool,
+    /// Self-check of the stored paths: the merge also evaluates every kept path under the
+    /// state it was drawn at and records the largest relative difference from its stored
+    /// factor ([`super::MergeDiagnostics`]). Costs one more BRDF evaluation per kept sample.
+    pub verify_paths: bool,
+    /// Weight of the last iteration's target adjoint in this one's, in [0, 1): the
+    /// resampling targets use an exponential moving average of the adjoints (0: this
+    /// iteration's adjoint, as the values do), so that they change less between iterations
+    /// than a noisy primal's adjoint does. The values, and so the estimate, always use the
+    /// iteration's own adjoint. `None`: by the primal estimator, [`TARGET_SMOOTHING_INDEPENDENT`]
+    /// with the independent primal and 0 with the control variate, whose image is already a
+    /// recursive average (a second one only adds lag: measured worse on `vase` and `sphere`).
+    pub target_smoothing: Option<f32>,
+    /// Reuse on a schedule: the kept samples' confidence cap is `m_cap` times the
+    /// learning-rate schedule's factor at the iteration (so with a decaying schedule early
+    /// iterations reuse fully and late ones average mostly fresh samples); without a schedule
+    /// it changes nothing.
+    pub m_cap_follows_schedule: bool,
+}
+
+impl Default for RestirOptions {
+    fn default() -> Self {
+        RestirOptions {
+            m_cap: 8.0,
+            confidence: Confidence::default(),
+            temporal: true,
+            positivization: true,
+            verify_paths: false,
+            target_smoothing: None,
+            m_cap_follows_schedule: false,
+        }
+    }
+}
+
+impl crate::optim::estimator::Options for RestirOptions {
+    const METHOD: crate::optim::Method = crate::optim::Method::Restir;
+
+    fn check(&self) -> std::result::Result<(), (String, String)> {
+        if !(self.m_cap.is_finite() && self.m_cap > 0.0) {
+            return Err(("m_cap".into(), "must be a positive number".into()));
+        }
+        if self
+            .target_smoothing
+            .is_some_and(|b| !(0.0..1.0).contains(&b))
+        {
+            return Err(("target_smoothing".into(), "must be in [0, 1)".into()));
+        }
+        Ok(())
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "M cap {}{}, target smoothing {}",
+            self.m_cap,
+            if self.m_cap_follows_schedule {
+                " (follows the schedule)"
+            } else {
+                ""
+            },
+            self.target_smoothing
+                .map_or("by primal".to_string(), |b| b.to_string())
+        )
+    }
+}
+
+/// What `bench --tune` searches for ReSTIR, in order: the M cap (2, 32), whether it follows
+/// the learning-rate schedule, and the target smoothing (0, 0.9).
+pub(crate) fn tuning() -> Vec<crate::optim::estimator::TypedAxis<RestirOptions>> {
+    vec![
+        |b| {
+            [2.0, 32.0]
+                .map(|m_cap| RestirOptions { m_cap, ..*b })
+                .to_vec()
+        },
+        |b| {
+            vec![RestirOptions {
+                m_cap_follows_schedule: !b.m_cap_follows_schedule,
+                ..*b
+            }]
+        },
+        |b| {
+            [0.0, TARGET_SMOOTHING_INDEPENDENT]
+                .map(|s| RestirOptions {
+                    target_smoothing: Some(s),
+                    ..*b
+                })
+                .to_vec()
+        },
+    ]
+}
+
+impl RestirOptions {
+    /// The target smoothing used with the primal estimator `primal`.
+    pub fn target_smoothing_for(&self, primal: crate::optim::PrimalMode) -> f32 {
+        self.target_smoothing.unwrap_or(match primal {
+            crate::optim::PrimalMode::Independent => TARGET_SMOOTHING_INDEPENDENT,
+            crate::optim::PrimalMode::ControlVariate => 0.0,
+        })
+    }
+}
+
+/// [`RestirOptions::target_smoothing`] by default with the independent primal.
+pub const TARGET_SMOOTHING_INDEPENDENT: f32 = 0.9;
