@@ -381,6 +381,19 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
         },
         summary.out.display()
     );
+    if summary.per_texture.len() > 1 {
+        let parts: Vec<String> = summary
+            .per_texture
+            .iter()
+            .map(|t| {
+                format!(
+                    "{} {:.4} -> {:.4}",
+                    t.texture, t.initial_rmse_observed, t.final_rmse_observed
+                )
+            })
+            .collect();
+        println!("observed-texel RMSE per texture: {}", parts.join(", "));
+    }
     if let Some(t) = summary.pass_times {
         let timed = t.total();
         println!(

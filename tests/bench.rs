@@ -252,6 +252,27 @@ fn bench_json_has_every_field_finite_and_in_range() {
 
     let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
     assert!(md.contains("| sphere |"), "{md}");
+    // Per texture (the task has two): each run's observed-texel RMSE per texture, between
+    // the smallest and the largest part no more than the whole (an RMSE over the union lies
+    // between its parts'), and the report's table of them.
+    assert_eq!(s["textures"].as_array().unwrap().len(), 2);
+    for r in runs {
+        let parts: Vec<f64> = r["texture_rmse_observed_per_texture"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        assert_eq!(parts.len(), 2);
+        let whole = number(r, "texture_rmse_observed");
+        let (lo, hi) = (parts[0].min(parts[1]), parts[0].max(parts[1]));
+        assert!(
+            lo > 0.0 && lo <= whole * (1.0 + 1e-9) && whole <= hi * (1.0 + 1e-9),
+            "{}: parts {parts:?}, whole {whole}",
+            r["name"]
+        );
+    }
+    assert!(md.contains("### Per texture"), "{md}");
     // Every run has its rows.
     for r in runs {
         assert!(md.contains(&format!("| sphere | {} |", r["name"].as_str().unwrap())));

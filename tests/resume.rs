@@ -208,6 +208,24 @@ fn kill_and_resume(method: &str) {
     let ref_rows = metrics(&a);
     // A row for the start (iteration 0), then one per iteration.
     assert_eq!(ref_rows.len(), iterations + 1);
+    // texture_errors.csv: the one texture's observed-texel RMSE at the start and the end,
+    // the whole's (one texture), as metrics.csv has it (both printed to 7 digits).
+    let text = std::fs::read_to_string(a.join("texture_errors.csv")).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(
+        lines[0],
+        "texture,initial_rmse_observed,final_rmse_observed"
+    );
+    assert_eq!(lines.len(), 2, "{text}");
+    let f: Vec<&str> = lines[1].split(',').collect();
+    assert_eq!(f[0], "plane_base_color");
+    let observed = |row: &str| -> f64 { row.split(',').nth(4).unwrap().parse().unwrap() };
+    let m = std::fs::read_to_string(a.join("metrics.csv")).unwrap();
+    let rows: Vec<&str> = m.lines().skip(1).collect();
+    for (got, row) in [(f[1], rows[0]), (f[2], rows[rows.len() - 1])] {
+        let (got, want) = (got.parse::<f64>().unwrap(), observed(row));
+        assert!((got - want).abs() <= 1e-6 * want, "{got} vs {want}");
+    }
 
     // Kill moments: uniform over the run's length, from a seed printed for repetition.
     let seed = std::env::var("PSRESTIR_KILL_SEED")

@@ -153,6 +153,7 @@ pub(super) struct OptimizationRun {
     pub(super) counters_per_iteration: Vec<(String, f64)>,
     pub(super) state_bytes_per_texel: f64,
     pub(super) final_image: Image,
+    pub(super) per_texture_observed: Vec<f64>,
 }
 
 pub(super) fn optimization_phase(
@@ -267,6 +268,15 @@ pub(super) fn optimization_phase(
         None => evaluate(&opt, prep, task, o.eval_spp)?.1,
     };
     let iterations = opt.iteration;
+    let per_texture_observed = match truth {
+        Some(r) => crate::optim::observed::rmse_observed_per_texture(
+            &prep.set,
+            &opt.read_params()?,
+            r,
+            &observed,
+        ),
+        None => vec![f64::NAN; prep.set.textures.len()],
+    };
     progress.done();
     Ok(OptimizationRun {
         ms_per_iteration: 1000.0 * seconds / iterations.max(1) as f64,
@@ -282,6 +292,7 @@ pub(super) fn optimization_phase(
         state_bytes_per_texel: opt.state_bytes_per_texel(),
         curve,
         final_image,
+        per_texture_observed,
     })
 }
 
@@ -386,6 +397,7 @@ pub(super) fn optimization_phases(
             texture_rmse_observed_ratio: to / tob,
             texture_rmse_observed_third: third(&run),
             texture_rmse_observed_min: min_observed(&run),
+            texture_rmse_observed_per_texture: run.per_texture_observed.clone(),
             ms_per_iteration: run.ms_per_iteration,
             iterations: run.iterations,
             passes: run.passes,
@@ -405,6 +417,16 @@ pub(super) fn optimization_phases(
             / observed.len().max(1) as f64,
         observed_texels: observed.iter().filter(|&&b| b).count() as u64,
         schedule: task.optimizer.schedule.describe(),
+        textures: prep.set.textures.iter().map(|t| t.name()).collect(),
+        texture_rmse_observed_initial_per_texture: match prep.reference.as_deref() {
+            Some(r) => crate::optim::observed::rmse_observed_per_texture(
+                &prep.set,
+                &prep.set.values,
+                r,
+                &observed,
+            ),
+            None => vec![f64::NAN; prep.set.textures.len()],
+        },
         runs,
     };
     Ok((result, finals))

@@ -144,6 +144,10 @@ pub struct OptimizationResult {
     pub observed_texels: u64,
     /// The learning-rate schedule every run followed.
     pub schedule: String,
+    /// The optimized textures (`material_slot`), in task order.
+    pub textures: Vec<String>,
+    /// Per texture, its observed-texel RMSE at the start.
+    pub texture_rmse_observed_initial_per_texture: Vec<f64>,
     /// Every run, in order: the baseline with Adam first (the reference of every ratio),
     /// then [`super::BenchOptions::contenders`].
     pub runs: Vec<RunResult>,
@@ -179,6 +183,8 @@ pub struct RunResult {
     pub texture_rmse_observed_third: f64,
     /// Lowest observed-texel RMSE of the run (a run that ends well above it drifted).
     pub texture_rmse_observed_min: f64,
+    /// Per texture (as [`OptimizationResult::textures`]), its observed-texel RMSE at the end.
+    pub texture_rmse_observed_per_texture: Vec<f64>,
     /// Mean wall-clock milliseconds per iteration (GPU work finished).
     pub ms_per_iteration: f64,
     /// Iterations run within the budget.

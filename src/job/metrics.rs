@@ -128,6 +128,30 @@ impl Metrics<'_> {
     }
 }
 
+impl Metrics<'_> {
+    /// Per texture, its observed-texel RMSE at the initial values and at `values` (empty
+    /// without a ground truth).
+    pub(super) fn errors_per_texture(&self, values: &[f32]) -> Vec<super::run::TextureErrors> {
+        let p = self.prep;
+        let Some(r) = p.reference.as_ref() else {
+            return Vec::new();
+        };
+        let per = |v: &[f32]| {
+            crate::optim::observed::rmse_observed_per_texture(&p.set, v, r, self.observed)
+        };
+        p.set
+            .textures
+            .iter()
+            .zip(per(&p.set.values).into_iter().zip(per(values)))
+            .map(|(t, (a, b))| super::run::TextureErrors {
+                texture: t.name(),
+                initial_rmse_observed: a,
+                final_rmse_observed: b,
+            })
+            .collect()
+    }
+}
+
 /// Say how many texels the cameras observe.
 pub(super) fn log_observed(observed: &[bool]) {
     let (n_observed, n_texels) = crate::optim::observed::observed_count(observed);

@@ -56,6 +56,9 @@ pub struct RunSummary {
     pub initial_rmse_observed: Option<f64>,
     /// Texture RMSE at the end over the observed texels.
     pub final_rmse_observed: Option<f64>,
+    /// Per optimized texture (in task order), its name and its observed-texel RMSE at the
+    /// start and at the end, when the ground truth is known: which texture the error is in.
+    pub per_texture: Vec<TextureErrors>,
     /// Milliseconds per iteration in this session.
     pub ms_per_iteration: f64,
     /// The output folder.
@@ -69,6 +72,17 @@ pub struct RunSummary {
     /// Seconds this run spent creating (compiling) GPU pipelines, all before the
     /// optimization's clock started ([`Gpu::pipeline_times`]).
     pub pipeline_s: f64,
+}
+
+/// One optimized texture's observed-texel RMSE at the start and at the end of a run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TextureErrors {
+    /// `material_slot`.
+    pub texture: String,
+    /// At the initial values.
+    pub initial_rmse_observed: f64,
+    /// At the end.
+    pub final_rmse_observed: f64,
 }
 
 /// A render as it is compared with its target: times the camera's exposure.
@@ -122,6 +136,19 @@ fn layout_string(set: &ParamSet) -> String {
 /// The columns of metrics.csv.
 pub const METRICS_HEADER: &str =
     "iteration,elapsed_s,loss,texture_rmse,texture_rmse_observed,image_relmse,learning_rate";
+
+/// Write `texture_errors.csv` atomically: per optimized texture, its observed-texel RMSE at
+/// the start and at the end of the run.
+pub fn write_texture_errors(path: &Path, errors: &[TextureErrors]) -> Result<()> {
+    let mut s = String::from("texture,initial_rmse_observed,final_rmse_observed\n");
+    for t in errors {
+        s.push_str(&format!(
+            "{},{:.6e},{:.6e}\n",
+            t.texture, t.initial_rmse_observed, t.final_rmse_observed
+        ));
+    }
+    image_io::write_atomic(path, s.as_bytes())
+}
 
 /// Write metrics.csv atomically. Empty fields: not measured at that iteration (texture
 /// errors without a ground truth, image error between evaluations, the loss of the start).
@@ -357,6 +384,10 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     save_checkpoint(&opt, &rows, elapsed)?;
     let values = opt.read_params()?;
     let (final_rmse, final_rmse_observed, initial_rmse_observed) = metrics.final_errors(&values);
+    let per_texture = metrics.errors_per_texture(&values);
+    if !per_texture.is_empty() {
+        write_texture_errors(&out.join("texture_errors.csv"), &per_texture)?;
+    }
     write_outputs(&out, task, &prep, &opt, &values, &rows)?;
     if task.optimizer.optimize_exposure || task.target.exposure.is_some() {
         log_exposures(&prep, &opt);
@@ -373,6 +404,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         final_rmse,
         initial_rmse_observed,
         final_rmse_observed,
+        per_texture,
         ms_per_iteration: if done > 0 {
             1000.0 * session_s / done as f64
         } else {

@@ -101,9 +101,46 @@ pub(crate) fn observed_mask(
 /// texels marked in `observed` (one flag per texel, as [`Optimizer::observed_texels`]);
 /// NaN when none is observed.
 pub fn rmse_observed(set: &ParamSet, values: &[f32], truth: &[f32], observed: &[bool]) -> f64 {
-    let (mut s, mut n) = (0.0, 0usize);
+    let (s, n) = squared_errors_observed(set, values, truth, observed)
+        .into_iter()
+        .fold((0.0, 0usize), |(s, n), (ts, tn)| (s + ts, n + tn));
+    if n == 0 {
+        return f64::NAN;
+    }
+    (s / n as f64).sqrt()
+}
+
+/// [`rmse_observed`] of each texture of `set` alone, in order (NaN for a texture no camera
+/// observes): which texture the error is in, where a task has several.
+pub fn rmse_observed_per_texture(
+    set: &ParamSet,
+    values: &[f32],
+    truth: &[f32],
+    observed: &[bool],
+) -> Vec<f64> {
+    squared_errors_observed(set, values, truth, observed)
+        .into_iter()
+        .map(|(s, n)| {
+            if n == 0 {
+                f64::NAN
+            } else {
+                (s / n as f64).sqrt()
+            }
+        })
+        .collect()
+}
+
+/// Per texture, the sum of squared errors over its observed texels' channels and their count.
+fn squared_errors_observed(
+    set: &ParamSet,
+    values: &[f32],
+    truth: &[f32],
+    observed: &[bool],
+) -> Vec<(f64, usize)> {
     let mut texel = 0usize;
+    let mut out = Vec::with_capacity(set.textures.len());
     for t in &set.textures {
+        let (mut s, mut n) = (0.0, 0usize);
         let ch = t.channels() as usize;
         for local in 0..(t.width * t.height) as usize {
             if observed.get(texel + local).copied().unwrap_or(false) {
@@ -115,11 +152,9 @@ pub fn rmse_observed(set: &ParamSet, values: &[f32], truth: &[f32], observed: &[
             }
         }
         texel += (t.width * t.height) as usize;
+        out.push((s, n));
     }
-    if n == 0 {
-        return f64::NAN;
-    }
-    (s / n as f64).sqrt()
+    out
 }
 
 /// The number of observed texels and of all texels.

@@ -168,8 +168,8 @@ fn write_gradients(dir: &Path, prep: &Problem, g: &GradientSnapshot) -> Result<(
 
 mod tables;
 pub use tables::{
-    curve_table, gradient_table, optimization_table, primal_table, settings_table,
-    successive_table, texture_table,
+    curve_table, gradient_table, optimization_table, per_texture_table, primal_table,
+    settings_table, successive_table, texture_table,
 };
 use tables::{ratio, sci};
 
@@ -197,6 +197,14 @@ fn reconstruction_markdown(r: &BenchReport) -> String {
         }
     );
     md.push_str(&settings_table(r));
+    let per_texture = per_texture_table(r);
+    if !per_texture.is_empty() {
+        md.push_str(
+            "\n### Per texture\n\nObserved-texel RMSE of each texture where a scene has \
+             several: which texture the error is in.\n\n",
+        );
+        md.push_str(&per_texture);
+    }
     md.push_str("\n### Observed-texel RMSE along the run\n\n");
     md.push_str(&curve_table(r));
     md.push_str(
@@ -214,8 +222,17 @@ pub fn table(r: &BenchReport) -> String {
         s.push('\n');
         s.push_str(&settings_table(r));
         s.push('\n');
+        let per_texture = per_texture_table(r);
+        if !per_texture.is_empty() {
+            s.push_str(&per_texture);
+            s.push('\n');
+        }
         s.push_str(&curve_table(r));
         s.push('\n');
+    }
+    // Absent with --end-to-end-only.
+    if !gradient_measured(r) {
+        return s;
     }
     s.push_str(&primal_table(r));
     s.push('\n');
@@ -230,6 +247,13 @@ pub fn table(r: &BenchReport) -> String {
     s.push('\n');
     s.push_str(&successive_table(r));
     s
+}
+
+/// Whether the primal and gradient phases ran (not with `--end-to-end-only`).
+fn gradient_measured(r: &BenchReport) -> bool {
+    r.scenes
+        .iter()
+        .any(|x| x.gradient_relmse_estimator.is_finite())
 }
 
 /// The per-pass GPU times (markdown), for every run of the equal-time phase.
@@ -424,11 +448,7 @@ pub fn report_markdown(r: &BenchReport) -> String {
     if r.scenes.iter().any(|x| x.optimization.is_some()) {
         md.push_str(&reconstruction_markdown(r));
     }
-    // Absent with --end-to-end-only.
-    if r.scenes
-        .iter()
-        .any(|x| x.gradient_relmse_estimator.is_finite())
-    {
+    if gradient_measured(r) {
         md.push_str("## Primal image error\n\n");
         md.push_str(&primal_table(r));
         md.push_str(

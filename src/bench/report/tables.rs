@@ -166,6 +166,40 @@ pub fn optimization_table(r: &BenchReport) -> String {
     s
 }
 
+/// Per texture of the scenes with several, each run's observed-texel RMSE at the end with its
+/// ratio over the baseline's (empty when no scene has several textures).
+pub fn per_texture_table(r: &BenchReport) -> String {
+    let mut s = String::new();
+    for x in &r.scenes {
+        let Some(o) = &x.optimization else { continue };
+        if o.textures.len() < 2 {
+            continue;
+        }
+        if s.is_empty() {
+            s.push_str(
+                "| scene | texture | initial | estimator, step | end | ÷ baseline |\n\
+                 |---|---|---|---|---|---|\n",
+            );
+        }
+        for (k, name) in o.textures.iter().enumerate() {
+            let base = o.baseline().texture_rmse_observed_per_texture[k];
+            for c in &o.runs {
+                let end = c.texture_rmse_observed_per_texture[k];
+                let _ = writeln!(
+                    s,
+                    "| {} | {name} | {:.4} | {} | {:.4} | **{}** |",
+                    x.name,
+                    o.texture_rmse_observed_initial_per_texture[k],
+                    c.name,
+                    end,
+                    ratio(end / base)
+                );
+            }
+        }
+    }
+    s
+}
+
 /// Each run's settings (tuned or the task's) and, with `--tune`, the search's score on its
 /// own seed.
 pub fn settings_table(r: &BenchReport) -> String {
