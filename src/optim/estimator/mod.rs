@@ -11,8 +11,13 @@
 //!   the current and the previous state correct the running estimate
 //!   (`recursive_gradient.wgsl`, `recursive_combine.wgsl`).
 //!
-//! Each lives in its own folder with its Rust and its passes' WGSL (shared WGSL stays in
-//! `shaders/shared/`).
+//! Each lives in its own folder with everything of its own: its Rust, its WGSL, its part of
+//! the GPU contract (generated as `gen/<name>`), its uniforms' mirrors and their tests, and
+//! its options ([`Options`], read from its table in [`EstimatorOptions`]). This module is the
+//! registry, the one place that names each folder's items: [`Method`], `build`, `passes`,
+//! `memory`, `max_cameras`, the options' checks and tuning, `WGSL` and `GENERATED`. Nothing
+//! else names them (the test `seam_tests` holds it), so that the optimizer, the CLI, task
+//! files, checkpoints and the bench see a method's name and its options table only.
 pub mod baseline;
 pub mod recursive;
 pub mod restir;

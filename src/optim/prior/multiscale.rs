@@ -1,4 +1,4 @@
-//! The multiscale gradient (shaders/multiscale_gradient.wgsl): before Adam, each observed
+//! The multiscale gradient (multiscale_gradient.wgsl): before Adam, each observed
 //! texel's gradient becomes a weighted mean over levels 0..=L of the gradient averaged over
 //! its 2^l x 2^l block (the texel's own with weight [`FINE_WEIGHT`], each block with 1). For
 //! plain gradient descent this is descent on a pyramid of textures that are added up; the
@@ -27,7 +27,7 @@ pub(crate) const MULTISCALE_GROUP: GroupDecl = GroupDecl {
     names: &["mp", "grad", "observed"],
 };
 
-/// `MultiscaleParams` in shaders/multiscale_gradient.wgsl (a test checks the layout).
+/// `MultiscaleParams` in multiscale_gradient.wgsl (a test checks the layout).
 /// The fields are documented in the WGSL twin.
 #[allow(missing_docs)]
 #[repr(C)]

@@ -8,7 +8,7 @@
 // each iteration, so that no block edge stays put). Only observed texels take part: the others
 // keep a zero gradient and their initial values.
 
-// Mirrored by MultiscaleParams in src/optim/multiscale.rs.
+// Mirrored by MultiscaleParams in src/optim/prior/multiscale.rs.
 struct MultiscaleParams {
     // First float of the texture in the gradient.
     offset: u32,

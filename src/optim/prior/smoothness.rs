@@ -1,4 +1,4 @@
-//! The smoothness prior (shaders/smoothness.wgsl): before the multiscale gradient and Adam,
+//! The smoothness prior (smoothness.wgsl): before the multiscale gradient and Adam,
 //! each observed texel's gradient gains the derivative of
 //! `R = lambda * mean over observed 4-neighbour pairs and channels of (x_i - x_j)^2`.
 //!
@@ -25,7 +25,7 @@ pub(crate) const SMOOTHNESS_GROUP: GroupDecl = GroupDecl {
 /// Workgroup side of the pass (8 x 8 texels).
 const WORKGROUP_SIDE: u32 = 8;
 
-/// `SmoothnessParams` in shaders/smoothness.wgsl (a test checks the layout).
+/// `SmoothnessParams` in smoothness.wgsl (a test checks the layout).
 /// The fields are documented in the WGSL twin.
 #[allow(missing_docs)]
 #[repr(C)]

@@ -1,11 +1,11 @@
 // Smoothness prior: adds to each observed texel's gradient the derivative of
 //   R = lambda x (mean over the observed 4-neighbour pairs and channels of (x_i - x_j)^2),
 //   dR/dx_i = scale x sum over the observed neighbours j of (x_i - x_j),
-// with scale = 2 lambda / (channels x pairs) set by src/optim/smoothness.rs. Texels the
+// with scale = 2 lambda / (channels x pairs) set by src/optim/prior/smoothness.rs. Texels the
 // cameras do not observe take no part (they keep a zero gradient and their initial values).
 // The texture does not wrap: texels on opposite edges are not neighbours.
 
-// Mirrored by SmoothnessParams in src/optim/smoothness.rs.
+// Mirrored by SmoothnessParams in src/optim/prior/smoothness.rs.
 struct SmoothnessParams {
     // First float of the texture in the parameters and the gradient.
     offset: u32,

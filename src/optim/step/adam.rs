@@ -1,4 +1,4 @@
-//! Adam: the constants, the pass of shaders/adam.wgsl (`AdamPass`, one or two dispatches per
+//! Adam: the constants, the pass of adam.wgsl (`AdamPass`, one or two dispatches per
 //! optimized texture), its CPU reference, and what it shares with the variance-scaled step
 //! (`TextureSteps`).
 use super::moment_filter::MomentFilter;
@@ -114,7 +114,7 @@ pub fn step_with(
     }
 }
 
-/// `AdamParams` in shaders/adam.wgsl (a test checks the layout).
+/// `AdamParams` in adam.wgsl (a test checks the layout).
 /// The fields are documented in the WGSL twin.
 #[allow(missing_docs)]
 #[repr(C)]

@@ -1,7 +1,7 @@
 //! Filtered moments (after Chang et al., "Spatiotemporal Bilateral Gradient Filtering for
 //! Inverse Rendering", 2024): before each step, the pair of per-texel arrays the step divides
 //! (Adam's first and second moments; the variance step's estimate and its variance) is
-//! smoothed in texture space by an edge-stopping à-trous filter (shaders/moment_filter.wgsl,
+//! smoothed in texture space by an edge-stopping à-trous filter (moment_filter.wgsl,
 //! levels at tap spacings 1, 2, 4, ...), guided by the current texture so that it does not
 //! average across the texture's edges. Neighbouring texels of a real texture are alike, so a
 //! texel that drew few or no samples this iteration steps with its neighbours, and one noisy
@@ -118,7 +118,7 @@ pub(crate) const MOMENT_FILTER_GROUP: GroupDecl = GroupDecl {
 /// Workgroup side of the pass (8 x 8 texels).
 const WORKGROUP_SIDE: u32 = 8;
 
-/// `MomentFilterParams` in shaders/moment_filter.wgsl (a test checks the layout).
+/// `MomentFilterParams` in moment_filter.wgsl (a test checks the layout).
 /// The fields are documented in the WGSL twin.
 #[allow(missing_docs)]
 #[repr(C)]

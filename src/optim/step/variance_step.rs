@@ -97,7 +97,7 @@ pub fn step(
     }
 }
 
-/// `VarianceStepParams` in shaders/variance_step.wgsl (a test checks the layout).
+/// `VarianceStepParams` in variance_step.wgsl (a test checks the layout).
 /// The fields are documented in the WGSL twin.
 #[allow(missing_docs)]
 #[repr(C)]

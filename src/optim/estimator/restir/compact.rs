@@ -1,5 +1,5 @@
-//! ReSTIR's compact path encodings (shaders/shared/compact_path.wgsl), mirrored on the CPU
-//! with the precision of each one. A reservoir keeps its path in [`reservoir::WORDS`] words:
+//! ReSTIR's compact path encodings (shaders/shared/path_encoding.wgsl and compact_path.wgsl
+//! here), mirrored on the CPU with the precision of each one. A reservoir keeps its path in [`reservoir::WORDS`] words:
 //!
 //! | field | encoding | precision |
 //! |---|---|---|

@@ -1,5 +1,5 @@
 //! The parameter-space ReSTIR estimator (`restir_candidates.wgsl`, `restir_merge.wgsl` in
-//! this folder, shaders/shared/reservoir.wgsl).
+//! this folder, reservoir.wgsl).
 //!
 //! Every optimized texel keeps two reservoirs, one over the positive and one over the negative
 //! part of its target q = target_of(a x e) (shared/params.wgsl: for RGB textures the
@@ -235,7 +235,7 @@ pub(crate) struct Restir {
     merge_pipeline: wgpu::ComputePipeline,
     cameras: Vec<Camera>,
     /// Reservoir slot k of every observed texel (`slots[k]`), and the headers that say which
-    /// slots hold the kept reservoirs (shaders/shared/reservoir_slots.wgsl).
+    /// slots hold the kept reservoirs (reservoir_slots.wgsl).
     slots: Vec<wgpu::Buffer>,
     headers: wgpu::Buffer,
     merge_uniform: wgpu::Buffer,
@@ -245,7 +245,7 @@ pub(crate) struct Restir {
     candidate_stats: wgpu::Buffer,
     merge_stats: wgpu::Buffer,
     /// The target adjoints of both parities of the iteration, one after the other
-    /// (shaders/shared/reservoir.wgsl).
+    /// (reservoir.wgsl).
     targets: wgpu::Buffer,
     /// Pixels (vec4s) of one parity's target adjoints.
     target_len: u32,

@@ -1,5 +1,5 @@
 //! The reservoir selection test pass (`reservoir_test.wgsl` in this folder): the streaming update of
-//! shaders/shared/reservoir.wgsl run on the GPU, for the chi-square test of its selection.
+//! reservoir.wgsl run on the GPU, for the chi-square test of its selection.
 use super::abi::reservoir;
 use crate::gpu::{grid_2d, Gpu};
 use crate::render::WORKGROUP;
@@ -14,7 +14,7 @@ pub(crate) const RESERVOIR_TEST_GROUP: crate::gpu::GroupDecl = crate::gpu::Group
     ],
 };
 
-/// Run the streaming reservoir update of shaders/shared/reservoir.wgsl on the GPU for a test:
+/// Run the streaming reservoir update of reservoir.wgsl on the GPU for a test:
 /// `reservoirs` reservoirs each receive every candidate k (weight `weights[k]`) `copies`
 /// times, from concurrent invocations. Returns the index of the candidate each reservoir
 /// selected (u32::MAX for none) and the number of offers that never got the lock.
