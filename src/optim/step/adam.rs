@@ -208,10 +208,10 @@ impl AdamPass {
             gpu, "adam", pipeline, set, filter, make, bind,
         )))
     }
+}
 
-    /// Record step `t` (from 1) of every texture at its learning rate times `factor`;
-    /// returns the learning rates used, one per texture.
-    pub(crate) fn encode(
+impl super::Step for AdamPass {
+    fn encode(
         &mut self,
         gpu: &Gpu,
         enc: &mut wgpu::CommandEncoder,
@@ -226,20 +226,6 @@ impl AdamPass {
             p.bias2 = 1.0 - p.beta2.powi(t as i32);
             p.count
         })
-    }
-}
-
-impl super::Step for AdamPass {
-    fn encode(
-        &mut self,
-        gpu: &Gpu,
-        enc: &mut wgpu::CommandEncoder,
-        set: &ParamSet,
-        factor: f32,
-        t: u32,
-        timer: &mut PassTimer,
-    ) -> Vec<f32> {
-        AdamPass::encode(self, gpu, enc, set, factor, t, timer)
     }
 
     fn filter(&self) -> Option<&MomentFilter> {

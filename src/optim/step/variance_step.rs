@@ -202,10 +202,10 @@ impl VarianceStepPass {
             bind,
         )))
     }
+}
 
-    /// Record step `t` (from 1) of every texture at its learning rate times `factor`;
-    /// returns the learning rates used, one per texture.
-    pub(crate) fn encode(
+impl super::Step for VarianceStepPass {
+    fn encode(
         &mut self,
         gpu: &Gpu,
         enc: &mut wgpu::CommandEncoder,
@@ -219,20 +219,6 @@ impl VarianceStepPass {
             p.bias = 1.0 - p.beta.powi(t as i32);
             p.count
         })
-    }
-}
-
-impl super::Step for VarianceStepPass {
-    fn encode(
-        &mut self,
-        gpu: &Gpu,
-        enc: &mut wgpu::CommandEncoder,
-        set: &ParamSet,
-        factor: f32,
-        t: u32,
-        timer: &mut PassTimer,
-    ) -> Vec<f32> {
-        VarianceStepPass::encode(self, gpu, enc, set, factor, t, timer)
     }
 
     fn filter(&self) -> Option<&MomentFilter> {
