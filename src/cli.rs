@@ -343,6 +343,9 @@ pub(crate) enum Command {
     Bench(BenchArgs),
     /// Print the GPU adapter psrestir would use, its features and limits.
     Adapter,
+    /// List the gradient estimators, what each does and its options with their defaults (the
+    /// TOML of its task-file table `[optimizer.<method>]`; `--estimator-option` sets one).
+    Estimators,
     /// Regenerate the bundled scenes (scenes/default and scenes/bench/*).
     #[command(hide = true)]
     MakeScenes {

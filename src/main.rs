@@ -105,6 +105,30 @@ fn run(cli: Cli) -> Result<()> {
             }
         }
         Command::Bench(args) => cmd_bench(args)?,
+        Command::Estimators => {
+            for m in psrestir::optim::Method::ALL {
+                let default = if m == psrestir::optim::Method::default() {
+                    " (the default)"
+                } else {
+                    ""
+                };
+                println!("{}{default}: {}", m.name(), m.summary());
+                let toml = psrestir::optim::EstimatorOptions::defaults_toml(m);
+                if toml.is_empty() {
+                    println!("  no options\n");
+                } else {
+                    println!("  [optimizer.{}]", m.name());
+                    for line in toml.lines() {
+                        println!("  {line}");
+                    }
+                    println!();
+                }
+            }
+            println!(
+                "Set one with --estimator-option METHOD.KEY=VALUE, or in the task file's table; \
+                 docs/guide.md says what each option does."
+            );
+        }
         Command::Adapter => {
             let gpu = Gpu::new()?;
             println!("{}", gpu.describe());

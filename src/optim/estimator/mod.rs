@@ -58,6 +58,22 @@ impl Method {
         }
     }
 
+    /// What it does, in one line.
+    pub fn summary(self) -> &'static str {
+        match self {
+            Method::Baseline => {
+                "plain Monte Carlo: every sample adds its derivative to the texels it touches"
+            }
+            Method::Restir => {
+                "parameter-space ReSTIR: two reservoirs per observed texel reused across iterations"
+            }
+            Method::Recursive => {
+                "a recursive control variate: each sample at the current and the previous \
+                 state corrects a running estimate"
+            }
+        }
+    }
+
     /// Every estimator's name.
     pub fn names() -> Vec<&'static str> {
         Method::ALL.iter().map(|m| m.name()).collect()
@@ -94,6 +110,8 @@ pub trait Options:
 {
     /// The estimator they belong to.
     const METHOD: Method;
+    /// The options whose default is to be absent (an `Option` left `None`).
+    const OPTIONAL: &'static [&'static str] = &[];
     /// An error naming the option (its key in the table) and what is wrong.
     fn check(&self) -> std::result::Result<(), (String, String)>;
     /// A short description for reports (empty: nothing to say), e.g. `M cap 8`.
@@ -233,6 +251,23 @@ impl EstimatorOptions {
             "none".into()
         } else {
             all.join(", ")
+        }
+    }
+
+    /// `method`'s options at their defaults, as the TOML of its task-file table (empty when
+    /// it has none; options whose default is to be absent as comments).
+    pub fn defaults_toml(method: Method) -> String {
+        fn t<T: Options>() -> String {
+            let mut s = toml::to_string(&T::default()).unwrap_or_default();
+            for key in T::OPTIONAL {
+                s.push_str(&format!("# {key} = ...  (absent by default)\n"));
+            }
+            s
+        }
+        match method {
+            Method::Baseline => String::new(),
+            Method::Restir => t::<RestirOptions>(),
+            Method::Recursive => t::<RecursiveOptions>(),
         }
     }
 
@@ -477,6 +512,63 @@ pub(crate) fn memory(
         Method::Baseline => Vec::new(),
         Method::Restir => restir::memory(n_texels, n_observed, n_pixels),
         Method::Recursive => recursive::memory(n_params),
+    }
+}
+
+#[cfg(test)]
+mod options_tests {
+    use super::*;
+
+    #[test]
+    fn default_tables_round_trip_and_optional_keys_are_options() {
+        for m in Method::ALL {
+            let toml = EstimatorOptions::defaults_toml(m);
+            let table: toml::Table = toml::from_str(&toml).unwrap();
+            let mut o = EstimatorOptions::default();
+            o.set_table(m, table.clone());
+            assert_eq!(o.check(), Ok(()), "{m}: {toml}");
+            // Each optional key, commented out in the listing, is an option of its own.
+            for line in toml.lines().filter_map(|l| l.strip_prefix("# ")) {
+                let key = line.split(' ').next().unwrap();
+                let mut o = o.clone();
+                o.set(m, key, toml::Value::Float(0.5));
+                assert_eq!(o.check(), Ok(()), "{m}.{key}");
+            }
+        }
+    }
+
+    #[test]
+    fn assignments_parse_merge_and_name_what_is_wrong() {
+        let mut o = EstimatorOptions::default();
+        o.assign("restir.m_cap=16").unwrap();
+        o.assign(" restir.confidence = candidates ").unwrap();
+        let r: RestirOptions = o.get().unwrap();
+        assert_eq!(r.m_cap, 16.0);
+        assert_eq!(r.confidence, restir::Confidence::Candidates);
+        // Over a task's table, option by option.
+        let mut task = EstimatorOptions::default();
+        task.set(Method::Restir, "m_cap", toml::Value::Float(2.0));
+        task.set(Method::Restir, "temporal", toml::Value::Boolean(false));
+        let both: RestirOptions = task.merged(&o).get().unwrap();
+        assert_eq!((both.m_cap, both.temporal), (16.0, false));
+        for (bad, says) in [
+            ("m_cap=3", "METHOD.KEY=VALUE"),
+            ("restir.m_cap", "METHOD.KEY=VALUE"),
+            ("sgd.lr=3", "unknown gradient estimator"),
+            ("restir.m_capp=3", "m_capp"),
+            ("restir.m_cap=-1", "optimizer.restir.m_cap"),
+            ("recursive.min_weight=2", "optimizer.recursive.min_weight"),
+            ("baseline.m_cap=2", "the baseline has none"),
+        ] {
+            let e = EstimatorOptions::default()
+                .assign(bad)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(says) && e.contains(bad), "{bad}: {e}");
+        }
+        let mut unknown = EstimatorOptions::default();
+        unknown.tables.insert("sgd".into(), toml::Table::new());
+        assert_eq!(unknown.check().unwrap_err().0, "optimizer.sgd");
     }
 }
 

@@ -89,6 +89,7 @@ impl Default for RecursiveOptions {
 
 impl crate::optim::estimator::Options for RecursiveOptions {
     const METHOD: crate::optim::Method = crate::optim::Method::Recursive;
+    const OPTIONAL: &'static [&'static str] = &["weight"];
 
     fn check(&self) -> std::result::Result<(), (String, String)> {
         let bad = |k: &str, m: &str| Err((k.to_string(), m.to_string()));

@@ -72,6 +72,7 @@ impl Default for RestirOptions {
 
 impl crate::optim::estimator::Options for RestirOptions {
     const METHOD: crate::optim::Method = crate::optim::Method::Restir;
+    const OPTIONAL: &'static [&'static str] = &["target_smoothing"];
 
     fn check(&self) -> std::result::Result<(), (String, String)> {
         if !(self.m_cap.is_finite() && self.m_cap > 0.0) {
