@@ -1,6 +1,7 @@
 //! Texture optimization on the GPU: primal render, loss and adjoint, a gradient estimator
-//! ([`estimator`]: the baseline, or ReSTIR's candidate and merge passes), and Adam, as one
-//! submission per iteration.
+//! ([`estimator`]: the baseline, ReSTIR or the recursive control variate), the priors
+//! ([`prior`]) and a step ([`step`]: Adam or the variance-scaled step, with or without
+//! filtered moments), as one submission per iteration.
 
 mod cameras;
 pub mod checkpoint;
