@@ -283,8 +283,8 @@ impl EstimatorOptions {
         }
     }
 
-    /// The values `bench --tune` tries for `method`'s own options: for each option searched,
-    /// the tables to try around `best`'s (in search order).
+    /// What `bench --tune` tries for `method`'s own options: for each option searched, in
+    /// search order, a function from the best table so far to the tables to try.
     pub fn tuning(method: Method) -> Vec<TuningAxis> {
         match method {
             Method::Baseline => Vec::new(),
