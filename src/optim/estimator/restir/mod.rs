@@ -20,6 +20,7 @@
 //!    identity shift in path space, sign routing), writes the merged reservoirs and the
 //!    gradient sum over signs of v(y) W. It traces no ray.
 pub mod compact;
+mod diagnostics;
 mod options;
 mod params;
 mod reservoir_test;
@@ -34,6 +35,7 @@ use crate::{Error, Result};
 
 pub mod abi;
 pub use abi::reservoir;
+pub use diagnostics::{state_names, MergeDiagnostics};
 pub(crate) use options::tuning;
 pub use options::{Confidence, RestirOptions, TARGET_SMOOTHING_INDEPENDENT};
 #[cfg(test)]
@@ -91,77 +93,6 @@ const MERGE_STAT_VERIFY_MAX_ERROR: usize = abi::stat::MERGE_VERIFY_MAX_ERROR as 
 const CANDIDATE_STAT_LOST: usize = abi::stat::CANDIDATE_LOST as usize;
 const CANDIDATE_STAT_DROPPED: usize = abi::stat::CANDIDATE_DROPPED as usize;
 const CANDIDATE_STAT_UNMAPPED: usize = abi::stat::CANDIDATE_UNMAPPED as usize;
-
-/// Names in the ReSTIR estimator's [`EstimatorState`]: the kept reservoirs (two per texel,
-/// sign 0 then sign 1, [`reservoir::WORDS`] words each), the target adjoints of both parities
-/// (RGBA f32 per pixel, the cameras one after another, the even iterations' first: the
-/// resampling targets' smoothed adjoint), and the merges whose samples the kept reservoirs can
-/// hold (0 before the first iteration or without temporal reuse; it sets the kept samples'
-/// confidence).
-pub mod state_names {
-    /// Array: the kept reservoirs.
-    pub const RESERVOIRS: &str = "reservoirs";
-    /// Array: the target adjoints.
-    pub const TARGETS: &str = "targets";
-    /// Counter: the merges so far.
-    pub const HISTORY: &str = "history";
-    /// Counter: words per reservoir ([`super::reservoir::WORDS`]; a state saved with another
-    /// reservoir layout is refused).
-    pub const WORDS: &str = "reservoir words";
-}
-
-/// What the merge pass counted since the optimizer was created.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct MergeDiagnostics {
-    /// BRDF evaluations of stored paths (the merge's whole work; it traces no ray).
-    pub evaluations: u64,
-    /// Kept paths checked with [`RestirOptions::verify_paths`].
-    pub verified: u64,
-    /// Largest relative difference between a stored path's target under the previous state
-    /// (stored with it, in bfloat16) and its evaluation there.
-    pub max_relative_error: f32,
-    /// Candidates for texels outside the compaction map (texels that the observed-texel
-    /// pass's strata missed), dropped by the candidate pass.
-    pub unmapped: u64,
-}
-
-impl MergeDiagnostics {
-    const EVALUATIONS: &'static str = "merge evaluations";
-    const VERIFIED: &'static str = "merge verified";
-    const MAX_RELATIVE_ERROR: &'static str = "merge max relative error";
-    const UNMAPPED: &'static str = "candidates unmapped";
-
-    fn named(&self) -> Diagnostics {
-        vec![
-            (Self::EVALUATIONS, self.evaluations as f64),
-            (Self::VERIFIED, self.verified as f64),
-            (Self::MAX_RELATIVE_ERROR, f64::from(self.max_relative_error)),
-            (Self::UNMAPPED, self.unmapped as f64),
-        ]
-    }
-
-    /// What the ReSTIR merge of `optimizer` counted (None when it runs another estimator).
-    pub fn of(optimizer: &crate::optim::Optimizer) -> Result<Option<MergeDiagnostics>> {
-        let d = optimizer.estimator_diagnostics()?;
-        let get = |name: &str| d.iter().find(|(n, _)| *n == name).map(|v| v.1);
-        Ok(
-            match (
-                get(Self::EVALUATIONS),
-                get(Self::VERIFIED),
-                get(Self::MAX_RELATIVE_ERROR),
-                get(Self::UNMAPPED),
-            ) {
-                (Some(e), Some(v), Some(m), Some(u)) => Some(MergeDiagnostics {
-                    evaluations: e as u64,
-                    verified: v as u64,
-                    max_relative_error: m as f32,
-                    unmapped: u as u64,
-                }),
-                _ => None,
-            },
-        )
-    }
-}
 
 /// The buffers ReSTIR allocates for `n_texels` texels of which `n_observed` are observed,
 /// and `n_pixels` pixels (all cameras'), by label, size in bytes and what the size scales
