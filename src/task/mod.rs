@@ -74,7 +74,6 @@
 //! init = [0.5, 0.5, 0.5]          # one value for roughness and metallic
 //! learning_rate = 0.02
 //! ```
-use crate::optim::EstimatorOptions;
 pub use crate::vocab::{check_texture, Filter, Init, Loss, Slot, TextureSpec, ROUGHNESS_FLOOR};
 use crate::{Error, Result};
 use serde::Deserialize;
@@ -177,141 +176,6 @@ fn default_target_spp() -> u32 {
     256
 }
 
-/// Optimizer settings.
-#[derive(Clone, Debug, PartialEq, Deserialize)]
-pub struct OptimizerSpec {
-    /// Iterations to run (at most).
-    pub iterations: Option<u32>,
-    /// Wall-clock budget in seconds (at most).
-    pub time_budget_s: Option<f64>,
-    /// Samples per pixel of the primal render (independent of the gradient samples).
-    #[serde(default = "default_primal_spp")]
-    pub primal_spp: u32,
-    /// How the primal image is estimated: "independent" or "control_variate".
-    #[serde(default)]
-    pub primal: crate::optim::PrimalMode,
-    /// Upper clamp of the control variate's per-pixel weight, in [0, 1].
-    #[serde(default = "default_cv_max_weight")]
-    pub cv_max_weight: f32,
-    /// Samples per pixel of the gradient pass.
-    #[serde(default = "one")]
-    pub gradient_spp: u32,
-    /// Gradient estimator: "baseline" (the default), "restir" or "recursive"; `--method`
-    /// overrides it.
-    #[serde(default)]
-    pub method: crate::optim::Method,
-    /// The step taken with each gradient: "adam" (the default) or "variance".
-    #[serde(default)]
-    pub step: crate::optim::StepKind,
-    /// The variance-scaled step's options (`[optimizer.variance_step]`).
-    #[serde(default)]
-    pub variance_step: crate::optim::VarianceStepOptions,
-    /// Image loss.
-    #[serde(default)]
-    pub loss: Loss,
-    /// Texture filter of the optimized textures.
-    #[serde(default)]
-    pub filter: Filter,
-    /// Iterations between checkpoints (0: not by iterations).
-    #[serde(default = "default_checkpoint")]
-    pub checkpoint_every: u32,
-    /// Seconds between checkpoints (0: not by time); whichever of the two comes first.
-    #[serde(default = "default_checkpoint_s")]
-    pub checkpoint_every_s: f64,
-    /// Optimize a per-camera exposure factor with the textures (photos have unknown
-    /// exposure); it starts at `target.exposure` (or 1).
-    #[serde(default)]
-    pub optimize_exposure: bool,
-    /// Adam learning rate of the exposures' logarithms.
-    #[serde(default = "default_exposure_lr")]
-    pub exposure_learning_rate: f32,
-    /// Learning-rate schedule over the run (constant when absent).
-    #[serde(default)]
-    pub schedule: crate::optim::Schedule,
-    /// Sparse Adam: entries with an exactly zero gradient keep their value and moments.
-    #[serde(default)]
-    pub adam_mask: bool,
-    /// Adam's decays and epsilon (`[optimizer.adam]`: `beta1`, `beta2`, `eps`).
-    #[serde(default)]
-    pub adam: crate::optim::adam::AdamOptions,
-    /// Levels of the multiscale gradient (0: off, at most 4): before Adam, each observed
-    /// texel's gradient is averaged with the mean gradients of its 2^l x 2^l blocks.
-    #[serde(default)]
-    pub multiscale_levels: u32,
-    /// Weight of the smoothness prior (0: off): the mean squared difference of observed
-    /// neighbouring texels, times this, is added to the loss that Adam descends.
-    #[serde(default)]
-    pub smoothness: f32,
-    /// The moment filter (`[optimizer.moment_filter]`: `levels` (0: off), `sigma`,
-    /// `log_space`, `own_weight`, `write_back`).
-    #[serde(default)]
-    pub moment_filter: crate::optim::moment_filter::MomentFilterOptions,
-    /// Iterations between evaluation renders (image relMSE of an `eval_spp` render of every
-    /// camera against its target, outside the timed budget); 0: none.
-    #[serde(default = "default_eval_every")]
-    pub eval_every: u32,
-    /// Samples per pixel of the evaluation renders.
-    #[serde(default = "default_eval_spp")]
-    pub eval_spp: u32,
-    /// Each estimator's options: the tables `[optimizer.<method>]` (`[optimizer.restir]`,
-    /// `[optimizer.recursive]`), passed on to the estimator, which reads and checks its own.
-    /// Any other key is refused when the task is checked.
-    #[serde(flatten)]
-    pub estimators: std::collections::BTreeMap<String, toml::Value>,
-}
-
-impl OptimizerSpec {
-    /// The estimators' option tables (an error names a key that is neither an option nor
-    /// an estimator's table).
-    pub fn estimator_options(&self) -> std::result::Result<EstimatorOptions, (String, String)> {
-        let mut o = EstimatorOptions::default();
-        for (name, value) in &self.estimators {
-            let key = format!("optimizer.{name}");
-            let method = crate::optim::Method::by_name(name).ok_or_else(|| {
-                (
-                    key.clone(),
-                    format!(
-                        "unknown key (nor the options of an estimator: {})",
-                        crate::optim::Method::names().join(", ")
-                    ),
-                )
-            })?;
-            match value {
-                toml::Value::Table(t) => o.set_table(method, t.clone()),
-                _ => return Err((key, "must be a table of the estimator's options".into())),
-            }
-        }
-        Ok(o)
-    }
-}
-
-fn default_checkpoint_s() -> f64 {
-    60.0
-}
-fn default_exposure_lr() -> f32 {
-    0.01
-}
-fn default_eval_every() -> u32 {
-    10
-}
-fn default_eval_spp() -> u32 {
-    16
-}
-
-fn default_cv_max_weight() -> f32 {
-    crate::optim::primal::DEFAULT_MAX_WEIGHT
-}
-
-fn default_primal_spp() -> u32 {
-    4
-}
-fn one() -> u32 {
-    1
-}
-fn default_checkpoint() -> u32 {
-    25
-}
-
 /// A whole task file.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -344,7 +208,7 @@ pub struct Task {
     /// Image height.
     pub height: u32,
     /// Random seed.
-    #[serde(default = "one")]
+    #[serde(default = "optimizer::one")]
     pub seed: u32,
     /// Output folder (relative to the working directory).
     pub output: Option<PathBuf>,
@@ -678,45 +542,8 @@ impl Task {
     }
 }
 
-/// The optimizer settings a task asks for, with the given estimator and the estimators'
-/// options `extra` over the task's (option by option). A task whose tables are not
-/// estimators' (refused when it loads) contributes none.
-pub fn task_settings(
-    task: &Task,
-    cameras: &[usize],
-    method: crate::optim::Method,
-    extra: &EstimatorOptions,
-) -> crate::optim::Settings {
-    crate::optim::Settings {
-        width: task.width,
-        height: task.height,
-        cameras: cameras.to_vec(),
-        primal_spp: task.optimizer.primal_spp,
-        primal: task.optimizer.primal,
-        cv_max_weight: task.optimizer.cv_max_weight,
-        gradient_spp: task.optimizer.gradient_spp,
-        loss: task.optimizer.loss,
-        seed: task.seed,
-        method,
-        estimator_options: task
-            .optimizer
-            .estimator_options()
-            .unwrap_or_default()
-            .merged(extra),
-        step: task.optimizer.step,
-        variance_step: task.optimizer.variance_step,
-        schedule: task.optimizer.schedule.clone(),
-        adam: task.optimizer.adam,
-        adam_mask: task.optimizer.adam_mask,
-        multiscale_levels: task.optimizer.multiscale_levels,
-        smoothness: task.optimizer.smoothness,
-        moment_filter: task.optimizer.moment_filter,
-        exposure_learning_rate: task
-            .optimizer
-            .optimize_exposure
-            .then_some(task.optimizer.exposure_learning_rate),
-    }
-}
+mod optimizer;
+pub use optimizer::{task_settings, OptimizerSpec};
 
 #[cfg(test)]
 mod tests;

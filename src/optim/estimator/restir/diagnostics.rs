@@ -1,0 +1,75 @@
+//! What ReSTIR reports about itself: the names in its checkpointed state and what its merge
+//! counted.
+use super::Diagnostics;
+use crate::Result;
+
+/// Names in the ReSTIR estimator's [`EstimatorState`](super::EstimatorState): the kept reservoirs (two per texel,
+/// sign 0 then sign 1, [`reservoir::WORDS`](super::reservoir::WORDS) words each), the target adjoints of both parities
+/// (RGBA f32 per pixel, the cameras one after another, the even iterations' first: the
+/// resampling targets' smoothed adjoint), and the merges whose samples the kept reservoirs can
+/// hold (0 before the first iteration or without temporal reuse; it sets the kept samples'
+/// confidence).
+pub mod state_names {
+    /// Array: the kept reservoirs.
+    pub const RESERVOIRS: &str = "reservoirs";
+    /// Array: the target adjoints.
+    pub const TARGETS: &str = "targets";
+    /// Counter: the merges so far.
+    pub const HISTORY: &str = "history";
+    /// Counter: words per reservoir ([`reservoir::WORDS`](super::super::reservoir::WORDS); a state saved with another
+    /// reservoir layout is refused).
+    pub const WORDS: &str = "reservoir words";
+}
+
+/// What the merge pass counted since the optimizer was created.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct MergeDiagnostics {
+    /// BRDF evaluations of stored paths (the merge's whole work; it traces no ray).
+    pub evaluations: u64,
+    /// Kept paths checked with [`RestirOptions::verify_paths`](super::RestirOptions::verify_paths).
+    pub verified: u64,
+    /// Largest relative difference between a stored path's target under the previous state
+    /// (stored with it, in bfloat16) and its evaluation there.
+    pub max_relative_error: f32,
+    /// Candidates for texels outside the compaction map (texels that the observed-texel
+    /// pass's strata missed), dropped by the candidate pass.
+    pub unmapped: u64,
+}
+
+impl MergeDiagnostics {
+    pub(super) const EVALUATIONS: &'static str = "merge evaluations";
+    const VERIFIED: &'static str = "merge verified";
+    const MAX_RELATIVE_ERROR: &'static str = "merge max relative error";
+    pub(super) const UNMAPPED: &'static str = "candidates unmapped";
+
+    pub(super) fn named(&self) -> Diagnostics {
+        vec![
+            (Self::EVALUATIONS, self.evaluations as f64),
+            (Self::VERIFIED, self.verified as f64),
+            (Self::MAX_RELATIVE_ERROR, f64::from(self.max_relative_error)),
+            (Self::UNMAPPED, self.unmapped as f64),
+        ]
+    }
+
+    /// What the ReSTIR merge of `optimizer` counted (None when it runs another estimator).
+    pub fn of(optimizer: &crate::optim::Optimizer) -> Result<Option<MergeDiagnostics>> {
+        let d = optimizer.estimator_diagnostics()?;
+        let get = |name: &str| d.iter().find(|(n, _)| *n == name).map(|v| v.1);
+        Ok(
+            match (
+                get(Self::EVALUATIONS),
+                get(Self::VERIFIED),
+                get(Self::MAX_RELATIVE_ERROR),
+                get(Self::UNMAPPED),
+            ) {
+                (Some(e), Some(v), Some(m), Some(u)) => Some(MergeDiagnostics {
+                    evaluations: e as u64,
+                    verified: v as u64,
+                    max_relative_error: m as f32,
+                    unmapped: u as u64,
+                }),
+                _ => None,
+            },
+        )
+    }
+}
