@@ -46,11 +46,12 @@ impl StepArg {
 /// gradients.
 #[derive(clap::Args)]
 pub(crate) struct EstimatorArgs {
-    /// Gradient estimator: baseline (plain Monte Carlo), restir (parameter-space ReSTIR) or
-    /// recursive (a recursive control variate on the gradient). Default: the task's
-    /// `optimizer.method`, else baseline.
+    /// Gradient estimator: auto (chosen by the task's sampling and size; `psrestir
+    /// estimators` states the rule), baseline (plain Monte Carlo), restir (parameter-space
+    /// ReSTIR) or recursive (a recursive control variate on the gradient). Default: the
+    /// task's `optimizer.method`, else auto.
     #[arg(long, value_parser = parse_method)]
-    pub(crate) method: Option<optim::Method>,
+    pub(crate) method: Option<optim::MethodChoice>,
     /// An estimator's option over the task's `[optimizer.METHOD]` table, as
     /// METHOD.KEY=VALUE (`restir.m_cap=16`, `restir.confidence=candidates`,
     /// `recursive.min_weight=0.2`); repeat for more. docs/guide.md lists the options.
@@ -58,7 +59,11 @@ pub(crate) struct EstimatorArgs {
     pub(crate) options: Vec<String>,
 }
 
-fn parse_method(s: &str) -> std::result::Result<optim::Method, String> {
+fn parse_method(s: &str) -> std::result::Result<optim::MethodChoice, String> {
+    s.parse().map_err(|e: psrestir::Error| e.to_string())
+}
+
+fn parse_estimator(s: &str) -> std::result::Result<optim::Method, String> {
     s.parse().map_err(|e: psrestir::Error| e.to_string())
 }
 
@@ -67,8 +72,8 @@ impl EstimatorArgs {
     /// refused here (before any scene is loaded) when invalid.
     pub(crate) fn resolve(
         &self,
-        task_method: optim::Method,
-    ) -> Result<(optim::Method, optim::EstimatorOptions)> {
+        task_method: optim::MethodChoice,
+    ) -> Result<(optim::MethodChoice, optim::EstimatorOptions)> {
         Ok((
             self.method.unwrap_or(task_method),
             self.estimator_options()?,
@@ -267,7 +272,7 @@ pub(crate) struct BenchArgs {
     #[arg(long, value_enum, default_value = "default")]
     pub(crate) protocol: ProtocolArg,
     /// The estimator whose gradient error the gradient phase measures against the baseline's.
-    #[arg(long, value_parser = parse_method, default_value = "restir")]
+    #[arg(long, value_parser = parse_estimator, default_value = "restir")]
     pub(crate) gradient_method: optim::Method,
     /// Measure the gradient error only (skip the equal-time optimization).
     #[arg(long)]

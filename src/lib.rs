@@ -81,7 +81,9 @@ pub use error::{Error, Result};
 pub use gpu::Gpu;
 pub use image_io::Image;
 pub use job::Problem;
-pub use optim::{EstimatorOptions, Method, Optimizer, OptimizerState, Progress, Settings, Stop};
+pub use optim::{
+    EstimatorOptions, Method, MethodChoice, Optimizer, OptimizerState, Progress, Settings, Stop,
+};
 pub use scene::Scene;
 pub use task::{Filter, Init, Loss, Slot, Task, TextureSpec};
 

@@ -106,13 +106,20 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Bench(args) => cmd_bench(args)?,
         Command::Estimators => {
+            {
+                use psrestir::optim::estimator as e;
+                println!(
+                    "auto (the default): the baseline where the gradient pass draws at least {} \
+                     sample per optimized texel and iteration; below that, ReSTIR where the \
+                     primal takes at least {} samples per gradient sample or the textures have \
+                     fewer than {} texels, the baseline otherwise\n",
+                    e::DENSE_SAMPLES_PER_TEXEL,
+                    e::RESTIR_PRIMAL_RATIO,
+                    e::RESTIR_MAX_TEXELS_CHEAP_PRIMAL
+                );
+            }
             for m in psrestir::optim::Method::ALL {
-                let default = if m == psrestir::optim::Method::default() {
-                    " (the default)"
-                } else {
-                    ""
-                };
-                println!("{}{default}: {}", m.name(), m.summary());
+                println!("{}: {}", m.name(), m.summary());
                 let toml = psrestir::optim::EstimatorOptions::defaults_toml(m);
                 if toml.is_empty() {
                     println!("  no options\n");

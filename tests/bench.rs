@@ -250,8 +250,34 @@ fn bench_json_has_every_field_finite_and_in_range() {
         "{extra} bytes per texel, expected {expected}"
     );
 
+    // `auto` on this task (2 cameras of 32², 1 gradient spp, 2 x 64² texels: 0.25 samples
+    // per texel, a small texture) picks ReSTIR, and its run over the better of the
+    // baseline's and ReSTIR's is ReSTIR's own error over that minimum.
+    let auto = &s["auto"];
+    assert_eq!(auto["method"].as_str(), Some("restir"), "{auto}");
+    assert_eq!(number(auto, "samples_per_texel"), 0.25);
+    assert!(auto["reason"]
+        .as_str()
+        .unwrap()
+        .contains("0.25 gradient samples"));
+    for (k, v) in [
+        ("texture_rmse_observed_over_best", "texture_rmse_observed"),
+        ("image_relmse_over_best", "image_relmse"),
+    ] {
+        let want = number(restir, v) / number(base, v).min(number(restir, v));
+        let got = number(auto, k);
+        assert!(
+            got >= 1.0 && (got - want).abs() <= 1e-9 * want,
+            "{k} {got} vs {want}"
+        );
+    }
+
     let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
     assert!(md.contains("| sphere |"), "{md}");
+    assert!(
+        md.contains("| sphere | 2 / 1 | 8192 | 0.25 | restir |"),
+        "{md}"
+    );
     // Per texture (the task has two): each run's observed-texel RMSE per texture, between
     // the smallest and the largest part no more than the whole (an RMSE over the union lies
     // between its parts'), and the report's table of them.

@@ -385,7 +385,7 @@ learning_rate = 0.05
         &gpu,
         &task,
         &RunOptions {
-            method: Method::Restir,
+            method: Method::Restir.into(),
             out: Some(out.clone()),
             ..Default::default()
         },

@@ -427,7 +427,34 @@ pub(super) fn optimization_phases(
             ),
             None => vec![f64::NAN; prep.set.textures.len()],
         },
+        auto: auto_result(task, prep.cameras.len(), &runs),
         runs,
     };
     Ok((result, finals))
+}
+
+/// What `auto` picks for `task` and how the run of its pick (with Adam, unfiltered) compares
+/// with the lower of the baseline's and ReSTIR's, when both are among `runs`.
+fn auto_result(task: &Task, cameras: usize, runs: &[RunResult]) -> AutoResult {
+    let choice = crate::task::task_method(task, crate::optim::MethodChoice::Auto, cameras);
+    let regime = crate::task::task_regime(task, cameras);
+    let run = |m: Method| runs.iter().find(|r| r.key == Contender::adam(m).key());
+    let over_best = |f: fn(&RunResult) -> f64| {
+        let picked = f(run(choice.method)?);
+        let best = [Method::Baseline, Method::Restir]
+            .into_iter()
+            .map(|m| run(m).map(f))
+            .collect::<Option<Vec<f64>>>()?
+            .into_iter()
+            .fold(f64::INFINITY, f64::min);
+        Some(picked / best)
+    };
+    AutoResult {
+        method: choice.method.name().into(),
+        reason: choice.reason,
+        samples_per_texel: regime.samples_per_texel(),
+        texels: regime.texels,
+        texture_rmse_observed_over_best: over_best(|r| r.texture_rmse_observed),
+        image_relmse_over_best: over_best(|r| r.image_relmse),
+    }
 }

@@ -151,6 +151,28 @@ pub struct OptimizationResult {
     /// Every run, in order: the baseline with Adam first (the reference of every ratio),
     /// then [`super::BenchOptions::contenders`].
     pub runs: Vec<RunResult>,
+    /// What `method = "auto"` picks for this scene's sampling, and how the run of its pick
+    /// compares with the better of the fixed methods it picks between.
+    pub auto: AutoResult,
+}
+
+/// `method = "auto"` on one scene: its pick among the baseline and ReSTIR (both with Adam,
+/// unfiltered), and its run's errors over the lower of the two runs' (1: it picked the
+/// better one; 1.05: it ends 5% above it). The ratios are absent unless both ran.
+#[derive(Clone, Debug, Serialize)]
+pub struct AutoResult {
+    /// The estimator it picks.
+    pub method: String,
+    /// Why.
+    pub reason: String,
+    /// Gradient samples per optimized texel per iteration (what the rule reads first).
+    pub samples_per_texel: f64,
+    /// Optimized texels.
+    pub texels: u64,
+    /// Observed-texel RMSE of its pick's run over the lower of the two.
+    pub texture_rmse_observed_over_best: Option<f64>,
+    /// Image relMSE of its pick's run over the lower of the two.
+    pub image_relmse_over_best: Option<f64>,
 }
 
 impl OptimizationResult {

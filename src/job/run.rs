@@ -10,8 +10,8 @@ use crate::image_io::{self, Image};
 use crate::optim::checkpoint::{Checkpoint, Header, MetricRow};
 use crate::optim::{FaultCounts, Optimizer, PassTimes};
 use crate::render::params::ParamSet;
-use crate::task::task_settings;
 use crate::task::Task;
+use crate::task::{named_cameras, task_method, task_settings};
 use crate::vocab::Slot;
 use crate::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -30,8 +30,8 @@ pub struct RunOptions {
     pub resume: bool,
     /// Show a progress bar.
     pub progress: bool,
-    /// Gradient estimator.
-    pub method: crate::optim::Method,
+    /// Gradient estimator (`auto`, the default: chosen by the task's sampling settings).
+    pub method: crate::optim::MethodChoice,
     /// Estimators' options over the task's tables (`--estimator-option`).
     pub estimator_options: crate::optim::EstimatorOptions,
     /// Set (e.g. from a Ctrl-C handler) to stop after the iteration under way: the run then
@@ -238,11 +238,12 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         "preparing the targets and the GPU passes (a driver's first run on a machine compiles \
          their shaders; later runs load them from its cache)"
     );
-    // The optimizer's passes compile on a second device while this one renders the targets.
+    // The optimizer's passes compile on a second device while this one renders the targets
+    // (for `auto`, those of its choice with the cameras the task names).
     let passes = Optimizer::passes(&task_settings(
         task,
         &[],
-        opts.method,
+        task_method(task, opts.method, named_cameras(task)).method,
         &opts.estimator_options,
     ));
     let helper = gpu.compile_elsewhere(&passes);
@@ -251,17 +252,23 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     if let Some(h) = helper {
         let _ = h.join();
     }
-    let settings = task_settings(task, &prep.cameras, opts.method, &opts.estimator_options);
+    let choice = task_method(task, opts.method, prep.cameras.len());
+    let settings = task_settings(task, &prep.cameras, choice.method, &opts.estimator_options);
     let own = settings.estimator_options.describe(settings.method);
     log::info!(
-        "gradient estimator: {}{}; step: {}",
+        "gradient estimator: {}{}; step: {}{}",
         settings.method.name(),
         if own.is_empty() {
             String::new()
         } else {
             format!(" ({own})")
         },
-        settings.step.name()
+        settings.step.name(),
+        if choice.automatic {
+            format!(" ({})", choice.reason)
+        } else {
+            String::new()
+        }
     );
     let initial_rmse = prep.reference.as_ref().map(|r| rmse(&prep.set.values, r));
     let mut opt = Optimizer::for_problem(gpu, &prep, settings)?;
@@ -576,12 +583,16 @@ pub fn write_gradient(
     gpu: &Gpu,
     task: &Task,
     dir: &Path,
-    method: crate::optim::Method,
+    method: crate::optim::MethodChoice,
     options: &crate::optim::EstimatorOptions,
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
     let prep = Problem::from_task(gpu, task, dir, false)?;
-    let settings = task_settings(task, &prep.cameras, method, options);
+    let choice = task_method(task, method, prep.cameras.len());
+    if choice.automatic {
+        log::info!("gradient estimator: {} ({})", choice.method, choice.reason);
+    }
+    let settings = task_settings(task, &prep.cameras, choice.method, options);
     let mut opt = Optimizer::for_problem(gpu, &prep, settings)?;
     let (grad, _) = opt.estimate_gradient(0)?;
     let mut written = Vec::new();

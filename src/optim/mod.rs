@@ -36,7 +36,7 @@ use crate::scene::Scene;
 use crate::{Error, Result};
 use cameras::{camera_passes, check_inputs, CameraPasses, CameraSetup, Stats};
 use estimator::Estimator;
-pub use estimator::{EstimatorOptions, EstimatorState, Method};
+pub use estimator::{Choice, EstimatorOptions, EstimatorState, Method, MethodChoice};
 pub use primal::{ControlVariateSnapshot, PrimalMode};
 pub use prior::{multiscale, smoothness};
 pub use schedule::{Schedule, ScheduleKind};

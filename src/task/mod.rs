@@ -449,7 +449,8 @@ impl Task {
         self.optimizer
             .estimator_options()
             .map_err(|(key, msg)| self.bad(&key, msg))?;
-        let mut settings = task_settings(self, &[], self.optimizer.method, &Default::default());
+        let method = task_method(self, self.optimizer.method, named_cameras(self)).method;
+        let mut settings = task_settings(self, &[], method, &Default::default());
         settings.exposure_learning_rate = Some(self.optimizer.exposure_learning_rate);
         settings
             .validate()
@@ -543,7 +544,7 @@ impl Task {
 }
 
 mod optimizer;
-pub use optimizer::{task_settings, OptimizerSpec};
+pub use optimizer::{named_cameras, task_method, task_regime, task_settings, OptimizerSpec};
 
 #[cfg(test)]
 mod tests;

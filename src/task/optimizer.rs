@@ -1,6 +1,7 @@
 //! The `[optimizer]` table of a task file and the optimizer settings a task asks for.
 use super::{Filter, Loss, Task};
-use crate::optim::EstimatorOptions;
+use crate::optim::estimator::Regime;
+use crate::optim::{Choice, EstimatorOptions, Method, MethodChoice};
 use serde::Deserialize;
 
 /// Optimizer settings.
@@ -22,10 +23,10 @@ pub struct OptimizerSpec {
     /// Samples per pixel of the gradient pass.
     #[serde(default = "one")]
     pub gradient_spp: u32,
-    /// Gradient estimator: "baseline" (the default), "restir" or "recursive"; `--method`
-    /// overrides it.
+    /// Gradient estimator: "auto" (the default: chosen by the task's sampling, see
+    /// [`MethodChoice`]), "baseline", "restir" or "recursive"; `--method` overrides it.
     #[serde(default)]
-    pub method: crate::optim::Method,
+    pub method: MethodChoice,
     /// The step taken with each gradient: "adam" (the default) or "variance".
     #[serde(default)]
     pub step: crate::optim::StepKind,
@@ -93,12 +94,12 @@ impl OptimizerSpec {
         let mut o = EstimatorOptions::default();
         for (name, value) in &self.estimators {
             let key = format!("optimizer.{name}");
-            let method = crate::optim::Method::by_name(name).ok_or_else(|| {
+            let method = Method::by_name(name).ok_or_else(|| {
                 (
                     key.clone(),
                     format!(
                         "unknown key (nor the options of an estimator: {})",
-                        crate::optim::Method::names().join(", ")
+                        Method::names().join(", ")
                     ),
                 )
             })?;
@@ -138,13 +139,42 @@ fn default_checkpoint() -> u32 {
     25
 }
 
+/// The estimator `choice` resolves to for `task` seen by `cameras` cameras (`auto`: by the
+/// task's sampling and sizes, [`MethodChoice::resolve`]).
+pub fn task_method(task: &Task, choice: MethodChoice, cameras: usize) -> Choice {
+    choice.resolve(&task_regime(task, cameras))
+}
+
+/// The sampling and sizes of `task` seen by `cameras` cameras, as `auto` reads them.
+pub fn task_regime(task: &Task, cameras: usize) -> Regime {
+    Regime {
+        primal_spp: task.optimizer.primal_spp,
+        gradient_spp: task.optimizer.gradient_spp,
+        pixels: task.width as u64 * task.height as u64 * cameras.max(1) as u64,
+        texels: task
+            .textures
+            .iter()
+            .map(|t| t.resolution[0] as u64 * t.resolution[1] as u64)
+            .sum(),
+    }
+}
+
+/// The cameras `task` names, or 1 where it leaves them to its scene or camera file: the
+/// count [`task_method`] assumes before the scene is loaded.
+pub fn named_cameras(task: &Task) -> usize {
+    task.cameras
+        .as_ref()
+        .map_or(task.camera_defs.len(), |c| c.len())
+        .max(1)
+}
+
 /// The optimizer settings a task asks for, with the given estimator and the estimators'
 /// options `extra` over the task's (option by option). A task whose tables are not
 /// estimators' (refused when it loads) contributes none.
 pub fn task_settings(
     task: &Task,
     cameras: &[usize],
-    method: crate::optim::Method,
+    method: Method,
     extra: &EstimatorOptions,
 ) -> crate::optim::Settings {
     crate::optim::Settings {

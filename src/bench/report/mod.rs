@@ -168,7 +168,7 @@ fn write_gradients(dir: &Path, prep: &Problem, g: &GradientSnapshot) -> Result<(
 
 mod tables;
 pub use tables::{
-    curve_table, gradient_table, optimization_table, per_texture_table, primal_table,
+    auto_table, curve_table, gradient_table, optimization_table, per_texture_table, primal_table,
     settings_table, successive_table, texture_table,
 };
 use tables::{ratio, sci};
@@ -205,6 +205,18 @@ fn reconstruction_markdown(r: &BenchReport) -> String {
         );
         md.push_str(&per_texture);
     }
+    let _ = write!(
+        md,
+        "\n### The automatic choice\n\n`method = \"auto\"` (the default of task files and \
+         the command line) takes the baseline where the gradient pass draws at least {} \
+         sample per texel and iteration; below that, ReSTIR where the primal takes at least {} \
+         samples per gradient sample or the texture has fewer than {} texels, the baseline \
+         otherwise. Its pick's run over the better of the baseline's and ReSTIR's:\n\n",
+        crate::optim::estimator::DENSE_SAMPLES_PER_TEXEL,
+        crate::optim::estimator::RESTIR_PRIMAL_RATIO,
+        crate::optim::estimator::RESTIR_MAX_TEXELS_CHEAP_PRIMAL,
+    );
+    md.push_str(&auto_table(r));
     md.push_str("\n### Observed-texel RMSE along the run\n\n");
     md.push_str(&curve_table(r));
     md.push_str(
@@ -228,6 +240,8 @@ pub fn table(r: &BenchReport) -> String {
             s.push('\n');
         }
         s.push_str(&curve_table(r));
+        s.push('\n');
+        s.push_str(&auto_table(r));
         s.push('\n');
     }
     // Absent with --end-to-end-only.

@@ -200,6 +200,32 @@ pub fn per_texture_table(r: &BenchReport) -> String {
     s
 }
 
+/// What `method = "auto"` picks per scene and its run's errors over the better of the
+/// baseline's and ReSTIR's (both with Adam; "–" unless both ran).
+pub fn auto_table(r: &BenchReport) -> String {
+    let mut s = String::from(
+        "| scene | spp primal / gradient | texels | gradient samples per texel | auto picks | \
+         texture ÷ best | image ÷ best |\n|---|---|---|---|---|---|---|\n",
+    );
+    let or_dash = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("**{}**", ratio(v)));
+    for x in &r.scenes {
+        let Some(o) = &x.optimization else { continue };
+        let _ = writeln!(
+            s,
+            "| {} | {} / {} | {} | {:.2} | {} | {} | {} |",
+            x.name,
+            x.primal_spp,
+            x.gradient_spp,
+            o.auto.texels,
+            o.auto.samples_per_texel,
+            o.auto.method,
+            or_dash(o.auto.texture_rmse_observed_over_best),
+            or_dash(o.auto.image_relmse_over_best),
+        );
+    }
+    s
+}
+
 /// Each run's settings (tuned or the task's) and, with `--tune`, the search's score on its
 /// own seed.
 pub fn settings_table(r: &BenchReport) -> String {

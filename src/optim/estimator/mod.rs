@@ -19,8 +19,14 @@
 //! else names them (the seam test in `tests.rs` holds it), so that the optimizer, the CLI, task
 //! files, checkpoints and the bench see a method's name and its options table only.
 pub mod baseline;
+mod choice;
 pub mod recursive;
 pub mod restir;
+
+pub use choice::{
+    Choice, MethodChoice, Regime, DENSE_SAMPLES_PER_TEXEL, RESTIR_MAX_TEXELS_CHEAP_PRIMAL,
+    RESTIR_PRIMAL_RATIO,
+};
 
 use super::{FaultCounts, PassTimer, Settings};
 use crate::gpu::Gpu;
@@ -30,9 +36,10 @@ use crate::Result;
 use recursive::RecursiveOptions;
 use restir::RestirOptions;
 
-/// The gradient estimator. The default is the one that ends lower on the bundled default task
-/// at equal time, each at its own best settings (docs/studies.md, "Which estimator is the
-/// default"): on the machines measured so far, the baseline.
+/// The gradient estimator. The library's default is the one that ends lower on the bundled
+/// default task at equal time, each at its own best settings (docs/studies.md, "Which
+/// estimator is the default"): on the machines measured so far, the baseline. Task files and
+/// the command line default to [`MethodChoice::Auto`], which picks one by the task's regime.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Method {
