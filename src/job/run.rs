@@ -30,7 +30,7 @@ pub struct RunOptions {
     pub resume: bool,
     /// Show a progress bar.
     pub progress: bool,
-    /// Gradient estimator (`auto`, the default: chosen by the task's sampling settings).
+    /// Gradient estimator (`auto`, the default: chosen by the task's sampling and sizes).
     pub method: crate::optim::MethodChoice,
     /// Estimators' options over the task's tables (`--estimator-option`).
     pub estimator_options: crate::optim::EstimatorOptions,
