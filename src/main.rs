@@ -22,8 +22,18 @@ fn main() {
     }
     // A panic inside a third-party decoder is caught and reported as an error naming the
     // file; the default hook would also print it as a crash.
+    // Output piped into a reader that stops early (`psrestir estimators | head`) ends the
+    // program quietly, as the usual command-line tools do, not with a panic's backtrace.
     let default_hook = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
+        let message = info
+            .payload()
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .unwrap_or_default();
+        if message.starts_with("failed printing to stdout") && message.contains("Broken pipe") {
+            std::process::exit(0);
+        }
         if !psrestir::error::panic_is_guarded() {
             default_hook(info)
         }

@@ -327,6 +327,23 @@ fn render_cli_rejects_bad_arguments_clearly() {
     assert!(err.contains("sky.exr"), "{err}");
 }
 
+#[test]
+fn output_into_a_closed_pipe_ends_quietly() {
+    // The reader is gone before the program writes (as `psrestir estimators | head -1` once
+    // head has its line): the writes fail with a broken pipe.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_psrestir"))
+        .arg("estimators")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
+
 #[cfg(target_os = "linux")]
 #[test]
 fn a_missing_gpu_driver_says_how_to_install_one() {
