@@ -25,7 +25,8 @@ pub const RESTIR_PRIMAL_RATIO: f64 = 8.0;
 /// Optimized texels from which `auto` takes the baseline in the sparse regime when the primal
 /// is cheap: ReSTIR's merge over that many texels costs more than the primal render and
 /// halves the iterations of a budget (measured: `lattice` at 1024² texels with a 2-spp primal
-/// ends at 1.30x the baseline's texture error, at 512² and below level or lower).
+/// ends at 1.30x the baseline's texture error with two seeds, `vase` at 1024² level; every
+/// scene at 512² and below level or lower).
 pub const RESTIR_MAX_TEXELS_CHEAP_PRIMAL: u64 = 1 << 20;
 
 /// What the rule reads: a task's sampling and sizes.
