@@ -436,8 +436,8 @@ pub(super) fn optimization_phases(
 /// What `auto` picks for `task` and how the run of its pick (with Adam, unfiltered) compares
 /// with the lower of the baseline's and ReSTIR's, when both are among `runs`.
 fn auto_result(task: &Task, cameras: usize, runs: &[RunResult]) -> AutoResult {
-    let choice = crate::task::task_method(task, crate::optim::MethodChoice::Auto, cameras);
     let regime = crate::task::task_regime(task, cameras);
+    let choice = crate::optim::MethodChoice::Auto.resolve(&regime);
     let run = |m: Method| runs.iter().find(|r| r.key == Contender::adam(m).key());
     let over_best = |f: fn(&RunResult) -> f64| {
         let picked = f(run(choice.method)?);
