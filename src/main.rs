@@ -116,18 +116,10 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Bench(args) => cmd_bench(args)?,
         Command::Estimators => {
-            {
-                use psrestir::optim::estimator as e;
-                println!(
-                    "auto (the default): the baseline where the gradient pass draws at least {} \
-                     sample per optimized texel and iteration; below that, ReSTIR where the \
-                     primal takes at least {} samples per gradient sample or the textures have \
-                     fewer than {} texels, the baseline otherwise\n",
-                    e::DENSE_SAMPLES_PER_TEXEL,
-                    e::RESTIR_PRIMAL_RATIO,
-                    e::RESTIR_MAX_TEXELS_CHEAP_PRIMAL
-                );
-            }
+            println!(
+                "auto (the default): {}\n",
+                psrestir::optim::estimator::auto_rule()
+            );
             for m in psrestir::optim::Method::ALL {
                 println!("{}: {}", m.name(), m.summary());
                 let toml = psrestir::optim::EstimatorOptions::defaults_toml(m);

@@ -208,13 +208,9 @@ fn reconstruction_markdown(r: &BenchReport) -> String {
     let _ = write!(
         md,
         "\n### The automatic choice\n\n`method = \"auto\"` (the default of task files and \
-         the command line) takes the baseline where the gradient pass draws at least {} \
-         sample per texel and iteration; below that, ReSTIR where the primal takes at least {} \
-         samples per gradient sample or the texture has fewer than {} texels, the baseline \
-         otherwise. Its pick's run over the better of the baseline's and ReSTIR's:\n\n",
-        crate::optim::estimator::DENSE_SAMPLES_PER_TEXEL,
-        crate::optim::estimator::RESTIR_PRIMAL_RATIO,
-        crate::optim::estimator::RESTIR_MAX_TEXELS_CHEAP_PRIMAL,
+         the command line) takes {}. Its pick's run over the better of the baseline's and \
+         ReSTIR's:\n\n",
+        crate::optim::estimator::auto_rule()
     );
     md.push_str(&auto_table(r));
     md.push_str("\n### Observed-texel RMSE along the run\n\n");

@@ -29,6 +29,16 @@ pub const RESTIR_PRIMAL_RATIO: f64 = 8.0;
 /// scene at 512² and below level or lower).
 pub const RESTIR_MAX_TEXELS_CHEAP_PRIMAL: u64 = 1 << 20;
 
+/// The rule in one sentence, with its thresholds (for `psrestir estimators` and reports).
+pub fn rule() -> String {
+    format!(
+        "the baseline where the gradient pass draws at least {DENSE_SAMPLES_PER_TEXEL} sample \
+         per optimized texel and iteration; below that, ReSTIR where the primal takes at least \
+         {RESTIR_PRIMAL_RATIO} samples per gradient sample or the textures have fewer than \
+         {RESTIR_MAX_TEXELS_CHEAP_PRIMAL} texels, the baseline otherwise"
+    )
+}
+
 /// What the rule reads: a task's sampling and sizes.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Regime {

@@ -24,8 +24,8 @@ pub mod recursive;
 pub mod restir;
 
 pub use choice::{
-    Choice, MethodChoice, Regime, DENSE_SAMPLES_PER_TEXEL, RESTIR_MAX_TEXELS_CHEAP_PRIMAL,
-    RESTIR_PRIMAL_RATIO,
+    rule as auto_rule, Choice, MethodChoice, Regime, DENSE_SAMPLES_PER_TEXEL,
+    RESTIR_MAX_TEXELS_CHEAP_PRIMAL, RESTIR_PRIMAL_RATIO,
 };
 
 use super::{FaultCounts, PassTimer, Settings};
