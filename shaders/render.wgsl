@@ -48,7 +48,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         // The camera-sample index identifies this sample.
         rng_init(rp.seed, (rp.sample_offset + s) * n_pixels + pixel, 0u);
         let d = camera_direction(rp.camera, xy + rand2());
-        let l = direct_radiance_states(rp.camera.origin, d, rp.two_states != 0u);
+        let l = radiance_states(rp.camera.origin, d, rp.two_states != 0u);
         if all(l[0] == l[0]) && all(abs(l[0]) < vec3f(3.0e38)) && all(l[1] == l[1]) && all(abs(l[1]) < vec3f(3.0e38)) {
             sum += l[0];
             sum_prev += l[1];

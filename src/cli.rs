@@ -148,6 +148,10 @@ pub(crate) struct RenderArgs {
     /// Sampling techniques for area and environment lights.
     #[arg(long, value_enum, default_value = "mis")]
     pub(crate) technique: TechniqueArg,
+    /// Vertices of a camera path: 1 is direct light only, each more one bounce of indirect
+    /// light (default 1).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=psrestir::scene::MaxDepth::LIMIT as i64))]
+    pub(crate) max_depth: Option<u32>,
     /// Output image: .exr (linear) or .png (sRGB).
     #[arg(short, long)]
     pub(crate) output: PathBuf,
@@ -179,6 +183,10 @@ pub(crate) struct OptimizeArgs {
     /// Continue from the checkpoint in the output folder.
     #[arg(long)]
     pub(crate) resume: bool,
+    /// Vertices of a camera path: 1 is direct light only, each more one bounce of indirect
+    /// light (overrides the task's `max_depth`).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=psrestir::scene::MaxDepth::LIMIT as i64))]
+    pub(crate) max_depth: Option<u32>,
     /// Primal estimator (overrides the task).
     #[arg(long, value_enum)]
     pub(crate) primal: Option<PrimalArg>,
@@ -293,6 +301,10 @@ pub(crate) struct BenchArgs {
     /// Switch off the tasks' priors (multiscale gradient, smoothness prior).
     #[arg(long)]
     pub(crate) no_priors: bool,
+    /// Vertices of a camera path: 1 is direct light only, each more one bounce of indirect
+    /// light (overrides every task's `max_depth`).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=psrestir::scene::MaxDepth::LIMIT as i64))]
+    pub(crate) max_depth: Option<u32>,
     /// Measure throughput only, on the first scene given (default: the bundled default
     /// task): camera samples per second of a 256², 64-spp render and of each estimator's
     /// passes, and each pass's pipeline creation. Writes throughput.md and throughput.json.
@@ -323,7 +335,7 @@ pub(crate) struct BenchArgs {
 
 #[derive(Subcommand)]
 pub(crate) enum Command {
-    /// Render a glTF scene with direct lighting.
+    /// Render a glTF scene: direct light, and with --max-depth indirect light.
     Render(RenderArgs),
     /// Recover textures from target images by gradient descent.
     Optimize(OptimizeArgs),

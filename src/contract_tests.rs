@@ -177,7 +177,8 @@ fn scene_mirrors_match_wgsl_field_by_field() {
             env_conditional,
             env_scale,
             env_total,
-            scene_radius
+            scene_radius,
+            max_depth
         ]
     );
     mirror!(

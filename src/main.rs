@@ -187,6 +187,7 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
         no_default_env,
         seed,
         technique,
+        max_depth,
         output,
         cameras,
         frame,
@@ -207,6 +208,7 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
         bail!("--env-scale must be a finite number >= 0");
     }
     let mut sc = scene::load(&path)?;
+    sc.max_depth = scene::MaxDepth::new(max_depth.unwrap_or(1)).map_err(anyhow::Error::msg)?;
     if let Some(env) = env {
         let mut map = EnvMap::load(&env)?;
         map.scale = env_scale;
@@ -313,6 +315,7 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
         time_budget,
         out,
         resume,
+        max_depth,
         primal,
         multiscale_levels,
         smoothness,
@@ -332,6 +335,7 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
     } = args;
     let path = task.unwrap_or_else(|| PathBuf::from(DEFAULT_TASK));
     let mut task = Task::load(&path)?;
+    task.max_depth = max_depth.unwrap_or(task.max_depth);
     if let Some(f) = lr_scale {
         if !(f.is_finite() && f > 0.0) {
             bail!("--lr-scale must be a positive number");
@@ -477,6 +481,7 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         end_to_end_only,
         contenders,
         no_priors,
+        max_depth,
         throughput,
         tune,
         tune_budget,
@@ -555,6 +560,7 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         tune,
         tune_budget_s: tune_budget,
         primal: primal.map(PrimalArg::mode),
+        max_depth,
         eval_spp,
         estimator_options,
         gradient_method,

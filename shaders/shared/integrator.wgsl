@@ -1,8 +1,10 @@
-// Direct illumination at the first hit of a camera ray: emission seen directly, next-event
-// estimation and BSDF sampling, combined by MIS (power heuristic). Each technique returns the
-// sampled direction, the radiance arriving along it and the factor MIS weight / density, so
-// that the contribution is brdf_eval_cos(wo, wi) x radiance x scale; the gradient passes
-// reuse this split (ReSTIR stores the path, direction and radiance, without the factor).
+// Camera paths: emission seen directly, then at every vertex next-event estimation and BSDF
+// sampling, combined by MIS (power heuristic), to scene.max_depth vertices (1: direct light).
+// Each of the first vertex's two techniques returns the sampled direction, the radiance
+// arriving along it (with further vertices, everything the BSDF sample's ray brings back) and
+// a factor (MIS weight / density, or 1 / density), so that the contribution is
+// brdf_eval_cos(wo, wi) x radiance x scale; the gradient passes reuse this split (ReSTIR
+// stores the path, direction and radiance, without the factor).
 #import shared/bvh
 #import shared/surface
 #import shared/path_encoding
@@ -52,20 +54,26 @@ fn mis_bsdf(p_bsdf: f32, p_light: f32) -> f32 {
     }
 }
 
-// The first hit of a camera ray and its two direct samples: light sampling (NEE), then BSDF
-// sampling. A CPU device inlines every function call, so each call site of a function is
-// compiled anew (measured on lavapipe: about 1.5 s of pipeline creation per traversal). So
-// the three rays (camera, shadow, BSDF) are traced at one call site, in a loop over these
-// stages, and what arrives at the shading point (emission at a hit, an area light's point,
-// the environment in a direction) is evaluated at one call site too: STAGE_LIGHT traces
-// nothing and evaluates the sampled light's point there.
+// A camera path: the first hit and its two direct samples (light sampling, NEE, then BSDF
+// sampling), and with scene.max_depth > 1 the path continued from the BSDF sample's hit, with
+// both samples at every further vertex combined by MIS, to max_depth vertices (depth 1 is
+// direct light only). A CPU device inlines every function call, so each call site of a
+// function is compiled anew (measured on lavapipe: about 1.5 s of pipeline creation per
+// traversal). So every ray (camera, shadow, BSDF, at every vertex) is traced at one call
+// site, in a loop over these stages, what arrives at a shading point (emission at a hit, an
+// area light's point, the environment in a direction) is evaluated at one call site, and
+// every vertex is shaded at one: STAGE_LIGHT traces nothing and evaluates the sampled light's
+// point there.
 const STAGE_CAMERA: u32 = 0u;
 const STAGE_LIGHT: u32 = 1u;
 const STAGE_SHADOW: u32 = 2u;
 const STAGE_BSDF: u32 = 3u;
 const STAGE_DONE: u32 = 4u;
 
-struct DirectPath {
+// Vertices from which Russian roulette may end a path (the first three never end by it).
+const RR_VERTEX: u32 = 4u;
+
+struct CameraPath {
     // The camera ray's hit (tri NONE on a miss); with compact_paths, at the barycentrics
     // ReSTIR stores.
     hit: Hit,
@@ -77,10 +85,19 @@ struct DirectPath {
     // The inputs that the glTF material gives, and those with the optimized textures.
     gltf: SurfaceMaterial,
     mat: SurfaceMaterial,
+    // The inputs with the previous iteration's optimized textures (with `both`).
+    mat_prev: SurfaceMaterial,
     // Radiance along the camera ray itself: the environment on a miss, emission at a hit.
     e: vec3f,
     nee: DirectSample,
+    // BSDF sampling at the first hit. With max_depth > 1 its radiance is everything that
+    // arrives along its direction: the emission it finds, weighted by MIS, plus the path's
+    // further vertices (scale is then 1 / density); otherwise the emission alone (scale MIS
+    // weight / density).
     bsdf: DirectSample,
+    // bsdf.radiance with the further vertices under the previous iteration's textures (with
+    // `both`; otherwise bsdf.radiance).
+    bsdf_prev: vec3f,
 }
 
 // Whether material mi has an optimized texture (fields read one by one: a CPU device loads
@@ -89,15 +106,24 @@ fn has_optimized(mi: u32) -> bool {
     return materials[mi].param_base_color != NONE || materials[mi].param_metallic != NONE || materials[mi].param_roughness != NONE;
 }
 
-// Uses 6 random numbers in a fixed order (light choice, light sample, BSDF sample), so that
-// the primal and gradient passes draw the same samples from the same camera-sample index.
-fn direct_path(o: vec3f, d: vec3f, optimized_only: bool) -> DirectPath {
-    var out: DirectPath;
+fn max_component(v: vec3f) -> f32 {
+    return max(max(v.x, v.y), v.z);
+}
+
+// Uses 6 random numbers per vertex in a fixed order (light choice, light sample, BSDF sample;
+// then, from vertex RR_VERTEX on, one for Russian roulette before them), so that the primal
+// and gradient passes draw the same samples from the same camera-sample index. With `both`,
+// the vertices after the first are also evaluated under the previous iteration's textures
+// (same directions, densities and MIS weights), for bsdf_prev.
+fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool) -> CameraPath {
+    var out: CameraPath;
     out.hit = Hit(3.0e38, NONE, 0.0, 0.0);
     out.shaded = false;
     out.e = vec3f(0.0);
     out.nee = NO_SAMPLE;
     out.bsdf = NO_SAMPLE;
+    out.bsdf_prev = vec3f(0.0);
+    let max_depth = max(scene.max_depth, 1u);
     var ray_o = o;
     var ray_d = d;
     var ray_tmax = 3.0e38;
@@ -106,16 +132,46 @@ fn direct_path(o: vec3f, d: vec3f, optimized_only: bool) -> DirectPath {
     var nee_weight = 0.0;
     var u_bsdf = vec3f(0.0);
     var bsdf_pdf = 0.0;
-    for (var step = 0u; step < 4u && stage != STAGE_DONE; step++) {
+    // The vertex whose samples are being traced (1 = the camera ray's hit), its surface and
+    // material under the current and (with both) the previous textures.
+    var vertex = 0u;
+    var depth = 1u;
+    var vsf: Surface;
+    var vmat: SurfaceMaterial;
+    var vmat_prev: SurfaceMaterial;
+    // The surface at the hit of a ray that a vertex is shaded at next.
+    var next_sf: Surface;
+    // From vertex 2 on: the throughput from vertex 2 to this vertex (1 at vertex 2) and to the
+    // next one along the BSDF sample, under each state, and the radiance gathered so far,
+    // arriving at the first vertex along its BSDF sample (before its BRDF and density).
+    var beta = vec3f(1.0);
+    var beta_prev = vec3f(1.0);
+    var beta_next = vec3f(1.0);
+    var beta_next_prev = vec3f(1.0);
+    var ind = vec3f(0.0);
+    var ind_prev = vec3f(0.0);
+    // The first vertex's BRDF x cos / density along its BSDF sample (for Russian roulette).
+    var first_weight = vec3f(1.0);
+    // The first vertex's BSDF sample: its density and the MIS-weighted emission it finds.
+    var first_pdf = 0.0;
+    var first_e = vec3f(0.0);
+    for (var step = 0u; step < 1u + 3u * max_depth && stage != STAGE_DONE; step++) {
         var hit = Hit(ray_tmax, NONE, 0.0, 0.0);
         if stage != STAGE_LIGHT {
             hit = trace_ray(ray_o, ray_d, ray_tmax, stage == STAGE_SHADOW);
         }
         var next_bsdf = false;
+        var nee_arrives = false;
+        var shade = false;
+        // After the first vertex: the direction in which this vertex's BRDF is evaluated in
+        // this step (zero for none), and the radiance arriving along it, weighted by MIS
+        // and density (from a light sample, or the emission a BSDF sample found).
+        var eval_wi = vec3f(0.0);
+        var arrives = vec3f(0.0);
+        // Whether eval_wi is the direction of the BSDF sample that leads to the next vertex.
+        var to_next = false;
         if stage == STAGE_SHADOW {
-            if hit.tri == NONE {
-                out.nee = DirectSample(ls.wi, ls.radiance, nee_weight / ls.pdf);
-            }
+            nee_arrives = hit.tri == NONE;
             next_bsdf = true;
         } else {
             // What arrives: from the emitter point (tri, b) seen from its front or back, or
@@ -123,19 +179,25 @@ fn direct_path(o: vec3f, d: vec3f, optimized_only: bool) -> DirectPath {
             var tri = hit.tri;
             var dir = ray_d;
             var front = false;
+            // A hit that becomes the next vertex: the camera ray's, or a BSDF sample's below
+            // the maximum depth.
+            let continues = stage == STAGE_CAMERA || (stage == STAGE_BSDF && depth < max_depth);
             if stage == STAGE_LIGHT {
                 tri = ls.tri;
                 hit.b1 = ls.b.x;
                 hit.b2 = ls.b.y;
                 dir = ls.wi;
                 front = ls.front;
-            } else if stage == STAGE_CAMERA && hit.tri != NONE {
-                if compact_paths {
+            } else if continues && hit.tri != NONE {
+                if stage == STAGE_CAMERA && compact_paths {
                     hit = stored_hit(hit.tri, vec2u(bary_round(hit.b1), bary_round(hit.b2)));
                 }
-                out.hit = hit;
-                out.sf = surface_at(o, hit);
-                front = out.sf.front;
+                next_sf = surface_at(ray_o, hit);
+                if stage == STAGE_CAMERA {
+                    out.hit = hit;
+                    out.sf = next_sf;
+                }
+                front = next_sf.front;
             } else if hit.tri != NONE {
                 let p0 = tri_vertex(hit.tri, 0u);
                 let ng = cross(tri_vertex(hit.tri, 1u) - p0, tri_vertex(hit.tri, 2u) - p0);
@@ -158,13 +220,23 @@ fn direct_path(o: vec3f, d: vec3f, optimized_only: bool) -> DirectPath {
             if stage == STAGE_BSDF {
                 var p_light = p_env;
                 if hit.tri != NONE {
-                    p_light = area_light_pdf(hit.tri, out.sf.p, ray_o + hit.t * ray_d);
+                    p_light = area_light_pdf(hit.tri, vsf.p, ray_o + hit.t * ray_d);
                 }
                 let w = mis_bsdf(bsdf_pdf, p_light);
                 if !(all(le == vec3f(0.0)) || w <= 0.0) {
-                    out.bsdf = DirectSample(ray_d, le, w / bsdf_pdf);
+                    if depth == 1u {
+                        out.bsdf = DirectSample(ray_d, le, w / bsdf_pdf);
+                        first_e = le * w;
+                    } else {
+                        arrives = le * w;
+                    }
+                }
+                if max_depth > 1u {
+                    eval_wi = ray_d;
+                    to_next = true;
                 }
                 stage = STAGE_DONE;
+                shade = continues && hit.tri != NONE && next_sf.valid;
             } else if stage == STAGE_LIGHT {
                 if ls.env {
                     ls.radiance = le;
@@ -172,13 +244,13 @@ fn direct_path(o: vec3f, d: vec3f, optimized_only: bool) -> DirectPath {
                 } else if !ls.is_delta {
                     ls.radiance = le;
                 }
-                let sf = out.sf;
+                let sf = vsf;
                 stage = STAGE_DONE;
                 next_bsdf = true;
                 if !(ls.pdf <= 0.0 || all(ls.radiance == vec3f(0.0)) || dot(ls.wi, sf.ng) <= 0.0) {
                     nee_weight = 1.0;
                     if !ls.is_delta {
-                        let p_bsdf = brdf_pdf(out.mat, to_local(sf.frame, sf.wo), to_local(sf.frame, ls.wi));
+                        let p_bsdf = brdf_pdf(vmat, to_local(sf.frame, sf.wo), to_local(sf.frame, ls.wi));
                         nee_weight = mis_light(ls.pdf, p_bsdf);
                     }
                     if !(nee_weight <= 0.0) {
@@ -205,7 +277,7 @@ fn direct_path(o: vec3f, d: vec3f, optimized_only: bool) -> DirectPath {
                             let to = q - so;
                             let len = length(to);
                             if len <= 0.0 {
-                                out.nee = DirectSample(ls.wi, ls.radiance, nee_weight / ls.pdf);
+                                nee_arrives = true;
                             } else {
                                 ray_o = so;
                                 ray_d = to / len;
@@ -221,35 +293,119 @@ fn direct_path(o: vec3f, d: vec3f, optimized_only: bool) -> DirectPath {
             } else {
                 out.e = le;
                 stage = STAGE_DONE;
-                if hit.tri != NONE && out.sf.valid && (!optimized_only || has_optimized(out.sf.material)) {
-                    out.shaded = true;
-                    let sf = out.sf;
-                    out.gltf = gltf_inputs(sf.material, sf.uv);
-                    out.mat = with_optimized(sf.material, sf.uv, out.gltf);
-                    let u_pick = rand();
-                    let u_light = rand2();
-                    u_bsdf = vec3f(rand(), rand2());
-                    ls = sample_light(sf.p, u_pick, u_light);
-                    stage = STAGE_LIGHT;
+                shade = hit.tri != NONE && next_sf.valid && (!optimized_only || has_optimized(next_sf.material));
+                out.shaded = shade;
+            }
+        }
+        if nee_arrives {
+            if depth == 1u {
+                out.nee = DirectSample(ls.wi, ls.radiance, nee_weight / ls.pdf);
+            } else {
+                eval_wi = ls.wi;
+                arrives = ls.radiance * (nee_weight / ls.pdf);
+            }
+        }
+        if any(eval_wi != vec3f(0.0)) {
+            // The vertex's BRDF x cos towards eval_wi under each state, at one call site (the
+            // light sample's and the BSDF sample's; see above). A BSDF sample's carries the
+            // path on to the next vertex (beta_next); at the first vertex it only weighs
+            // Russian roulette.
+            let wo = to_local(vsf.frame, vsf.wo);
+            let wi = to_local(vsf.frame, eval_wi);
+            for (var state = 0u; state < select(1u, 2u, both && depth > 1u); state++) {
+                var m = vmat;
+                var b = beta;
+                if state == 1u {
+                    m = vmat_prev;
+                    b = beta_prev;
                 }
+                var f = brdf_eval_cos(m, wo, wi);
+                if to_next {
+                    f /= bsdf_pdf;
+                }
+                if depth == 1u {
+                    first_weight = f;
+                } else if to_next {
+                    if state == 0u {
+                        beta_next = b * f;
+                        ind += beta_next * arrives;
+                    } else {
+                        beta_next_prev = b * f;
+                        ind_prev += beta_next_prev * arrives;
+                    }
+                } else if state == 0u {
+                    ind += b * f * arrives;
+                } else {
+                    ind_prev += b * f * arrives;
+                }
+            }
+        }
+        if shade {
+            // The hit becomes the next vertex: the first at the camera ray's hit.
+            vertex += 1u;
+            depth = vertex;
+            vsf = next_sf;
+            let gltf = gltf_inputs(vsf.material, vsf.uv);
+            // The optimized inputs under each state, at one call site.
+            for (var state = 0u; state < select(1u, 2u, both); state++) {
+                use_prev_params = state == 1u;
+                let m = with_optimized(vsf.material, vsf.uv, gltf);
+                if state == 0u {
+                    vmat = m;
+                } else {
+                    vmat_prev = m;
+                }
+            }
+            use_prev_params = false;
+            if depth == 1u {
+                out.gltf = gltf;
+                out.mat = vmat;
+                out.mat_prev = vmat_prev;
+            } else {
+                beta = beta_next;
+                beta_prev = beta_next_prev;
+                if depth >= RR_VERTEX {
+                    let q = min(max_component(beta * first_weight), 0.95);
+                    if rand() < q {
+                        beta /= q;
+                        beta_prev /= q;
+                    } else {
+                        shade = false;
+                    }
+                }
+            }
+            if shade {
+                let u_pick = rand();
+                let u_light = rand2();
+                u_bsdf = vec3f(rand(), rand2());
+                ls = sample_light(vsf.p, u_pick, u_light);
+                stage = STAGE_LIGHT;
             }
         }
         if next_bsdf {
             stage = STAGE_DONE;
-            let wo = to_local(out.sf.frame, out.sf.wo);
-            let wi_local = brdf_sample(out.mat, wo, u_bsdf);
-            let wi = to_world(out.sf.frame, wi_local);
-            if !(wi_local.z <= 0.0 || dot(wi, out.sf.ng) <= 0.0) {
-                bsdf_pdf = brdf_pdf(out.mat, wo, wi_local);
+            let wo = to_local(vsf.frame, vsf.wo);
+            let wi_local = brdf_sample(vmat, wo, u_bsdf);
+            let wi = to_world(vsf.frame, wi_local);
+            if !(wi_local.z <= 0.0 || dot(wi, vsf.ng) <= 0.0) {
+                bsdf_pdf = brdf_pdf(vmat, wo, wi_local);
                 if !(bsdf_pdf <= 0.0) {
                     bsdf_rays += 1u;
-                    ray_o = offset_origin(out.sf, wi);
+                    ray_o = offset_origin(vsf, wi);
                     ray_d = wi;
                     ray_tmax = 3.0e38;
                     stage = STAGE_BSDF;
+                    if depth == 1u {
+                        first_pdf = bsdf_pdf;
+                    }
                 }
             }
         }
+    }
+    out.bsdf_prev = out.bsdf.radiance;
+    if any(ind != vec3f(0.0)) || any(ind_prev != vec3f(0.0)) {
+        out.bsdf = DirectSample(out.bsdf.wi, first_e + ind, 1.0 / first_pdf);
+        out.bsdf_prev = first_e + ind_prev;
     }
     return out;
 }
@@ -262,13 +418,13 @@ fn contribution(mat: SurfaceMaterial, sf: Surface, s: DirectSample) -> vec3f {
     return brdf_eval_cos(mat, wo, to_local(sf.frame, s.wi)) * s.radiance * s.scale;
 }
 
-// Radiance along a camera ray (origin o, unit direction d) with direct illumination only:
-// [0] under the current textures and, when `both`, [1] the same path (same hit, samples and
-// MIS weights) under the previous iteration's textures (otherwise [1] = [0]). The two
-// techniques' contributions under each state are added in one loop, for the reason
-// direct_path traces in one.
-fn direct_radiance_states(o: vec3f, d: vec3f, both: bool) -> array<vec3f, 2> {
-    let p = direct_path(o, d, false);
+// Radiance along a camera ray (origin o, unit direction d), paths of scene.max_depth vertices:
+// [0] under the current textures and, when `both`, [1] the same path (same hits, samples and
+// MIS weights) under the previous iteration's textures (otherwise [1] = [0]). The first
+// vertex's two techniques' contributions under each state are added in one loop, for the
+// reason camera_path traces in one.
+fn radiance_states(o: vec3f, d: vec3f, both: bool) -> array<vec3f, 2> {
+    let p = camera_path(o, d, false, both);
     var l = array<vec3f, 2>(p.e, p.e);
     if !p.shaded {
         return l;
@@ -277,13 +433,14 @@ fn direct_radiance_states(o: vec3f, d: vec3f, both: bool) -> array<vec3f, 2> {
     let terms = select(2u, 4u, both);
     for (var j = 0u; j < terms; j++) {
         if j == 2u {
-            use_prev_params = true;
-            mat = with_optimized(p.sf.material, p.sf.uv, p.gltf);
-            use_prev_params = false;
+            mat = p.mat_prev;
         }
         var s = p.nee;
         if (j & 1u) == 1u {
             s = p.bsdf;
+        }
+        if j == 3u {
+            s.radiance = p.bsdf_prev;
         }
         l[j / 2u] += contribution(mat, p.sf, s);
     }
@@ -314,6 +471,9 @@ struct TechniqueSample {
     // (shared/path_encoding.wgsl).
     ko: vec2u,
     rgbe: u32,
+    // ds.radiance with the path's further vertices under the previous iteration's textures
+    // (gradient_sample with `both`; otherwise ds.radiance).
+    radiance_prev: vec3f,
 }
 
 // The two samples of a GradientSample, in the order in which every pass adds them.
@@ -328,7 +488,7 @@ struct GradientSample {
     tri: u32,
     kb: vec2u,
     // Light sampling and BSDF sampling. The passes loop over the two (technique_sample)
-    // rather than naming each, so that their code is compiled once (see direct_path).
+    // rather than naming each, so that their code is compiled once (see camera_path).
     nee: TechniqueSample,
     bsdf: TechniqueSample,
 }
@@ -358,9 +518,11 @@ fn rounded_direction(sf: Surface, wi: vec3f) -> RoundedDirection {
     return RoundedDirection(vec2f(oct_value(ko.x), oct_value(ko.y)), ko);
 }
 
-fn gradient_sample(o: vec3f, d: vec3f) -> GradientSample {
+// With `both`, the BSDF sample's radiance_prev holds what its further vertices bring back
+// under the previous iteration's textures (the recursive estimator's second state).
+fn gradient_sample(o: vec3f, d: vec3f, both: bool) -> GradientSample {
     var out: GradientSample;
-    let p = direct_path(o, d, true);
+    let p = camera_path(o, d, true, both);
     out.valid = p.shaded;
     if !p.shaded {
         return out;
@@ -375,8 +537,10 @@ fn gradient_sample(o: vec3f, d: vec3f) -> GradientSample {
     for (var t = 0u; t < 2u; t++) {
         var ts: TechniqueSample;
         ts.ds = p.nee;
+        ts.radiance_prev = p.nee.radiance;
         if t == SAMPLE_BSDF {
             ts.ds = p.bsdf;
+            ts.radiance_prev = p.bsdf_prev;
         }
         ts.rgbe = 0u;
         if compact_paths {

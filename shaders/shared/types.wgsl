@@ -93,7 +93,8 @@ struct SceneInfo {
     env_scale: f32,
     env_total: f32,
     scene_radius: f32,
-    _pad: u32,
+    // Vertices of a camera path (1: direct light only; see shared/integrator.wgsl).
+    max_depth: u32,
 }
 
 // An optimized texture: linear values, `channels` floats per texel from params[offset], row 0

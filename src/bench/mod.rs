@@ -204,6 +204,8 @@ pub struct BenchOptions {
     pub gradient_only: bool,
     /// The primal estimator of every run (None: each task's own).
     pub primal: Option<crate::optim::PrimalMode>,
+    /// Vertices of a camera path in every task (None: each task's own `max_depth`).
+    pub max_depth: Option<u32>,
     /// Samples per pixel of the renders that measure image error.
     pub eval_spp: u32,
     /// Image-error evaluations along each optimization (start and end included).
@@ -242,6 +244,7 @@ impl Default for BenchOptions {
             protocol: Protocol::Default,
             gradient_only: false,
             primal: None,
+            max_depth: None,
             eval_spp: 64,
             curve_points: 11,
             estimator_options: EstimatorOptions::default(),
@@ -406,6 +409,11 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         if o.no_priors {
             t.optimizer.multiscale_levels = 0;
             t.optimizer.smoothness = 0.0;
+        }
+        if let Some(d) = o.max_depth {
+            crate::scene::MaxDepth::new(d)
+                .map_err(|m| Error::Invalid(format!("bench: --max-depth: {m}")))?;
+            t.max_depth = d;
         }
         loaded.push(t);
     }

@@ -346,7 +346,13 @@ fn targets_key_with(task: &Task, truth: &Path, renderer: u64) -> Result<u64> {
         &mut h,
         format!(
             "{:?}",
-            (task.width, task.height, task.seed, task.target.spp)
+            (
+                task.width,
+                task.height,
+                task.seed,
+                task.target.spp,
+                task.max_depth
+            )
         )
         .as_bytes(),
     );
@@ -382,6 +388,8 @@ type FrameImages = std::collections::BTreeMap<String, Option<std::path::PathBuf>
 /// indices of the cameras the task added and each camera-file frame's image by camera name.
 fn task_scene(task: &Task, path: &Path) -> Result<(Scene, Vec<usize>, FrameImages)> {
     let mut s = scene::load(&task.resolve(path))?;
+    s.max_depth = scene::MaxDepth::new(task.max_depth)
+        .map_err(|m| Error::file(&task.path, format!("`max_depth`: {m}")))?;
     if let Some(env) = &task.env {
         let mut e = EnvMap::load(&task.resolve(env))?;
         e.scale = task.env_scale;

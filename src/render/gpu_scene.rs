@@ -360,6 +360,7 @@ fn gpu_lights(
         n_tris: n_tris as u32,
         env_light: u32::MAX,
         scene_radius: radius,
+        max_depth: scene.max_depth.get(),
         ..Default::default()
     };
     if let Some(env) = &scene.env {

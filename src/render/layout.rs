@@ -131,7 +131,7 @@ pub struct GpuSceneInfo {
     pub env_scale: f32,
     pub env_total: f32,
     pub scene_radius: f32,
-    pub _pad: u32,
+    pub max_depth: u32,
 }
 
 /// `CameraInfo` in camera.wgsl.

@@ -308,6 +308,44 @@ impl PunctualLight {
     }
 }
 
+/// How many vertices a camera path has: 1 renders direct light only (emission seen directly,
+/// and light arriving from emitters at the first surface a camera ray hits); each more is one
+/// more bounce of indirect light (next-event estimation and BSDF sampling by MIS at every
+/// vertex, Russian roulette from the fourth). The default is 1.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct MaxDepth(u32);
+
+impl MaxDepth {
+    /// Direct light only.
+    pub const DIRECT: MaxDepth = MaxDepth(1);
+    /// The largest depth accepted (paths that long carry next to nothing on any scene a
+    /// camera sees; the bound keeps every path's loop short).
+    pub const LIMIT: u32 = 64;
+
+    /// `depth` vertices, 1 to [`MaxDepth::LIMIT`]; the error says what is allowed.
+    pub fn new(depth: u32) -> std::result::Result<MaxDepth, String> {
+        if (1..=Self::LIMIT).contains(&depth) {
+            Ok(MaxDepth(depth))
+        } else {
+            Err(format!(
+                "{depth} is out of range: path depth runs from 1 (direct light only) to {}",
+                Self::LIMIT
+            ))
+        }
+    }
+
+    /// The number of vertices.
+    pub fn get(self) -> u32 {
+        self.0
+    }
+}
+
+impl Default for MaxDepth {
+    fn default() -> Self {
+        Self::DIRECT
+    }
+}
+
 /// Everything the renderer needs, in world space.
 #[derive(Clone, Debug, Default)]
 pub struct Scene {
@@ -327,6 +365,8 @@ pub struct Scene {
     pub env: Option<EnvMap>,
     /// Things skipped while loading, each naming what and why.
     pub warnings: Vec<String>,
+    /// Vertices of the camera paths that render it (1, the default: direct light only).
+    pub max_depth: MaxDepth,
 }
 
 impl Scene {

@@ -210,6 +210,11 @@ pub struct Task {
     /// Random seed.
     #[serde(default = "optimizer::one")]
     pub seed: u32,
+    /// Vertices of a camera path, for the target renders and the model that is fitted: 1 (the
+    /// default) is direct light only; photos of real objects carry indirect light, which a
+    /// depth of 3 or more models (docs/guide.md, "Indirect light").
+    #[serde(default = "optimizer::one")]
+    pub max_depth: u32,
     /// Output folder (relative to the working directory).
     pub output: Option<PathBuf>,
     /// Where the targets come from.
@@ -458,6 +463,7 @@ impl Task {
         if !(self.env_scale.is_finite() && self.env_scale >= 0.0) {
             return Err(self.bad("env_scale", "must be a finite number >= 0"));
         }
+        crate::scene::MaxDepth::new(self.max_depth).map_err(|m| self.bad("max_depth", m))?;
         let t = &self.target;
         match (&t.scene, &t.images) {
             (None, None) if self.cameras_file.is_none() => {

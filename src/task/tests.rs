@@ -29,6 +29,7 @@ fn a_good_task_parses_with_defaults() {
     assert_eq!(t.optimizer.loss, Loss::L2);
     assert_eq!(t.optimizer.filter, Filter::Bilinear);
     assert_eq!(t.target.spp, 256);
+    assert_eq!(t.max_depth, 1);
     assert_eq!(t.textures[0].init_values(), vec![0.5]);
     assert_eq!(
         t.resolve(Path::new("scene.gltf")),
@@ -43,6 +44,18 @@ fn unknown_keys_and_bad_values_name_the_key() {
         .replace("seed", "x")
         .replace("width = 32", "width = 32\nwidht = 3"));
     assert!(e.contains("t.toml") && e.contains("widht"), "{e}");
+    for depth in [0, 65] {
+        let e = err(&GOOD.replace("width = 32", &format!("width = 32\nmax_depth = {depth}")));
+        assert!(
+            e.contains("max_depth") && e.contains("1 (direct light only)"),
+            "{e}"
+        );
+    }
+    let t = Task::parse(
+        &GOOD.replace("width = 32", "width = 32\nmax_depth = 3"),
+        Path::new("t.toml"),
+    );
+    assert_eq!(t.unwrap().max_depth, 3);
     let e = err(&GOOD.replace("init = 0.5", "init = 0.5\nlearning_rat = 1"));
     assert!(e.contains("learning_rat"), "{e}");
     let e = err(&GOOD.replace("learning_rate = 0.01", "learning_rate = -1"));

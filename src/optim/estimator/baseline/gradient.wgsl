@@ -91,7 +91,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     for (var s = 0u; s < gp.spp; s++) {
         rng_init(gp.seed, (gp.sample_offset + s) * a.n_pixels + a.pixel, 0u);
         let d = camera_direction(gp.camera, a.xy + rand2());
-        let g = gradient_sample(gp.camera.origin, d);
+        let g = gradient_sample(gp.camera.origin, d, false);
         if !g.valid {
             continue;
         }

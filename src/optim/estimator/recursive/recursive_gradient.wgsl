@@ -82,9 +82,10 @@ fn add_grad_prev(i: u32, v: f32) {
 
 // Scatter one technique's contribution (radiance x MIS weight / density = weight) under both
 // states: its BRDF derivative at the current material `bg` with the current adjoint, and at
-// the previous material `bg_prev` with the previous adjoint.
-fn scatter2(m: Material, uv: vec2f, bg: BrdfGrad, bg_prev: BrdfGrad, weight: vec3f, adj: vec3f, adj_prev: vec3f) {
-    if all(weight == vec3f(0.0)) {
+// the previous material `bg_prev` with the previous adjoint and `weight_prev` (the radiance
+// that the path's further vertices bring back under the previous textures; weight at depth 1).
+fn scatter2(m: Material, uv: vec2f, bg: BrdfGrad, bg_prev: BrdfGrad, weight: vec3f, weight_prev: vec3f, adj: vec3f, adj_prev: vec3f) {
+    if all(weight == vec3f(0.0)) && all(weight_prev == vec3f(0.0)) {
         return;
     }
     for (var slot = 0u; slot < 3u; slot++) {
@@ -95,7 +96,7 @@ fn scatter2(m: Material, uv: vec2f, bg: BrdfGrad, bg_prev: BrdfGrad, weight: vec
         let p = param_textures[pi];
         let fp = param_footprint(p, uv);
         let g = slot_derivative(slot, bg, weight, adj);
-        let gp = slot_derivative(slot, bg_prev, weight, adj_prev);
+        let gp = slot_derivative(slot, bg_prev, weight_prev, adj_prev);
         for (var k = 0u; k < 4u; k++) {
             if fp.weight[k] != 0.0 {
                 let base = p.offset + fp.texel[k] * p.channels;
@@ -130,7 +131,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         // The same random numbers as the baseline's sample s of this pixel.
         rng_init(rp.seed, s * n_pixels + pixel, 0u);
         let d = camera_direction(rp.camera, vec2f(xy) + rand2());
-        let g = gradient_sample(rp.camera.origin, d);
+        let g = gradient_sample(rp.camera.origin, d, rp.have_prev != 0u);
         if !g.valid {
             continue;
         }
@@ -141,7 +142,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
                 // The same path under the previous textures, with the glTF inputs it kept.
                 grad_prev = vertex_grad_prev(ts.vertex);
             }
-            scatter2(g.m, g.sf.uv, ts.grad, grad_prev, ts.ds.radiance * ts.ds.scale, adj, adj_prev);
+            scatter2(g.m, g.sf.uv, ts.grad, grad_prev, ts.ds.radiance * ts.ds.scale, ts.radiance_prev * ts.ds.scale, adj, adj_prev);
         }
     }
     atomicAdd(&rstats[RECURSIVE_STAT_SAMPLES], rp.spp);

@@ -169,7 +169,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     for (var s = 0u; s < cp.spp; s++) {
         rng_init(cp.seed, s * a.n_pixels + a.pixel, 0u);
         let d = camera_direction(cp.camera, a.xy + rand2());
-        let g = gradient_sample(cp.camera.origin, d);
+        let g = gradient_sample(cp.camera.origin, d, false);
         if !g.valid {
             continue;
         }

@@ -1,0 +1,249 @@
+//! Indirect light (`max_depth` > 1) against references computed without the renderer: a white
+//! furnace (a closed sphere that emits and reflects, seen from its centre, against the
+//! integral equation of its radiance solved on the CPU), and light and BSDF sampling agreeing
+//! at every vertex of a path.
+mod common;
+
+use common::*;
+use glam::{Vec2, Vec3};
+use psrestir::render::{RenderSettings, Renderer, Techniques};
+use psrestir::scene::{Material, MaxDepth, Scene, Triangle};
+use std::f32::consts::PI;
+
+/// A sphere of radius `r` at the origin, `rings` x `segments` quads (the poles' as triangles),
+/// facing inwards, normals towards the centre.
+fn inward_sphere(r: f32, rings: u32, segments: u32, material: u32) -> Vec<Triangle> {
+    let point = |i: u32, j: u32| {
+        let theta = PI * i as f32 / rings as f32;
+        let phi = 2.0 * PI * j as f32 / segments as f32;
+        Vec3::new(
+            theta.sin() * phi.cos(),
+            theta.cos(),
+            theta.sin() * phi.sin(),
+        )
+    };
+    let mut out = Vec::new();
+    let mut tri = |a: Vec3, b: Vec3, c: Vec3| {
+        // Wound so that cross(b - a, c - a) points inwards (the front face is inside).
+        let (b, c) = if (b - a).cross(c - a).dot(a + b + c) > 0.0 {
+            (c, b)
+        } else {
+            (b, c)
+        };
+        out.push(Triangle {
+            p: [a * r, b * r, c * r],
+            n: [-a, -b, -c],
+            uv: [Vec2::ZERO; 3],
+            t: Default::default(),
+            material,
+        });
+    };
+    for i in 0..rings {
+        for j in 0..segments {
+            let (a, b, c, d) = (
+                point(i, j),
+                point(i + 1, j),
+                point(i + 1, j + 1),
+                point(i, j + 1),
+            );
+            if i > 0 {
+                tri(a, c, d);
+            }
+            if i + 1 < rings {
+                tri(a, b, c);
+            }
+        }
+    }
+    out
+}
+
+/// The radiance leaving the inside of a sphere of uniform emission `le` and the BRDF of
+/// (`base`, metallic 0, `roughness`), at angle theta to the normal, for paths of `depth`
+/// vertices (None: every depth), tabulated over theta in `n` bins. By the sphere's symmetry
+/// (a chord makes the same angle with the normals at both of its ends) the radiance depends on
+/// that angle alone: L = le + K L, with K(theta_o, theta_i) the BRDF x cos integrated over
+/// the azimuth, by a midpoint rule; depth d sums le + K le + ... + K^d le.
+fn furnace_solution(base: f32, roughness: f32, le: f32, depth: Option<u32>, n: usize) -> Vec<f64> {
+    let (sub, np) = (4usize, 96usize);
+    let dt = 0.5 * PI / (n * sub) as f32;
+    let dp = 2.0 * PI / np as f32;
+    let mut k = vec![vec![0f64; n]; n];
+    for (o, row) in k.iter_mut().enumerate() {
+        let to = (o as f32 + 0.5) / n as f32 * 0.5 * PI;
+        let wo = Vec3::new(to.sin(), to.cos(), 0.0);
+        for (i, kij) in row.iter_mut().enumerate() {
+            let mut s = 0f64;
+            for a in 0..sub {
+                let ti = (i * sub + a) as f32 * dt + 0.5 * dt;
+                for b in 0..np {
+                    let phi = (b as f32 + 0.5) * dp;
+                    let wi = Vec3::new(ti.sin() * phi.cos(), ti.cos(), ti.sin() * phi.sin());
+                    let f = brdf_eval_cos(Vec3::splat(base), 0.0, roughness, Vec3::Y, wo, wi);
+                    s += (f.x * ti.sin() * dt * dp) as f64;
+                }
+            }
+            *kij = s;
+        }
+    }
+    let steps = depth.unwrap_or(400);
+    let mut l = vec![le as f64; n];
+    for _ in 0..steps {
+        let next: Vec<f64> = (0..n)
+            .map(|o| le as f64 + (0..n).map(|i| k[o][i] * l[i]).sum::<f64>())
+            .collect();
+        l = next;
+    }
+    l
+}
+
+fn render_depth(r: &Renderer, w: u32, spp: u32, seed: u32) -> psrestir::image_io::Image {
+    r.render(
+        &RenderSettings {
+            width: w,
+            height: w,
+            spp,
+            seed,
+            camera: 0,
+            techniques: Techniques::Mis,
+        },
+        |_| {},
+    )
+    .unwrap()
+    .image
+}
+
+#[test]
+fn a_closed_sphere_lit_by_its_own_emission_renders_the_furnace_solution() {
+    let Some(gpu) = gpu() else { return };
+    let (base, roughness, le) = (0.5f32, 0.8f32, 1.0f32);
+    let mut scene = Scene {
+        triangles: inward_sphere(1.0, 48, 96, 0),
+        materials: vec![Material {
+            emissive: Vec3::splat(le),
+            ..material([base; 3], 0.0, roughness)
+        }],
+        // From the centre, every camera ray meets the wall at (nearly) normal incidence.
+        cameras: vec![look_at(Vec3::ZERO, Vec3::Z, Vec3::Y, 0.3)],
+        ..Default::default()
+    };
+    let w = 32u32;
+    let n = 32usize;
+    let full = furnace_solution(base, roughness, le, None, n);
+    // The whole series is within 1% of the converged one from depth 6 on.
+    let deep = 12u32;
+    let truncated = furnace_solution(base, roughness, le, Some(deep), n);
+    assert!((truncated[0] / full[0] - 1.0).abs() < 1e-3);
+    for depth in [1u32, 2, 3, deep] {
+        scene.max_depth = MaxDepth::new(depth).unwrap();
+        let r = Renderer::new(&gpu, &scene).unwrap();
+        let want = furnace_solution(base, roughness, le, Some(depth), n)[0];
+        let (a, b) = (render_depth(&r, w, 64, 1), render_depth(&r, w, 64, 2));
+        let pixels: Vec<f64> = a.rgb.iter().chain(&b.rgb).map(|p| lum(*p)).collect();
+        let (mean, sd) = mean_sd(&pixels);
+        let se = sd / (pixels.len() as f64).sqrt();
+        eprintln!(
+            "depth {depth}: {mean:.5} (standard error {se:.5}), reference {want:.5} \
+             (converged {:.5}, le / (1 - albedo at normal incidence) {:.5})",
+            full[0],
+            le as f64
+                / (1.0
+                    - lum(
+                        directional_albedo(Vec3::splat(base), 0.0, roughness, Vec3::Y).to_array()
+                    ))
+        );
+        // Within 5 standard errors plus 0.2% of the reference (the faceted sphere and the
+        // quadrature; the issue's bar is 1%), with the noise well inside 1%.
+        assert!(se < 2e-3 * want, "depth {depth}: too noisy to tell ({se})");
+        assert!(
+            (mean - want).abs() < 5.0 * se + 2e-3 * want,
+            "depth {depth}: mean radiance {mean} against {want}"
+        );
+    }
+}
+
+/// The inside of a corner (floor, back wall, left wall) under a lamp facing down and a point
+/// light, seen from the open side: light bounces between the three faces.
+fn corner_scene() -> Scene {
+    let mut s = Scene::default();
+    s.materials.push(material([0.7, 0.6, 0.5], 0.0, 0.6));
+    s.materials.push(material([0.3, 0.6, 0.8], 0.3, 0.35));
+    s.materials.push(Material {
+        emissive: Vec3::splat(6.0),
+        ..material([0.0; 3], 0.0, 1.0)
+    });
+    // Floor (facing +y), back wall (facing +z), left wall (facing +x).
+    s.triangles.extend(quad(
+        Vec3::new(-1.0, 0.0, 1.0),
+        Vec3::new(2.0, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, -2.0),
+        0,
+    ));
+    s.triangles.extend(quad(
+        Vec3::new(-1.0, 0.0, -1.0),
+        Vec3::new(2.0, 0.0, 0.0),
+        Vec3::new(0.0, 2.0, 0.0),
+        1,
+    ));
+    s.triangles.extend(quad(
+        Vec3::new(-1.0, 0.0, 1.0),
+        Vec3::new(0.0, 0.0, -2.0),
+        Vec3::new(0.0, 2.0, 0.0),
+        0,
+    ));
+    // The lamp faces down (u x v = -y).
+    s.triangles.extend(quad(
+        Vec3::new(-0.2, 1.6, -0.6),
+        Vec3::new(0.5, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, 0.5),
+        2,
+    ));
+    s.lights.push(psrestir::scene::PunctualLight::point(
+        "p",
+        Vec3::new(0.5, 1.2, 0.4),
+        Vec3::splat(1.5),
+    ));
+    s.cameras.push(look_at(
+        Vec3::new(0.9, 1.1, 2.4),
+        Vec3::new(-0.3, 0.5, -0.5),
+        Vec3::Y,
+        1.0,
+    ));
+    s
+}
+
+#[test]
+fn light_and_bsdf_sampling_agree_at_every_vertex_of_a_path() {
+    // NEE alone, BSDF sampling alone (delta lights still by NEE) and MIS are three unbiased
+    // estimators of the same image at every depth: a wrong MIS weight, density or throughput
+    // at a vertex after the first shows as a difference between them.
+    let Some(gpu) = gpu() else { return };
+    let mut scene = corner_scene();
+    scene.max_depth = MaxDepth::new(3).unwrap();
+    let r = Renderer::new(&gpu, &scene).unwrap();
+    let w = 32usize;
+    let render = |t, spp, seed| render_image(&r, w as u32, spp, seed, t).rgb;
+    let mis = [
+        render(Techniques::Mis, 128, 1),
+        render(Techniques::Mis, 128, 2),
+    ];
+    for (t, spp) in [(Techniques::NeeOnly, 128), (Techniques::BsdfOnly, 512)] {
+        let other = [render(t, spp, 3), render(t, spp, 4)];
+        let z = block_z_scores([&mis[0], &mis[1]], [&other[0], &other[1]], w, 8);
+        let worst = z.iter().fold(0f64, |m, v| m.max(v.abs()));
+        eprintln!("MIS against {t:?} at depth 3: worst block z {worst:.2}");
+        assert!(worst < 5.0, "{t:?}: block z-scores {z:?}");
+    }
+    // And the bounces add light: the corner at depth 3 is brighter than at depth 1.
+    scene.max_depth = MaxDepth::DIRECT;
+    let direct = render_image(
+        &Renderer::new(&gpu, &scene).unwrap(),
+        w as u32,
+        128,
+        1,
+        Techniques::Mis,
+    );
+    let sum = |rgb: &[[f32; 3]]| rgb.iter().map(|p| lum(*p)).sum::<f64>();
+    let gain = sum(&mis[0]) / sum(&direct.rgb);
+    eprintln!("depth 3 / depth 1: {gain:.3}");
+    assert!(gain > 1.1, "indirect light adds {gain}");
+}
