@@ -11,8 +11,13 @@ use psrestir::scene::{Material, MaxDepth, Scene, Triangle};
 use std::f32::consts::PI;
 
 /// A sphere of radius `r` at the origin, `rings` x `segments` quads (the poles' as triangles),
-/// facing inwards, normals towards the centre.
-fn inward_sphere(r: f32, rings: u32, segments: u32, material: u32) -> Vec<Triangle> {
+/// facing inwards, normals towards the centre; quad (i, j) of material `material(i, j)`.
+fn inward_sphere(
+    r: f32,
+    rings: u32,
+    segments: u32,
+    material: impl Fn(u32, u32) -> u32,
+) -> Vec<Triangle> {
     let point = |i: u32, j: u32| {
         let theta = PI * i as f32 / rings as f32;
         let phi = 2.0 * PI * j as f32 / segments as f32;
@@ -23,7 +28,7 @@ fn inward_sphere(r: f32, rings: u32, segments: u32, material: u32) -> Vec<Triang
         )
     };
     let mut out = Vec::new();
-    let mut tri = |a: Vec3, b: Vec3, c: Vec3| {
+    let mut tri = |a: Vec3, b: Vec3, c: Vec3, material: u32| {
         // Wound so that cross(b - a, c - a) points inwards (the front face is inside).
         let (b, c) = if (b - a).cross(c - a).dot(a + b + c) > 0.0 {
             (c, b)
@@ -46,11 +51,12 @@ fn inward_sphere(r: f32, rings: u32, segments: u32, material: u32) -> Vec<Triang
                 point(i + 1, j + 1),
                 point(i, j + 1),
             );
+            let m = material(i, j);
             if i > 0 {
-                tri(a, c, d);
+                tri(a, c, d, m);
             }
             if i + 1 < rings {
-                tri(a, b, c);
+                tri(a, b, c, m);
             }
         }
     }
@@ -116,20 +122,10 @@ fn render_depth(r: &Renderer, w: u32, spp: u32, seed: u32) -> psrestir::image_io
 fn a_closed_sphere_lit_by_its_own_emission_renders_the_furnace_solution() {
     let Some(gpu) = gpu() else { return };
     let (base, roughness, le) = (0.5f32, 0.8f32, 1.0f32);
-    let mut scene = Scene {
-        triangles: inward_sphere(1.0, 48, 96, 0),
-        materials: vec![Material {
-            emissive: Vec3::splat(le),
-            ..material([base; 3], 0.0, roughness)
-        }],
-        // From the centre, every camera ray meets the wall at (nearly) normal incidence.
-        cameras: vec![look_at(Vec3::ZERO, Vec3::Z, Vec3::Y, 0.3)],
-        ..Default::default()
-    };
-    let w = 32u32;
-    let n = 32usize;
+    let mut scene = furnace_scene(base, roughness, le, false);
+    let (w, n) = (32u32, 32usize);
     let full = furnace_solution(base, roughness, le, None, n);
-    // The whole series is within 1% of the converged one from depth 6 on.
+    // The series at depth 12 is within 0.1% of the converged one.
     let deep = 12u32;
     let truncated = furnace_solution(base, roughness, le, Some(deep), n);
     assert!((truncated[0] / full[0] - 1.0).abs() < 1e-3);
@@ -138,9 +134,7 @@ fn a_closed_sphere_lit_by_its_own_emission_renders_the_furnace_solution() {
         let r = Renderer::new(&gpu, &scene).unwrap();
         let want = furnace_solution(base, roughness, le, Some(depth), n)[0];
         let (a, b) = (render_depth(&r, w, 64, 1), render_depth(&r, w, 64, 2));
-        let pixels: Vec<f64> = a.rgb.iter().chain(&b.rgb).map(|p| lum(*p)).collect();
-        let (mean, sd) = mean_sd(&pixels);
-        let se = sd / (pixels.len() as f64).sqrt();
+        let (mean, se) = mean_and_error(&a, &b, None);
         eprintln!(
             "depth {depth}: {mean:.5} (standard error {se:.5}), reference {want:.5} \
              (converged {:.5}, le / (1 - albedo at normal incidence) {:.5})",
@@ -159,6 +153,77 @@ fn a_closed_sphere_lit_by_its_own_emission_renders_the_furnace_solution() {
             "depth {depth}: mean radiance {mean} against {want}"
         );
     }
+}
+
+#[test]
+fn a_closed_sphere_half_of_whose_cells_emit_reflects_the_furnace_solution_of_half_the_emission() {
+    // Every other cell of the sphere emits (half the area of every ring): a path that reaches
+    // a cell that does not emit must still bring back what lies beyond it. Light arriving
+    // anywhere averages over hundreds of cells, so what a cell reflects is the furnace
+    // solution of half the emission. The same seed at depth 1 and at depth d sees the same
+    // emission along each camera ray, so their difference is the light of bounces 2 to d.
+    let Some(gpu) = gpu() else { return };
+    let (base, roughness, le) = (0.5f32, 0.8f32, 1.0f32);
+    let mut scene = furnace_scene(base, roughness, le, true);
+    let (w, n) = (32u32, 32usize);
+    let solution = |d| furnace_solution(base, roughness, 0.5 * le, Some(d), n)[0];
+    let render = |scene: &Scene, seed| {
+        let r = Renderer::new(&gpu, scene).unwrap();
+        render_depth(&r, w, 64, seed)
+    };
+    scene.max_depth = MaxDepth::DIRECT;
+    let direct = [render(&scene, 1), render(&scene, 2)];
+    for depth in [2u32, 3, 12] {
+        scene.max_depth = MaxDepth::new(depth).unwrap();
+        let (a, b) = (render(&scene, 1), render(&scene, 2));
+        let (mean, se) = mean_and_error(&a, &b, Some(&direct));
+        let want = solution(depth) - solution(1);
+        eprintln!("bounces 2 to {depth}: {mean:.5} (standard error {se:.5}), reference {want:.5}");
+        assert!(se < 5e-3 * want, "depth {depth}: too noisy to tell ({se})");
+        assert!(
+            (mean - want).abs() < 5.0 * se + 5e-3 * want,
+            "depth {depth}: bounces 2 to {depth} bring {mean}, against {want}"
+        );
+    }
+}
+
+/// A closed sphere of radius 1 of (`base`, metallic 0, `roughness`) that emits `le` from
+/// every cell or (`checkered`) from every other, seen from its centre.
+fn furnace_scene(base: f32, roughness: f32, le: f32, checkered: bool) -> Scene {
+    Scene {
+        triangles: inward_sphere(1.0, 48, 96, |i, j| if checkered { (i + j) % 2 } else { 0 }),
+        materials: vec![
+            Material {
+                emissive: Vec3::splat(le),
+                ..material([base; 3], 0.0, roughness)
+            },
+            material([base; 3], 0.0, roughness),
+        ],
+        // From the centre, every camera ray meets the wall at (nearly) normal incidence.
+        cameras: vec![look_at(Vec3::ZERO, Vec3::Z, Vec3::Y, 0.3)],
+        ..Default::default()
+    }
+}
+
+/// The mean luminance of two renders with independent seeds, less that of `minus` (two
+/// renders with the same two seeds) when given, and its standard error, from the per-pixel
+/// differences between the seeds (the image's own pattern is not noise).
+fn mean_and_error(
+    a: &psrestir::image_io::Image,
+    b: &psrestir::image_io::Image,
+    minus: Option<&[psrestir::image_io::Image; 2]>,
+) -> (f64, f64) {
+    let value = |img: &psrestir::image_io::Image, k: usize, i: usize| {
+        lum(img.rgb[i]) - minus.map_or(0.0, |m| lum(m[k].rgb[i]))
+    };
+    let n = a.rgb.len();
+    let (mut sum, mut var) = (0.0, 0.0);
+    for i in 0..n {
+        let (x, y) = (value(a, 0, i), value(b, 1, i));
+        sum += 0.5 * (x + y);
+        var += 0.25 * (x - y) * (x - y);
+    }
+    (sum / n as f64, var.sqrt() / n as f64)
 }
 
 /// The inside of a corner (floor, back wall, left wall) under a lamp facing down and a point

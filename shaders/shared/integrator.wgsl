@@ -152,7 +152,9 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool) -> CameraPa
     var ind_prev = vec3f(0.0);
     // The first vertex's BRDF x cos / density along its BSDF sample (for Russian roulette).
     var first_weight = vec3f(1.0);
-    // The first vertex's BSDF sample: its density and the MIS-weighted emission it finds.
+    // The first vertex's BSDF sample: its direction, density and the MIS-weighted emission
+    // it finds.
+    var first_wi = vec3f(0.0, 0.0, 1.0);
     var first_pdf = 0.0;
     var first_e = vec3f(0.0);
     for (var step = 0u; step < 1u + 3u * max_depth && stage != STAGE_DONE; step++) {
@@ -396,6 +398,7 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool) -> CameraPa
                     ray_tmax = 3.0e38;
                     stage = STAGE_BSDF;
                     if depth == 1u {
+                        first_wi = wi;
                         first_pdf = bsdf_pdf;
                     }
                 }
@@ -404,7 +407,7 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool) -> CameraPa
     }
     out.bsdf_prev = out.bsdf.radiance;
     if any(ind != vec3f(0.0)) || any(ind_prev != vec3f(0.0)) {
-        out.bsdf = DirectSample(out.bsdf.wi, first_e + ind, 1.0 / first_pdf);
+        out.bsdf = DirectSample(first_wi, first_e + ind, 1.0 / first_pdf);
         out.bsdf_prev = first_e + ind_prev;
     }
     return out;
