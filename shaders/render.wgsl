@@ -7,6 +7,7 @@
 #import shared/rng
 #import shared/camera
 #import shared/integrator
+#import shared/first_vertex_only
 
 // Mirrored by GpuRenderParams in src/render/layout.rs.
 struct RenderParams {

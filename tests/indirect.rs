@@ -226,64 +226,13 @@ fn mean_and_error(
     (sum / n as f64, var.sqrt() / n as f64)
 }
 
-/// The inside of a corner (floor, back wall, left wall) under a lamp facing down and a point
-/// light, seen from the open side: light bounces between the three faces.
-fn corner_scene() -> Scene {
-    let mut s = Scene::default();
-    s.materials.push(material([0.7, 0.6, 0.5], 0.0, 0.6));
-    s.materials.push(material([0.3, 0.6, 0.8], 0.3, 0.35));
-    s.materials.push(Material {
-        emissive: Vec3::splat(6.0),
-        ..material([0.0; 3], 0.0, 1.0)
-    });
-    // Floor (facing +y), back wall (facing +z), left wall (facing +x).
-    s.triangles.extend(quad(
-        Vec3::new(-1.0, 0.0, 1.0),
-        Vec3::new(2.0, 0.0, 0.0),
-        Vec3::new(0.0, 0.0, -2.0),
-        0,
-    ));
-    s.triangles.extend(quad(
-        Vec3::new(-1.0, 0.0, -1.0),
-        Vec3::new(2.0, 0.0, 0.0),
-        Vec3::new(0.0, 2.0, 0.0),
-        1,
-    ));
-    s.triangles.extend(quad(
-        Vec3::new(-1.0, 0.0, 1.0),
-        Vec3::new(0.0, 0.0, -2.0),
-        Vec3::new(0.0, 2.0, 0.0),
-        0,
-    ));
-    // The lamp faces down (u x v = -y).
-    s.triangles.extend(quad(
-        Vec3::new(-0.2, 1.6, -0.6),
-        Vec3::new(0.5, 0.0, 0.0),
-        Vec3::new(0.0, 0.0, 0.5),
-        2,
-    ));
-    s.lights.push(psrestir::scene::PunctualLight::point(
-        "p",
-        Vec3::new(0.5, 1.2, 0.4),
-        Vec3::splat(1.5),
-    ));
-    s.cameras.push(look_at(
-        Vec3::new(0.9, 1.1, 2.4),
-        Vec3::new(-0.3, 0.5, -0.5),
-        Vec3::Y,
-        1.0,
-    ));
-    s
-}
-
 #[test]
 fn light_and_bsdf_sampling_agree_at_every_vertex_of_a_path() {
     // NEE alone, BSDF sampling alone (delta lights still by NEE) and MIS are three unbiased
     // estimators of the same image at every depth: a wrong MIS weight, density or throughput
     // at a vertex after the first shows as a difference between them.
     let Some(gpu) = gpu() else { return };
-    let mut scene = corner_scene();
-    scene.max_depth = MaxDepth::new(3).unwrap();
+    let mut scene = corner_scene(3);
     let r = Renderer::new(&gpu, &scene).unwrap();
     let w = 32usize;
     let render = |t, spp, seed| render_image(&r, w as u32, spp, seed, t).rgb;

@@ -1,7 +1,7 @@
 //! The recursive estimator (a recursive control variate on the gradient) and the
 //! variance-scaled step:
 //! - its fresh term is the baseline's gradient, sample for sample (same seeds), so with the
-//!   weight a = 1 it is the baseline;
+//!   weight a = 1 it is the baseline, with direct light and at depth 3;
 //! - run along one fixed sequence of states (textures and adjoints) with independent seeds,
 //!   the mean of its running estimate matches the baseline's mean at every state within the
 //!   standard error, for base color (bilinear) and roughness (nearest), and its spread at the
@@ -49,7 +49,15 @@ fn state(n: usize, k: usize, lo: f32) -> Vec<f32> {
 #[test]
 fn recursive_fresh_term_is_the_baseline_gradient() {
     let Some(gpu) = gpu() else { return };
-    let scene = shadow_scene();
+    // Direct light, and paths of 3 vertices where the texture is also seen at later vertices
+    // (each pass replays the path to differentiate them).
+    for scene in [shadow_scene(), corner_scene(3)] {
+        fresh_term_is_the_baseline_gradient(&gpu, &scene);
+    }
+}
+
+fn fresh_term_is_the_baseline_gradient(gpu: &psrestir::gpu::Gpu, scene: &psrestir::scene::Scene) {
+    let scene = scene.clone();
     let set = ParamSet::from_specs(
         &scene,
         &[spec(Slot::BaseColor, [4, 4])],
@@ -59,7 +67,7 @@ fn recursive_fresh_term_is_the_baseline_gradient() {
     .unwrap();
     let target = vec![Image::new(W, W)];
     let mut base = Optimizer::new(
-        &gpu,
+        gpu,
         &scene,
         set.clone(),
         settings(Method::Baseline, 2, 3),
@@ -71,7 +79,7 @@ fn recursive_fresh_term_is_the_baseline_gradient() {
         weight: Some(1.0),
         ..Default::default()
     });
-    let mut rec = Optimizer::new(&gpu, &scene, set, rec_settings, &target).unwrap();
+    let mut rec = Optimizer::new(gpu, &scene, set, rec_settings, &target).unwrap();
     let (adjoint, _) = base.converged_adjoint(64, 5).unwrap();
     for it in 0..3 {
         let values = state(48, it as usize, 0.0);

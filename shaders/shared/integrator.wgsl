@@ -78,8 +78,8 @@ struct CameraPath {
     // ReSTIR stores.
     hit: Hit,
     // Whether the hit was shaded and its samples drawn: false on a miss, at the back of a
-    // single-sided surface, and (with optimized_only) on a material without optimized
-    // textures. Only e is set otherwise.
+    // single-sided surface, and (with optimized_only, unless replay at depth > 1) on a
+    // material without optimized textures. Only e is set otherwise.
     shaded: bool,
     sf: Surface,
     // The inputs that the glTF material gives, and those with the optimized textures.
@@ -115,7 +115,18 @@ fn max_component(v: vec3f) -> f32 {
 // and gradient passes draw the same samples from the same camera-sample index. With `both`,
 // the vertices after the first are also evaluated under the previous iteration's textures
 // (same directions, densities and MIS weights), for bsdf_prev.
-fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool) -> CameraPath {
+//
+// With `replay`, the derivatives at the vertices after the first (path replay
+// backpropagation): once the path is traced and everything it brings back is known, it is
+// traced again from the same random numbers, and at every later vertex with an optimized
+// material the pass's differentiate_later_vertex receives the BRDF's inputs and directions
+// and the factor that its derivative multiplies: for a light sample, the throughput up to the
+// vertex times the sample's weight; for the BSDF sample, what the rest of the path brings
+// back (everything less what the vertices before it brought) over the BRDF's value there.
+// Both include the first vertex's BRDF x cos / density along its BSDF sample. The memory is
+// the same at every depth; the cost is a second tracing of the paths that reach an optimized
+// material after the first vertex.
+fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: bool) -> CameraPath {
     var out: CameraPath;
     out.hit = Hit(3.0e38, NONE, 0.0, 0.0);
     out.shaded = false;
@@ -124,6 +135,13 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool) -> CameraPa
     out.bsdf = NO_SAMPLE;
     out.bsdf_prev = vec3f(0.0);
     let max_depth = max(scene.max_depth, 1u);
+    let rng_start = rng_state;
+    // Whether the path is being replayed (with `replay`) to differentiate later vertices,
+    // knowing what it brought back in all (ind_total, ind_prev_total).
+    var replaying = false;
+    var ind_total = vec3f(0.0);
+    var ind_prev_total = vec3f(0.0);
+    var later_optimized = false;
     var ray_o = o;
     var ray_d = d;
     var ray_tmax = 3.0e38;
@@ -150,14 +168,17 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool) -> CameraPa
     var beta_next_prev = vec3f(1.0);
     var ind = vec3f(0.0);
     var ind_prev = vec3f(0.0);
-    // The first vertex's BRDF x cos / density along its BSDF sample (for Russian roulette).
+    // The first vertex's BRDF x cos / density along its BSDF sample (for Russian roulette and
+    // the later vertices' derivatives), under each state.
     var first_weight = vec3f(1.0);
+    var first_weight_prev = vec3f(1.0);
     // The first vertex's BSDF sample: its direction, density and the MIS-weighted emission
     // it finds.
     var first_wi = vec3f(0.0, 0.0, 1.0);
     var first_pdf = 0.0;
     var first_e = vec3f(0.0);
-    for (var step = 0u; step < 1u + 3u * max_depth && stage != STAGE_DONE; step++) {
+    let steps = (1u + 3u * max_depth) * select(1u, 2u, replay && max_depth > 1u);
+    for (var step = 0u; step < steps && stage != STAGE_DONE; step++) {
         var hit = Hit(ray_tmax, NONE, 0.0, 0.0);
         if stage != STAGE_LIGHT {
             hit = trace_ray(ray_o, ray_d, ray_tmax, stage == STAGE_SHADOW);
@@ -295,7 +316,8 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool) -> CameraPa
             } else {
                 out.e = le;
                 stage = STAGE_DONE;
-                shade = hit.tri != NONE && next_sf.valid && (!optimized_only || has_optimized(next_sf.material));
+                // (With replay, a path whose first vertex is not optimized may still reach one.)
+                shade = hit.tri != NONE && next_sf.valid && (!optimized_only || has_optimized(next_sf.material) || (replay && max_depth > 1u));
                 out.shaded = shade;
             }
         }
@@ -314,7 +336,12 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool) -> CameraPa
             // Russian roulette.
             let wo = to_local(vsf.frame, vsf.wo);
             let wi = to_local(vsf.frame, eval_wi);
-            for (var state = 0u; state < select(1u, 2u, both && depth > 1u); state++) {
+            // What the rest of the path brings back from here (replay only).
+            let rest = ind_total - ind;
+            let rest_prev = ind_prev_total - ind_prev;
+            var fc = vec3f(0.0);
+            var fc_prev = vec3f(0.0);
+            for (var state = 0u; state < select(1u, 2u, both); state++) {
                 var m = vmat;
                 var b = beta;
                 if state == 1u {
@@ -322,11 +349,20 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool) -> CameraPa
                     b = beta_prev;
                 }
                 var f = brdf_eval_cos(m, wo, wi);
+                if state == 0u {
+                    fc = f;
+                } else {
+                    fc_prev = f;
+                }
                 if to_next {
                     f /= bsdf_pdf;
                 }
                 if depth == 1u {
-                    first_weight = f;
+                    if state == 0u {
+                        first_weight = f;
+                    } else {
+                        first_weight_prev = f;
+                    }
                 } else if to_next {
                     if state == 0u {
                         beta_next = b * f;
@@ -340,6 +376,15 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool) -> CameraPa
                 } else {
                     ind_prev += b * f * arrives;
                 }
+            }
+            if replaying && depth > 1u && has_optimized(vsf.material) {
+                var w = first_weight * beta * arrives;
+                var w_prev = first_weight_prev * beta_prev * arrives;
+                if to_next {
+                    w = first_weight * select(vec3f(0.0), rest / fc, fc > vec3f(0.0));
+                    w_prev = first_weight_prev * select(vec3f(0.0), rest_prev / fc_prev, fc_prev > vec3f(0.0));
+                }
+                differentiate_later_vertex(vsf.material, vsf.uv, wo, wi, vmat, vmat_prev, w, w_prev);
             }
         }
         if shade {
@@ -364,6 +409,7 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool) -> CameraPa
                 out.mat = vmat;
                 out.mat_prev = vmat_prev;
             } else {
+                later_optimized = later_optimized || has_optimized(vsf.material);
                 beta = beta_next;
                 beta_prev = beta_next_prev;
                 if depth >= RR_VERTEX {
@@ -404,6 +450,23 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool) -> CameraPa
                 }
             }
         }
+        if stage == STAGE_DONE && replay && !replaying && later_optimized && (any(ind != vec3f(0.0)) || any(ind_prev != vec3f(0.0))) {
+            // Replay: the same path from the same random numbers, now knowing its total.
+            replaying = true;
+            ind_total = ind;
+            ind_prev_total = ind_prev;
+            ind = vec3f(0.0);
+            ind_prev = vec3f(0.0);
+            rng_state = rng_start;
+            ray_o = o;
+            ray_d = d;
+            ray_tmax = 3.0e38;
+            stage = STAGE_CAMERA;
+            vertex = 0u;
+            depth = 1u;
+            beta_next = vec3f(1.0);
+            beta_next_prev = vec3f(1.0);
+        }
     }
     out.bsdf_prev = out.bsdf.radiance;
     if any(ind != vec3f(0.0)) || any(ind_prev != vec3f(0.0)) {
@@ -427,7 +490,7 @@ fn contribution(mat: SurfaceMaterial, sf: Surface, s: DirectSample) -> vec3f {
 // vertex's two techniques' contributions under each state are added in one loop, for the
 // reason camera_path traces in one.
 fn radiance_states(o: vec3f, d: vec3f, both: bool) -> array<vec3f, 2> {
-    let p = camera_path(o, d, false, both);
+    let p = camera_path(o, d, false, both, false);
     var l = array<vec3f, 2>(p.e, p.e);
     if !p.shaded {
         return l;
@@ -522,12 +585,14 @@ fn rounded_direction(sf: Surface, wi: vec3f) -> RoundedDirection {
 }
 
 // With `both`, the BSDF sample's radiance_prev holds what its further vertices bring back
-// under the previous iteration's textures (the recursive estimator's second state).
-fn gradient_sample(o: vec3f, d: vec3f, both: bool) -> GradientSample {
+// under the previous iteration's textures (the recursive estimator's second state). With
+// `replay`, the path's later vertices are differentiated on the way (camera_path): the pass
+// defines differentiate_later_vertex.
+fn gradient_sample(o: vec3f, d: vec3f, both: bool, replay: bool) -> GradientSample {
     var out: GradientSample;
-    let p = camera_path(o, d, true, both);
-    out.valid = p.shaded;
-    if !p.shaded {
+    let p = camera_path(o, d, true, both, replay);
+    out.valid = p.shaded && has_optimized(p.sf.material);
+    if !out.valid {
         return out;
     }
     out.sf = p.sf;

@@ -83,6 +83,10 @@ pub const SHADERS: &[(&str, &str)] = &[
         include_str!("../../shaders/shared/integrator.wgsl"),
     ),
     (
+        "shared/first_vertex_only",
+        include_str!("../../shaders/shared/first_vertex_only.wgsl"),
+    ),
+    (
         "shared/adjoint_pixel",
         include_str!("../../shaders/shared/adjoint_pixel.wgsl"),
     ),

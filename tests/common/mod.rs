@@ -272,6 +272,65 @@ pub fn shadow_scene() -> Scene {
     s
 }
 
+/// The inside of a corner: a floor of material "plane" and two white walls, under a lamp and
+/// a point light, rendered with paths of `depth` vertices. The camera sees mostly the walls,
+/// whose light from the floor reaches it after a bounce on the floor: with indirect light,
+/// the derivatives at later vertices carry much of the floor's gradient.
+pub fn corner_scene(depth: u32) -> Scene {
+    let mut s = Scene::default();
+    s.materials.push(Material {
+        name: "plane".into(),
+        ..material([0.6, 0.5, 0.4], 0.2, 0.5)
+    });
+    s.materials.push(Material {
+        name: "lamp".into(),
+        emissive: Vec3::splat(6.0),
+        ..material([0.0; 3], 0.0, 1.0)
+    });
+    s.materials.push(Material {
+        name: "wall".into(),
+        ..material([0.8, 0.8, 0.8], 0.0, 0.7)
+    });
+    s.triangles.extend(quad(
+        Vec3::new(-1.0, 0.0, 1.0),
+        Vec3::new(2.0, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, -2.0),
+        0,
+    ));
+    s.triangles.extend(quad(
+        Vec3::new(-1.0, 0.0, -1.0),
+        Vec3::new(2.0, 0.0, 0.0),
+        Vec3::new(0.0, 2.0, 0.0),
+        2,
+    ));
+    s.triangles.extend(quad(
+        Vec3::new(-1.0, 0.0, 1.0),
+        Vec3::new(0.0, 0.0, -2.0),
+        Vec3::new(0.0, 2.0, 0.0),
+        2,
+    ));
+    // The lamp faces down (u x v = -y).
+    s.triangles.extend(quad(
+        Vec3::new(-0.2, 1.6, -0.6),
+        Vec3::new(0.5, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, 0.5),
+        1,
+    ));
+    s.lights.push(PunctualLight::point(
+        "p",
+        Vec3::new(0.5, 1.2, 0.4),
+        Vec3::splat(1.5),
+    ));
+    s.cameras.push(look_at(
+        Vec3::new(0.7, 0.9, 1.8),
+        Vec3::new(-0.6, 1.0, -0.8),
+        Vec3::Y,
+        0.9,
+    ));
+    s.max_depth = psrestir::scene::MaxDepth::new(depth).unwrap();
+    s
+}
+
 /// CRC-32 (IEEE) as PNG chunks use it.
 pub fn crc32(bytes: &[u8]) -> u32 {
     let mut c = 0xffff_ffffu32;

@@ -1,7 +1,8 @@
 // Baseline gradient pass: every camera sample differentiates its light-sampled and
-// BSDF-sampled contributions with respect to the material inputs at its hit point, weights
-// them by the adjoint of its pixel, and adds the result into the texels that the filter
-// touches (the parameter-space estimator of docs/method.md). Float additions use a
+// BSDF-sampled contributions with respect to the material inputs at its hit point (and, with
+// indirect light, at every later vertex of its path: path replay, shared/integrator.wgsl),
+// weights them by the adjoint of its pixel, and adds the result into the texels that the
+// filter touches (the parameter-space estimator of docs/method.md). Float additions use a
 // bounded compare-and-swap loop on 32-bit atomics; an update that exhausts the bound is
 // counted (GRADIENT_STAT_LOST), never silently lost.
 #import shared/rng
@@ -81,6 +82,14 @@ fn scatter(m: Material, uv: vec2f, bg: BrdfGrad, weight: vec3f, adj: vec3f) {
     }
 }
 
+// The adjoint of the pixel whose sample is being differentiated.
+var<private> pixel_adj: vec3f;
+
+// A later vertex of the path (shared/integrator.wgsl, camera_path with replay).
+fn differentiate_later_vertex(mi: u32, uv: vec2f, wo: vec3f, wi: vec3f, mat: SurfaceMaterial, mat_prev: SurfaceMaterial, weight: vec3f, weight_prev: vec3f) {
+    scatter(materials[mi], uv, brdf_eval_cos_grad(mat, wo, wi), weight, pixel_adj);
+}
+
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {
     let a = adjoint_pixel(id.x + id.y * gp.stride, gp.camera, gp.adjoint_offset, gp.inv_spp);
@@ -88,10 +97,11 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         return;
     }
     techniques = gp.techniques;
+    pixel_adj = a.adj;
     for (var s = 0u; s < gp.spp; s++) {
         rng_init(gp.seed, (gp.sample_offset + s) * a.n_pixels + a.pixel, 0u);
         let d = camera_direction(gp.camera, a.xy + rand2());
-        let g = gradient_sample(gp.camera.origin, d, false);
+        let g = gradient_sample(gp.camera.origin, d, false, true);
         if !g.valid {
             continue;
         }

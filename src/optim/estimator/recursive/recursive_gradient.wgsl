@@ -111,6 +111,21 @@ fn scatter2(m: Material, uv: vec2f, bg: BrdfGrad, bg_prev: BrdfGrad, weight: vec
     }
 }
 
+// The current and previous adjoints of the pixel whose sample is being differentiated.
+var<private> pixel_adj: vec3f;
+var<private> pixel_adj_prev: vec3f;
+
+// A later vertex of the path (shared/integrator.wgsl, camera_path with replay), under both
+// states.
+fn differentiate_later_vertex(mi: u32, uv: vec2f, wo: vec3f, wi: vec3f, mat: SurfaceMaterial, mat_prev: SurfaceMaterial, weight: vec3f, weight_prev: vec3f) {
+    let bg = brdf_eval_cos_grad(mat, wo, wi);
+    var bg_prev = bg;
+    if rp.have_prev != 0u {
+        bg_prev = brdf_eval_cos_grad(mat_prev, wo, wi);
+    }
+    scatter2(materials[mi], uv, bg, bg_prev, weight, weight_prev, pixel_adj, pixel_adj_prev);
+}
+
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {
     let xy = tile_pixel(id.x + id.y * rp.stride, rp.camera.width, rp.camera.height);
@@ -127,11 +142,13 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     if all(adj == vec3f(0.0)) && all(adj_prev == vec3f(0.0)) {
         return;
     }
+    pixel_adj = adj;
+    pixel_adj_prev = adj_prev;
     for (var s = 0u; s < rp.spp; s++) {
         // The same random numbers as the baseline's sample s of this pixel.
         rng_init(rp.seed, s * n_pixels + pixel, 0u);
         let d = camera_direction(rp.camera, vec2f(xy) + rand2());
-        let g = gradient_sample(rp.camera.origin, d, rp.have_prev != 0u);
+        let g = gradient_sample(rp.camera.origin, d, rp.have_prev != 0u, true);
         if !g.valid {
             continue;
         }

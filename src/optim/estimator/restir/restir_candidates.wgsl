@@ -18,6 +18,7 @@
 #import shared/camera
 #import shared/adjoint_pixel
 #import shared/integrator
+#import shared/first_vertex_only
 #import gen/restir
 #import restir/compact_path
 #import restir/reservoir
@@ -169,7 +170,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     for (var s = 0u; s < cp.spp; s++) {
         rng_init(cp.seed, s * a.n_pixels + a.pixel, 0u);
         let d = camera_direction(cp.camera, a.xy + rand2());
-        let g = gradient_sample(cp.camera.origin, d, false);
+        let g = gradient_sample(cp.camera.origin, d, false, false);
         if !g.valid {
             continue;
         }
