@@ -270,6 +270,15 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
             String::new()
         }
     );
+    if settings.method == crate::optim::Method::Restir && task.max_depth > 1 {
+        log::warn!(
+            "ReSTIR with paths of {} vertices differentiates each path's first vertex only \
+             (the light the rest of the path brings is its stored radiance); the texture's \
+             effect on the light it sends to other surfaces is not in its gradient. The \
+             baseline and the recursive estimator differentiate every vertex",
+            task.max_depth
+        );
+    }
     let initial_rmse = prep.reference.as_ref().map(|r| rmse(&prep.set.values, r));
     let mut opt = Optimizer::for_problem(gpu, &prep, settings)?;
     opt.prepare()?;

@@ -156,6 +156,7 @@ pub fn task_regime(task: &Task, cameras: usize) -> Regime {
             .iter()
             .map(|t| t.resolution[0] as u64 * t.resolution[1] as u64)
             .sum(),
+        max_depth: task.max_depth,
     }
 }
 

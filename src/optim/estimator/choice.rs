@@ -32,7 +32,8 @@ pub const RESTIR_MAX_TEXELS_CHEAP_PRIMAL: u64 = 1 << 20;
 /// The rule in one sentence, with its thresholds (for `psrestir estimators` and reports).
 pub fn rule() -> String {
     format!(
-        "the baseline where the gradient pass draws at least {DENSE_SAMPLES_PER_TEXEL} sample \
+        "the baseline with indirect light (max_depth above 1: ReSTIR differentiates a path's \
+         first vertex only); with direct light, the baseline where the gradient pass draws at least {DENSE_SAMPLES_PER_TEXEL} sample \
          per optimized texel and iteration; below that, ReSTIR where the primal takes at least \
          {RESTIR_PRIMAL_RATIO} samples per gradient sample or the textures have fewer than \
          {RESTIR_MAX_TEXELS_CHEAP_PRIMAL} texels, the baseline otherwise"
@@ -50,6 +51,8 @@ pub struct Regime {
     pub pixels: u64,
     /// Optimized texels (all textures).
     pub texels: u64,
+    /// Vertices of a camera path (1: direct light only).
+    pub max_depth: u32,
 }
 
 impl Regime {
@@ -127,7 +130,16 @@ impl MethodChoice {
 /// merge leaves the budget many iterations; else the baseline.
 fn auto(r: &Regime) -> Choice {
     let (d, q) = (r.samples_per_texel(), r.primal_ratio());
-    let (method, why) = if d >= DENSE_SAMPLES_PER_TEXEL {
+    let (method, why) = if r.max_depth > 1 {
+        (
+            Method::Baseline,
+            format!(
+                "indirect light (paths of {} vertices): ReSTIR differentiates the first vertex \
+                 only, the baseline every vertex",
+                r.max_depth
+            ),
+        )
+    } else if d >= DENSE_SAMPLES_PER_TEXEL {
         (
             Method::Baseline,
             format!("dense sampling (from {DENSE_SAMPLES_PER_TEXEL}): reuse has little to add"),
@@ -218,6 +230,7 @@ mod tests {
             gradient_spp,
             pixels,
             texels,
+            max_depth: 1,
         }
     }
 
@@ -249,6 +262,14 @@ mod tests {
             c.automatic && c.reason.contains("0.25 gradient samples"),
             "{c:?}"
         );
+        // With indirect light, the baseline whatever the sampling.
+        let deep = Regime {
+            max_depth: 3,
+            ..regime(32, 1, 128 * 128, 256 * 256)
+        };
+        let c = MethodChoice::Auto.resolve(&deep);
+        assert_eq!(c.method, Method::Baseline);
+        assert!(c.reason.contains("3 vertices"), "{c:?}");
     }
 
     #[test]
