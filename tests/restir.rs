@@ -149,8 +149,28 @@ fn optimizer_on(
 #[test]
 fn without_reuse_restir_equals_the_baseline_for_scalar_textures() {
     let Some(gpu) = gpu() else { return };
+    // Direct light, and paths of 3 vertices whose later vertices meet the textures too (the
+    // first vertex's candidates carry what the rest of the path brings back; the later
+    // vertices' derivatives are plain Monte Carlo in both).
+    let mut corner = corner_scene(3);
+    // Seeing the whole floor: ReSTIR estimates the texels the camera sees (every texel here).
+    corner.cameras = vec![look_at(
+        glam::Vec3::new(1.4, 2.0, 2.2),
+        glam::Vec3::new(-0.3, 0.3, -0.3),
+        glam::Vec3::Y,
+        1.0,
+    )];
+    for scene in [shadow_scene(), corner] {
+        restir_without_reuse_equals_the_baseline(&gpu, &scene);
+    }
+}
+
+fn restir_without_reuse_equals_the_baseline(
+    gpu: &psrestir::gpu::Gpu,
+    scene: &psrestir::scene::Scene,
+) {
     // Two scalar textures at once (roughness 2x2, metallic 3x1) on the same material.
-    let scene = shadow_scene();
+    let scene = scene.clone();
     let specs = [
         TextureSpec {
             material: "plane".into(),
@@ -199,7 +219,7 @@ fn without_reuse_restir_equals_the_baseline_for_scalar_textures() {
             variance_step: Default::default(),
         };
         let opt = Optimizer::new(
-            &gpu,
+            gpu,
             &scene,
             set.clone(),
             settings.clone(),
@@ -209,7 +229,7 @@ fn without_reuse_restir_equals_the_baseline_for_scalar_textures() {
         opt.write_params(&truth).unwrap();
         let target = opt.render(0, 1024, 99).unwrap();
         let mut base = Optimizer::new(
-            &gpu,
+            gpu,
             &scene,
             set.clone(),
             settings.clone(),
@@ -217,7 +237,7 @@ fn without_reuse_restir_equals_the_baseline_for_scalar_textures() {
         )
         .unwrap();
         let mut re = Optimizer::new(
-            &gpu,
+            gpu,
             &scene,
             set,
             Settings {
@@ -240,10 +260,20 @@ fn without_reuse_restir_equals_the_baseline_for_scalar_textures() {
                 // each term within compact::RADIANCE_ERROR of its own value, so the sum
                 // within that of the sum of the terms' magnitudes, which exceeds |sum| where
                 // terms of both signs cancel (the second part, relative to the largest entry).
-                let tol = RADIANCE_ERROR * (gb[i].abs() + 0.5 * scale);
+                // With indirect light the rest of the path starts from the rounded hit (about
+                // 1e-6 away), which now and then moves a later vertex's sample across a
+                // texel's edge or a shadow's: four times the bound (measured: at most 1.0%,
+                // 0.2% but for one entry).
+                let bound = if scene.max_depth.get() > 1 {
+                    4.0 * RADIANCE_ERROR
+                } else {
+                    RADIANCE_ERROR
+                };
+                let tol = bound * (gb[i].abs() + 0.5 * scale);
                 assert!(
                     (gb[i] - gr[i]).abs() <= tol,
-                    "{filter:?} iteration {it} parameter {i}: baseline {} vs ReSTIR {}",
+                    "depth {}, {filter:?} iteration {it} parameter {i}: baseline {} vs ReSTIR {}",
+                    scene.max_depth.get(),
                     gb[i],
                     gr[i]
                 );

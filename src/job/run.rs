@@ -272,10 +272,11 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     );
     if settings.method == crate::optim::Method::Restir && task.max_depth > 1 {
         log::warn!(
-            "ReSTIR with paths of {} vertices differentiates each path's first vertex only \
-             (the light the rest of the path brings is its stored radiance); the texture's \
-             effect on the light it sends to other surfaces is not in its gradient. The \
-             baseline and the recursive estimator differentiate every vertex",
+            "ReSTIR with paths of {} vertices reuses each path's first vertex with the light \
+             the rest of the path brought back when it was drawn, which the other surfaces' \
+             textures change since: its gradient lags them (the later vertices' derivatives \
+             are plain Monte Carlo). The baseline and the recursive estimator draw every \
+             vertex afresh",
             task.max_depth
         );
     }

@@ -32,8 +32,9 @@ pub const RESTIR_MAX_TEXELS_CHEAP_PRIMAL: u64 = 1 << 20;
 /// The rule in one sentence, with its thresholds (for `psrestir estimators` and reports).
 pub fn rule() -> String {
     format!(
-        "the baseline with indirect light (max_depth above 1: ReSTIR differentiates a path's \
-         first vertex only); with direct light, the baseline where the gradient pass draws at least {DENSE_SAMPLES_PER_TEXEL} sample \
+        "the baseline with indirect light (max_depth above 1: ReSTIR's kept samples carry the \
+         light they brought back when drawn, which the other surfaces' textures change); with \
+         direct light, the baseline where the gradient pass draws at least {DENSE_SAMPLES_PER_TEXEL} sample \
          per optimized texel and iteration; below that, ReSTIR where the primal takes at least \
          {RESTIR_PRIMAL_RATIO} samples per gradient sample or the textures have fewer than \
          {RESTIR_MAX_TEXELS_CHEAP_PRIMAL} texels, the baseline otherwise"
@@ -134,8 +135,8 @@ fn auto(r: &Regime) -> Choice {
         (
             Method::Baseline,
             format!(
-                "indirect light (paths of {} vertices): ReSTIR differentiates the first vertex \
-                 only, the baseline every vertex",
+                "indirect light (paths of {} vertices): ReSTIR's kept samples carry the light \
+                 they brought back when drawn, which the other surfaces' textures change",
                 r.max_depth
             ),
         )

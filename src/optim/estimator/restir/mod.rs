@@ -190,6 +190,11 @@ pub(crate) struct Restir {
     /// Merges whose samples the kept reservoirs can hold (0: nothing to reuse).
     history: u32,
     queue: wgpu::Queue,
+    /// The optimizer's gradient, which the merge writes (and, with indirect light, the
+    /// candidates add the later vertices' derivatives into first).
+    grad: wgpu::Buffer,
+    /// Whether paths have more than one vertex.
+    indirect: bool,
 }
 
 impl Restir {
@@ -357,6 +362,7 @@ impl Restir {
                             ("cstats", &candidate_stats),
                             ("targets", &targets),
                             ("observed_map", &observed_map),
+                            ("grad", s.grad),
                         ],
                     )
                 });
@@ -388,6 +394,8 @@ impl Restir {
             seed: s.settings.seed,
             history: 0,
             queue: gpu.queue.clone(),
+            grad: s.grad.clone(),
+            indirect: s.scene.info.max_depth > 1,
         })
     }
 
@@ -414,6 +422,11 @@ impl Estimator for Restir {
         let reuse = self.options.temporal && have_prev;
         let target_cur = parity as u32 * self.target_len;
         let target_prev = (1 - parity as u32) * self.target_len;
+        if self.indirect {
+            // The candidates add the later vertices' derivatives into it; the merge adds the
+            // reservoirs' estimates.
+            enc.clear_buffer(&self.grad, 0, None);
+        }
         for (k, cam) in self.cameras.iter_mut().enumerate() {
             cam.params.seed = pass_seed(self.seed, frame.iteration, k as u32, Seeds::GRADIENT);
             cam.params.prev_targets = reuse as u32;

@@ -19,6 +19,7 @@ pub(crate) const CANDIDATES_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl
         "cstats",
         "targets",
         "observed_map",
+        "grad",
     ],
 };
 /// Group 1 of `restir_merge.wgsl`.

@@ -14,11 +14,14 @@
 // iteration's textures and target adjoint (the merge's MIS weights need it): the same path,
 // one more BRDF-with-derivative evaluation per technique here, shared by the path's texels,
 // instead of one per texel and reservoir in the merge.
+// With indirect light the candidates are the first vertex's samples, the light arriving
+// along each (everything the rest of the path brings back) stored as its radiance; the later
+// vertices' derivatives are plain Monte Carlo (path replay, shared/integrator.wgsl), added
+// into the gradient for observed texels, to which the merge adds the reservoirs' estimates.
 #import shared/rng
 #import shared/camera
 #import shared/adjoint_pixel
 #import shared/integrator
-#import shared/first_vertex_only
 #import gen/restir
 #import restir/compact_path
 #import restir/reservoir
@@ -62,6 +65,10 @@ struct CandidateParams {
 // The compaction map: per 32 texels, which are observed (bits) and how many observed texels
 // come before them.
 @group(1) @binding(9) var<storage, read> observed_map: array<vec2u>;
+// The gradient (f32 bits, laid out like params[]): with indirect light the later vertices'
+// derivatives are added here, cleared before this pass; the merge adds the rest. Not written
+// at depth 1.
+@group(1) @binding(10) var<storage, read_write> grad: array<atomic<u32>>;
 
 // The index of texel t among the observed texels, or UNOBSERVED.
 fn observed_index(t: u32) -> u32 {
@@ -77,6 +84,53 @@ var<private> offered: u32 = 0u;
 var<private> lost: u32 = 0u;
 var<private> dropped: u32 = 0u;
 var<private> unmapped: u32 = 0u;
+
+// The adjoint (over the spp) of the pixel whose sample is being differentiated.
+var<private> pixel_adj: vec3f;
+
+// A later vertex of the path (shared/integrator.wgsl, camera_path with replay): its
+// derivative added, plain Monte Carlo, into `grad` at the observed texels its footprint
+// touches (bounded compare-and-swap; an exhausted bound counts as lost, a non-finite value
+// as dropped).
+fn differentiate_later_vertex(mi: u32, uv: vec2f, wo: vec3f, wi: vec3f, mat: SurfaceMaterial, mat_prev: SurfaceMaterial, weight: vec3f, weight_prev: vec3f) {
+    let bg = brdf_eval_cos_grad(mat, wo, wi);
+    let m = materials[mi];
+    for (var slot = 0u; slot < 3u; slot++) {
+        let pi = material_param(m, slot);
+        if pi == NONE {
+            continue;
+        }
+        let p = param_textures[pi];
+        let fp = param_footprint(p, uv);
+        let g = slot_derivative(slot, bg, weight, pixel_adj);
+        for (var k = 0u; k < 4u; k++) {
+            if fp.weight[k] == 0.0 || observed_index(p.texel_offset + fp.texel[k]) == UNOBSERVED {
+                continue;
+            }
+            let base = p.offset + fp.texel[k] * p.channels;
+            for (var c = 0u; c < p.channels; c++) {
+                let v = fp.weight[k] * g[c];
+                if v == 0.0 {
+                    continue;
+                }
+                if !(abs(v) < 3.0e38) {
+                    dropped += 1u;
+                    continue;
+                }
+                var old = atomicLoad(&grad[base + c]);
+                var done = false;
+                for (var n = 0u; n < 256u && !done; n++) {
+                    let r = atomicCompareExchangeWeak(&grad[base + c], old, bitcast<u32>(bitcast<f32>(old) + v));
+                    done = r.exchanged;
+                    old = r.old_value;
+                }
+                if !done {
+                    lost += 1u;
+                }
+            }
+        }
+    }
+}
 
 // ts: the technique's sample; adj: the pixel's adjoint (for the value), adj_t: its target
 // adjoint; bg_prev and adj_t_prev: the path's BRDF derivatives and the pixel's target adjoint
@@ -163,6 +217,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     techniques = TECH_MIS;
     compact_paths = true;
     let info = a.pixel | (cp.camera_index << INFO_CAMERA_SHIFT);
+    pixel_adj = a.adj;
     var adj_t_prev = vec3f(0.0);
     if cp.prev_targets != 0u {
         adj_t_prev = last * cp.inv_spp;
@@ -170,7 +225,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     for (var s = 0u; s < cp.spp; s++) {
         rng_init(cp.seed, s * a.n_pixels + a.pixel, 0u);
         let d = camera_direction(cp.camera, a.xy + rand2());
-        let g = gradient_sample(cp.camera.origin, d, false, false);
+        let g = gradient_sample(cp.camera.origin, d, false, true);
         if !g.valid {
             continue;
         }

@@ -248,6 +248,15 @@ fn evaluate_stored(k: u32, i: u32, ti: u32, local: u32, ch: u32, verify: bool) -
     return Evaluated(st.path.q_prev, with_adjoint(e, pa.value, ch), q);
 }
 
+// What the candidate pass added into gradient entry j: the later vertices' derivatives with
+// indirect light (the buffer was cleared before it); 0 at depth 1, where it is not cleared.
+fn take_later(j: u32) -> f32 {
+    if scene.max_depth <= 1u {
+        return 0.0;
+    }
+    return grad[j];
+}
+
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {
     let i = id.x + id.y * mp.stride;
@@ -286,7 +295,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     // keep their slots until a merge selects something else).
     if !any(fresh_w > vec2f(0.0)) && !any(kept_w > vec2f(0.0)) {
         for (var c = 0u; c < ch; c++) {
-            grad[p.offset + local * ch + c] = 0.0;
+            grad[p.offset + local * ch + c] = take_later(p.offset + local * ch + c);
         }
         return;
     }
@@ -415,7 +424,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         }
     }
     for (var c = 0u; c < ch; c++) {
-        grad[p.offset + local * ch + c] = g[c];
+        grad[p.offset + local * ch + c] = g[c] + take_later(p.offset + local * ch + c);
     }
     atomicAdd(&mstats[MERGE_STAT_EVALUATIONS], evaluations);
     if dropped > 0u {
