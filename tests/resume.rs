@@ -562,3 +562,36 @@ fn a_run_killed_before_its_first_checkpoint_restarts_with_resume() {
     let log = String::from_utf8_lossy(&o.stderr);
     assert!(!log.contains("reading the rendered targets back"), "{log}");
 }
+
+#[test]
+fn a_checkpoint_is_not_resumed_at_another_path_depth() {
+    // A run's model includes its path depth: resuming a direct-light run's checkpoint with
+    // paths of 3 vertices is refused with a message that names both, and nothing is written.
+    if no_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let task = write_task(dir.path(), 5);
+    let bin = env!("CARGO_BIN_EXE_psrestir");
+    let out = dir.path().join("c");
+    let run = |extra: &[&str]| {
+        Command::new(bin)
+            .arg("optimize")
+            .arg(&task)
+            .arg("--out")
+            .arg(&out)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    assert!(run(&[]).status.success());
+    let before = std::fs::read(out.join("checkpoint.bin")).unwrap();
+    let o = run(&["--resume", "--max-depth", "3", "--iterations", "10"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "resumed at another depth: {err}");
+    assert!(
+        err.contains("checkpoint.bin") && err.contains("paths of 3 vertices"),
+        "unclear error: {err}"
+    );
+    assert_eq!(std::fs::read(out.join("checkpoint.bin")).unwrap(), before);
+}

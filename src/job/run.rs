@@ -288,7 +288,12 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         "{n_pipelines} GPU passes ready after {pipeline_s:.1} s of pipeline creation, before \
          the optimization's clock starts"
     );
-    let layout = layout_string(&prep.set);
+    // The model's path depth is part of what a checkpoint continues (said only above 1, so
+    // that checkpoints of direct-light runs read as before).
+    let mut layout = layout_string(&prep.set);
+    if task.max_depth > 1 {
+        layout.push_str(&format!(", paths of {} vertices", task.max_depth));
+    }
     let (mut rows, elapsed_before) = match checkpoint {
         Some(c) => resume(&mut opt, c, &ckpt_path, &layout, prep.set.values.len())?,
         None => (Vec::new(), 0.0),
