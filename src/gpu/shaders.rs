@@ -83,6 +83,10 @@ pub const SHADERS: &[(&str, &str)] = &[
         include_str!("../../shaders/shared/integrator.wgsl"),
     ),
     (
+        "shared/gradient_scatter",
+        include_str!("../../shaders/shared/gradient_scatter.wgsl"),
+    ),
+    (
         "shared/first_vertex_only",
         include_str!("../../shaders/shared/first_vertex_only.wgsl"),
     ),

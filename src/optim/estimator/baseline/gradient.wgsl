@@ -2,13 +2,15 @@
 // BSDF-sampled contributions with respect to the material inputs at its hit point (and, with
 // indirect light, at every later vertex of its path: path replay, shared/integrator.wgsl),
 // weights them by the adjoint of its pixel, and adds the result into the texels that the
-// filter touches (the parameter-space estimator of docs/method.md). Float additions use a
-// bounded compare-and-swap loop on 32-bit atomics; an update that exhausts the bound is
+// filter touches (the parameter-space estimator of docs/method.md), by
+// shared/gradient_scatter.wgsl. Float additions use a bounded compare-and-swap loop on
+// 32-bit atomics; an update that exhausts the bound is
 // counted (GRADIENT_STAT_LOST), never silently lost.
 #import shared/rng
 #import shared/camera
 #import shared/adjoint_pixel
 #import shared/integrator
+#import shared/gradient_scatter
 
 // Mirrored by GradientParams in src/optim/estimator/baseline/mod.rs.
 struct GradientParams {
@@ -32,55 +34,6 @@ struct GradientParams {
 @group(1) @binding(2) var<storage, read_write> grad: array<atomic<u32>>;
 // [0] samples, [1] lost updates (CAS bound exhausted), [2] dropped non-finite values.
 @group(1) @binding(3) var<storage, read_write> gstats: array<atomic<u32>, 4>;
-
-const CAS_BOUND: u32 = 256u;
-
-var<private> lost_updates: u32 = 0u;
-var<private> dropped_values: u32 = 0u;
-
-fn atomic_add_f32(i: u32, v: f32) {
-    if v == 0.0 {
-        return;
-    }
-    if !(abs(v) < 3.0e38) {
-        dropped_values += 1u;
-        return;
-    }
-    var old = atomicLoad(&grad[i]);
-    for (var k = 0u; k < CAS_BOUND; k++) {
-        let r = atomicCompareExchangeWeak(&grad[i], old, bitcast<u32>(bitcast<f32>(old) + v));
-        if r.exchanged {
-            return;
-        }
-        old = r.old_value;
-    }
-    lost_updates += 1u;
-}
-
-// Scatter the derivative of one contribution c = f cos x weight into the optimized textures
-// of the material.
-fn scatter(m: Material, uv: vec2f, bg: BrdfGrad, weight: vec3f, adj: vec3f) {
-    if all(weight == vec3f(0.0)) {
-        return;
-    }
-    for (var slot = 0u; slot < 3u; slot++) {
-        let pi = material_param(m, slot);
-        if pi == NONE {
-            continue;
-        }
-        let p = param_textures[pi];
-        let fp = param_footprint(p, uv);
-        let g = slot_derivative(slot, bg, weight, adj);
-        for (var k = 0u; k < 4u; k++) {
-            if fp.weight[k] != 0.0 {
-                let base = p.offset + fp.texel[k] * p.channels;
-                for (var c = 0u; c < p.channels; c++) {
-                    atomic_add_f32(base + c, fp.weight[k] * g[c]);
-                }
-            }
-        }
-    }
-}
 
 // The adjoint of the pixel whose sample is being differentiated.
 var<private> pixel_adj: vec3f;
@@ -111,10 +64,10 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         }
     }
     atomicAdd(&gstats[GRADIENT_STAT_SAMPLES], gp.spp);
-    if lost_updates > 0u {
-        atomicAdd(&gstats[GRADIENT_STAT_LOST], lost_updates);
+    if scatter_lost > 0u {
+        atomicAdd(&gstats[GRADIENT_STAT_LOST], scatter_lost);
     }
-    if dropped_values > 0u {
-        atomicAdd(&gstats[GRADIENT_STAT_DROPPED], dropped_values);
+    if scatter_dropped > 0u {
+        atomicAdd(&gstats[GRADIENT_STAT_DROPPED], scatter_dropped);
     }
 }

@@ -17,11 +17,13 @@
 // With indirect light the candidates are the first vertex's samples, the light arriving
 // along each (everything the rest of the path brings back) stored as its radiance; the later
 // vertices' derivatives are plain Monte Carlo (path replay, shared/integrator.wgsl), added
-// into the gradient for observed texels, to which the merge adds the reservoirs' estimates.
+// into the gradient as the baseline adds them; the merge adds the reservoirs' estimates to the
+// observed texels' (texels seen only after a bounce keep the plain Monte Carlo estimate).
 #import shared/rng
 #import shared/camera
 #import shared/adjoint_pixel
 #import shared/integrator
+#import shared/gradient_scatter
 #import gen/restir
 #import restir/compact_path
 #import restir/reservoir
@@ -66,8 +68,8 @@ struct CandidateParams {
 // come before them.
 @group(1) @binding(9) var<storage, read> observed_map: array<vec2u>;
 // The gradient (f32 bits, laid out like params[]): with indirect light the later vertices'
-// derivatives are added here, cleared before this pass; the merge adds the rest. Not written
-// at depth 1.
+// derivatives are added here (shared/gradient_scatter.wgsl), cleared before this pass; the
+// merge adds the rest. Not written at depth 1.
 @group(1) @binding(10) var<storage, read_write> grad: array<atomic<u32>>;
 
 // The index of texel t among the observed texels, or UNOBSERVED.
@@ -89,47 +91,9 @@ var<private> unmapped: u32 = 0u;
 var<private> pixel_adj: vec3f;
 
 // A later vertex of the path (shared/integrator.wgsl, camera_path with replay): its
-// derivative added, plain Monte Carlo, into `grad` at the observed texels its footprint
-// touches (bounded compare-and-swap; an exhausted bound counts as lost, a non-finite value
-// as dropped).
+// derivative added into `grad`, plain Monte Carlo, as the baseline adds it.
 fn differentiate_later_vertex(mi: u32, uv: vec2f, wo: vec3f, wi: vec3f, mat: SurfaceMaterial, mat_prev: SurfaceMaterial, weight: vec3f, weight_prev: vec3f) {
-    let bg = brdf_eval_cos_grad(mat, wo, wi);
-    let m = materials[mi];
-    for (var slot = 0u; slot < 3u; slot++) {
-        let pi = material_param(m, slot);
-        if pi == NONE {
-            continue;
-        }
-        let p = param_textures[pi];
-        let fp = param_footprint(p, uv);
-        let g = slot_derivative(slot, bg, weight, pixel_adj);
-        for (var k = 0u; k < 4u; k++) {
-            if fp.weight[k] == 0.0 || observed_index(p.texel_offset + fp.texel[k]) == UNOBSERVED {
-                continue;
-            }
-            let base = p.offset + fp.texel[k] * p.channels;
-            for (var c = 0u; c < p.channels; c++) {
-                let v = fp.weight[k] * g[c];
-                if v == 0.0 {
-                    continue;
-                }
-                if !(abs(v) < 3.0e38) {
-                    dropped += 1u;
-                    continue;
-                }
-                var old = atomicLoad(&grad[base + c]);
-                var done = false;
-                for (var n = 0u; n < 256u && !done; n++) {
-                    let r = atomicCompareExchangeWeak(&grad[base + c], old, bitcast<u32>(bitcast<f32>(old) + v));
-                    done = r.exchanged;
-                    old = r.old_value;
-                }
-                if !done {
-                    lost += 1u;
-                }
-            }
-        }
-    }
+    scatter(materials[mi], uv, brdf_eval_cos_grad(mat, wo, wi), weight, pixel_adj);
 }
 
 // ts: the technique's sample; adj: the pixel's adjoint (for the value), adj_t: its target
@@ -241,11 +205,11 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         }
     }
     atomicAdd(&cstats[CANDIDATE_STAT_OFFERED], offered);
-    if lost > 0u {
-        atomicAdd(&cstats[CANDIDATE_STAT_LOST], lost);
+    if lost + scatter_lost > 0u {
+        atomicAdd(&cstats[CANDIDATE_STAT_LOST], lost + scatter_lost);
     }
-    if dropped > 0u {
-        atomicAdd(&cstats[CANDIDATE_STAT_DROPPED], dropped);
+    if dropped + scatter_dropped > 0u {
+        atomicAdd(&cstats[CANDIDATE_STAT_DROPPED], dropped + scatter_dropped);
     }
     if unmapped > 0u {
         atomicAdd(&cstats[CANDIDATE_STAT_UNMAPPED], unmapped);
