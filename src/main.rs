@@ -509,7 +509,8 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
     if throughput {
         let name = scenes.first().map_or(DEFAULT_TASK, |s| s.as_str());
         let path = psrestir::bench::resolve_scene(name)?;
-        let task = Task::load(&path)?;
+        let mut task = Task::load(&path)?;
+        task.max_depth = max_depth.unwrap_or(task.max_depth);
         std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
         let gpu = Gpu::new()?;
         let r = psrestir::bench::throughput::throughput(&gpu, &task, &path, &out)?;
