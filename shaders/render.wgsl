@@ -7,7 +7,6 @@
 #import shared/rng
 #import shared/camera
 #import shared/integrator
-#import shared/first_vertex_only
 
 // Mirrored by GpuRenderParams in src/render/layout.rs.
 struct RenderParams {
@@ -28,6 +27,10 @@ struct RenderParams {
 @group(1) @binding(2) var<storage, read_write> stats: array<atomic<u32>, 4>;
 // The same samples under the previous textures (rgb sum), when two_states is set.
 @group(1) @binding(3) var<storage, read_write> accum_prev: array<vec4f>;
+
+// The hook camera_path names for the derivatives at a path's later vertices: a render never
+// replays a path, so it is never called here.
+fn differentiate_later_vertex(mi: u32, uv: vec2f, wo: vec3f, wi: vec3f, mat: SurfaceMaterial, mat_prev: SurfaceMaterial, weight: vec3f, weight_prev: vec3f) {}
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {

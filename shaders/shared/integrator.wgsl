@@ -150,10 +150,10 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
     var nee_weight = 0.0;
     var u_bsdf = vec3f(0.0);
     var bsdf_pdf = 0.0;
-    // The vertex whose samples are being traced (1 = the camera ray's hit), its surface and
-    // material under the current and (with both) the previous textures.
-    var vertex = 0u;
-    var depth = 1u;
+    // The vertex whose samples are being traced (1 = the camera ray's hit, 0 before it is
+    // shaded), its surface and material under the current and (with both) the previous
+    // textures.
+    var depth = 0u;
     var vsf: Surface;
     var vmat: SurfaceMaterial;
     var vmat_prev: SurfaceMaterial;
@@ -389,8 +389,7 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
         }
         if shade {
             // The hit becomes the next vertex: the first at the camera ray's hit.
-            vertex += 1u;
-            depth = vertex;
+            depth += 1u;
             vsf = next_sf;
             let gltf = gltf_inputs(vsf.material, vsf.uv);
             // The optimized inputs under each state, at one call site.
@@ -462,8 +461,7 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
             ray_d = d;
             ray_tmax = 3.0e38;
             stage = STAGE_CAMERA;
-            vertex = 0u;
-            depth = 1u;
+            depth = 0u;
             beta_next = vec3f(1.0);
             beta_next_prev = vec3f(1.0);
         }

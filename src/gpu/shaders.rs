@@ -87,10 +87,6 @@ pub const SHADERS: &[(&str, &str)] = &[
         include_str!("../../shaders/shared/gradient_scatter.wgsl"),
     ),
     (
-        "shared/first_vertex_only",
-        include_str!("../../shaders/shared/first_vertex_only.wgsl"),
-    ),
-    (
         "shared/adjoint_pixel",
         include_str!("../../shaders/shared/adjoint_pixel.wgsl"),
     ),
