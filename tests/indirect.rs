@@ -331,14 +331,7 @@ fn a_depth_3_model_recovers_a_concave_scenes_base_color_where_direct_light_canno
         for _ in 0..200 {
             opt.step().unwrap();
         }
-        let got = opt.read_params().unwrap();
-        let rmse = (got
-            .iter()
-            .zip(&truth)
-            .map(|(a, b)| ((a - b) as f64).powi(2))
-            .sum::<f64>()
-            / truth.len() as f64)
-            .sqrt();
+        let rmse = psrestir::job::run::rmse(&opt.read_params().unwrap(), &truth);
         eprintln!("model depth {depth}: base color RMSE {rmse:.4}");
         errors.push(rmse);
     }

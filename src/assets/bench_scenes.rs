@@ -22,15 +22,15 @@ pub fn write_bench_scenes(dir: &Path) -> Result<()> {
     write_lattice(&dir.join("lattice"))?;
     write_dish(&dir.join("dish"))?;
     write_sphere(&dir.join("sphere"))?;
-    write_room(&dir.join("room"))
+    super::bench_room::write_room(&dir.join("room"))
 }
 
-fn create(dir: &Path) -> Result<()> {
+pub(super) fn create(dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))
 }
 
 /// A deterministic hash to [0, 1) for procedural patterns.
-fn hash(a: u32, b: u32) -> f32 {
+pub(super) fn hash(a: u32, b: u32) -> f32 {
     let mut h = a.wrapping_mul(0x9E37_79B9) ^ b.wrapping_mul(0x85EB_CA6B);
     h ^= h >> 15;
     h = h.wrapping_mul(0x2C1B_3C6D);
@@ -39,7 +39,7 @@ fn hash(a: u32, b: u32) -> f32 {
 }
 
 /// A `TEX` x `TEX` RGBA8 image from a function of the texel centre's UV.
-fn texture(f: impl Fn(f32, f32) -> [u8; 4]) -> Vec<[u8; 4]> {
+pub(super) fn texture(f: impl Fn(f32, f32) -> [u8; 4]) -> Vec<[u8; 4]> {
     let mut out = Vec::with_capacity((TEX * TEX) as usize);
     for y in 0..TEX {
         for x in 0..TEX {
@@ -56,7 +56,7 @@ fn unit(v: f32) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
 }
 
-fn write_png(dir: &Path, name: &str, rgba: &[[u8; 4]]) -> Result<()> {
+pub(super) fn write_png(dir: &Path, name: &str, rgba: &[[u8; 4]]) -> Result<()> {
     write_atomic(&dir.join(name), &png_bytes(TEX, TEX, rgba)?)
 }
 
@@ -83,13 +83,13 @@ smoothness = 0.03
 "#;
 
 /// `task.toml`: the scene-specific head, the shared settings, then the textures.
-fn write_task(dir: &Path, head: &str, textures: &str) -> Result<()> {
+pub(super) fn write_task(dir: &Path, head: &str, textures: &str) -> Result<()> {
     let text = format!("{head}{TASK_COMMON}{textures}");
     write_atomic(&dir.join("task.toml"), text.as_bytes())
 }
 
 /// An emissive square of side `size` at `at`, facing `toward`, with `color` x `strength`.
-fn area_light(
+pub(super) fn area_light(
     b: &mut GltfBuilder,
     name: &str,
     at: [f32; 3],
@@ -127,7 +127,13 @@ fn floor(b: &mut GltfBuilder, s: f32, color: f32) -> usize {
     b.add_node(json!({"name": "floor", "mesh": mesh}))
 }
 
-fn camera(b: &mut GltfBuilder, name: &str, yfov: f32, eye: [f32; 3], target: [f32; 3]) -> usize {
+pub(super) fn camera(
+    b: &mut GltfBuilder,
+    name: &str,
+    yfov: f32,
+    eye: [f32; 3],
+    target: [f32; 3],
+) -> usize {
     let c = b.add_camera(name, yfov, Some(1.0));
     b.add_node(json!({"name": name, "camera": c,
         "matrix": look_at(Vec3::from(eye), Vec3::from(target), Vec3::Y)}))
@@ -568,176 +574,6 @@ slot = "roughness"
 resolution = [256, 256]
 init = 0.5
 learning_rate = 0.02
-"#,
-    )
-}
-
-/// A flat panel with corners `c` (in order around it) facing along `n`, UVs (0, 1), (1, 1),
-/// (1, 0), (0, 0) at the corners when `uv`.
-fn panel(
-    b: &mut GltfBuilder,
-    name: &str,
-    c: [[f32; 3]; 4],
-    n: [f32; 3],
-    uv: bool,
-    m: usize,
-) -> usize {
-    let p: Vec<Vec3> = c.iter().map(|&v| Vec3::from(v)).collect();
-    // Counter-clockwise seen from the side the normal points to (glTF's front face).
-    let idx: [u32; 6] = if (p[1] - p[0]).cross(p[2] - p[0]).dot(Vec3::from(n)) > 0.0 {
-        [0, 1, 2, 0, 2, 3]
-    } else {
-        [0, 2, 1, 0, 3, 2]
-    };
-    let uvs = [[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]];
-    let mesh = b.add_mesh(
-        name,
-        &c,
-        Some(&[n; 4]),
-        uv.then_some(&uvs[..]),
-        Some(&idx),
-        Some(m),
-    );
-    b.add_node(json!({"name": name, "mesh": mesh}))
-}
-
-/// A room open at the front, lit by one lamp under its ceiling: most of what the camera sees
-/// is lit by light that bounced off another wall first (indirect light, `max_depth = 3`).
-/// The back wall's tiled base color texture is optimized.
-pub fn write_room(dir: &Path) -> Result<()> {
-    create(dir)?;
-    let mut b = GltfBuilder::new();
-    b.use_extension("KHR_materials_emissive_strength");
-    // Tiles of varied colors with light grout.
-    let color = texture(|u, v| {
-        let tiles = 6.0;
-        let (fu, fv) = ((u * tiles).fract(), (v * tiles).fract());
-        let c = if fu < 0.06 || fv < 0.06 {
-            [0.8, 0.78, 0.72]
-        } else {
-            let (i, j) = ((u * tiles) as u32, (v * tiles) as u32);
-            let h = hash(i + 3, j + 11);
-            let shade = 0.85 + 0.15 * hash(j * 7 + 1, i * 3 + 2);
-            match (h * 4.0) as u32 {
-                0 => [0.65 * shade, 0.25 * shade, 0.15 * shade],
-                1 => [0.2 * shade, 0.4 * shade, 0.6 * shade],
-                2 => [0.7 * shade, 0.6 * shade, 0.3 * shade],
-                _ => [0.3 * shade, 0.55 * shade, 0.35 * shade],
-            }
-        };
-        [srgb8(c[0]), srgb8(c[1]), srgb8(c[2]), 255]
-    });
-    write_png(dir, "tiles.png", &color)?;
-    let img = b.add_image_uri("tiles", "tiles.png");
-    let tex = b.add_texture(img, None);
-    let tiled = b.add_material(json!({
-        "name": "tiles",
-        "pbrMetallicRoughness": {"baseColorTexture": {"index": tex},
-            "metallicFactor": 0.0, "roughnessFactor": 0.6}
-    }));
-    let plain = |b: &mut GltfBuilder, name: &str, c: [f32; 3]| {
-        b.add_material(json!({
-            "name": name,
-            "pbrMetallicRoughness": {"baseColorFactor": [c[0], c[1], c[2], 1.0],
-                "metallicFactor": 0.0, "roughnessFactor": 0.8}
-        }))
-    };
-    let white = plain(&mut b, "white", [0.75, 0.75, 0.72]);
-    let red = plain(&mut b, "red", [0.7, 0.15, 0.12]);
-    let green = plain(&mut b, "green", [0.15, 0.55, 0.2]);
-    let (w, h) = (1.0f32, 2.0f32);
-    let mut nodes = vec![
-        panel(
-            &mut b,
-            "back",
-            [[-w, 0.0, -w], [w, 0.0, -w], [w, h, -w], [-w, h, -w]],
-            [0.0, 0.0, 1.0],
-            true,
-            tiled,
-        ),
-        panel(
-            &mut b,
-            "floor",
-            [[-w, 0.0, w], [w, 0.0, w], [w, 0.0, -w], [-w, 0.0, -w]],
-            [0.0, 1.0, 0.0],
-            false,
-            white,
-        ),
-        panel(
-            &mut b,
-            "ceiling",
-            [[-w, h, -w], [w, h, -w], [w, h, w], [-w, h, w]],
-            [0.0, -1.0, 0.0],
-            false,
-            white,
-        ),
-        panel(
-            &mut b,
-            "left",
-            [[-w, 0.0, w], [-w, 0.0, -w], [-w, h, -w], [-w, h, w]],
-            [1.0, 0.0, 0.0],
-            false,
-            red,
-        ),
-        panel(
-            &mut b,
-            "right",
-            [[w, 0.0, -w], [w, 0.0, w], [w, h, w], [w, h, -w]],
-            [-1.0, 0.0, 0.0],
-            false,
-            green,
-        ),
-    ];
-    // A block that hides part of the back wall from the lamp.
-    let block = b.add_mesh(
-        "block",
-        &box_triangles([0.35, 0.45, -0.35], [0.3, 0.45, 0.3]),
-        None,
-        None,
-        None,
-        Some(white),
-    );
-    nodes.push(b.add_node(json!({"name": "block", "mesh": block})));
-    nodes.push(area_light(
-        &mut b,
-        "lamp",
-        [0.0, h - 0.01, 0.2],
-        [0.0, 0.0, 0.2],
-        0.5,
-        [1.0, 0.9, 0.8],
-        12.0,
-    ));
-    nodes.push(camera(
-        &mut b,
-        "main",
-        0.75,
-        [0.0, 1.0, 3.4],
-        [0.0, 0.95, 0.0],
-    ));
-    b.set_scene(&nodes);
-    b.write_gltf(&dir.join("scene.gltf"), false)?;
-    write_task(
-        dir,
-        r#"# Benchmark scene "room": recover the tiled base color of a room's back wall, most of
-# whose light arrives after a bounce on another wall, with paths of 3 vertices (max_depth).
-# Written by `psrestir make-scenes`; paths are relative to this file.
-scene = "scene.gltf"
-cameras = ["main"]
-width = 128
-height = 128
-seed = 5
-max_depth = 3
-# Lit by its lamp alone: no default environment through the open front.
-default_environment = false
-output = "out/bench/room"
-"#,
-        r#"
-[[textures]]
-material = "tiles"
-slot = "base_color"
-resolution = [256, 256]
-init = [0.5, 0.5, 0.5]
-learning_rate = 0.03
 "#,
     )
 }
