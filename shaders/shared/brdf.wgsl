@@ -14,8 +14,17 @@ fn material_alpha(m: SurfaceMaterial) -> f32 {
     return max(m.roughness * m.roughness, ALPHA_MIN);
 }
 
+// D's denominator root, 1 + nh^2 (a2 - 1), written so that rounding cannot take it below
+// nh^2 a2: in the direct form an nh^2 rounded above 1 (h from a normalize), or a compiler that
+// fuses it into one multiply-add, can cancel it to about 0 near nh = 1 at low roughness and
+// raise D by many orders of magnitude.
+fn ggx_t(nh: f32, a2: f32) -> f32 {
+    let c = nh * nh;
+    return max(1.0 - c, 0.0) + c * a2;
+}
+
 fn ggx_d(nh: f32, a2: f32) -> f32 {
-    let d = nh * nh * (a2 - 1.0) + 1.0;
+    let d = ggx_t(nh, a2);
     return a2 / (PI * d * d);
 }
 
@@ -60,7 +69,7 @@ fn brdf_eval_cos_grad(m: SurfaceMaterial, wo: vec3f, wi: vec3f) -> BrdfGrad {
     let dfm = (1.0 - k) * (b - vec3f(0.04));
     // D and V with their derivatives with respect to a2.
     let nh = h.z;
-    let t = nh * nh * (a2 - 1.0) + 1.0;
+    let t = ggx_t(nh, a2);
     let d = a2 / (PI * t * t);
     let dd = (t - 2.0 * a2 * nh * nh) / (PI * t * t * t);
     let nl = wi.z;

@@ -46,9 +46,10 @@ pub mod reservoir {
     pub const HEADER_SLOT_BITS: u32 = 2;
     /// Slot index mask after the shift.
     pub const HEADER_SLOT_MASK: u32 = (1 << HEADER_SLOT_BITS) - 1;
-    /// The header's lock bit of sign 0's fresh reservoir (sign 1's is the next bit): the
-    /// candidate pass takes it while it writes that reservoir.
-    pub const HEADER_LOCK_SHIFT: u32 = 2 * HEADER_SLOT_BITS;
+    /// Set in a fresh reservoir's info word while it holds the candidate pass's race key
+    /// (the complement of a non-negative float's bits) instead of an info word
+    /// (`reservoir.wgsl`); a free slot's info word is 0.
+    pub const KEY_BIT: u32 = 1 << 31;
     /// The header of a texel whose reservoirs lie in slots 0 (sign 0) and 1 (sign 1).
     pub const HEADER_FIRST_TWO: u32 = 1 << HEADER_SLOT_BITS;
     /// Marks a texel no camera observes in the compaction map's lookups (u32::MAX).
@@ -110,7 +111,7 @@ pub const CONSTANTS: &[(&str, u32)] = &[
     ("RESERVOIR_SLOTS", reservoir::SLOTS),
     ("HEADER_SLOT_BITS", reservoir::HEADER_SLOT_BITS),
     ("HEADER_SLOT_MASK", reservoir::HEADER_SLOT_MASK),
-    ("HEADER_LOCK_SHIFT", reservoir::HEADER_LOCK_SHIFT),
+    ("INFO_KEY_BIT", reservoir::KEY_BIT),
     ("INFO_CAMERA_SHIFT", reservoir::CAMERA_SHIFT),
     ("INFO_CAMERA_MASK", reservoir::CAMERA_MASK),
     ("INFO_PIXEL_MASK", reservoir::PIXEL_MASK),
@@ -140,6 +141,7 @@ pub fn wgsl() -> String {
 const _: () = {
     assert!(MAX_CAMERAS == 8);
     assert!(reservoir::TRI_BITS + 2 * reservoir::BARY_BITS == 64);
-    assert!(reservoir::HEADER_LOCK_SHIFT + 2 <= 32);
     assert!(reservoir::TECH_SHIFT > reservoir::CAMERA_SHIFT + 2);
+    // Info words never have the key bit.
+    assert!(reservoir::TECH_SHIFT + 1 < 32);
 };

@@ -153,11 +153,17 @@ fn compaction_map(observed: &[bool]) -> (Vec<[u32; 2]>, Vec<u32>) {
     (map, list)
 }
 
+/// The candidate pass's phases (restir_candidates.wgsl, `phase`): the weights and the race,
+/// then the winners' paths.
+const PHASES: usize = 2;
+
 struct Camera {
-    uniform: wgpu::Buffer,
+    /// Per phase (a queue write lands before the whole submission, so each phase's
+    /// parameters need their own buffer).
+    uniforms: [wgpu::Buffer; PHASES],
     params: CandidateParams,
-    /// Per parity of the iteration (the adjoints alternate).
-    groups: [wgpu::BindGroup; 2],
+    /// Per phase, then per parity of the iteration (the adjoints alternate).
+    groups: [[wgpu::BindGroup; 2]; PHASES],
 }
 
 /// The ReSTIR estimator's passes and buffers.
@@ -340,34 +346,38 @@ impl Restir {
                     smoothing: 0.0,
                     target_cur: 0,
                     target_prev: 0,
-                    _pad: 0,
+                    phase: 0,
                 };
-                let uniform = gpu.uniform(
-                    &format!("candidate params {k}"),
-                    bytemuck::bytes_of(&params),
-                );
-                let groups = [0usize, 1].map(|p| {
-                    gpu.bind(
-                        &CANDIDATES_GROUP,
-                        "restir_candidates",
-                        &candidate_layout,
-                        &[
-                            ("cp", &uniform),
-                            ("adjoint", &s.adjoint[p]),
-                            ("slots0", &slots[0]),
-                            ("slots1", &slots[1]),
-                            ("slots2", &slots[2]),
-                            ("slots3", &slots[3]),
-                            ("headers", &headers),
-                            ("cstats", &candidate_stats),
-                            ("targets", &targets),
-                            ("observed_map", &observed_map),
-                            ("grad", s.grad),
-                        ],
+                let uniforms: [wgpu::Buffer; PHASES] = std::array::from_fn(|phase| {
+                    gpu.uniform(
+                        &format!("candidate params {k} phase {phase}"),
+                        bytemuck::bytes_of(&params),
                     )
                 });
+                let groups = std::array::from_fn(|phase| {
+                    [0usize, 1].map(|p| {
+                        gpu.bind(
+                            &CANDIDATES_GROUP,
+                            "restir_candidates",
+                            &candidate_layout,
+                            &[
+                                ("cp", &uniforms[phase]),
+                                ("adjoint", &s.adjoint[p]),
+                                ("slots0", &slots[0]),
+                                ("slots1", &slots[1]),
+                                ("slots2", &slots[2]),
+                                ("slots3", &slots[3]),
+                                ("headers", &headers),
+                                ("cstats", &candidate_stats),
+                                ("targets", &targets),
+                                ("observed_map", &observed_map),
+                                ("grad", s.grad),
+                            ],
+                        )
+                    })
+                });
                 Camera {
-                    uniform,
+                    uniforms,
                     params,
                     groups,
                 }
@@ -415,8 +425,7 @@ impl Restir {
 impl Estimator for Restir {
     fn encode(&mut self, enc: &mut wgpu::CommandEncoder, frame: &Frame, timer: &mut PassTimer) {
         let parity = frame.parity();
-        // The free slots are empty already: the merge empties them, and every lock bit is
-        // released by the invocation that took it. The gradient of a texel no camera observes
+        // The free slots are empty already: the merge empties them. The gradient of a texel no camera observes
         // is never written: it stays 0 from the buffer's creation.
         let have_prev = self.history > 0;
         let reuse = self.options.temporal && have_prev;
@@ -427,22 +436,27 @@ impl Estimator for Restir {
             // reservoirs' estimates.
             enc.clear_buffer(&self.grad, 0, None);
         }
-        for (k, cam) in self.cameras.iter_mut().enumerate() {
-            cam.params.seed = pass_seed(self.seed, frame.iteration, k as u32, Seeds::GRADIENT);
-            cam.params.prev_targets = reuse as u32;
-            cam.params.target_cur = target_cur;
-            cam.params.target_prev = target_prev;
-            cam.params.smoothing = if have_prev { self.smoothing } else { 0.0 };
-            self.queue
-                .write_buffer(&cam.uniform, 0, bytemuck::bytes_of(&cam.params));
-            encode_timed_pass(
-                enc,
-                "restir_candidates",
-                &self.candidate_pipeline,
-                &[frame.scene_group, &cam.groups[parity]],
-                self.grid,
-                timer.next(PassKind::Gradient),
-            );
+        // Every camera's offers enter the race before any winner writes its path: the same
+        // texel's reservoir takes offers from several cameras.
+        for phase in 0..PHASES {
+            for (k, cam) in self.cameras.iter_mut().enumerate() {
+                cam.params.seed = pass_seed(self.seed, frame.iteration, k as u32, Seeds::GRADIENT);
+                cam.params.prev_targets = reuse as u32;
+                cam.params.target_cur = target_cur;
+                cam.params.target_prev = target_prev;
+                cam.params.smoothing = if have_prev { self.smoothing } else { 0.0 };
+                cam.params.phase = phase as u32;
+                self.queue
+                    .write_buffer(&cam.uniforms[phase], 0, bytemuck::bytes_of(&cam.params));
+                encode_timed_pass(
+                    enc,
+                    "restir_candidates",
+                    &self.candidate_pipeline,
+                    &[frame.scene_group, &cam.groups[phase][parity]],
+                    self.grid,
+                    timer.next(PassKind::Gradient),
+                );
+            }
         }
         let o = &self.options;
         self.merge_params.seed = pass_seed(self.seed, frame.iteration, 0, Seeds::MERGE);

@@ -59,7 +59,7 @@ pub struct CandidateParams {
     pub smoothing: f32,
     pub target_cur: u32,
     pub target_prev: u32,
-    pub _pad: u32,
+    pub phase: u32,
 }
 
 /// `MergeParams` in restir_merge.wgsl (a test checks the layout).
@@ -111,7 +111,8 @@ mod contract_tests {
                 prev_targets,
                 smoothing,
                 target_cur,
-                target_prev
+                target_prev,
+                phase
             ]
         );
         mirror!(

@@ -24,17 +24,27 @@
 // i * RESERVOIR_WORDS of buffer `slots<k>`, and header word i, which says which slot holds
 // its positive (sign 0) and its negative (sign 1) reservoir: two distinct slots, so two are
 // free for the next iteration's fresh candidates (fresh_slot). The merge selects in place
-// and rewrites the header: a kept sample is never copied. The header's lock bits
-// (HEADER_LOCK_SHIFT + sign) guard the fresh reservoirs while the candidate pass writes them.
-// Passes that offer candidates declare `slots0` .. `slots3` and `headers` as atomics.
+// and rewrites the header: a kept sample is never copied.
+// Passes that offer candidates declare `slots0` .. `slots3` as atomics.
 
-// Tries before an offer gives up (and is counted as lost). Invocations of one SIMD group
-// never wait on each other (the holder finishes in the iteration that took the lock), so the
-// bound only matters when the OS preempts a lavapipe thread that holds a lock. With many test
-// threads on 2 cores that lasts tens of ms: 1024 tries lost hundreds of offers per run, 2^18
-// tries (about 5 ms) still lost a few in CI; 2^22 (about 80 ms) outlasts a scheduler period.
-// A holder always releases in the same iteration, so the bound is never reached otherwise.
-const LOCK_BOUND: u32 = 4194304u;
+// Selection without locks: an exponential race (weighted sampling by keys, Efraimidis and
+// Spirakis). An offer of weight w with uniform u has key -ln(1 - u) / w, an exponential
+// variable of rate w, and the smallest key among a reservoir's offers is offer j's with
+// probability w_j / sum(w): exactly proportional to weight. The candidate pass runs twice over
+// the same samples with the same random numbers (CandidateParams.phase). Phase 0: every offer
+// adds its weight to the fresh reservoir's sum (RES_W) and enters its key into RES_INFO with
+// atomicMax, complemented (the complement of a non-negative float's bits has the top bit,
+// INFO_KEY_BIT, set, which no info word has; a free slot's info word is 0). Phase 1: the offer
+// whose key is the reservoir's swaps it for its info word with a compare-and-exchange (one
+// offer wins even on a tie) and writes its path. No invocation waits for another. The lock
+// this replaces (tested and set in the header, the critical section inside the loop iteration
+// that took it) worked on lavapipe and starved on an NVIDIA H100, whose SIMD groups need not
+// run the lane that holds a lock while its neighbours spin: 26 s per iteration, most offers
+// lost.
+
+// Tries of a compare-and-swap loop; a retry follows another invocation's success, so the
+// bound is only reached when an OS preempts a lavapipe thread mid-update (counted as lost).
+const RESERVOIR_CAS_BOUND: u32 = 65536u;
 
 // A candidate path for one texel.
 struct Candidate {
@@ -80,37 +90,78 @@ fn slot_load(k: u32, i: u32) -> u32 {
     }
 }
 
-// Streaming update from many invocations at once. Design: a per-reservoir lock bit in the
-// texel's header, taken with atomicOr (test and set), the critical section and the release
-// inside the loop iteration that took it (a lock that spins first and works after the loop
-// deadlocks within a SIMD group on lavapipe). Chosen over order-independent selection
-// (atomicMin on -ln(u)/w keys), which is deterministic but needs a second pass in which every
-// candidate is traced again to write its payload: the candidate pass is the expensive part,
-// and doubling it would cost more than determinism is worth here. Every word is accessed
-// atomically so that the next holder sees it. The candidate replaces the sample with
-// probability w / (Wsum_before + w), which makes the selection exactly proportional to
-// weight. Offers go to slot k of observed texel i, sign `sign`'s lock.
-// Returns false if the bounded loop never got the lock (the caller counts it).
-fn reservoir_offer(k: u32, i: u32, sign: u32, w: f32, u: f32, c: Candidate) -> bool {
-    let bit = 1u << (HEADER_LOCK_SHIFT + sign);
-    for (var n = 0u; n < LOCK_BOUND; n++) {
-        if (atomicOr(&headers[i], bit) & bit) == 0u {
-            let base = i * RESERVOIR_WORDS;
-            let before = bitcast<f32>(slot_load(k, base + RES_W));
-            let wsum = before + w;
-            slot_store(k, base + RES_W, bitcast<u32>(wsum));
-            // The first offer to an empty reservoir is always taken (u * wsum < w can fail
-            // for a denormal w), so that its weight never stands beside the payload of an
-            // older sample left in a free slot.
-            if before == 0.0 || u * wsum < w {
-                slot_store(k, base + RES_INFO, c.info);
-                for (var j = 0u; j < 5u; j++) {
-                    slot_store(k, base + RES_TRI + j, c.words[j]);
-                }
-            }
-            atomicAnd(&headers[i], ~bit);
-            return true;
+fn slot_max(k: u32, i: u32, x: u32) {
+    switch k {
+        case 0u: {
+            atomicMax(&slots0[i], x);
+        }
+        case 1u: {
+            atomicMax(&slots1[i], x);
+        }
+        case 2u: {
+            atomicMax(&slots2[i], x);
+        }
+        default: {
+            atomicMax(&slots3[i], x);
         }
     }
+}
+
+// Word i of slot k becomes x if it holds `old`; whether it did (a weak exchange may fail
+// spuriously: callers retry).
+fn slot_exchange(k: u32, i: u32, old: u32, x: u32) -> bool {
+    switch k {
+        case 0u: {
+            return atomicCompareExchangeWeak(&slots0[i], old, x).exchanged;
+        }
+        case 1u: {
+            return atomicCompareExchangeWeak(&slots1[i], old, x).exchanged;
+        }
+        case 2u: {
+            return atomicCompareExchangeWeak(&slots2[i], old, x).exchanged;
+        }
+        default: {
+            return atomicCompareExchangeWeak(&slots3[i], old, x).exchanged;
+        }
+    }
+}
+
+// The complemented race key of an offer of weight w > 0 with uniform u in [0, 1): larger wins.
+// abs, not negation: -ln(1) would be -0.0, whose complement lacks the top bit.
+fn race_key(w: f32, u: f32) -> u32 {
+    return ~bitcast<u32>(abs(log(1.0 - u)) / w);
+}
+
+// Phase 0 of an offer to slot k of observed texel i: w into the weight sum, then the key into
+// the race (only an offer whose weight was added can win). Returns false if the addition ran
+// out of tries (the caller counts it as lost).
+fn reservoir_enter(k: u32, i: u32, w: f32, u: f32) -> bool {
+    let base = i * RESERVOIR_WORDS;
+    var old = slot_load(k, base + RES_W);
+    for (var n = 0u; n < RESERVOIR_CAS_BOUND; n++) {
+        if slot_exchange(k, base + RES_W, old, bitcast<u32>(bitcast<f32>(old) + w)) {
+            slot_max(k, base + RES_INFO, race_key(w, u));
+            return true;
+        }
+        old = slot_load(k, base + RES_W);
+    }
     return false;
+}
+
+// Phase 1 of the same offer (same w and u): if its key won, it takes the reservoir (its info
+// word for the key) and writes its path.
+fn reservoir_claim(k: u32, i: u32, w: f32, u: f32, c: Candidate) {
+    let base = i * RESERVOIR_WORDS;
+    let key = race_key(w, u);
+    for (var n = 0u; n < RESERVOIR_CAS_BOUND; n++) {
+        if slot_load(k, base + RES_INFO) != key {
+            return;
+        }
+        if slot_exchange(k, base + RES_INFO, key, c.info) {
+            for (var j = 0u; j < 5u; j++) {
+                slot_store(k, base + RES_TRI + j, c.words[j]);
+            }
+            return;
+        }
+    }
 }

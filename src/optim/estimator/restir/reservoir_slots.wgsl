@@ -1,8 +1,7 @@
 // Where a texel's reservoirs lie: RESERVOIR_SLOTS slots per observed texel and a header word
 // (the layout is generated from abi.rs, gen/restir). The header names two distinct
 // slots, those of the positive (sign 0) and the negative (sign 1) reservoir; the other two
-// are free for the next iteration's fresh candidates. Bits from HEADER_LOCK_SHIFT on are the
-// candidate pass's locks.
+// are free for the next iteration's fresh candidates.
 #import gen/abi
 #import gen/restir
 

@@ -14,10 +14,10 @@ pub(crate) const RESERVOIR_TEST_GROUP: crate::gpu::GroupDecl = crate::gpu::Group
     ],
 };
 
-/// Run the streaming reservoir update of reservoir.wgsl on the GPU for a test:
+/// Run the reservoir update of reservoir.wgsl on the GPU for a test, both phases:
 /// `reservoirs` reservoirs each receive every candidate k (weight `weights[k]`) `copies`
 /// times, from concurrent invocations. Returns the index of the candidate each reservoir
-/// selected (u32::MAX for none) and the number of offers that never got the lock.
+/// selected (u32::MAX for none) and the number of offers whose weight was not added.
 pub fn selection_trial(
     gpu: &Gpu,
     weights: &[f32],
@@ -28,46 +28,55 @@ pub fn selection_trial(
     let words = reservoir::WORDS as usize;
     let n_candidates = weights.len() as u32;
     let n_invocations = n_candidates * copies * reservoirs;
-    let params: [u32; 4] = [n_candidates, copies, n_invocations, seed];
     let layout = gpu.pass_layout("reservoir_test", 0)?;
     let pipeline = gpu.compute_pipeline("reservoir_test", &[&layout])?;
-    let uniform = gpu.uniform("reservoir_test params", bytemuck::cast_slice(&params));
+    let uniforms: Vec<wgpu::Buffer> = (0..2u32)
+        .map(|phase| {
+            let params: [u32; 8] = [n_candidates, copies, n_invocations, seed, phase, 0, 0, 0];
+            gpu.uniform(
+                &format!("reservoir_test params phase {phase}"),
+                bytemuck::cast_slice(&params),
+            )
+        })
+        .collect();
     let w = gpu.storage(
         "reservoir_test weights",
         bytemuck::cast_slice(weights),
         wgpu::BufferUsages::empty(),
     );
-    // Empty reservoirs select nothing: info words hold u32::MAX.
-    let mut init = vec![0u32; reservoirs as usize * words];
-    for r in 0..reservoirs as usize {
-        init[r * words + reservoir::INFO as usize] = u32::MAX;
-    }
+    // Empty, as the merge leaves a free slot: weight sum and info word 0.
+    let init = vec![0u32; reservoirs as usize * words];
     let res = gpu.storage(
         "reservoir_test reservoirs",
         bytemuck::cast_slice(&init),
         wgpu::BufferUsages::COPY_SRC,
     );
-    // Slots 1 to 3 take no offers here; the headers hold the locks.
+    // Slots 1 to 3 take no offers here.
     let unused: Vec<wgpu::Buffer> = (1..4)
         .map(|k| gpu.storage_zeroed(&format!("reservoir_test slots{k}"), 16))
         .collect();
     let headers = gpu.storage_zeroed("reservoir_test headers", reservoirs as u64 * 4);
     let failures = gpu.storage_zeroed("reservoir_test failures", 16);
-    let group = gpu.bind(
-        &RESERVOIR_TEST_GROUP,
-        "reservoir_test",
-        &layout,
-        &[
-            ("tp", &uniform),
-            ("weights", &w),
-            ("slots0", &res),
-            ("slots1", &unused[0]),
-            ("slots2", &unused[1]),
-            ("slots3", &unused[2]),
-            ("headers", &headers),
-            ("failures", &failures),
-        ],
-    );
+    let groups: Vec<wgpu::BindGroup> = uniforms
+        .iter()
+        .map(|uniform| {
+            gpu.bind(
+                &RESERVOIR_TEST_GROUP,
+                "reservoir_test",
+                &layout,
+                &[
+                    ("tp", uniform),
+                    ("weights", &w),
+                    ("slots0", &res),
+                    ("slots1", &unused[0]),
+                    ("slots2", &unused[1]),
+                    ("slots3", &unused[2]),
+                    ("headers", &headers),
+                    ("failures", &failures),
+                ],
+            )
+        })
+        .collect();
     let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
     let grid = grid_2d(n_invocations, WORKGROUP, max_dim);
     if grid.1 > 1 {
@@ -80,12 +89,24 @@ pub fn selection_trial(
         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("reservoir_test"),
         });
-    crate::gpu::encode_pass(&mut enc, "reservoir_test", &pipeline, &[&group], grid);
+    for group in &groups {
+        crate::gpu::encode_pass(&mut enc, "reservoir_test", &pipeline, &[group], grid);
+    }
     gpu.queue.submit([enc.finish()]);
     let out: Vec<u32> = gpu.read_pod(&res)?;
     let fails: Vec<u32> = gpu.read_pod(&failures)?;
+    // None: no weight (no offer), or an info word that still holds a race key (no offer
+    // wrote its path).
     let selected = (0..reservoirs as usize)
-        .map(|r| out[r * words + reservoir::INFO as usize])
+        .map(|r| {
+            let info = out[r * words + reservoir::INFO as usize];
+            let w = f32::from_bits(out[r * words + reservoir::W as usize]);
+            if w == 0.0 || info & reservoir::KEY_BIT != 0 {
+                u32::MAX
+            } else {
+                info
+            }
+        })
         .collect();
     Ok((selected, fails[0]))
 }

@@ -1,7 +1,8 @@
 // Test pass for the reservoir update: invocation i offers candidate i % n_candidates, with
 // weight weights[i % n_candidates], to reservoir i / (n_candidates * copies), so that many
-// invocations hit each reservoir at once (slot 0 of observed texel r, sign 0's lock). The
-// test checks the selection frequencies.
+// invocations hit each reservoir at once (slot 0 of observed texel r), in the candidate
+// pass's two phases (tp.phase: the race, then the winner's path). The test checks the
+// selection frequencies.
 #import shared/rng
 #import gen/restir
 #import restir/reservoir
@@ -11,6 +12,10 @@ struct ReservoirTestParams {
     copies: u32,
     n_invocations: u32,
     seed: u32,
+    phase: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> tp: ReservoirTestParams;
@@ -35,8 +40,12 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         return;
     }
     rng_init(tp.seed, i, 0u);
-    let cand = Candidate(c, array<u32, 5>(c, 0u, 0u, 0u, 0u));
-    if !reservoir_offer(0u, r, 0u, w, rand(), cand) {
-        atomicAdd(&failures[0], 1u);
+    let u = rand();
+    if tp.phase == 0u {
+        if !reservoir_enter(0u, r, w, u) {
+            atomicAdd(&failures[0], 1u);
+        }
+    } else {
+        reservoir_claim(0u, r, w, u, Candidate(c, array<u32, 5>(c, 0u, 0u, 0u, 0u)));
     }
 }

@@ -7,7 +7,10 @@
 // A candidate is offered to the texel's positive reservoir when q > 0, to the negative one
 // when q < 0 (or to one reservoir without positivization) with the resampling weight |q| x
 // MIS weight / density, and the reservoir keeps the path (compact_path.wgsl; the
-// samples are taken at the rounded hit, directions and radiances that it stores). Only
+// samples are taken at the rounded hit, directions and radiances that it stores). The pass
+// runs twice per iteration with the same random numbers (cp.phase, reservoir.wgsl): phase 0
+// adds the weights and runs the race for each reservoir, phase 1 writes the winners' paths
+// (and adds, counts and forms nothing else). Only
 // observed texels have reservoirs (observed_map); a candidate for another texel is dropped
 // and counted (CANDIDATE_STAT_UNMAPPED: the observed-texel pass's strata missed it).
 // When the merge will reuse, each candidate also carries its target under the previous
@@ -47,18 +50,19 @@ struct CandidateParams {
     // Where this iteration's and the last iteration's target adjoints start in `targets`.
     target_cur: u32,
     target_prev: u32,
-    _pad0: u32,
+    // 0: weights and race keys; 1: the winners' paths (reservoir.wgsl).
+    phase: u32,
 }
 
 @group(1) @binding(0) var<uniform> cp: CandidateParams;
 @group(1) @binding(1) var<storage, read> adjoint: array<vec4f>;
 // Slot k of every observed texel's reservoirs (reservoir.wgsl) and the texels'
-// headers, which say which slots hold the kept reservoirs and carry the locks.
+// headers, which say which slots hold the kept reservoirs.
 @group(1) @binding(2) var<storage, read_write> slots0: array<atomic<u32>>;
 @group(1) @binding(3) var<storage, read_write> slots1: array<atomic<u32>>;
 @group(1) @binding(4) var<storage, read_write> slots2: array<atomic<u32>>;
 @group(1) @binding(5) var<storage, read_write> slots3: array<atomic<u32>>;
-@group(1) @binding(6) var<storage, read_write> headers: array<atomic<u32>>;
+@group(1) @binding(6) var<storage, read> headers: array<u32>;
 // CANDIDATE_STAT_* slots (generated from abi.rs).
 @group(1) @binding(7) var<storage, read_write> cstats: array<atomic<u32>, 4>;
 // The target adjoints (reservoir.wgsl), both parities: the last iteration's, and this
@@ -93,6 +97,9 @@ var<private> pixel_adj: vec3f;
 // A later vertex of the path (shared/integrator.wgsl, camera_path with replay): its
 // derivative added into `grad`, plain Monte Carlo, as the baseline adds it.
 fn differentiate_later_vertex(mi: u32, uv: vec2f, wo: vec3f, wi: vec3f, mat: SurfaceMaterial, mat_prev: SurfaceMaterial, weight: vec3f, weight_prev: vec3f) {
+    if cp.phase != 0u {
+        return;
+    }
     scatter(materials[mi], uv, brdf_eval_cos_grad(mat, wo, wi), weight, pixel_adj);
 }
 
@@ -143,10 +150,15 @@ fn offer_technique(g: GradientSample, ts: TechniqueSample, bg_prev: BrdfGrad, ad
                 continue;
             }
             let s = select(0u, 1u, cp.positivize != 0u && q < 0.0);
-            let slot = fresh_slot(atomicLoad(&headers[i]), s);
-            offered += 1u;
-            if !reservoir_offer(slot, i, s, w, rand(), Candidate(info, path_words(g.tri, g.kb, ts.ko, ts.rgbe, q_prev))) {
-                lost += 1u;
+            let slot = fresh_slot(headers[i], s);
+            let u = rand();
+            if cp.phase == 0u {
+                offered += 1u;
+                if !reservoir_enter(slot, i, w, u) {
+                    lost += 1u;
+                }
+            } else {
+                reservoir_claim(slot, i, w, u, Candidate(info, path_words(g.tri, g.kb, ts.ko, ts.rgbe, q_prev)));
             }
         }
     }
@@ -172,7 +184,9 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     if cp.smoothing > 0.0 {
         adj_t = mix(adj, last, cp.smoothing);
     }
-    targets[cp.target_cur + ai] = vec4f(adj_t, 0.0);
+    if cp.phase == 0u {
+        targets[cp.target_cur + ai] = vec4f(adj_t, 0.0);
+    }
     adj_t *= cp.inv_spp;
     let a = adjoint_pixel_at(xy_px, cp.camera, adj, cp.inv_spp);
     if a.pixel == NONE {
@@ -203,6 +217,9 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
             }
             offer_technique(g, ts, grad_prev, a.adj, adj_t, adj_t_prev, info | (t << INFO_TECH_SHIFT));
         }
+    }
+    if cp.phase != 0u {
+        return;
     }
     atomicAdd(&cstats[CANDIDATE_STAT_OFFERED], offered);
     if lost + scatter_lost > 0u {

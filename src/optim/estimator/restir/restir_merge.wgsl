@@ -28,8 +28,8 @@
 // Selection is in place: a texel's four reservoir slots hold its two kept reservoirs and the
 // two fresh ones (reservoir.wgsl); the merged reservoir of sign s is whichever input
 // it selected, where it already lies, with its W and its target rewritten, and the texel's
-// header says which slot that is. The two slots the new header leaves free get W = 0 for the
-// next iteration's candidates. One invocation per observed texel (observed_list).
+// header says which slot that is. The two slots the new header leaves free are emptied
+// (W = 0, info word 0) for the next iteration's candidates. One invocation per observed texel (observed_list).
 #import shared/rng
 #import restir/compact_path
 #import restir/target
@@ -166,6 +166,21 @@ fn set_w(k: u32, i: u32, w: f32) {
     set_slot_word(k, i * RESERVOIR_WORDS + RES_W, bitcast<u32>(w));
 }
 
+// The weight sum of the fresh reservoir in slot k of texel i. If the candidate pass's second
+// phase wrote no path into it (its info word still holds a race key, reservoir.wgsl: the two
+// phases computed a key differently), it is emptied, counted as dropped, and 0.
+fn fresh_weight(k: u32, i: u32) -> f32 {
+    let w = slot_w(k, i);
+    let info = i * RESERVOIR_WORDS + RES_INFO;
+    if w != 0.0 && (slot_word(k, info) & INFO_KEY_BIT) != 0u {
+        dropped += 1u;
+        set_w(k, i, 0.0);
+        set_slot_word(k, info, 0u);
+        return 0.0;
+    }
+    return w;
+}
+
 // Store q as the target under the previous state of the reservoir in slot k of texel i (the
 // high bytes of its direction words).
 fn set_q_prev(k: u32, i: u32, q: f32) {
@@ -282,7 +297,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     // Slots of the kept reservoirs (signs 0 and 1 of the last merge) and of the fresh ones.
     let kept_k = vec2u(header_slot(h, 0u), header_slot(h, 1u));
     let fresh_k = vec2u(fresh_slot(h, 0u), fresh_slot(h, 1u));
-    let fresh_w = vec2f(slot_w(fresh_k.x, i), slot_w(fresh_k.y, i));
+    let fresh_w = vec2f(fresh_weight(fresh_k.x, i), fresh_weight(fresh_k.y, i));
     var kept_w = vec2f(0.0);
     if reuse {
         kept_w = vec2f(slot_w(kept_k.x, i), slot_w(kept_k.y, i));
@@ -296,6 +311,9 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     if !any(fresh_w > vec2f(0.0)) && !any(kept_w > vec2f(0.0)) {
         for (var c = 0u; c < ch; c++) {
             grad[p.offset + local * ch + c] = take_later(p.offset + local * ch + c);
+        }
+        if dropped > 0u {
+            atomicAdd(&mstats[MERGE_STAT_DROPPED], dropped);
         }
         return;
     }
@@ -416,12 +434,12 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     let new_h = out_slot.x | (out_slot.y << HEADER_SLOT_BITS);
     headers[i] = new_h;
     // The slots the new header leaves free take the next iteration's candidates: the inputs
-    // that were not selected, kept or fresh, are emptied.
+    // that were not selected, kept or fresh, are emptied (weight sum and info word 0, the
+    // race's start, reservoir.wgsl).
     for (var s = 0u; s < 2u; s++) {
         let k = fresh_slot(new_h, s);
-        if slot_w(k, i) != 0.0 {
-            set_w(k, i, 0.0);
-        }
+        set_w(k, i, 0.0);
+        set_slot_word(k, i * RESERVOIR_WORDS + RES_INFO, 0u);
     }
     for (var c = 0u; c < ch; c++) {
         grad[p.offset + local * ch + c] = g[c] + take_later(p.offset + local * ch + c);
