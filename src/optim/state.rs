@@ -24,8 +24,9 @@ pub struct FaultCounts {
     /// Pixels whose loss or adjoint was not finite (e.g. a NaN in the target), counted once
     /// per iteration and camera, and left out of the loss and the gradient.
     pub dropped_pixels: u32,
-    /// Samples an estimator could not keep because its lock was not taken within the bound
-    /// (ReSTIR's candidates offered to a reservoir).
+    /// Samples an estimator could not keep because an atomic update ran out of tries
+    /// (ReSTIR's candidates whose weight was not added to a reservoir's sum; gradient
+    /// additions the candidate pass gave up on).
     pub lost_kept: u32,
     /// Non-finite values of kept samples an estimator dropped when it used them again
     /// (ReSTIR's stored paths in the merge).

@@ -425,8 +425,8 @@ impl Restir {
 impl Estimator for Restir {
     fn encode(&mut self, enc: &mut wgpu::CommandEncoder, frame: &Frame, timer: &mut PassTimer) {
         let parity = frame.parity();
-        // The free slots are empty already: the merge empties them. The gradient of a texel no camera observes
-        // is never written: it stays 0 from the buffer's creation.
+        // The free slots are empty already: the merge empties them. The gradient of a texel
+        // no camera observes is never written: it stays 0 from the buffer's creation.
         let have_prev = self.history > 0;
         let reuse = self.options.temporal && have_prev;
         let target_cur = parity as u32 * self.target_len;
