@@ -42,8 +42,9 @@
 // run the lane that holds a lock while its neighbours spin: 26 s per iteration, most offers
 // lost.
 
-// Tries of a compare-and-swap loop; a retry follows another invocation's success, so the
-// bound is only reached when an OS preempts a lavapipe thread mid-update (counted as lost).
+// Tries of a compare-and-swap loop. A retry follows another invocation's success on the same
+// word (a preempted thread delays only itself), so the bound would take that many updates of
+// one reservoir in one iteration; an exhausted one is counted as lost.
 const RESERVOIR_CAS_BOUND: u32 = 65536u;
 
 // A candidate path for one texel.
