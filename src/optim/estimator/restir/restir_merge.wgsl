@@ -29,7 +29,8 @@
 // two fresh ones (reservoir.wgsl); the merged reservoir of sign s is whichever input
 // it selected, where it already lies, with its W and its target rewritten, and the texel's
 // header says which slot that is. The two slots the new header leaves free are emptied
-// (W = 0, info word 0) for the next iteration's candidates. One invocation per observed texel (observed_list).
+// (W = 0, info word 0) for the next iteration's candidates. One invocation per observed
+// texel (observed_list).
 #import shared/rng
 #import restir/compact_path
 #import restir/target
