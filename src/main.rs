@@ -20,6 +20,8 @@ fn main() {
     if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
         std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
     }
+    // lavapipe's shaders at 4 lanes: half the compilation, the same speed (see the function).
+    psrestir::gpu::prefer_narrow_cpu_simd();
     // A panic inside a third-party decoder is caught and reported as an error naming the
     // file; the default hook would also print it as a crash.
     // Output piped into a reader that stops early (`psrestir estimators | head`) ends the

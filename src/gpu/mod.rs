@@ -495,6 +495,25 @@ impl Gpu {
     }
 }
 
+/// The environment variable through which Mesa's CPU drivers (lavapipe, llvmpipe) take the
+/// width of the SIMD code they compile shaders to, in bits.
+pub const CPU_SIMD_WIDTH_VAR: &str = "LP_NATIVE_VECTOR_WIDTH";
+
+/// Ask Mesa's CPU Vulkan driver (lavapipe) for 128-bit (4-lane) shader code, unless the
+/// environment already names a width ([`CPU_SIMD_WIDTH_VAR`]). On a machine with AVX2,
+/// lavapipe compiles 8-lane code by default, and since it loads buffer elements lane by lane,
+/// every load is compiled once per lane: at 4 lanes the passes compile in about half the
+/// time and run as fast, with the same images (measured in docs/performance.md, "SIMD width
+/// on lavapipe"). The variable is read when the driver starts, so this must run before a
+/// wgpu instance is created, and, since it sets the process environment, while the program
+/// has only one thread (the command line calls it first thing). A GPU driver ignores it. A
+/// library user's application decides for itself; `ci/test.sh` sets it for the tests.
+pub fn prefer_narrow_cpu_simd() {
+    if std::env::var_os(CPU_SIMD_WIDTH_VAR).is_none() {
+        std::env::set_var(CPU_SIMD_WIDTH_VAR, "128");
+    }
+}
+
 /// How the passes trace rays on an adapter with `features` of type `device_type`. The
 /// environment variable `PSRESTIR_TRACER` chooses (`software` or `ray-query`); by default
 /// ray queries are used where the adapter offers them on a GPU. On lavapipe, which offers
