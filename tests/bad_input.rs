@@ -1,5 +1,6 @@
 //! Broken and hostile scene files: each gets a clear error naming the file and the problem,
-//! from the library and from the command line (non-zero exit, no panic).
+//! from the library and from the command line (non-zero exit, no panic). Also the command
+//! line's environment: a machine without a driver, and lavapipe's SIMD width.
 mod common;
 
 use common::crc32;
@@ -361,6 +362,30 @@ fn a_missing_gpu_driver_says_how_to_install_one() {
         "{err}"
     );
     assert!(!err.contains("panicked"), "{err}");
+}
+
+/// The command line asks lavapipe for 4-lane SIMD code when the environment names no width,
+/// and leaves a width the user names alone (lavapipe says its width in the adapter's name).
+#[test]
+fn the_command_line_asks_lavapipe_for_four_lanes_unless_told() {
+    let adapter = |width: Option<&str>| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_psrestir"));
+        c.arg("adapter")
+            .env_remove(psrestir::gpu::CPU_SIMD_WIDTH_VAR);
+        if let Some(w) = width {
+            c.env(psrestir::gpu::CPU_SIMD_WIDTH_VAR, w);
+        }
+        let out = c.output().unwrap();
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let default = adapter(None);
+    if !default.contains("llvmpipe") {
+        eprintln!("skipped: the adapter is not lavapipe: {default}");
+        return;
+    }
+    assert!(default.contains("128 bits"), "{default}");
+    let told = adapter(Some("256"));
+    assert!(told.contains("256 bits"), "{told}");
 }
 
 /// The one-triangle scene of `textured`, with `edit` applied to its JSON.
