@@ -402,6 +402,7 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
             resume,
             progress: true,
             interrupt: Some(interrupt),
+            on_row: None,
         },
     )
     .with_context(|| format!("optimizing {}", path.display()))?;

@@ -467,6 +467,36 @@ impl crate::optim::Optimizer {
     }
 }
 
+impl crate::optim::DiffRender {
+    /// A differentiable render of `task`'s scene, cameras, image size, depth and textures
+    /// (at their initial values), with the task's gradient samples per pixel and seed and
+    /// the estimator `method` (`auto` resolves as for an optimization of the task) with the
+    /// task's estimator options over `extra`. The task's targets are not loaded: the loss is
+    /// the caller's ([`Problem::from_task`] gives them). Returns the problem it was made
+    /// from too (its scene, cameras and texture layout).
+    pub fn for_task(
+        gpu: &Gpu,
+        task: &Task,
+        method: crate::optim::MethodChoice,
+        extra: &crate::optim::EstimatorOptions,
+    ) -> Result<(crate::optim::DiffRender, Problem)> {
+        let problem = Problem::load(task)?;
+        let choice = crate::task::task_method(task, method, problem.cameras.len());
+        if choice.automatic {
+            log::info!("gradient estimator: {} ({})", choice.method.name(), choice.reason);
+        }
+        let settings =
+            crate::task::task_settings(task, &problem.cameras, choice.method, extra);
+        let op = crate::optim::DiffRender::new(
+            gpu,
+            &problem.scene,
+            problem.set.clone(),
+            settings,
+        )?;
+        Ok((op, problem))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -37,6 +37,19 @@ pub struct RunOptions {
     /// Set (e.g. from a Ctrl-C handler) to stop after the iteration under way: the run then
     /// writes its checkpoint and outputs as at a normal end and returns with `interrupted`.
     pub interrupt: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
+    /// Called with each iteration's metrics row once it is written (the Python package's
+    /// progress callback; set `interrupt` from it to stop).
+    pub on_row: Option<RowHook>,
+}
+
+/// A function [`run`] calls with each iteration's [`MetricRow`].
+#[derive(Clone)]
+pub struct RowHook(pub std::sync::Arc<dyn Fn(&MetricRow) + Send + Sync>);
+
+impl std::fmt::Debug for RowHook {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("RowHook(..)")
+    }
 }
 
 /// What a run did.
@@ -72,6 +85,8 @@ pub struct RunSummary {
     /// Seconds this run spent creating (compiling) GPU pipelines, all before the
     /// optimization's clock started ([`Gpu::pipeline_times`]).
     pub pipeline_s: f64,
+    /// The optimized textures' layout, and their final values laid out as it says.
+    pub set: ParamSet,
 }
 
 /// One optimized texture's observed-texel RMSE at the start and at the end of a run.
@@ -377,6 +392,9 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         let t0 = Instant::now();
         let row = metrics.row(&opt, stats.loss, elapsed)?;
         excluded += t0.elapsed().as_secs_f64();
+        if let Some(hook) = &opts.on_row {
+            (hook.0)(&row);
+        }
         rows.push(row);
         if let Some(b) = &bar {
             b.set_position(if max_iter.is_some() {
@@ -437,6 +455,10 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         pass_times: pass_times.mean(),
         interrupted: was_interrupted,
         pipeline_s,
+        set: ParamSet {
+            textures: prep.set.textures.clone(),
+            values,
+        },
     })
 }
 

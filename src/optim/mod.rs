@@ -5,6 +5,7 @@
 
 mod cameras;
 pub mod checkpoint;
+mod diff_render;
 pub mod estimator;
 pub mod loss;
 pub mod observed;
@@ -26,6 +27,7 @@ pub use seeds::*;
 pub use settings::*;
 pub use state::*;
 pub use timing::*;
+pub use diff_render::{DiffRender, DiffRenderOptions};
 
 use crate::gpu::abi::stat;
 use crate::gpu::Gpu;
@@ -282,12 +284,24 @@ impl Optimizer {
     /// loss of every camera (unless the adjoint was written already), the estimator's passes,
     /// and the copy of the textures that the next iteration calls previous.
     fn encode_gradient(&mut self, enc: &mut wgpu::CommandEncoder, iteration: u32, primal: bool) {
+        self.encode_gradient_seeded(enc, iteration, primal, self.settings.seed);
+    }
+
+    /// [`Optimizer::encode_gradient`] with the gradient samples drawn from `seed`'s streams.
+    fn encode_gradient_seeded(
+        &mut self,
+        enc: &mut wgpu::CommandEncoder,
+        iteration: u32,
+        primal: bool,
+        seed: u32,
+    ) {
         self.timer.begin();
         if primal {
             self.encode_primal(enc, iteration);
         }
         let frame = estimator::Frame {
             iteration,
+            seed,
             scene_group: &self.renderer.scene.bind_group,
             schedule_factor: self.settings.schedule.factor(iteration, self.progress),
         };

@@ -401,8 +401,12 @@ pub(crate) struct Setup<'a> {
 
 /// What one iteration's encoding needs.
 pub(crate) struct Frame<'a> {
-    /// The iteration (seeds derive from it).
+    /// The iteration (seeds derive from it and from `seed`).
     pub iteration: u32,
+    /// The seed whose streams the gradient samples draw from, mixed with the iteration
+    /// ([`pass_seed`](crate::optim::pass_seed)): the settings' seed in an optimization, the
+    /// caller's in [`Optimizer::backward`](crate::optim::Optimizer::backward).
+    pub seed: u32,
     /// The scene bind group (group 0).
     pub scene_group: &'a wgpu::BindGroup,
     /// The learning-rate schedule's factor at this iteration (1 without a schedule).
@@ -417,7 +421,7 @@ impl Frame<'_> {
 }
 
 /// A gradient estimator as the optimizer drives it.
-pub(crate) trait Estimator {
+pub(crate) trait Estimator: Send {
     /// Record the passes that turn the adjoint of every camera (in `adjoint[parity]`) into the
     /// gradient of iteration `frame.iteration`, in `grad`.
     fn encode(&mut self, enc: &mut wgpu::CommandEncoder, frame: &Frame, timer: &mut PassTimer);

@@ -45,7 +45,7 @@ impl StepKind {
 }
 
 /// A step as the optimizer drives it, once per iteration after the gradient.
-pub(crate) trait Step {
+pub(crate) trait Step: Send {
     /// Record step `t` (from 1) of every texture at its learning rate times `factor`;
     /// returns the learning rates used, one per texture.
     fn encode(

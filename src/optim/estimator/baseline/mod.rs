@@ -60,7 +60,6 @@ pub(crate) struct Baseline {
     grad: wgpu::Buffer,
     stats: wgpu::Buffer,
     grid: (u32, u32),
-    seed: u32,
     queue: wgpu::Queue,
 }
 
@@ -113,7 +112,6 @@ impl Baseline {
             grad: s.grad.clone(),
             stats,
             grid: s.grid,
-            seed: s.settings.seed,
             queue: gpu.queue.clone(),
         })
     }
@@ -123,7 +121,7 @@ impl Estimator for Baseline {
     fn encode(&mut self, enc: &mut wgpu::CommandEncoder, frame: &Frame, timer: &mut PassTimer) {
         enc.clear_buffer(&self.grad, 0, None);
         for (k, cam) in self.cameras.iter_mut().enumerate() {
-            cam.params.seed = pass_seed(self.seed, frame.iteration, k as u32, Seeds::GRADIENT);
+            cam.params.seed = pass_seed(frame.seed, frame.iteration, k as u32, Seeds::GRADIENT);
             self.queue
                 .write_buffer(&cam.uniform, 0, bytemuck::bytes_of(&cam.params));
             encode_timed_pass(

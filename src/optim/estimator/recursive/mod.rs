@@ -228,7 +228,6 @@ pub(crate) struct Recursive {
     stats: wgpu::Buffer,
     grid: (u32, u32),
     combine_grid: (u32, u32),
-    seed: u32,
     options: RecursiveOptions,
     /// Updates of the fresh term's and of the difference's moments so far.
     n_f: u32,
@@ -329,7 +328,6 @@ impl Recursive {
             stats,
             grid: s.grid,
             combine_grid: grid_2d(n_params as u32, WORKGROUP, max_dim),
-            seed: s.settings.seed,
             options,
             n_f: 0,
             n_dl: 0,
@@ -351,7 +349,7 @@ impl Estimator for Recursive {
         let have_prev = self.have_prev as u32;
         for (k, cam) in self.cameras.iter_mut().enumerate() {
             // The baseline's seeds: with the same settings, the fresh term is its gradient.
-            cam.params.seed = pass_seed(self.seed, frame.iteration, k as u32, Seeds::GRADIENT);
+            cam.params.seed = pass_seed(frame.seed, frame.iteration, k as u32, Seeds::GRADIENT);
             cam.params.have_prev = have_prev;
             self.queue
                 .write_buffer(&cam.uniform, 0, bytemuck::bytes_of(&cam.params));

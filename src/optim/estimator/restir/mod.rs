@@ -192,7 +192,6 @@ pub(crate) struct Restir {
     options: RestirOptions,
     /// The target smoothing in use ([`RestirOptions::target_smoothing_for`]).
     smoothing: f32,
-    seed: u32,
     /// Merges whose samples the kept reservoirs can hold (0: nothing to reuse).
     history: u32,
     queue: wgpu::Queue,
@@ -401,7 +400,6 @@ impl Restir {
             grid: s.grid,
             options: o,
             smoothing,
-            seed: s.settings.seed,
             history: 0,
             queue: gpu.queue.clone(),
             grad: s.grad.clone(),
@@ -440,7 +438,7 @@ impl Estimator for Restir {
         // texel's reservoir takes offers from several cameras.
         for phase in 0..PHASES {
             for (k, cam) in self.cameras.iter_mut().enumerate() {
-                cam.params.seed = pass_seed(self.seed, frame.iteration, k as u32, Seeds::GRADIENT);
+                cam.params.seed = pass_seed(frame.seed, frame.iteration, k as u32, Seeds::GRADIENT);
                 cam.params.prev_targets = reuse as u32;
                 cam.params.target_cur = target_cur;
                 cam.params.target_prev = target_prev;
@@ -459,7 +457,7 @@ impl Estimator for Restir {
             }
         }
         let o = &self.options;
-        self.merge_params.seed = pass_seed(self.seed, frame.iteration, 0, Seeds::MERGE);
+        self.merge_params.seed = pass_seed(frame.seed, frame.iteration, 0, Seeds::MERGE);
         self.merge_params.flags = if o.temporal { FLAG_TEMPORAL } else { 0 }
             | if o.positivization { FLAG_POSITIVIZE } else { 0 }
             | if have_prev { FLAG_HAVE_PREV } else { 0 }

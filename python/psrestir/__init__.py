@@ -1,0 +1,291 @@
+"""psrestir: inverse texture optimization on wgpu with parameter-space ReSTIR gradients.
+
+Two ways in:
+
+- :func:`optimize` runs a whole task (a task file's path, or the same content as a dict) as
+  ``psrestir optimize`` does, with a progress bar or callback, and returns a :class:`Result`.
+- :class:`DiffRender` is a differentiable render with the loss and the optimizer left to you:
+  set the textures from numpy arrays, :meth:`~DiffRender.render` the cameras, compute dL/dI
+  of any loss, and :meth:`~DiffRender.backward` returns each texture's gradient with the
+  chosen estimator (``baseline``, ``restir`` or ``recursive``), which keeps its state from
+  one call to the next. ``psrestir.torch`` wraps it as a ``torch.autograd.Function``.
+
+Arrays are float32 numpy arrays of shape (height, width, channels). GPU work runs with the
+interpreter released, on one device per process. Errors are the classes of
+:mod:`psrestir.errors`.
+"""
+
+import json as _json
+import os as _os
+import sys as _sys
+import time as _time
+from dataclasses import dataclass as _dataclass, field as _field
+
+from . import errors
+from ._psrestir import DiffRender as _NativeDiffRender
+from ._psrestir import adapter, estimators
+from ._psrestir import optimize as _optimize
+from .errors import (
+    AdapterError,
+    DeviceLost,
+    FileError,
+    GpuError,
+    GpuOutOfMemory,
+    InvalidArgument,
+    PsrestirError,
+)
+
+__all__ = [
+    "optimize",
+    "Result",
+    "DiffRender",
+    "estimators",
+    "adapter",
+    "errors",
+    "PsrestirError",
+    "FileError",
+    "InvalidArgument",
+    "AdapterError",
+    "GpuOutOfMemory",
+    "DeviceLost",
+    "GpuError",
+]
+
+
+def _task_args(task, base_dir):
+    """(path, json, base) for the native calls: a task file's path, or a dict's content."""
+    if isinstance(task, dict):
+        base = _os.fspath(base_dir) if base_dir is not None else _os.getcwd()
+        return None, _json.dumps(task), base
+    if isinstance(task, (str, bytes, _os.PathLike)):
+        path = _os.fsdecode(_os.fspath(task))
+        return path, None, _os.path.dirname(path) or "."
+    raise InvalidArgument(
+        f"task: expected a task file's path or a dict, got {type(task).__name__}"
+    )
+
+
+@_dataclass
+class Result:
+    """What :func:`optimize` did."""
+
+    #: Iterations done in total (including any before a resume).
+    iterations: int
+    #: Optimization seconds in total (target rendering and evaluations excluded).
+    elapsed_s: float
+    ms_per_iteration: float
+    final_loss: float
+    #: Texture RMSE against the ground truth at the start and the end (None without one).
+    initial_rmse: float | None
+    final_rmse: float | None
+    #: The same over the texels some camera observes (the ones the images determine).
+    initial_rmse_observed: float | None
+    final_rmse_observed: float | None
+    #: The output folder (textures, optimized.glb, metrics.csv, plot.png, checkpoint.bin).
+    out: str
+    #: The final textures by name (``material_slot``), float32 (height, width, channels).
+    textures: dict = _field(default_factory=dict)
+    #: Per texture: (initial, final) observed-texel RMSE, when the ground truth is known.
+    rmse_observed_per_texture: dict = _field(default_factory=dict)
+    #: Whether the run stopped early (Ctrl-C or an exception in the callback).
+    interrupted: bool = False
+
+
+class _Bar:
+    """A one-line progress display on ``sys.stderr`` (which notebooks show)."""
+
+    def __init__(self, iterations, time_budget):
+        self.iterations = iterations
+        self.time_budget = time_budget
+        self.last = 0.0
+
+    def __call__(self, row):
+        now = _time.monotonic()
+        if now - self.last < 0.2:
+            return
+        self.last = now
+        if self.iterations:
+            done = f"{row['iteration']}/{self.iterations} iterations"
+        else:
+            done = f"{row['elapsed_s']:.0f}/{self.time_budget:.0f} s, iteration {row['iteration']}"
+        parts = [done]
+        if row.get("loss") is not None:
+            parts.append(f"loss {row['loss']:.4e}")
+        if row.get("texture_rmse_observed") is not None:
+            parts.append(f"texture RMSE {row['texture_rmse_observed']:.4f}")
+        _sys.stderr.write("\r" + ", ".join(parts) + " " * 4)
+        _sys.stderr.flush()
+
+    def close(self):
+        _sys.stderr.write("\n")
+        _sys.stderr.flush()
+
+
+def optimize(
+    task,
+    *,
+    method="auto",
+    iterations=None,
+    time_budget=None,
+    out=None,
+    resume=False,
+    progress=True,
+    callback=None,
+    base_dir=None,
+):
+    """Run a whole task, as ``psrestir optimize`` does, and return a :class:`Result`.
+
+    ``task`` is a task file's path or the same content as a dict (relative paths in it
+    resolve against ``base_dir``, by default the working directory; its outputs go to its
+    ``output`` key or ``out/dict_task``). ``method`` is ``"auto"``, ``"baseline"``,
+    ``"restir"`` or ``"recursive"``; ``iterations`` and ``time_budget`` (seconds) override the
+    task's; ``out`` the output folder; ``resume=True`` continues from its checkpoint.
+    ``progress`` shows a one-line progress display on stderr; ``callback(row)`` is called
+    after each iteration with a dict (iteration, elapsed_s, loss, texture_rmse,
+    texture_rmse_observed, image_relmse, learning_rate).
+
+    Ctrl-C stops the run after the iteration under way, writes the checkpoint and outputs,
+    and raises ``KeyboardInterrupt`` (continue with ``resume=True``); an exception raised by
+    ``callback`` stops it the same way and is raised then.
+    """
+    path, text, base = _task_args(task, base_dir)
+    bar = _Bar(iterations, time_budget) if progress else None
+
+    def on_row(row):
+        if bar is not None:
+            bar(row)
+        if callback is not None:
+            callback(row)
+
+    try:
+        r = _optimize(
+            path,
+            text,
+            base,
+            method,
+            iterations,
+            time_budget,
+            None if out is None else _os.fspath(out),
+            resume,
+            on_row,
+        )
+    finally:
+        if bar is not None:
+            bar.close()
+    error = r.pop("error", None)
+    result = Result(**r)
+    if error is not None:
+        if isinstance(error, KeyboardInterrupt):
+            raise KeyboardInterrupt(
+                f"interrupted at iteration {result.iterations}; the checkpoint and outputs are "
+                f"in {result.out}: continue with psrestir.optimize(task, out={result.out!r}, "
+                "resume=True)"
+            )
+        raise error
+    return result
+
+
+class DiffRender:
+    """A differentiable render of a task's scene with your own loss and optimizer.
+
+    ``task`` (a task file's path or a dict, as for :func:`optimize`) gives the scene, its
+    lights and environment, the cameras, the image size, the path depth, the textures to
+    recover (at their ``init`` values), the gradient samples per pixel and the seed; its
+    targets are what :meth:`targets` returns. ``method`` picks the gradient estimator:
+    ``"baseline"`` (plain Monte Carlo), ``"restir"`` (parameter-space ReSTIR, which reuses
+    samples from earlier backward calls), ``"recursive"`` (a recursive control variate), or
+    ``"auto"`` (chosen by the task's sampling, as :func:`optimize` chooses).
+
+    One iteration::
+
+        images = op.render(spp=4, seed=it)
+        adjoints = [dloss_dimage(img, k) for k, img in enumerate(images)]
+        grads = op.backward(adjoints)           # {name: array like the texture}
+        op.set_texture(name, np.clip(op.texture(name) - lr * grads[name], 0, 1))
+
+    Each backward pairs with the render before it: a backward with no render since the last
+    texture change or backward raises :class:`InvalidArgument`. The estimator's state
+    advances once per backward (ReSTIR reuses the previous call's samples under the current
+    textures and adjoint).
+    """
+
+    def __init__(self, task, *, method="baseline", base_dir=None):
+        path, text, base = _task_args(task, base_dir)
+        self._op = _NativeDiffRender(path, text, base, method)
+
+    @property
+    def texture_names(self):
+        """The optimized textures, ``material_slot``, in the task's order."""
+        return self._op.texture_names
+
+    @property
+    def texture_shapes(self):
+        """{name: (height, width, channels)}."""
+        return dict(self._op.texture_shapes)
+
+    @property
+    def camera_names(self):
+        """The cameras, in the order of :meth:`render`'s images."""
+        return self._op.camera_names
+
+    @property
+    def image_shape(self):
+        """(height, width) of every image."""
+        return self._op.image_shape
+
+    @property
+    def method(self):
+        """The gradient estimator in use."""
+        return self._op.method
+
+    @property
+    def iteration(self):
+        """Backward calls so far."""
+        return self._op.iteration
+
+    def texture(self, name):
+        """A copy of a texture's current values (by name or index): float32 (h, w, c)."""
+        return self._op.texture(name)
+
+    def set_texture(self, name, values):
+        """Replace a texture's values: a float32 array of its shape, finite, within its
+        slot's range (base color and metallic [0, 1], roughness [0.02, 1])."""
+        self._op.set_texture(name, values)
+
+    def render(self, spp=4, seed=0):
+        """Render every camera at the current textures: a list of float32 (h, w, 3) linear
+        RGB images. ``seed`` picks the random numbers (use a new one each iteration)."""
+        return self._op.render(spp, seed)
+
+    def backward(self, adjoints, seed_grad=None):
+        """Each texture's gradient of a loss whose derivative with respect to the images of
+        the last :meth:`render` is ``adjoints`` (a list of float32 (h, w, 3) arrays, one per
+        camera): {name: float32 array of the texture's shape}. ``seed_grad`` picks the
+        gradient samples' random numbers (mixed with the number of backward calls; None: the
+        task's seed); they are independent of the render's."""
+        return self._op.backward(list(adjoints), seed_grad)
+
+    def observed(self, name):
+        """bool (h, w): the texels some camera sample reaches (the others get no gradient)."""
+        return self._op.observed(name)
+
+    def targets(self):
+        """The task's target images, float32 (h, w, 3), one per camera (rendered from its
+        target scene at the first call and cached in its output folder, or its photos)."""
+        return self._op.targets()
+
+    def reference(self, name):
+        """The true values of a texture when the task's targets come from a scene, else
+        None."""
+        return self._op.reference(name)
+
+    def reset(self):
+        """Forget the estimator's state from earlier backward calls."""
+        self._op.reset()
+
+    def __repr__(self):
+        h, w = self.image_shape
+        return (
+            f"DiffRender(method={self.method!r}, textures={self.texture_shapes}, "
+            f"cameras={self.camera_names}, image={w}x{h})"
+        )

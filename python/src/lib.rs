@@ -1,0 +1,603 @@
+//! The native half of the `psrestir` Python package (`psrestir._psrestir`): one process-wide
+//! GPU device, the whole task in one call ([`optimize`]) and the differentiable render
+//! ([`DiffRender`]). `python/psrestir/__init__.py` wraps these in the package's public
+//! surface; errors become the exception classes of `psrestir/errors.py`, and no panic
+//! crosses into Python. GPU work runs with the interpreter released.
+
+use numpy::{PyArray1, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
+use psrestir::image_io::Image;
+use psrestir::job::run::{RowHook, RunOptions};
+use psrestir::optim::checkpoint::MetricRow;
+use psrestir::{Error, Gpu, MethodChoice, Task};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+
+/// The process-wide device, made at first use.
+static GPU: Mutex<Option<Gpu>> = Mutex::new(None);
+
+fn gpu() -> psrestir::Result<Gpu> {
+    let mut g = GPU.lock().unwrap_or_else(|p| p.into_inner());
+    if let Some(gpu) = g.as_ref() {
+        return Ok(gpu.clone());
+    }
+    // lavapipe at 4 SIMD lanes, as the command line asks for it (half the compilation).
+    psrestir::gpu::prefer_narrow_cpu_simd();
+    let gpu = Gpu::new()?;
+    *g = Some(gpu.clone());
+    Ok(gpu)
+}
+
+/// The exception for `e`: a class of `psrestir.errors`, with a message that names Python
+/// remedies where the library's names command-line ones.
+fn to_py(e: Error) -> PyErr {
+    let (class, msg, path) = match e {
+        Error::File { path, msg } => (
+            "FileError",
+            format!("{}: {msg}", path.display()),
+            Some(path.display().to_string()),
+        ),
+        Error::NoAdapter(m) => ("AdapterError", m, None),
+        Error::Unsuitable(m) => ("AdapterError", format!("GPU adapter unsuitable: {m}"), None),
+        Error::OutOfMemory { label, msg } => (
+            "GpuOutOfMemory",
+            format!(
+                "GPU out of memory in {label}: {msg}. Lower the image size (the task's width and \
+                 height), the texture resolution or the samples per pixel, or free GPU memory \
+                 (`del` DiffRender objects you no longer use; other programs)"
+            ),
+            None,
+        ),
+        Error::DeviceLost { label, msg } => (
+            "DeviceLost",
+            format!(
+                "the GPU device was lost in {label}: {msg}. Nothing more can run on it in this \
+                 process: restart Python, and continue an optimization from its checkpoint with \
+                 psrestir.optimize(task, resume=True)"
+            ),
+            None,
+        ),
+        e @ (Error::Gpu { .. } | Error::Shader { .. }) => ("GpuError", e.to_string(), None),
+        Error::Invalid(m) => ("InvalidArgument", m, None),
+    };
+    raise(class, msg, path)
+}
+
+/// An instance of `psrestir.errors.<class>` with `msg` (and the file's `path`).
+fn raise(class: &str, msg: String, path: Option<String>) -> PyErr {
+    Python::attach(|py| {
+        let made = py
+            .import("psrestir.errors")
+            .and_then(|m| m.getattr(class))
+            .and_then(|c| match &path {
+                Some(p) => c.call1((msg.clone(), p.clone())),
+                None => c.call1((msg.clone(),)),
+            });
+        match made {
+            Ok(exc) => PyErr::from_value(exc),
+            Err(e) => e,
+        }
+    })
+}
+
+/// Run `f` with the interpreter released, turning a panic into `psrestir.errors.PsrestirError`
+/// and the library's errors into their classes.
+fn released<T: Send>(py: Python<'_>, f: impl FnOnce() -> psrestir::Result<T> + Send) -> PyResult<T> {
+    let r = py.detach(|| catch_unwind(AssertUnwindSafe(f)));
+    match r {
+        Ok(Ok(v)) => Ok(v),
+        Ok(Err(e)) => Err(to_py(e)),
+        Err(p) => {
+            let what = p
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_default();
+            Err(raise(
+                "PsrestirError",
+                format!("internal error (a bug in psrestir, please report it): {what}"),
+                None,
+            ))
+        }
+    }
+}
+
+/// A task from a file's path, or from the same content as JSON text (a dict on the Python
+/// side) anchored in `base` (relative paths resolve against it; errors name `<base>/<name>`).
+fn load_task(path: Option<PathBuf>, json: Option<String>, base: PathBuf) -> psrestir::Result<Task> {
+    match (path, json) {
+        (Some(p), None) => Task::load(&p),
+        (None, Some(j)) => {
+            let anchor = base.join("dict_task.toml");
+            let value: serde_json::Value =
+                serde_json::from_str(&j).map_err(|e| Error::Invalid(format!("task dict: {e}")))?;
+            let text = toml::to_string(&value).map_err(|e| {
+                Error::Invalid(format!(
+                    "task dict: {e} (values must be str, int, float, bool, lists or dicts; \
+                     no None)"
+                ))
+            })?;
+            Task::parse(&text, &anchor)
+        }
+        _ => Err(Error::Invalid("give a task file's path or a dict".into())),
+    }
+}
+
+fn method_choice(name: &str) -> psrestir::Result<MethodChoice> {
+    name.parse::<MethodChoice>().map_err(|e| {
+        Error::Invalid(format!(
+            "method {name:?}: {e} (psrestir.estimators() lists the estimators)"
+        ))
+    })
+}
+
+/// A float32 array of shape `(h, w, c)` copied out of any numpy array of that shape and
+/// dtype float32; anything else is an `InvalidArgument` that says what was expected.
+fn read_array(what: &str, obj: &Bound<'_, PyAny>, shape: [usize; 3]) -> PyResult<Vec<f32>> {
+    let bad = |got: String| {
+        raise(
+            "InvalidArgument",
+            format!(
+                "{what}: expected a numpy float32 array of shape ({}, {}, {}) (height, width, \
+                 channels), got {got}",
+                shape[0], shape[1], shape[2]
+            ),
+            None,
+        )
+    };
+    let Ok(arr) = obj.cast::<PyUntypedArray>() else {
+        return Err(bad(format!(
+            "a {} (convert it with numpy.asarray(x, dtype=numpy.float32))",
+            obj.get_type().name()?
+        )));
+    };
+    let dims = arr.shape().to_vec();
+    let dtype = arr.dtype().str()?.to_string();
+    let Ok(typed) = obj.cast::<numpy::PyArray3<f32>>() else {
+        return Err(bad(format!(
+            "dtype {dtype} with shape {dims:?} (use .astype(numpy.float32))"
+        )));
+    };
+    if dims != shape {
+        return Err(bad(format!("shape {dims:?}")));
+    }
+    let ro = typed.readonly();
+    let v: Vec<f32> = ro.as_array().iter().copied().collect();
+    Ok(v)
+}
+
+fn to_array<'py>(py: Python<'py>, v: Vec<f32>, shape: [usize; 3]) -> PyResult<Bound<'py, PyAny>> {
+    Ok(PyArray1::from_vec(py, v).reshape(shape)?.into_any())
+}
+
+fn image_array<'py>(py: Python<'py>, img: &Image) -> PyResult<Bound<'py, PyAny>> {
+    let v: Vec<f32> = img.rgb.iter().flatten().copied().collect();
+    to_array(py, v, [img.height as usize, img.width as usize, 3])
+}
+
+fn row_dict<'py>(py: Python<'py>, r: &MetricRow) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("iteration", r.iteration)?;
+    d.set_item("elapsed_s", r.elapsed_s)?;
+    d.set_item("loss", r.loss)?;
+    d.set_item("texture_rmse", r.texture_rmse)?;
+    d.set_item("texture_rmse_observed", r.texture_rmse_observed)?;
+    d.set_item("image_relmse", r.image_relmse)?;
+    d.set_item("learning_rate", r.learning_rate)?;
+    Ok(d)
+}
+
+/// `optimize(path, json, base, method, iterations, time_budget, out, resume, callback)`: a
+/// task run as `psrestir optimize` runs it; `callback(row: dict)` after each iteration (a
+/// Ctrl-C, or an exception in the callback, stops the run after the iteration under way,
+/// with the checkpoint and outputs written, and is raised then). Returns a dict.
+#[pyfunction]
+#[pyo3(signature = (path, json, base, method, iterations, time_budget, out, resume, callback))]
+#[allow(clippy::too_many_arguments)]
+fn optimize<'py>(
+    py: Python<'py>,
+    path: Option<PathBuf>,
+    json: Option<String>,
+    base: PathBuf,
+    method: &str,
+    iterations: Option<u32>,
+    time_budget: Option<f64>,
+    out: Option<PathBuf>,
+    resume: bool,
+    callback: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    if let Some(b) = time_budget {
+        if !(b.is_finite() && b > 0.0) {
+            return Err(to_py(Error::Invalid(format!(
+                "time_budget must be a positive number of seconds, not {b}"
+            ))));
+        }
+    }
+    let interrupt = Arc::new(AtomicBool::new(false));
+    // The first exception from the callback or a signal: raised once the run has ended.
+    let pending: Arc<Mutex<Option<PyErr>>> = Arc::new(Mutex::new(None));
+    let hook = {
+        let interrupt = interrupt.clone();
+        let pending = pending.clone();
+        RowHook(Arc::new(move |row: &MetricRow| {
+            Python::attach(|py| {
+                let result = py.check_signals().and_then(|_| match &callback {
+                    Some(cb) => cb.call1(py, (row_dict(py, row)?,)).map(|_| ()),
+                    None => Ok(()),
+                });
+                if let Err(e) = result {
+                    let mut p = pending.lock().unwrap_or_else(|p| p.into_inner());
+                    if p.is_none() {
+                        *p = Some(e);
+                    }
+                    interrupt.store(true, Ordering::SeqCst);
+                }
+            })
+        }))
+    };
+    let summary = released(py, || {
+        let task = load_task(path, json, base)?;
+        let gpu = gpu()?;
+        psrestir::job::run::run(
+            &gpu,
+            &task,
+            &RunOptions {
+                method: method_choice(method)?,
+                iterations,
+                time_budget_s: time_budget,
+                out,
+                resume,
+                progress: false,
+                interrupt: Some(interrupt),
+                on_row: Some(hook),
+                ..Default::default()
+            },
+        )
+    })?;
+    let d = PyDict::new(py);
+    d.set_item("iterations", summary.iterations)?;
+    d.set_item("elapsed_s", summary.elapsed_s)?;
+    d.set_item("ms_per_iteration", summary.ms_per_iteration)?;
+    d.set_item("final_loss", summary.final_loss)?;
+    d.set_item("initial_rmse", summary.initial_rmse)?;
+    d.set_item("final_rmse", summary.final_rmse)?;
+    d.set_item("initial_rmse_observed", summary.initial_rmse_observed)?;
+    d.set_item("final_rmse_observed", summary.final_rmse_observed)?;
+    d.set_item("out", summary.out.display().to_string())?;
+    d.set_item("interrupted", summary.interrupted)?;
+    let textures = PyDict::new(py);
+    for (i, t) in summary.set.textures.iter().enumerate() {
+        let v = summary.set.values_of(i).to_vec();
+        let shape = [t.height as usize, t.width as usize, t.channels() as usize];
+        textures.set_item(t.name(), to_array(py, v, shape)?)?;
+    }
+    d.set_item("textures", textures)?;
+    let per = PyDict::new(py);
+    for t in &summary.per_texture {
+        per.set_item(&t.texture, (t.initial_rmse_observed, t.final_rmse_observed))?;
+    }
+    d.set_item("rmse_observed_per_texture", per)?;
+    if let Some(e) = pending.lock().unwrap_or_else(|p| p.into_inner()).take() {
+        d.set_item("error", e.into_value(py))?;
+    }
+    Ok(d)
+}
+
+/// The differentiable render of a task's scene (see `psrestir.DiffRender`).
+#[pyclass(module = "psrestir._psrestir")]
+struct DiffRender {
+    inner: Mutex<psrestir::optim::DiffRender>,
+    task: Task,
+    /// Texture names (`material_slot`), shapes (height, width, channels).
+    names: Vec<String>,
+    shapes: Vec<[usize; 3]>,
+    cameras: Vec<String>,
+    method: String,
+    /// The task's targets and reference textures, loaded at first use.
+    targets: Mutex<Option<psrestir::Problem>>,
+}
+
+impl DiffRender {
+    fn index(&self, texture: &Bound<'_, PyAny>) -> PyResult<usize> {
+        if let Ok(i) = texture.extract::<usize>() {
+            if i < self.names.len() {
+                return Ok(i);
+            }
+        } else if let Ok(name) = texture.extract::<String>() {
+            if let Some(i) = self.names.iter().position(|n| *n == name) {
+                return Ok(i);
+            }
+        }
+        Err(raise(
+            "InvalidArgument",
+            format!(
+                "no optimized texture {}: the textures are {:?} (by name or index)",
+                texture.repr()?,
+                self.names
+            ),
+            None,
+        ))
+    }
+
+    fn problem(&self, py: Python<'_>) -> PyResult<psrestir::Problem> {
+        let mut cached = self.targets.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(p) = cached.as_ref() {
+            return Ok(p.clone());
+        }
+        let task = self.task.clone();
+        let p = released(py, move || {
+            let gpu = gpu()?;
+            let out = task.output_dir();
+            std::fs::create_dir_all(&out).map_err(|e| Error::file(&out, e.to_string()))?;
+            psrestir::Problem::from_task(&gpu, &task, &out, true)
+        })?;
+        *cached = Some(p.clone());
+        Ok(p)
+    }
+}
+
+#[pymethods]
+impl DiffRender {
+    #[new]
+    #[pyo3(signature = (path, json, base, method))]
+    fn new(
+        py: Python<'_>,
+        path: Option<PathBuf>,
+        json: Option<String>,
+        base: PathBuf,
+        method: &str,
+    ) -> PyResult<DiffRender> {
+        let (op, problem, task) = released(py, || {
+            let task = load_task(path, json, base)?;
+            let gpu = gpu()?;
+            let choice = method_choice(method)?;
+            let (op, problem) =
+                psrestir::optim::DiffRender::for_task(&gpu, &task, choice, &Default::default())?;
+            Ok((op, problem, task))
+        })?;
+        let names = op.textures().iter().map(|t| t.name()).collect();
+        let shapes = op
+            .textures()
+            .iter()
+            .map(|t| [t.height as usize, t.width as usize, t.channels() as usize])
+            .collect();
+        let cameras = problem
+            .cameras
+            .iter()
+            .map(|&c| problem.scene.cameras[c].name.clone())
+            .collect();
+        let method = op.optimizer().settings().method.name().to_string();
+        Ok(DiffRender {
+            inner: Mutex::new(op),
+            task,
+            names,
+            shapes,
+            cameras,
+            method,
+            targets: Mutex::new(None),
+        })
+    }
+
+    /// The optimized textures' names (`material_slot`), in order.
+    #[getter]
+    fn texture_names(&self) -> Vec<String> {
+        self.names.clone()
+    }
+
+    /// Shape (height, width, channels) of each texture, by name.
+    #[getter]
+    fn texture_shapes(&self) -> Vec<(String, (usize, usize, usize))> {
+        self.names
+            .iter()
+            .zip(&self.shapes)
+            .map(|(n, s)| (n.clone(), (s[0], s[1], s[2])))
+            .collect()
+    }
+
+    /// The cameras' names, in the order of the rendered images.
+    #[getter]
+    fn camera_names(&self) -> Vec<String> {
+        self.cameras.clone()
+    }
+
+    /// (height, width) of every image.
+    #[getter]
+    fn image_shape(&self) -> (u32, u32) {
+        let (w, h) = self.lock().image_size();
+        (h, w)
+    }
+
+    /// The gradient estimator's name.
+    #[getter]
+    fn method(&self) -> String {
+        self.method.clone()
+    }
+
+    /// Backward calls so far.
+    #[getter]
+    fn iteration(&self) -> u32 {
+        self.lock().iteration()
+    }
+
+    fn texture<'py>(&self, py: Python<'py>, texture: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+        let i = self.index(texture)?;
+        let v = released(py, || self.lock().texture(i))?;
+        to_array(py, v, self.shapes[i])
+    }
+
+    fn set_texture(&self, py: Python<'_>, texture: &Bound<'_, PyAny>, values: &Bound<'_, PyAny>) -> PyResult<()> {
+        let i = self.index(texture)?;
+        let v = read_array(&format!("texture `{}`", self.names[i]), values, self.shapes[i])?;
+        released(py, || self.lock().set_texture(i, &v))
+    }
+
+    #[pyo3(signature = (spp, seed))]
+    fn render<'py>(&self, py: Python<'py>, spp: u32, seed: u32) -> PyResult<Bound<'py, PyList>> {
+        let images = released(py, || self.lock().render(spp, seed))?;
+        let list = PyList::empty(py);
+        for img in &images {
+            list.append(image_array(py, img)?)?;
+        }
+        Ok(list)
+    }
+
+    #[pyo3(signature = (adjoints, seed_grad))]
+    fn backward<'py>(
+        &self,
+        py: Python<'py>,
+        adjoints: &Bound<'py, PyAny>,
+        seed_grad: Option<u32>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let (h, w) = self.image_shape();
+        let items: Vec<Bound<'py, PyAny>> = adjoints
+            .try_iter()
+            .map_err(|_| {
+                raise(
+                    "InvalidArgument",
+                    "backward: give a list of adjoint images, one per camera".into(),
+                    None,
+                )
+            })?
+            .collect::<PyResult<_>>()?;
+        if items.len() != self.cameras.len() {
+            return Err(raise(
+                "InvalidArgument",
+                format!(
+                    "backward: {} adjoint images for {} cameras ({:?})",
+                    items.len(),
+                    self.cameras.len(),
+                    self.cameras
+                ),
+                None,
+            ));
+        }
+        let mut images = Vec::new();
+        for (k, a) in items.iter().enumerate() {
+            let v = read_array(
+                &format!("adjoint image {k} (camera `{}`)", self.cameras[k]),
+                a,
+                [h as usize, w as usize, 3],
+            )?;
+            images.push(Image {
+                width: w,
+                height: h,
+                rgb: v.chunks(3).map(|c| [c[0], c[1], c[2]]).collect(),
+            });
+        }
+        let grads = released(py, || self.lock().backward(&images, seed_grad))?;
+        let d = PyDict::new(py);
+        for ((name, shape), g) in self.names.iter().zip(&self.shapes).zip(grads) {
+            d.set_item(name, to_array(py, g, *shape)?)?;
+        }
+        Ok(d)
+    }
+
+    /// Which texels some camera sample reaches: bool array (height, width).
+    fn observed<'py>(&self, py: Python<'py>, texture: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+        let i = self.index(texture)?;
+        let op = self.lock();
+        let t = &op.textures()[i];
+        let all = op.optimizer().observed_texels().map_err(to_py)?;
+        let start = (t.offset / t.channels()) as usize;
+        let n = (t.width * t.height) as usize;
+        let v: Vec<bool> = all[start..start + n].to_vec();
+        let shape = [t.height as usize, t.width as usize];
+        Ok(PyArray1::from_vec(py, v).reshape(shape)?.into_any())
+    }
+
+    /// The task's target images (rendered from its target scene, or its photos).
+    fn targets<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let p = self.problem(py)?;
+        let list = PyList::empty(py);
+        for img in &p.targets {
+            list.append(image_array(py, img)?)?;
+        }
+        Ok(list)
+    }
+
+    /// The ground-truth values of a texture, when the task's targets come from a scene.
+    fn reference<'py>(&self, py: Python<'py>, texture: &Bound<'py, PyAny>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        let i = self.index(texture)?;
+        let p = self.problem(py)?;
+        let Some(r) = &p.reference else {
+            return Ok(None);
+        };
+        let t = &p.set.textures[i];
+        let v = r[t.offset as usize..t.offset as usize + t.len()].to_vec();
+        Ok(Some(to_array(py, v, self.shapes[i])?))
+    }
+
+    /// Forget the estimator's state from earlier backward calls.
+    fn reset(&self, py: Python<'_>) -> PyResult<()> {
+        released(py, || self.lock().reset_estimator())
+    }
+}
+
+impl DiffRender {
+    fn lock(&self) -> std::sync::MutexGuard<'_, psrestir::optim::DiffRender> {
+        self.inner.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+/// The estimators' names and one-line summaries.
+#[pyfunction]
+fn estimators() -> Vec<(String, String)> {
+    psrestir::Method::ALL
+        .iter()
+        .map(|m| (m.name().to_string(), m.summary().to_string()))
+        .collect()
+}
+
+/// The adapter psrestir runs on, in words (makes the device at first use).
+#[pyfunction]
+fn adapter(py: Python<'_>) -> PyResult<String> {
+    released(py, || {
+        let g = gpu()?;
+        Ok(format!(
+            "{} ({:?}, {} {})",
+            g.info.name, g.info.backend, g.info.driver, g.info.driver_info
+        ))
+    })
+}
+
+/// The exception a library error of kind `kind` becomes (for the tests of the mapping).
+#[pyfunction]
+fn _error_for_test(kind: &str) -> PyErr {
+    let e = match kind {
+        "file" => Error::file(Path::new("scene.glb"), "not a glTF file"),
+        "no_adapter" => Error::NoAdapter("no Vulkan adapter".into()),
+        "unsuitable" => Error::Unsuitable("too few storage buffers".into()),
+        "out_of_memory" => Error::OutOfMemory {
+            label: "params".into(),
+            msg: "allocation failed".into(),
+        },
+        "device_lost" => Error::DeviceLost {
+            label: "render".into(),
+            msg: "driver reset".into(),
+        },
+        "gpu" => Error::Gpu {
+            label: "render".into(),
+            msg: "validation".into(),
+        },
+        "panic" => {
+            return Python::attach(|py| released::<()>(py, || panic!("test panic")).unwrap_err())
+        }
+        _ => Error::Invalid(format!("unknown kind {kind}")),
+    };
+    to_py(e)
+}
+
+#[pymodule]
+fn _psrestir(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let _ = env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn"))
+        .try_init();
+    m.add_class::<DiffRender>()?;
+    m.add_function(wrap_pyfunction!(optimize, m)?)?;
+    m.add_function(wrap_pyfunction!(estimators, m)?)?;
+    m.add_function(wrap_pyfunction!(adapter, m)?)?;
+    m.add_function(wrap_pyfunction!(_error_for_test, m)?)?;
+    Ok(())
+}
