@@ -4,7 +4,7 @@
 //! surface; errors become the exception classes of `psrestir/errors.py`, and no panic
 //! crosses into Python. GPU work runs with the interpreter released.
 
-use numpy::{PyArray1, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
+use numpy::{PyArray1, PyArrayDescrMethods, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use psrestir::image_io::Image;
 use psrestir::job::run::{RowHook, RunOptions};
 use psrestir::optim::checkpoint::MetricRow;
@@ -127,11 +127,8 @@ fn load_task(path: Option<PathBuf>, json: Option<String>, base: PathBuf) -> psre
 }
 
 fn method_choice(name: &str) -> psrestir::Result<MethodChoice> {
-    name.parse::<MethodChoice>().map_err(|e| {
-        Error::Invalid(format!(
-            "method {name:?}: {e} (psrestir.estimators() lists the estimators)"
-        ))
-    })
+    name.parse::<MethodChoice>()
+        .map_err(|e| Error::Invalid(format!("method: {e}")))
 }
 
 /// A float32 array of shape `(h, w, c)` copied out of any numpy array of that shape and
@@ -155,15 +152,17 @@ fn read_array(what: &str, obj: &Bound<'_, PyAny>, shape: [usize; 3]) -> PyResult
         )));
     };
     let dims = arr.shape().to_vec();
-    let dtype = arr.dtype().str()?.to_string();
-    let Ok(typed) = obj.cast::<numpy::PyArray3<f32>>() else {
+    let dtype = arr.dtype();
+    if !dtype.is_equiv_to(&numpy::dtype::<f32>(obj.py())) {
         return Err(bad(format!(
-            "dtype {dtype} with shape {dims:?} (use .astype(numpy.float32))"
+            "dtype {} (convert it with .astype(numpy.float32))",
+            dtype.str()?
         )));
-    };
+    }
     if dims != shape {
         return Err(bad(format!("shape {dims:?}")));
     }
+    let typed = obj.cast::<numpy::PyArray3<f32>>().map_err(|e| bad(e.to_string()))?;
     let ro = typed.readonly();
     let v: Vec<f32> = ro.as_array().iter().copied().collect();
     Ok(v)
