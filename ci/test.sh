@@ -17,3 +17,12 @@ cargo test --all-targets
 cargo test --doc
 # The API documentation builds without warnings (broken or private intra-doc links).
 RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --quiet
+# The Python package (pyproject.toml, python/) and its tests. CI builds it with the dev profile,
+# which reuses the library the Rust tests just compiled (a release build, `pip install .`, is
+# what users run; the tests check behaviour, not speed). pytest exits non-zero when it
+# collects no test.
+PYTHON="${PYTHON:-python3}"
+"$PYTHON" -m pip install --quiet --disable-pip-version-check "maturin>=1.9,<2" numpy pytest
+MATURIN_PEP517_ARGS="--profile dev" "$PYTHON" -m pip install --quiet --disable-pip-version-check \
+    --no-build-isolation --force-reinstall --no-deps .
+"$PYTHON" -m pytest -q tests/python

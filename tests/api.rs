@@ -744,3 +744,56 @@ fn invalid_restir_options_are_refused_by_name() {
         assert!(e.contains(name), "{m_cap} {target_smoothing}: {e}");
     }
 }
+
+/// The differentiable render's backward, given the adjoint the optimizer's own loss pass
+/// wrote, is the optimizer's own gradient, for every estimator and across a texture change
+/// (ReSTIR and the recursive estimator pair each call with the previous one's textures and
+/// adjoint); and a backward without a render at the current textures is refused.
+#[test]
+fn backward_from_an_external_adjoint_is_the_optimizers_gradient() {
+    if no_gpu() {
+        return;
+    }
+    let gpu = Gpu::new().unwrap();
+    let p = problem(&gpu, [[230, 60, 40], [40, 90, 220]]);
+    for method in [Method::Baseline, Method::Restir, Method::Recursive] {
+        let s = Settings {
+            primal: psrestir::optim::PrimalMode::Independent,
+            ..settings(method)
+        };
+        let mut opt = Optimizer::for_problem(&gpu, &p, s.clone()).unwrap();
+        let moved: Vec<f32> = p.set.values.iter().map(|v| 0.8 * v + 0.1).collect();
+        let (g0, _) = opt.estimate_gradient(0).unwrap();
+        let a0 = opt.read_adjoint(0).unwrap();
+        opt.write_params(&moved).unwrap();
+        let (g1, _) = opt.estimate_gradient(1).unwrap();
+        let a1 = opt.read_adjoint(1).unwrap();
+        let rgb = |a: &[f32]| psrestir::Image {
+            width: 32,
+            height: 32,
+            rgb: a.chunks(4).map(|c| [c[0], c[1], c[2]]).collect(),
+        };
+        let mut op = psrestir::optim::DiffRender::new(&gpu, &p.scene, p.set.clone(), s).unwrap();
+        let err = op.backward(&[rgb(&a0)], None).unwrap_err().to_string();
+        assert!(err.contains("backward needs a render"), "{err}");
+        op.render(1, 0).unwrap();
+        let h0 = op.backward(&[rgb(&a0)], None).unwrap().remove(0);
+        assert!(
+            op.backward(&[rgb(&a0)], None).is_err(),
+            "a second backward per render"
+        );
+        op.set_texture(0, &moved).unwrap();
+        op.render(1, 1).unwrap();
+        let h1 = op.backward(&[rgb(&a1)], None).unwrap().remove(0);
+        for (g, h, it) in [(&g0, &h0, 0), (&g1, &h1, 1)] {
+            let scale = g.iter().fold(0f32, |m, v| m.max(v.abs()));
+            let worst = g.iter().zip(h).fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+            assert!(scale > 0.0, "{method:?}: a zero gradient tests nothing");
+            // The same samples and arithmetic; float atomics may add in another order.
+            assert!(
+                worst <= 1e-4 * scale,
+                "{method:?} iteration {it}: backward differs by {worst} (largest {scale})"
+            );
+        }
+    }
+}

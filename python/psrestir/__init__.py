@@ -106,8 +106,10 @@ class _Bar:
         self.last = now
         if self.iterations:
             done = f"{row['iteration']}/{self.iterations} iterations"
-        else:
+        elif self.time_budget:
             done = f"{row['elapsed_s']:.0f}/{self.time_budget:.0f} s, iteration {row['iteration']}"
+        else:  # the task's own budget
+            done = f"iteration {row['iteration']}, {row['elapsed_s']:.1f} s"
         parts = [done]
         if row.get("loss") is not None:
             parts.append(f"loss {row['loss']:.4e}")

@@ -85,7 +85,10 @@ fn raise(class: &str, msg: String, path: Option<String>) -> PyErr {
 
 /// Run `f` with the interpreter released, turning a panic into `psrestir.errors.PsrestirError`
 /// and the library's errors into their classes.
-fn released<T: Send>(py: Python<'_>, f: impl FnOnce() -> psrestir::Result<T> + Send) -> PyResult<T> {
+fn released<T: Send>(
+    py: Python<'_>,
+    f: impl FnOnce() -> psrestir::Result<T> + Send,
+) -> PyResult<T> {
     let r = py.detach(|| catch_unwind(AssertUnwindSafe(f)));
     match r {
         Ok(Ok(v)) => Ok(v),
@@ -162,7 +165,9 @@ fn read_array(what: &str, obj: &Bound<'_, PyAny>, shape: [usize; 3]) -> PyResult
     if dims != shape {
         return Err(bad(format!("shape {dims:?}")));
     }
-    let typed = obj.cast::<numpy::PyArray3<f32>>().map_err(|e| bad(e.to_string()))?;
+    let typed = obj
+        .cast::<numpy::PyArray3<f32>>()
+        .map_err(|e| bad(e.to_string()))?;
     let ro = typed.readonly();
     let v: Vec<f32> = ro.as_array().iter().copied().collect();
     Ok(v)
@@ -421,15 +426,28 @@ impl DiffRender {
         self.lock().iteration()
     }
 
-    fn texture<'py>(&self, py: Python<'py>, texture: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+    fn texture<'py>(
+        &self,
+        py: Python<'py>,
+        texture: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
         let i = self.index(texture)?;
         let v = released(py, || self.lock().texture(i))?;
         to_array(py, v, self.shapes[i])
     }
 
-    fn set_texture(&self, py: Python<'_>, texture: &Bound<'_, PyAny>, values: &Bound<'_, PyAny>) -> PyResult<()> {
+    fn set_texture(
+        &self,
+        py: Python<'_>,
+        texture: &Bound<'_, PyAny>,
+        values: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
         let i = self.index(texture)?;
-        let v = read_array(&format!("texture `{}`", self.names[i]), values, self.shapes[i])?;
+        let v = read_array(
+            &format!("texture `{}`", self.names[i]),
+            values,
+            self.shapes[i],
+        )?;
         released(py, || self.lock().set_texture(i, &v))
     }
 
@@ -495,7 +513,11 @@ impl DiffRender {
     }
 
     /// Which texels some camera sample reaches: bool array (height, width).
-    fn observed<'py>(&self, py: Python<'py>, texture: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+    fn observed<'py>(
+        &self,
+        py: Python<'py>,
+        texture: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
         let i = self.index(texture)?;
         let op = self.lock();
         let t = &op.textures()[i];
@@ -518,7 +540,11 @@ impl DiffRender {
     }
 
     /// The ground-truth values of a texture, when the task's targets come from a scene.
-    fn reference<'py>(&self, py: Python<'py>, texture: &Bound<'py, PyAny>) -> PyResult<Option<Bound<'py, PyAny>>> {
+    fn reference<'py>(
+        &self,
+        py: Python<'py>,
+        texture: &Bound<'py, PyAny>,
+    ) -> PyResult<Option<Bound<'py, PyAny>>> {
         let i = self.index(texture)?;
         let p = self.problem(py)?;
         let Some(r) = &p.reference else {

@@ -483,16 +483,14 @@ impl crate::optim::DiffRender {
         let problem = Problem::load(task)?;
         let choice = crate::task::task_method(task, method, problem.cameras.len());
         if choice.automatic {
-            log::info!("gradient estimator: {} ({})", choice.method.name(), choice.reason);
+            log::info!(
+                "gradient estimator: {} ({})",
+                choice.method.name(),
+                choice.reason
+            );
         }
-        let settings =
-            crate::task::task_settings(task, &problem.cameras, choice.method, extra);
-        let op = crate::optim::DiffRender::new(
-            gpu,
-            &problem.scene,
-            problem.set.clone(),
-            settings,
-        )?;
+        let settings = crate::task::task_settings(task, &problem.cameras, choice.method, extra);
+        let op = crate::optim::DiffRender::new(gpu, &problem.scene, problem.set.clone(), settings)?;
         Ok((op, problem))
     }
 }

@@ -103,7 +103,10 @@ impl Optimizer {
                 self.settings.height
             )));
         }
-        if let Some(i) = adjoint.iter().position(|a| !a.iter().all(|v| v.is_finite())) {
+        if let Some(i) = adjoint
+            .iter()
+            .position(|a| !a.iter().all(|v| v.is_finite()))
+        {
             return Err(Error::Invalid(format!(
                 "the adjoint is not finite at pixel {i} (counting through the cameras)"
             )));
@@ -239,7 +242,10 @@ impl DiffRender {
             )));
         }
         let (lo, hi) = t.slot.range();
-        if let Some(k) = values.iter().position(|v| !(v.is_finite() && *v >= lo && *v <= hi)) {
+        if let Some(k) = values
+            .iter()
+            .position(|v| !(v.is_finite() && *v >= lo && *v <= hi))
+        {
             return Err(Error::Invalid(format!(
                 "texture `{}`: value {} at index {k} is outside the slot's range [{lo}, {hi}] \
                  (clip the values to it)",
@@ -248,10 +254,11 @@ impl DiffRender {
             )));
         }
         let offset = t.offset as u64 * 4;
-        self.opt
-            .gpu
-            .queue
-            .write_buffer(&self.opt.params.values, offset, bytemuck::cast_slice(values));
+        self.opt.gpu.queue.write_buffer(
+            &self.opt.params.values,
+            offset,
+            bytemuck::cast_slice(values),
+        );
         self.rendered = false;
         self.opt.gpu.check("set_texture")
     }

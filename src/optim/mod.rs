@@ -22,12 +22,12 @@ mod settings;
 mod state;
 mod targets;
 mod timing;
+pub use diff_render::{DiffRender, DiffRenderOptions};
 pub use memory::*;
 pub use seeds::*;
 pub use settings::*;
 pub use state::*;
 pub use timing::*;
-pub use diff_render::{DiffRender, DiffRenderOptions};
 
 use crate::gpu::abi::stat;
 use crate::gpu::Gpu;

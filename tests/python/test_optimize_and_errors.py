@@ -29,9 +29,12 @@ def test_optimize_a_dict_task_returns_errors_textures_and_outputs(tmp_path):
     assert os.path.samefile(r.out, tmp_path / "run")
     for f in ["metrics.csv", "checkpoint.bin", "sphere_base_color.exr", "optimized.glb"]:
         assert (tmp_path / "run" / f).exists(), f
-    # Resuming continues from the checkpoint: two more iterations, not eight.
-    r2 = psrestir.optimize(task, iterations=8, resume=True, progress=False)
-    assert r2.iterations == 8
+    # Resuming continues from the checkpoint: two more iterations, not eight; with the
+    # default progress display (the task's own budget, then an iteration count).
+    r2 = psrestir.optimize(task, resume=True)
+    assert r2.iterations == 6
+    r3 = psrestir.optimize(task, iterations=8, resume=True)
+    assert r3.iterations == 8
 
 
 def test_optimize_a_task_file_with_keyword_options(tmp_path):
