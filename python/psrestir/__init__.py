@@ -215,6 +215,66 @@ class DiffRender:
         path, text, base = _task_args(task, base_dir)
         self._op = _NativeDiffRender(path, text, base, method)
 
+    @classmethod
+    def from_scene(
+        cls,
+        scene,
+        textures,
+        *,
+        cameras=None,
+        width=256,
+        height=256,
+        env=None,
+        max_depth=1,
+        spp_grad=1,
+        seed=1,
+        filter="bilinear",
+        method="baseline",
+    ):
+        """A differentiable render of a glTF file without a task file.
+
+        ``textures`` lists what to recover, each ``(material, slot, (width, height))`` or
+        ``(material, slot, (width, height), init)`` with ``slot`` one of ``"base_color"``,
+        ``"roughness"``, ``"metallic"`` (``init``: a value or an RGB triple; by default 0.5
+        gray, roughness 0.5, metallic 0). ``cameras`` names the file's cameras (None: all);
+        ``env`` an environment map (lat-long EXR or HDR); ``max_depth`` the path depth
+        (1: direct light). :meth:`targets` renders the file's own materials.
+        """
+        defaults = {"base_color": [0.5, 0.5, 0.5], "roughness": 0.5, "metallic": 0.0}
+        specs = []
+        for t in textures:
+            if len(t) not in (3, 4):
+                raise InvalidArgument(
+                    f"textures: expected (material, slot, (width, height)[, init]), got {t!r}"
+                )
+            material, slot, resolution = t[0], t[1], t[2]
+            init = t[3] if len(t) == 4 else defaults.get(slot, 0.5)
+            specs.append(
+                {
+                    "material": material,
+                    "slot": slot,
+                    "resolution": list(resolution),
+                    "init": init,
+                    "learning_rate": 0.01,
+                }
+            )
+        scene = _os.path.abspath(_os.fspath(scene))
+        task = {
+            "scene": scene,
+            "width": width,
+            "height": height,
+            "seed": seed,
+            "max_depth": max_depth,
+            "target": {"scene": scene},
+            "optimizer": {"iterations": 1, "gradient_spp": spp_grad, "filter": filter},
+            "textures": specs,
+        }
+        if cameras is not None:
+            task["cameras"] = list(cameras)
+        if env is not None:
+            task["env"] = _os.path.abspath(_os.fspath(env))
+        return cls(task, method=method)
+
     @property
     def texture_names(self):
         """The optimized textures, ``material_slot``, in the task's order."""

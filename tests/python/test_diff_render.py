@@ -176,3 +176,29 @@ def test_restir_lowers_a_loss_computed_in_python(out_dir):
     assert op.iteration == 40
     end = loss(10_001)
     assert end < 0.5 * start, (start, end)
+
+
+def test_from_scene_needs_no_task_file(tmp_path, monkeypatch):
+    from conftest import SCENE, SKY
+
+    monkeypatch.chdir(tmp_path)  # its targets are cached under out/dict_task
+    op = psrestir.DiffRender.from_scene(
+        SCENE,
+        [("sphere", "roughness", (4, 4)), ("sphere", "base_color", (8, 4), [0.2, 0.3, 0.4])],
+        cameras=["top"],
+        width=32,
+        height=32,
+        env=SKY,
+        method="recursive",
+    )
+    assert op.texture_names == ["sphere_roughness", "sphere_base_color"]
+    assert op.texture_shapes == {"sphere_roughness": (4, 4, 1), "sphere_base_color": (4, 8, 3)}
+    np.testing.assert_allclose(op.texture("sphere_base_color")[0, 0], [0.2, 0.3, 0.4])
+    assert op.camera_names == ["top"] and op.method == "recursive"
+    img = op.render(spp=2, seed=0)[0]
+    target = op.targets()[0]
+    grads = op.backward([(2.0 / img.size) * (img - target)])
+    assert grads["sphere_roughness"].shape == (4, 4, 1)
+    assert np.abs(grads["sphere_base_color"]).sum() > 0
+    with pytest.raises(psrestir.InvalidArgument, match="expected \\(material, slot"):
+        psrestir.DiffRender.from_scene(SCENE, [("sphere", "roughness")])
