@@ -1,11 +1,12 @@
 //! psrestir: inverse texture optimization on wgpu with parameter-space ReSTIR gradients.
 //!
 //! psrestir recovers material textures (base color, roughness, metallic) of a scene whose
-//! geometry, lights and cameras are known, from target images, by gradient descent (Adam).
-//! It has two gradient estimators, measured side by side: plain Monte Carlo (the baseline,
-//! the default: it ends lower at equal time on the machines measured so far) and
-//! parameter-space ReSTIR, which reuses Monte Carlo samples across iterations through two
-//! reservoirs per texel ([`Method`]). All GPU work is WGSL compute shaders on [`wgpu`].
+//! geometry, lights and cameras are known, from target images, by gradient descent. It has
+//! three gradient estimators ([`Method`]): plain Monte Carlo (the baseline), parameter-space
+//! ReSTIR, which reuses Monte Carlo samples across iterations through two reservoirs per
+//! texel, and a recursive control variate; `auto` picks by the task's sampling
+//! ([`MethodChoice`]). Each is followed by Adam or a variance-scaled step, optionally with
+//! moments filtered across texels. All GPU work is WGSL compute shaders on [`wgpu`].
 //!
 //! # Use from a wgpu application
 //! The application keeps its device and queue; psrestir checks their limits and works on
@@ -57,6 +58,10 @@
 //! # Ok(())
 //! # }
 //! ```
+//!
+//! With a loss of its own, an application renders and differentiates through
+//! [`optim::DiffRender`]: `render` the cameras, compute dL/dI, and `backward` returns each
+//! texture's gradient from the chosen estimator (the Python package is built on it).
 //!
 //! The `psrestir` binary is built on the same API: task files ([`Task`]) are turned into
 //! problems with [`Problem::from_task`], and [`job::run::run`] adds progress, metrics,

@@ -1,5 +1,7 @@
 //! `psrestir bench`: the paper's measurements (docs/method.md, "How results are measured") of
-//! the baseline and the ReSTIR estimator, one after the other on the same device, per scene:
+//! the estimators, one after the other on the same device, per scene (the gradient-error
+//! phase compares ReSTIR with the baseline; the equal-time phase runs the baseline with Adam
+//! and then every contender: an estimator with its step):
 //!
 //! 1. gradient error: after `warmup` ReSTIR iterations, the relMSE of ReSTIR's next gradient
 //!    and of baseline gradients at the same parameter state, at equal iterations (the task's
@@ -13,9 +15,9 @@
 //!    for that integrand); and the estimator-only error of the mean of successive
 //!    estimates (ReSTIR's share kept samples) against a mean of as many independent
 //!    baseline estimates;
-//! 2. equal-time optimization: both estimators optimize from the same start for the same
-//!    wall-clock budget; image relMSE (a high-spp render against the target) and texture RMSE
-//!    against the ground truth, as curves over time and at the end;
+//! 2. equal-time optimization: the baseline and each contender optimize from the same start
+//!    for the same wall-clock budget; image relMSE (a high-spp render against the target) and
+//!    texture RMSE against the ground truth, as curves over time and at the end;
 //! 3. cost: milliseconds per iteration, GPU time per pass, bytes of state per texel.
 //!
 //! The report (`bench.json`, `report.md`, plots and gradient images) is written by

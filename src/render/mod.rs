@@ -1,4 +1,5 @@
-//! The direct-lighting renderer: scene upload, the `render` pass and the `trace_rays` pass.
+//! The renderer (direct light, and path-traced indirect light to the scene's `max_depth`):
+//! scene upload, the `render` pass and the `trace_rays` pass.
 
 // Field-for-field mirrors of WGSL structs: each struct names its WGSL twin, whose comments
 // document the fields.

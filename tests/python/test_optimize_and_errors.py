@@ -85,11 +85,15 @@ def test_an_exception_in_the_callback_stops_the_run_with_its_checkpoint(tmp_path
 def test_ctrl_c_stops_cleanly_with_the_checkpoint_written(tmp_path):
     """A real SIGINT to a process running optimize: KeyboardInterrupt once the iteration
     under way is done, with the checkpoint and outputs written."""
-    task = small_task(tmp_path / "sigint", time_budget_s=300.0)
+    task = small_task(tmp_path / "sigint", time_budget_s=100.0)
     del task["optimizer"]["iterations"]
+    # A process started in the background by a non-interactive shell inherits SIGINT ignored,
+    # and Python then installs no KeyboardInterrupt handler: install it, as an interactive
+    # interpreter has it.
     script = textwrap.dedent(
         f"""
-        import json, sys, psrestir
+        import json, signal, sys, psrestir
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         def cb(row):
             if row["iteration"] == 1:
                 print("started", flush=True)
