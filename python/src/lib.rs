@@ -520,10 +520,12 @@ impl DiffRender {
     ) -> PyResult<Bound<'py, PyAny>> {
         let i = self.index(texture)?;
         let op = self.lock();
+        let texels = |t: &psrestir::render::params::ParamTexture| (t.width * t.height) as usize;
         let t = &op.textures()[i];
         let all = op.optimizer().observed_texels().map_err(to_py)?;
-        let start = (t.offset / t.channels()) as usize;
-        let n = (t.width * t.height) as usize;
+        // One flag per texel, the textures one after another.
+        let start: usize = op.textures()[..i].iter().map(texels).sum();
+        let n = texels(t);
         let v: Vec<bool> = all[start..start + n].to_vec();
         let shape = [t.height as usize, t.width as usize];
         Ok(PyArray1::from_vec(py, v).reshape(shape)?.into_any())

@@ -136,15 +136,6 @@ impl Optimizer {
     }
 }
 
-/// What a [`DiffRender`] renders and how it estimates gradients.
-#[derive(Clone, Debug)]
-pub struct DiffRenderOptions {
-    /// The cameras, image size, gradient samples per pixel, estimator and its options, and
-    /// the seed the gradient's streams derive from when a call names none. The primal, step
-    /// and prior settings are not used: the caller renders, computes its loss and steps.
-    pub settings: Settings,
-}
-
 /// A differentiable render whose loss and optimizer belong to the caller: set the textures,
 /// [`render`](DiffRender::render) the cameras, compute dL/dI of any loss, and
 /// [`backward`](DiffRender::backward) gives each texel's gradient with the chosen estimator.

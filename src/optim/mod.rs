@@ -22,7 +22,7 @@ mod settings;
 mod state;
 mod targets;
 mod timing;
-pub use diff_render::{DiffRender, DiffRenderOptions};
+pub use diff_render::DiffRender;
 pub use memory::*;
 pub use seeds::*;
 pub use settings::*;

@@ -200,5 +200,12 @@ def test_from_scene_needs_no_task_file(tmp_path, monkeypatch):
     grads = op.backward([(2.0 / img.size) * (img - target)])
     assert grads["sphere_roughness"].shape == (4, 4, 1)
     assert np.abs(grads["sphere_base_color"]).sum() > 0
+    # The observed texels of the second texture are its own (the flags of the textures lie
+    # one after another): the same mask as a render that optimizes it alone.
+    alone = psrestir.DiffRender.from_scene(
+        SCENE, [("sphere", "base_color", (8, 4))], cameras=["top"], width=32, height=32, env=SKY
+    )
+    np.testing.assert_array_equal(op.observed("sphere_base_color"), alone.observed(0))
+    assert op.observed("sphere_roughness").shape == (4, 4)
     with pytest.raises(psrestir.InvalidArgument, match="expected \\(material, slot"):
         psrestir.DiffRender.from_scene(SCENE, [("sphere", "roughness")])
