@@ -14,6 +14,30 @@ pub(super) struct CameraPasses {
     pub(super) render_group: wgpu::BindGroup,
 }
 
+impl CameraPasses {
+    /// Point this camera's primal render at `spp` samples from sample `offset` of `seed`'s
+    /// stream, under the current textures only (no control-variate state), and upload its
+    /// uniform: a chunk of a render outside the iteration. Returns `spp`.
+    pub(super) fn set_samples(
+        &mut self,
+        queue: &wgpu::Queue,
+        seed: u32,
+        offset: u32,
+        spp: u32,
+    ) -> u32 {
+        self.render_params.seed = seed;
+        self.render_params.sample_offset = offset;
+        self.render_params.spp = spp;
+        self.render_params.two_states = 0;
+        queue.write_buffer(
+            &self.render_uniform,
+            0,
+            bytemuck::bytes_of(&self.render_params),
+        );
+        spp
+    }
+}
+
 /// Counters of the passes the optimizer runs itself.
 pub(super) struct Stats {
     pub(super) primal: wgpu::Buffer,

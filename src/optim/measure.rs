@@ -126,14 +126,11 @@ impl Optimizer {
             let mut done = 0;
             while done < spp {
                 let cam = &mut self.cams[k];
-                cam.render_params.seed = pass_seed(seed, u32::MAX - 3, k as u32, Seeds::PRIMAL);
-                cam.render_params.sample_offset = done;
-                cam.render_params.spp = chunk.min(spp - done);
-                cam.render_params.two_states = 0;
-                self.gpu.queue.write_buffer(
-                    &cam.render_uniform,
-                    0,
-                    bytemuck::bytes_of(&cam.render_params),
+                let n = cam.set_samples(
+                    &self.gpu.queue,
+                    pass_seed(seed, u32::MAX - 3, k as u32, Seeds::PRIMAL),
+                    done,
+                    chunk.min(spp - done),
                 );
                 let mut enc =
                     self.gpu
@@ -146,7 +143,7 @@ impl Optimizer {
                 }
                 self.renderer
                     .encode_render(&mut enc, "primal", &cam.render_group, self.grid, None);
-                done += cam.render_params.spp;
+                done += n;
                 if done >= spp {
                     self.loss.encode(&mut enc, k, parity, None);
                 }
