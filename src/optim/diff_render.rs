@@ -27,9 +27,12 @@ impl Optimizer {
         let (w, h) = (self.settings.width, self.settings.height);
         let n_pixels = w * h;
         let bytes = n_pixels as u64 * 16;
+        let n_cams = self.cams.len() as u64;
+        let gpu = &self.gpu;
         let images = self
-            .gpu
-            .storage_zeroed("render_cameras images", bytes * self.cams.len() as u64);
+            .camera_images
+            .get_or_init(|| gpu.storage_zeroed("render_cameras images", bytes * n_cams))
+            .clone();
         let chunk = ((1u32 << 20) / n_pixels).clamp(1, 64);
         let new_encoder = |gpu: &Gpu| {
             gpu.device
@@ -67,17 +70,7 @@ impl Optimizer {
         Ok(sums
             .chunks(n_pixels as usize)
             .take(self.cams.len())
-            .map(|c| Image {
-                width: w,
-                height: h,
-                rgb: c
-                    .iter()
-                    .map(|s| {
-                        let n = s[3].max(1.0);
-                        [s[0] / n, s[1] / n, s[2] / n]
-                    })
-                    .collect(),
-            })
+            .map(|c| crate::render::accum_image(w, h, c))
             .collect())
     }
 

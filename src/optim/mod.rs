@@ -76,6 +76,8 @@ pub struct Optimizer {
     estimator: Box<dyn Estimator>,
     /// The texture_export pipeline, built on first use.
     export_pipeline: std::sync::OnceLock<wgpu::ComputePipeline>,
+    /// The images [`Optimizer::render_cameras`] reads back, made at its first call.
+    camera_images: std::sync::OnceLock<wgpu::Buffer>,
     /// The observed-texel mask, computed when the optimizer is made: its flags, and the GPU
     /// buffer they were read from (one word per texel, nonzero: observed), which the
     /// multiscale and smoothness passes bind.
@@ -229,6 +231,7 @@ impl Optimizer {
             timer,
             estimator,
             export_pipeline: std::sync::OnceLock::new(),
+            camera_images: std::sync::OnceLock::new(),
             observed,
             multiscale: None,
             smoothness: None,

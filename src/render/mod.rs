@@ -322,17 +322,7 @@ impl Renderer {
         let seconds = start.elapsed().as_secs_f64();
         let sums: Vec<[f32; 4]> = self.gpu.read_pod(&accum)?;
         let counts: Vec<u32> = self.gpu.read_pod(&stats)?;
-        let image = Image {
-            width: w,
-            height: h,
-            rgb: sums
-                .iter()
-                .map(|s| {
-                    let n = s[3].max(1.0);
-                    [s[0] / n, s[1] / n, s[2] / n]
-                })
-                .collect(),
-        };
+        let image = accum_image(w, h, &sums);
         Ok(RenderOutput {
             image,
             camera_rays: counts[stat::RENDER_CAMERA_RAYS as usize] as u64,
@@ -401,5 +391,21 @@ impl Renderer {
                 }
             })
             .collect())
+    }
+}
+
+/// The image of a `w` x `h` render's accumulator (per pixel: the sum of its samples' RGB, and
+/// their count in the fourth value).
+pub fn accum_image(w: u32, h: u32, sums: &[[f32; 4]]) -> Image {
+    Image {
+        width: w,
+        height: h,
+        rgb: sums
+            .iter()
+            .map(|s| {
+                let n = s[3].max(1.0);
+                [s[0] / n, s[1] / n, s[2] / n]
+            })
+            .collect(),
     }
 }
