@@ -1,4 +1,5 @@
-//! The benchmark scene `room` (see `bench_scenes`): a room lit mostly by indirect light.
+//! The benchmark scenes lit by indirect light (see `bench_scenes`): `room`, lit mostly by
+//! light that bounced, and `gallery`, whose painting is lit only by bounced light.
 use super::authoring::{box_triangles, GltfBuilder};
 use super::bench_scenes::{area_light, camera, create, hash, texture, write_png, write_task};
 use super::bundled::srgb8;
@@ -169,6 +170,174 @@ output = "out/bench/room"
         r#"
 [[textures]]
 material = "tiles"
+slot = "base_color"
+resolution = [256, 256]
+init = [0.5, 0.5, 0.5]
+learning_rate = 0.03
+"#,
+    )
+}
+
+/// The painting of `gallery`: colored discs and a band over a warm ground.
+fn painting(u: f32, v: f32) -> [f32; 3] {
+    let mut c = [0.78 - 0.25 * v, 0.7 - 0.3 * v, 0.55 - 0.3 * v];
+    if (0.62..0.7).contains(&v) {
+        c = [0.15, 0.25, 0.45];
+    }
+    for k in 0..9u32 {
+        let (x, y) = (hash(k, 1), hash(k, 2));
+        let r = 0.05 + 0.12 * hash(k, 3);
+        if (u - x).powi(2) + ((v - y) * 0.75).powi(2) < r * r {
+            c = match k % 4 {
+                0 => [0.75, 0.2, 0.12],
+                1 => [0.2, 0.45, 0.25],
+                2 => [0.9, 0.8, 0.35],
+                _ => [0.12, 0.12, 0.14],
+            };
+        }
+    }
+    c
+}
+
+/// A gallery room whose painting on the back wall is lit only by bounced light: the lamp
+/// hangs above the painting's top edge and shines at the ceiling, so no point of the painting
+/// sees its emitting side, and every path that lights the painting bounces first (`max_depth
+/// = 3`: the ceiling and one more surface). The painting's base color is optimized, seen by
+/// two cameras.
+pub fn write_gallery(dir: &Path) -> Result<()> {
+    create(dir)?;
+    let mut b = GltfBuilder::new();
+    b.use_extension("KHR_materials_emissive_strength");
+    let color = texture(|u, v| {
+        let c = painting(u, v);
+        [srgb8(c[0]), srgb8(c[1]), srgb8(c[2]), 255]
+    });
+    write_png(dir, "painting.png", &color)?;
+    let img = b.add_image_uri("painting", "painting.png");
+    let tex = b.add_texture(img, None);
+    let canvas = b.add_material(json!({
+        "name": "painting",
+        "pbrMetallicRoughness": {"baseColorTexture": {"index": tex},
+            "metallicFactor": 0.0, "roughnessFactor": 0.7}
+    }));
+    let plain = |b: &mut GltfBuilder, name: &str, c: [f32; 3]| {
+        b.add_material(json!({
+            "name": name,
+            "pbrMetallicRoughness": {"baseColorFactor": [c[0], c[1], c[2], 1.0],
+                "metallicFactor": 0.0, "roughnessFactor": 0.8}
+        }))
+    };
+    let white = plain(&mut b, "white", [0.8, 0.8, 0.78]);
+    let wall = plain(&mut b, "wall", [0.6, 0.62, 0.66]);
+    let wood = plain(&mut b, "wood", [0.45, 0.3, 0.18]);
+    let (w, h) = (1.2f32, 2.0f32);
+    let (px, py0, py1, pz) = (0.6f32, 0.55f32, 1.45f32, -w + 0.01);
+    let mut nodes = vec![
+        panel(
+            &mut b,
+            "painting",
+            [[-px, py0, pz], [px, py0, pz], [px, py1, pz], [-px, py1, pz]],
+            [0.0, 0.0, 1.0],
+            true,
+            canvas,
+        ),
+        panel(
+            &mut b,
+            "back",
+            [[-w, 0.0, -w], [w, 0.0, -w], [w, h, -w], [-w, h, -w]],
+            [0.0, 0.0, 1.0],
+            false,
+            wall,
+        ),
+        panel(
+            &mut b,
+            "floor",
+            [[-w, 0.0, w], [w, 0.0, w], [w, 0.0, -w], [-w, 0.0, -w]],
+            [0.0, 1.0, 0.0],
+            false,
+            wood,
+        ),
+        panel(
+            &mut b,
+            "ceiling",
+            [[-w, h, -w], [w, h, -w], [w, h, w], [-w, h, w]],
+            [0.0, -1.0, 0.0],
+            false,
+            white,
+        ),
+        panel(
+            &mut b,
+            "left",
+            [[-w, 0.0, w], [-w, 0.0, -w], [-w, h, -w], [-w, h, w]],
+            [1.0, 0.0, 0.0],
+            false,
+            wall,
+        ),
+        panel(
+            &mut b,
+            "right",
+            [[w, 0.0, -w], [w, 0.0, w], [w, h, w], [w, h, -w]],
+            [-1.0, 0.0, 0.0],
+            false,
+            wall,
+        ),
+    ];
+    // The lamp's shade: a flat box under the lamp, which faces the ceiling from above the
+    // painting's top edge (the painting lies below the lamp's plane: no direct light).
+    let ly = py1 + 0.2;
+    let shade = b.add_mesh(
+        "shade",
+        &box_triangles([0.0, ly - 0.03, -0.2], [0.3, 0.025, 0.3]),
+        None,
+        None,
+        None,
+        Some(white),
+    );
+    nodes.push(b.add_node(json!({"name": "shade", "mesh": shade})));
+    nodes.push(area_light(
+        &mut b,
+        "lamp",
+        [0.0, ly, -0.2],
+        [0.0, h, -0.2],
+        0.5,
+        [1.0, 0.92, 0.82],
+        30.0,
+    ));
+    nodes.push(camera(
+        &mut b,
+        "main",
+        0.5,
+        [0.0, 1.0, 3.0],
+        [0.0, 1.0, -w],
+    ));
+    nodes.push(camera(
+        &mut b,
+        "side",
+        0.55,
+        [0.9, 0.8, 2.0],
+        [-0.1, 1.0, -w],
+    ));
+    b.set_scene(&nodes);
+    b.write_gltf(&dir.join("scene.gltf"), false)?;
+    write_task(
+        dir,
+        r#"# Benchmark scene "gallery": recover the base color of a painting lit only by bounced
+# light (its lamp shines at the ceiling from above the painting), seen by two cameras, with
+# paths of 3 vertices (max_depth).
+# Written by `psrestir make-scenes`; paths are relative to this file.
+scene = "scene.gltf"
+cameras = ["main", "side"]
+width = 128
+height = 128
+seed = 6
+max_depth = 3
+# Lit by its lamp alone: no default environment through the open front.
+default_environment = false
+output = "out/bench/gallery"
+"#,
+        r#"
+[[textures]]
+material = "painting"
 slot = "base_color"
 resolution = [256, 256]
 init = [0.5, 0.5, 0.5]

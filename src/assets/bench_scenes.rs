@@ -1,5 +1,6 @@
 //! Generator of the benchmark scenes under `scenes/bench/` (run `psrestir make-scenes`): the
-//! paper's four experiments in miniature, and a room lit mostly by indirect light, each a glTF
+//! paper's four experiments in miniature, a room lit mostly by indirect light and a gallery whose
+//! painting is lit only by bounced light, each a glTF
 //! scene holding the ground-truth texture and a task file that starts the optimized texture
 //! from a constant.
 use super::authoring::{box_triangles, lathe, png_bytes, quad_facing, uv_sphere, GltfBuilder};
@@ -11,7 +12,7 @@ use serde_json::json;
 use std::path::Path;
 
 /// Names of the benchmark scenes, in the order `psrestir bench` runs them.
-pub const BENCH_SCENES: [&str; 5] = ["vase", "lattice", "dish", "sphere", "room"];
+pub const BENCH_SCENES: [&str; 6] = ["vase", "lattice", "dish", "sphere", "room", "gallery"];
 
 /// Texture resolution of the ground truth and of the optimized textures.
 const TEX: u32 = 256;
@@ -22,7 +23,8 @@ pub fn write_bench_scenes(dir: &Path) -> Result<()> {
     write_lattice(&dir.join("lattice"))?;
     write_dish(&dir.join("dish"))?;
     write_sphere(&dir.join("sphere"))?;
-    super::bench_room::write_room(&dir.join("room"))
+    super::bench_room::write_room(&dir.join("room"))?;
+    super::bench_room::write_gallery(&dir.join("gallery"))
 }
 
 pub(super) fn create(dir: &Path) -> Result<()> {
