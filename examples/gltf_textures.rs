@@ -33,7 +33,7 @@ pub fn run(scene_path: &Path, out: &Path, iterations: u32) -> psrestir::Result<O
         slot: Slot::BaseColor,
         resolution: [64, 32],
         init: Init::Vector(vec![0.5; 3]),
-        learning_rate: 0.03,
+        learning_rate: Some(0.03),
     };
     let mut problem = Problem::new(scene.clone(), vec![main], &[texture], Filter::Bilinear)?;
     // The file itself is the truth: render the targets from it.

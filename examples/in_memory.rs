@@ -100,7 +100,7 @@ pub fn texture() -> TextureSpec {
         slot: Slot::BaseColor,
         resolution: [8, 8],
         init: Init::Vector(vec![0.5; 3]),
-        learning_rate: 0.03,
+        learning_rate: Some(0.03),
     }
 }
 

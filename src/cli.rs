@@ -290,12 +290,12 @@ pub(crate) struct BenchArgs {
     pub(crate) end_to_end_only: bool,
     /// The estimators optimized at equal time after the baseline with Adam (the reference
     /// of every ratio), as METHOD or METHOD:STEP (steps: adam, variance), either with
-    /// `+filtered` for filtered moments (`baseline+filtered`), comma-separated; `none` for
-    /// none.
+    /// `+filtered` for filtered moments (`baseline+filtered`), or `default` (the scene's task
+    /// stripped to what `auto` chooses), comma-separated; `none` for none.
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "restir,recursive:adam,recursive:variance"
+        default_value = "restir,recursive:adam,recursive:variance,default"
     )]
     pub(crate) contenders: Vec<String>,
     /// Switch off the tasks' priors (multiscale gradient, smoothness prior).

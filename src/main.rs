@@ -338,20 +338,30 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
     let path = task.unwrap_or_else(|| PathBuf::from(DEFAULT_TASK));
     let mut task = Task::load(&path)?;
     task.max_depth = max_depth.unwrap_or(task.max_depth);
-    if let Some(f) = lr_scale {
-        if !(f.is_finite() && f > 0.0) {
-            bail!("--lr-scale must be a positive number");
-        }
-        for t in &mut task.textures {
-            t.learning_rate *= f;
-        }
-    }
     let adam = &mut task.optimizer.adam;
     adam.beta1 = adam_beta1.unwrap_or(adam.beta1);
     adam.beta2 = adam_beta2.unwrap_or(adam.beta2);
     adam.eps = adam_eps.unwrap_or(adam.eps);
     if let Some(s) = step {
-        task.optimizer.step = s.kind();
+        task.optimizer.step = Some(s.kind());
+    }
+    if let Some(f) = lr_scale {
+        if !(f.is_finite() && f > 0.0) {
+            bail!("--lr-scale must be a positive number");
+        }
+        // A texture without a rate scales the one `auto` gives it under the task's step.
+        let step = psrestir::task::task_configuration(
+            &task,
+            task.optimizer.method,
+            psrestir::task::named_cameras(&task),
+        )
+        .step;
+        for t in &mut task.textures {
+            let rate = t
+                .learning_rate
+                .unwrap_or_else(|| psrestir::optim::auto::learning_rate(step, t.slot));
+            t.learning_rate = Some(rate * f);
+        }
     }
     let vs = &mut task.optimizer.variance_step;
     vs.clip = step_clip.unwrap_or(vs.clip);
@@ -359,7 +369,21 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
     if let Some(p) = primal {
         task.optimizer.primal = p.mode();
     }
-    let mf = &mut task.optimizer.moment_filter;
+    // A flag on the filter changes the filter the task would run with (its own, or `auto`'s
+    // for its step).
+    let filter_flags = moment_filter.is_some()
+        || moment_filter_sigma.is_some()
+        || moment_filter_taps.is_some()
+        || moment_filter_own_weight.is_some()
+        || moment_filter_log
+        || moment_filter_write_back;
+    if filter_flags && task.optimizer.moment_filter.is_none() {
+        let cameras = psrestir::task::named_cameras(&task);
+        let c = psrestir::task::task_configuration(&task, task.optimizer.method, cameras);
+        task.optimizer.moment_filter = Some(c.moment_filter);
+    }
+    let mut unset = Default::default();
+    let mf = task.optimizer.moment_filter.as_mut().unwrap_or(&mut unset);
     mf.levels = moment_filter.unwrap_or(mf.levels);
     mf.sigma = moment_filter_sigma.unwrap_or(mf.sigma);
     mf.taps = moment_filter_taps.unwrap_or(mf.taps);
@@ -370,7 +394,7 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
         task.optimizer.multiscale_levels = l;
     }
     if let Some(s) = smoothness {
-        task.optimizer.smoothness = s;
+        task.optimizer.smoothness = Some(s);
     }
     if let Some(b) = time_budget {
         if !(b.is_finite() && b > 0.0) {

@@ -88,8 +88,9 @@ pub struct TextureSpec {
     pub resolution: [u32; 2],
     /// Constant initial value.
     pub init: Init,
-    /// Adam learning rate.
-    pub learning_rate: f32,
+    /// Learning rate (None: the step's for the slot, [`crate::optim::auto::learning_rate`]).
+    #[serde(default)]
+    pub learning_rate: Option<f32>,
 }
 
 impl TextureSpec {
@@ -131,7 +132,10 @@ pub fn check_texture(
     {
         return Err(("init", format!("values must lie in [{lo}, {hi}]")));
     }
-    if !(tex.learning_rate.is_finite() && tex.learning_rate >= 0.0) {
+    if tex
+        .learning_rate
+        .is_some_and(|lr| !(lr.is_finite() && lr >= 0.0))
+    {
         return Err(("learning_rate", "must be a finite number >= 0".into()));
     }
     if earlier

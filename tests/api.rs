@@ -293,7 +293,7 @@ fn a_task_too_large_for_the_device_is_refused_before_allocating() {
         slot: psrestir::Slot::Roughness,
         resolution: [500, 500],
         init: psrestir::Init::Scalar(0.5),
-        learning_rate: 0.01,
+        learning_rate: Some(0.01),
     };
     let mut p = Problem::new(in_memory::scene(), vec![0], &[spec], Filter::Bilinear).unwrap();
     p.render_targets(&gpu, in_memory::scene(), 64, 64, 4, 1)
@@ -388,7 +388,7 @@ fn a_1024_squared_texture_optimizes_with_restir() {
     let gpu = Gpu::new().unwrap();
     let spec = psrestir::TextureSpec {
         resolution: [1024, 1024],
-        learning_rate: 0.2,
+        learning_rate: Some(0.2),
         ..in_memory::texture()
     };
     let mut p = Problem::new(in_memory::scene(), vec![0], &[spec], Filter::Bilinear).unwrap();

@@ -173,10 +173,28 @@ fn bench_json_has_every_field_finite_and_in_range() {
     assert!(number(s, "image_relmse_initial") > 0.0);
     // Every run: the baseline with Adam first (the reference of the ratios), then the
     // default contenders: ReSTIR with Adam, the recursive estimator with Adam and with the
-    // variance-scaled step.
+    // variance-scaled step, and the default configuration (auto's: at 0.125 gradient samples
+    // per texel over 2 x 64² texels, ReSTIR, with the variance-scaled step, unfiltered over
+    // a roughness texture).
     let runs = s["runs"].as_array().unwrap();
     let names: Vec<&str> = runs.iter().map(|r| r["method"].as_str().unwrap()).collect();
-    assert_eq!(names, ["baseline", "restir", "recursive", "recursive"]);
+    assert_eq!(
+        names,
+        ["baseline", "restir", "recursive", "recursive", "restir"]
+    );
+    let d = &runs[4];
+    assert_eq!(d["key"].as_str(), Some("default"));
+    assert_eq!(
+        d["name"].as_str(),
+        Some("default (auto: restir, variance-scaled step)")
+    );
+    let dr = &s["auto"]["default_run"];
+    let want = number(d, "texture_rmse_observed") / number(s, "texture_rmse_observed_initial");
+    assert!(
+        (number(dr, "over_start") - want).abs() <= 1e-9 * want,
+        "{dr}"
+    );
+    assert!(number(dr, "over_best") > 0.0, "{dr}");
     let (base, restir) = (&runs[0], &runs[1]);
     for r in runs {
         let name = r["name"].as_str().unwrap();

@@ -23,7 +23,7 @@ fn optimizer(gpu: &psrestir::gpu::Gpu, primal: PrimalMode) -> Optimizer {
             slot,
             resolution: [2, 2],
             init: Init::Vector(vec![0.5; slot.channels() as usize]),
-            learning_rate: 0.0,
+            learning_rate: Some(0.0),
         })
         .collect();
     let set =

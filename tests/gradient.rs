@@ -21,7 +21,7 @@ fn spec(slot: Slot, init: Init) -> TextureSpec {
         slot,
         resolution: [2, 2],
         init,
-        learning_rate: 0.0,
+        learning_rate: Some(0.0),
     }
 }
 

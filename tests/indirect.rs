@@ -279,7 +279,7 @@ fn a_depth_3_model_recovers_a_concave_scenes_base_color_where_direct_light_canno
         slot: Slot::BaseColor,
         resolution: [4, 4],
         init: Init::Vector(vec![0.5; 3]),
-        learning_rate: 0.03,
+        learning_rate: Some(0.03),
     };
     let mut scene = corner_scene(3);
     // Seeing the whole floor and both walls.

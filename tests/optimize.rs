@@ -63,7 +63,7 @@ fn setup_with(
         slot,
         resolution: [res, res],
         init: Init::Scalar(0.5),
-        learning_rate: lr,
+        learning_rate: Some(lr),
     };
     let set = ParamSet::from_specs(&scene, &[spec], filter, std::path::Path::new("test")).unwrap();
     let mut settings = Settings {
@@ -269,7 +269,7 @@ fn the_observed_mask_is_what_the_camera_sees() {
             slot: Slot::Roughness,
             resolution: [res, res],
             init: Init::Scalar(0.5),
-            learning_rate: 0.01,
+            learning_rate: Some(0.01),
         };
         let set =
             ParamSet::from_specs(&scene, &[spec], filter, std::path::Path::new("test")).unwrap();
@@ -314,7 +314,7 @@ fn partly_observed_plane() -> (Scene, ParamSet, Vec<f32>) {
         slot: Slot::BaseColor,
         resolution: [40, 40],
         init: Init::Scalar(0.5),
-        learning_rate: 0.01,
+        learning_rate: Some(0.01),
     };
     let set = ParamSet::from_specs(
         &scene,
@@ -507,7 +507,7 @@ fn moment_filter_setup(
         slot,
         resolution: [res, res],
         init: Init::Scalar(0.5),
-        learning_rate: 0.01,
+        learning_rate: Some(0.01),
     };
     let specs = [spec(Slot::BaseColor, 40), spec(Slot::Roughness, 20)];
     let set = ParamSet::from_specs(&scene, &specs, Filter::Bilinear, "test".as_ref()).unwrap();

@@ -441,7 +441,7 @@ fn plane_optimizer(gpu: &psrestir::gpu::Gpu, settings: Settings, target: &Image)
         slot: Slot::BaseColor,
         resolution: [2, 2],
         init: Init::Vector(vec![0.5; 3]),
-        learning_rate: 0.0,
+        learning_rate: Some(0.0),
     };
     let set = ParamSet::from_specs(&scene, &[spec], Filter::Bilinear, Path::new("t")).unwrap();
     Optimizer::new(gpu, &scene, set, settings, std::slice::from_ref(target)).unwrap()

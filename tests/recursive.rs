@@ -25,7 +25,7 @@ fn spec(slot: Slot, resolution: [u32; 2]) -> TextureSpec {
         slot,
         resolution,
         init: Init::Vector(vec![0.5; slot.channels() as usize]),
-        learning_rate: 0.0,
+        learning_rate: Some(0.0),
     }
 }
 
@@ -281,7 +281,7 @@ fn recovery(
 ) -> (Optimizer, Vec<f32>) {
     let scene = shadow_scene();
     let mut spec = spec(Slot::BaseColor, [4, 4]);
-    spec.learning_rate = lr;
+    spec.learning_rate = Some(lr);
     let set = ParamSet::from_specs(
         &scene,
         &[spec],

@@ -112,7 +112,7 @@ fn optimizer_on(
             slot,
             resolution: [2, 2],
             init: Init::Vector(vec![0.5; slot.channels() as usize]),
-            learning_rate: 0.0,
+            learning_rate: Some(0.0),
         })
         .collect();
     let set = ParamSet::from_specs(&scene, &specs, filter, std::path::Path::new("test")).unwrap();
@@ -175,14 +175,14 @@ fn restir_without_reuse_equals_the_baseline(
             slot: Slot::Roughness,
             resolution: [2, 2],
             init: Init::Scalar(0.5),
-            learning_rate: 0.0,
+            learning_rate: Some(0.0),
         },
         TextureSpec {
             material: "plane".into(),
             slot: Slot::Metallic,
             resolution: [3, 1],
             init: Init::Scalar(0.5),
-            learning_rate: 0.0,
+            learning_rate: Some(0.0),
         },
     ];
     let values = [0.3, 0.5, 0.7, 0.4, 0.2, 0.6, 0.9];
@@ -637,7 +637,7 @@ fn gradients_follow_a_sign_change() {
             slot: Slot::Roughness,
             resolution: [1, 1],
             init: Init::Scalar(0.5),
-            learning_rate: 0.0,
+            learning_rate: Some(0.0),
         };
         let set =
             ParamSet::from_specs(&scene, &[spec], filter, std::path::Path::new("test")).unwrap();
@@ -744,10 +744,10 @@ fn shrunk_default_task(side: u32, target_spp: u32) -> psrestir::task::Task {
     // These tests compare the estimators under Adam, at the rate Adam was tuned to on this
     // task (the task itself now takes the variance-scaled step at half of it), without the
     // moment filter that the task now has.
-    task.optimizer.step = psrestir::optim::StepKind::Adam;
-    task.optimizer.moment_filter.levels = 0;
+    task.optimizer.step = Some(psrestir::optim::StepKind::Adam);
+    task.optimizer.moment_filter = Some(Default::default());
     for t in &mut task.textures {
-        t.learning_rate = 0.02;
+        t.learning_rate = Some(0.02);
     }
     task
 }
@@ -764,7 +764,7 @@ fn restir_beats_the_baseline_on_the_default_scene_at_low_sampling() {
     task.optimizer.primal_spp = 2;
     task.optimizer.gradient_spp = 1;
     task.optimizer.primal = psrestir::optim::PrimalMode::Independent;
-    task.optimizer.smoothness = 0.03;
+    task.optimizer.smoothness = Some(0.03);
     let iterations = 60;
     let dir = tempfile::tempdir().unwrap();
     let prep = psrestir::job::Problem::from_task(&gpu, &task, dir.path(), false).unwrap();
@@ -864,9 +864,9 @@ fn without_priors_at_tuned_settings_neither_estimator_drifts() {
     // 0.1467), which is why the default estimator is the baseline.
     let mut task = shrunk_default_task(64, 512);
     task.textures[0].resolution = [128, 64];
-    task.textures[0].learning_rate *= 0.5;
+    task.textures[0].learning_rate = task.textures[0].learning_rate.map(|r| r * 0.5);
     task.optimizer.multiscale_levels = 0;
-    task.optimizer.smoothness = 0.0;
+    task.optimizer.smoothness = Some(0.0);
     let dir = tempfile::tempdir().unwrap();
     let prep = psrestir::job::Problem::from_task(&gpu, &task, dir.path(), false).unwrap();
     let truth = prep.reference.clone().unwrap();

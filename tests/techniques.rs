@@ -503,7 +503,7 @@ fn light_and_bsdf_sampled_gradients_agree() {
             slot,
             resolution: [2, 2],
             init: Init::Vector(vec![0.5; slot.channels() as usize]),
-            learning_rate: 0.0,
+            learning_rate: Some(0.0),
         };
         let set = ParamSet::from_specs(&scene, &[spec], Filter::Nearest, std::path::Path::new("t"))
             .unwrap();

@@ -19,6 +19,7 @@ import json as _json
 import os as _os
 import sys as _sys
 import time as _time
+import warnings as _warnings
 from dataclasses import dataclass as _dataclass, field as _field
 
 from . import errors
@@ -89,6 +90,9 @@ class Result:
     rmse_observed_per_texture: dict = _field(default_factory=dict)
     #: Whether the run stopped early (Ctrl-C or an exception in the callback).
     interrupted: bool = False
+    #: What the run warned of (also raised as ``RuntimeWarning``): a loss that had not fallen
+    #: below its start after a quarter of the budget, with what to try.
+    warnings: list = _field(default_factory=list)
 
 
 class _Bar:
@@ -176,6 +180,8 @@ def optimize(
             bar.close()
     error = r.pop("error", None)
     result = Result(**r)
+    for w in result.warnings:
+        _warnings.warn(w, RuntimeWarning, stacklevel=2)
     if error is not None:
         if isinstance(error, KeyboardInterrupt):
             raise KeyboardInterrupt(

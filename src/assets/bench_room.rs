@@ -303,13 +303,7 @@ pub fn write_gallery(dir: &Path) -> Result<()> {
         [1.0, 0.92, 0.82],
         30.0,
     ));
-    nodes.push(camera(
-        &mut b,
-        "main",
-        0.5,
-        [0.0, 1.0, 3.0],
-        [0.0, 1.0, -w],
-    ));
+    nodes.push(camera(&mut b, "main", 0.5, [0.0, 1.0, 3.0], [0.0, 1.0, -w]));
     nodes.push(camera(
         &mut b,
         "side",

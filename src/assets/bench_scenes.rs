@@ -1,8 +1,7 @@
 //! Generator of the benchmark scenes under `scenes/bench/` (run `psrestir make-scenes`): the
-//! paper's four experiments in miniature, a room lit mostly by indirect light and a gallery whose
-//! painting is lit only by bounced light, each a glTF
-//! scene holding the ground-truth texture and a task file that starts the optimized texture
-//! from a constant.
+//! paper's four experiments in miniature, a room lit mostly by indirect light and a gallery
+//! whose painting is lit only by bounced light, each a glTF scene holding the ground-truth
+//! texture and a task file that starts the optimized texture from a constant.
 use super::authoring::{box_triangles, lathe, png_bytes, quad_facing, uv_sphere, GltfBuilder};
 use super::bundled::{look_at, srgb8, write_sky};
 use crate::image_io::write_atomic;

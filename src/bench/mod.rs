@@ -82,6 +82,31 @@ pub struct Contender {
     /// [`moment_filter::SUGGESTED_LEVELS`](crate::optim::moment_filter::SUGGESTED_LEVELS)
     /// levels with the other defaults where the task has none.
     pub filtered: bool,
+    /// The default configuration ([`Contender::AUTO`]): the scene's task stripped to what a
+    /// task file naming only its scene, cameras, targets, textures and sampling gives, every
+    /// other choice `auto`'s ([`bare`]); method, step and filtered are what `auto` chose.
+    pub auto: bool,
+}
+
+/// `task` as a task file that names only its scene, cameras, targets, textures, sampling and
+/// budget gives it: the estimator, step, moment filter, learning rates and schedule left to
+/// `auto` ([`crate::optim::auto`]), and no priors.
+pub fn bare(task: &Task) -> Task {
+    let mut t = task.clone();
+    let o = &mut t.optimizer;
+    o.method = crate::optim::MethodChoice::Auto;
+    o.step = None;
+    o.moment_filter = None;
+    o.schedule = None;
+    o.multiscale_levels = 0;
+    o.smoothness = None;
+    o.adam = Default::default();
+    o.variance_step = Default::default();
+    o.estimators.clear();
+    for tex in &mut t.textures {
+        tex.learning_rate = None;
+    }
+    t
 }
 
 impl Contender {
@@ -90,26 +115,40 @@ impl Contender {
         method: Method::Baseline,
         step: StepKind::Adam,
         filtered: false,
+        auto: false,
+    };
+
+    /// The default configuration (see [`Contender::auto`]), before a scene resolves its
+    /// estimator, step and filter ([`Contender::on`]).
+    pub const AUTO: Contender = Contender {
+        method: Method::Baseline,
+        step: StepKind::Variance,
+        filtered: false,
+        auto: true,
     };
 
     /// The bench's default contenders: ReSTIR with Adam, the recursive estimator with Adam
-    /// and with the variance-scaled step.
-    pub const DEFAULT: [Contender; 3] = [
+    /// and with the variance-scaled step, and the default configuration.
+    pub const DEFAULT: [Contender; 4] = [
         Contender {
             method: Method::Restir,
             step: StepKind::Adam,
             filtered: false,
+            auto: false,
         },
         Contender {
             method: Method::Recursive,
             step: StepKind::Adam,
             filtered: false,
+            auto: false,
         },
         Contender {
             method: Method::Recursive,
             step: StepKind::Variance,
             filtered: false,
+            auto: false,
         },
+        Contender::AUTO,
     ];
 
     /// An estimator with Adam, unfiltered.
@@ -118,7 +157,39 @@ impl Contender {
             method,
             step: StepKind::Adam,
             filtered: false,
+            auto: false,
         }
+    }
+
+    /// The contender on `task` seen by `cameras` cameras: for [`Contender::AUTO`], the
+    /// estimator, step and filter that `auto` chooses for the [`bare`] task.
+    pub fn on(&self, task: &Task, cameras: usize) -> Contender {
+        if !self.auto {
+            return *self;
+        }
+        let c =
+            crate::task::task_configuration(&bare(task), crate::optim::MethodChoice::Auto, cameras);
+        Contender {
+            method: c.estimator.method,
+            step: c.step,
+            filtered: c.moment_filter.enabled(),
+            auto: true,
+        }
+    }
+
+    /// Its settings on `task` (its cameras and the bench's options from `settings`): the
+    /// task's with its step and filter, or the [`bare`] task's.
+    pub fn settings(
+        &self,
+        task: &Task,
+        settings: impl Fn(&Task, Method) -> crate::optim::Settings,
+    ) -> crate::optim::Settings {
+        if self.auto {
+            return settings(&bare(task), self.method);
+        }
+        let mut s = settings(task, self.method);
+        self.apply(&mut s);
+        s
     }
 
     /// Put its step and filter into `s`.
@@ -131,8 +202,16 @@ impl Contender {
         }
     }
 
-    /// How reports name it, e.g. `recursive, variance-scaled step, filtered moments`.
+    /// How reports name it, e.g. `recursive, variance-scaled step, filtered moments`, or
+    /// `default (auto: baseline, variance-scaled step, filtered moments)`.
     pub fn name(&self) -> String {
+        if self.auto {
+            let c = Contender {
+                auto: false,
+                ..*self
+            };
+            return format!("default (auto: {})", c.name());
+        }
         let step = match self.step {
             StepKind::Adam => "Adam",
             StepKind::Variance => "variance-scaled step",
@@ -147,12 +226,18 @@ impl Contender {
 
     /// Its key in file names (`recursive`, `recursive_variance`, `baseline_filtered`).
     pub fn key(&self) -> String {
+        if self.auto {
+            return "default".into();
+        }
         tune::contender_key(self.method, self.step, self.filtered)
     }
 
     /// Parse `METHOD`, `METHOD:STEP` (`recursive:variance`), either with `+filtered`
-    /// (`baseline+filtered`, `recursive:variance+filtered`).
+    /// (`baseline+filtered`, `recursive:variance+filtered`), or `default` ([`Contender::AUTO`]).
     pub fn parse(s: &str) -> std::result::Result<Contender, String> {
+        if s == "default" {
+            return Ok(Contender::AUTO);
+        }
         let (s, filtered) = match s.strip_suffix("+filtered") {
             Some(rest) => (rest, true),
             None => (s, false),
@@ -168,6 +253,7 @@ impl Contender {
             method,
             step,
             filtered,
+            auto: false,
         })
     }
 }
@@ -410,7 +496,7 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         let mut t = o.protocol.apply(&scaled(&Task::load(p)?, o.scale));
         if o.no_priors {
             t.optimizer.multiscale_levels = 0;
-            t.optimizer.smoothness = 0.0;
+            t.optimizer.smoothness = Some(0.0);
         }
         if let Some(d) = o.max_depth {
             crate::scene::MaxDepth::new(d)
@@ -467,8 +553,8 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         let mut passes: Vec<&str> = Vec::new();
         let all = [Contender::BASELINE, Contender::adam(o.gradient_method)];
         for c in all.iter().chain(&o.contenders) {
-            let mut s = task_settings(task, &[], c.method, &o.estimator_options);
-            c.apply(&mut s);
+            let c = c.on(task, crate::task::named_cameras(task));
+            let s = c.settings(task, |t, m| task_settings(t, &[], m, &o.estimator_options));
             for p in Optimizer::passes(&s) {
                 if !passes.contains(&p) {
                     passes.push(p);
@@ -521,6 +607,11 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
                 let mut t = Vec::new();
                 let all = std::iter::once(Contender::BASELINE).chain(o.contenders.iter().copied());
                 for c in all {
+                    // The default configuration is measured as it is, untuned.
+                    if c.auto {
+                        t.push(None);
+                        continue;
+                    }
                     let mut s = settings(&prep, task, c.method, o);
                     c.apply(&mut s);
                     t.push(Some(tune::tune(

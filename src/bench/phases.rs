@@ -165,15 +165,19 @@ pub(super) fn optimization_phase(
     tuned: Option<&tune::Tunable>,
     progress: &Progress,
 ) -> Result<OptimizationRun> {
-    let method = who.method;
-    let mut s = settings(prep, task, method, o);
-    who.apply(&mut s);
+    let mut s = who.settings(task, |t, m| settings(prep, t, m, o));
     if let Some(t) = tuned {
         t.apply(&mut s);
     }
     let mut opt = Optimizer::for_problem(gpu, prep, s)?;
     if let Some(t) = tuned {
         t.apply_learning_rate(&mut opt, prep);
+    }
+    if who.auto {
+        // The rates `auto` gives textures that name none.
+        for t in &mut opt.set.textures {
+            t.learning_rate = None;
+        }
     }
     let truth = prep.reference.as_deref();
     let texture_rmse = |v: &[f32]| truth.map(|r| rmse(v, r)).unwrap_or(f64::NAN);
@@ -249,7 +253,10 @@ pub(super) fn optimization_phase(
         }
         let values = opt.read_params()?;
         let factor = match (opt.last_learning_rates().first(), prep.set.textures.first()) {
-            (Some(&l), Some(t)) if t.learning_rate > 0.0 => Some(l as f64 / t.learning_rate as f64),
+            (Some(&l), Some(t)) => {
+                let rate = crate::optim::auto::texture_rate(t, opt.settings().step);
+                (rate > 0.0).then(|| l as f64 / rate as f64)
+            }
             _ => None,
         };
         curve.push(CurvePoint {
@@ -330,13 +337,26 @@ pub(super) fn optimization_phases(
         image_relmse: Some(image_initial),
     };
     let describe = |who: Contender, t: Option<&tune::Tunable>| {
-        t.cloned()
-            .unwrap_or_else(|| {
-                let mut s = settings(prep, task, who.method, o);
-                who.apply(&mut s);
-                tune::Tunable::untuned(&s)
-            })
-            .describe(who.method)
+        let s = who.settings(task, |t, m| settings(prep, t, m, o));
+        let d = t
+            .cloned()
+            .unwrap_or_else(|| tune::Tunable::untuned(&s))
+            .describe(who.method);
+        if !who.auto {
+            return d;
+        }
+        // The rates and schedule `auto` gave, which the scale above multiplies.
+        let rates: Vec<String> = prep
+            .set
+            .textures
+            .iter()
+            .map(|t| format!("{}", crate::optim::auto::learning_rate(s.step, t.slot)))
+            .collect();
+        format!(
+            "{d}; auto's rates {}, {}, no priors",
+            rates.join(" / "),
+            s.schedule.describe()
+        )
     };
     let min_observed = |r: &OptimizationRun| {
         r.curve
@@ -372,7 +392,9 @@ pub(super) fn optimization_phases(
         v.extend_from_slice(c);
         v
     };
-    let runs_of = std::iter::once(Contender::BASELINE).chain(o.contenders.iter().copied());
+    let runs_of = std::iter::once(Contender::BASELINE)
+        .chain(o.contenders.iter().copied())
+        .map(|c| c.on(task, prep.cameras.len()));
     tuned.resize(1 + o.contenders.len(), None);
     let mut runs: Vec<RunResult> = Vec::new();
     let mut finals = FinalImages {
@@ -416,7 +438,9 @@ pub(super) fn optimization_phases(
         observed_fraction: observed.iter().filter(|&&b| b).count() as f64
             / observed.len().max(1) as f64,
         observed_texels: observed.iter().filter(|&&b| b).count() as u64,
-        schedule: task.optimizer.schedule.describe(),
+        schedule: settings(prep, task, Method::Baseline, o)
+            .schedule
+            .describe(),
         textures: prep.set.textures.iter().map(|t| t.name()).collect(),
         texture_rmse_observed_initial_per_texture: match prep.reference.as_deref() {
             Some(r) => crate::optim::observed::rmse_observed_per_texture(
@@ -427,7 +451,7 @@ pub(super) fn optimization_phases(
             ),
             None => vec![f64::NAN; prep.set.textures.len()],
         },
-        auto: auto_result(task, prep.cameras.len(), &runs),
+        auto: auto_result(task, prep.cameras.len(), &runs, texture_observed_initial),
         runs,
     };
     Ok((result, finals))
@@ -435,7 +459,7 @@ pub(super) fn optimization_phases(
 
 /// What `auto` picks for `task` and how the run of its pick (with Adam, unfiltered) compares
 /// with the lower of the baseline's and ReSTIR's, when both are among `runs`.
-fn auto_result(task: &Task, cameras: usize, runs: &[RunResult]) -> AutoResult {
+fn auto_result(task: &Task, cameras: usize, runs: &[RunResult], start: f64) -> AutoResult {
     let regime = crate::task::task_regime(task, cameras);
     let choice = crate::optim::MethodChoice::Auto.resolve(&regime);
     let run = |m: Method| runs.iter().find(|r| r.key == Contender::adam(m).key());
@@ -456,5 +480,24 @@ fn auto_result(task: &Task, cameras: usize, runs: &[RunResult]) -> AutoResult {
         texels: regime.texels,
         texture_rmse_observed_over_best: over_best(|r| r.texture_rmse_observed),
         image_relmse_over_best: over_best(|r| r.image_relmse),
+        default_run: default_result(runs, start),
     }
+}
+
+/// The default configuration's run (the contender `default`) against the start and the
+/// lowest observed-texel RMSE of the other runs; None unless it ran.
+fn default_result(runs: &[RunResult], start: f64) -> Option<DefaultResult> {
+    let d = runs.iter().find(|r| r.key == Contender::AUTO.key())?;
+    let best = runs
+        .iter()
+        .filter(|r| r.key != d.key)
+        .min_by(|a, b| a.texture_rmse_observed.total_cmp(&b.texture_rmse_observed))?;
+    Some(DefaultResult {
+        name: d.name.clone(),
+        texture_rmse_observed: d.texture_rmse_observed,
+        over_start: d.texture_rmse_observed / start,
+        best: best.name.clone(),
+        over_best: d.texture_rmse_observed / best.texture_rmse_observed,
+        image_over_best: d.image_relmse / best.image_relmse,
+    })
 }

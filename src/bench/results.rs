@@ -173,6 +173,26 @@ pub struct AutoResult {
     pub texture_rmse_observed_over_best: Option<f64>,
     /// Image relMSE of its pick's run over the lower of the two.
     pub image_relmse_over_best: Option<f64>,
+    /// The default configuration's run against the others, when it ran.
+    pub default_run: Option<DefaultResult>,
+}
+
+/// The default configuration (the contender `default`: every choice `auto`'s) on one scene,
+/// against its start and the run of the others that ended lowest (observed-texel RMSE).
+#[derive(Clone, Debug, Serialize)]
+pub struct DefaultResult {
+    /// Its run's name (what `auto` chose).
+    pub name: String,
+    /// Its observed-texel RMSE at the end.
+    pub texture_rmse_observed: f64,
+    /// That over the start's.
+    pub over_start: f64,
+    /// The run of the others that ended lowest.
+    pub best: String,
+    /// Its observed-texel RMSE over that run's.
+    pub over_best: f64,
+    /// Its image relMSE over that run's.
+    pub image_over_best: f64,
 }
 
 impl OptimizationResult {

@@ -92,7 +92,8 @@ impl Tunable {
     /// Scale the learning rates of `opt`'s textures (made from `prep`).
     pub fn apply_learning_rate(&self, opt: &mut Optimizer, prep: &Problem) {
         for (t, p) in opt.set.textures.iter_mut().zip(&prep.set.textures) {
-            t.learning_rate = p.learning_rate * self.learning_rate_scale;
+            t.learning_rate =
+                Some(crate::optim::auto::texture_rate(p, self.step) * self.learning_rate_scale);
         }
     }
 

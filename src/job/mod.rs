@@ -6,5 +6,6 @@ mod metrics;
 pub mod plot;
 pub mod problem;
 pub mod run;
+pub mod watch;
 
 pub use problem::Problem;

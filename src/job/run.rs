@@ -11,7 +11,7 @@ use crate::optim::checkpoint::{Checkpoint, Header, MetricRow};
 use crate::optim::{FaultCounts, Optimizer, PassTimes};
 use crate::render::params::ParamSet;
 use crate::task::Task;
-use crate::task::{named_cameras, task_method, task_settings};
+use crate::task::{named_cameras, task_configuration, task_method, task_settings};
 use crate::vocab::Slot;
 use crate::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -82,6 +82,8 @@ pub struct RunSummary {
     pub pass_times: Option<PassTimes>,
     /// Whether the run stopped early because `RunOptions::interrupt` was set.
     pub interrupted: bool,
+    /// Warnings the run gave (also logged): a loss that did not fall ([`super::watch`]).
+    pub warnings: Vec<String>,
     /// Seconds this run spent creating (compiling) GPU pipelines, all before the
     /// optimization's clock started ([`Gpu::pipeline_times`]).
     pub pipeline_s: f64,
@@ -267,11 +269,16 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     if let Some(h) = helper {
         let _ = h.join();
     }
-    let choice = task_method(task, opts.method, prep.cameras.len());
-    let settings = task_settings(task, &prep.cameras, choice.method, &opts.estimator_options);
+    let config = task_configuration(task, opts.method, prep.cameras.len());
+    let settings = task_settings(
+        task,
+        &prep.cameras,
+        config.estimator.method,
+        &opts.estimator_options,
+    );
     let own = settings.estimator_options.describe(settings.method);
     log::info!(
-        "gradient estimator: {}{}; step: {}{}",
+        "gradient estimator: {}{}; step: {}{}; learning rates {}; schedule: {}",
         settings.method.name(),
         if own.is_empty() {
             String::new()
@@ -279,12 +286,29 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
             format!(" ({own})")
         },
         settings.step.name(),
-        if choice.automatic {
-            format!(" ({})", choice.reason)
+        if settings.moment_filter.enabled() {
+            format!(
+                " with filtered moments ({} levels)",
+                settings.moment_filter.levels
+            )
         } else {
             String::new()
-        }
+        },
+        prep.set
+            .textures
+            .iter()
+            .map(|t| format!(
+                "{} {}",
+                t.name(),
+                crate::optim::auto::texture_rate(t, settings.step)
+            ))
+            .collect::<Vec<_>>()
+            .join(", "),
+        settings.schedule.describe(),
     );
+    for reason in &config.reasons {
+        log::info!("auto: {reason}");
+    }
     if settings.method == crate::optim::Method::Restir && task.max_depth > 1 {
         log::warn!(
             "ReSTIR with paths of {} vertices reuses each path's first vertex with the light \
@@ -296,6 +320,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         );
     }
     let initial_rmse = prep.reference.as_ref().map(|r| rmse(&prep.set.values, r));
+    let settings_step = settings.step;
     let mut opt = Optimizer::for_problem(gpu, &prep, settings)?;
     opt.prepare()?;
     let (n_pipelines, pipeline_s) = gpu.pipeline_seconds_since(pipelines_before);
@@ -369,6 +394,12 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         |excluded: f64| elapsed_before + session_start.elapsed().as_secs_f64() - excluded;
     // Only an interrupt that stops the loop early counts (one during the final writes does not).
     let mut was_interrupted = false;
+    let mut watch = super::watch::LossWatch::new(settings_step);
+    let mut warnings = Vec::new();
+    for r in rows.iter().skip(1) {
+        // A resumed run's earlier iterations (judged from the next one on).
+        watch.observe(r.loss.unwrap_or(f64::NAN), 0.0);
+    }
     loop {
         let elapsed = elapsed_now(excluded);
         if max_iter.is_some_and(|n| opt.iteration >= n) || budget.is_some_and(|b| elapsed >= b) {
@@ -380,9 +411,14 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         }
         let by_iterations = max_iter.map_or(0.0, |n| opt.iteration as f64 / n.max(1) as f64);
         let by_time = budget.map_or(0.0, |b| elapsed / b);
-        opt.set_progress(by_iterations.max(by_time));
+        let progress = by_iterations.max(by_time);
+        opt.set_progress(progress);
         let stats = opt.step()?;
         last_loss = stats.loss;
+        if let Some(w) = watch.observe(stats.loss, progress) {
+            log::warn!("{w}");
+            warnings.push(w);
+        }
         // Timestamps are read back on every 8th iteration only: one readback less per
         // iteration, and the mean is as good.
         if (opt.iteration - start_iter) % 8 == 1 {
@@ -454,6 +490,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         faults,
         pass_times: pass_times.mean(),
         interrupted: was_interrupted,
+        warnings,
         pipeline_s,
         set: ParamSet {
             textures: prep.set.textures.clone(),

@@ -3,6 +3,7 @@
 //! ([`prior`]) and a step ([`step`]: Adam or the variance-scaled step, with or without
 //! filtered moments), as one submission per iteration.
 
+pub mod auto;
 mod cameras;
 pub mod checkpoint;
 mod diff_render;

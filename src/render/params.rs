@@ -21,8 +21,8 @@ pub struct ParamTexture {
     pub filter: Filter,
     /// First float in [`ParamSet::values`].
     pub offset: u32,
-    /// Adam learning rate.
-    pub learning_rate: f32,
+    /// Learning rate (None: the step's default for the slot, `optim::auto::learning_rate`).
+    pub learning_rate: Option<f32>,
 }
 
 impl ParamTexture {

@@ -15,8 +15,10 @@
 //!
 //! [optimizer]
 //! iterations = 300                # and/or time_budget_s
-//! method = "baseline"             # gradient estimator: or "restir", "recursive"; --method overrides it
-//! step = "adam"                   # or "variance": the variance-scaled step
+//! # Every key of [optimizer] that is absent is chosen by `auto` (optim::auto): the estimator,
+//! # the step, its moment filter, the learning rates, their schedule and the smoothness prior.
+//! method = "baseline"             # gradient estimator: or "restir", "recursive", "auto"
+//! step = "adam"                   # or "variance" (auto's): the variance-scaled step
 //! primal_spp = 2
 //! primal = "control_variate"      # or "independent" (the default)
 //! cv_max_weight = 0.9             # upper clamp of the control variate's weight (0..1)
@@ -26,7 +28,7 @@
 //! checkpoint_every = 25
 //! adam_mask = true                # sparse Adam: zero-gradient entries keep value and moments
 //! multiscale_levels = 4           # gradient averaged over 2^l-texel blocks, l <= 4 (0: off)
-//! smoothness = 0.1                # weight of the smoothness prior on observed texels (0: off)
+//! smoothness = 0.1                # smoothness prior on observed texels (0: off; absent: auto's)
 //! eval_every = 10                 # low-noise image error every N iterations (0: never)
 //! eval_spp = 16
 //!
@@ -55,7 +57,7 @@
 //! beta = 0.9                      # decay of the moving variance (estimators without their own)
 //! eps = 1e-12
 //!
-//! [optimizer.moment_filter]       # filtered moments (off by default: levels = 0)
+//! [optimizer.moment_filter]       # filtered moments (absent: auto's, 5 levels with the variance step)
 //! levels = 5                      # a-trous levels: taps 1, 2, 4, 8, 16 texels apart (at most 8)
 //! taps = 3                        # taps per side of a level: 3 or 5
 //! sigma = 0.1                     # edge-stopping scale of the texture's differences
@@ -63,7 +65,7 @@
 //! own_weight = 0.25               # weight of a texel's own moments against the filtered ones
 //! write_back = false              # the mix replaces Adam's moments (Adam only)
 //!
-//! [optimizer.schedule]            # learning-rate schedule (default: constant)
+//! [optimizer.schedule]            # learning-rate schedule (absent: auto's, cosine to 0.05)
 //! kind = "cosine"                 # or "constant", "step", "exponential"
 //! final = 0.05
 //!
@@ -72,7 +74,7 @@
 //! slot = "base_color"             # or "roughness", "metallic"
 //! resolution = [64, 32]
 //! init = [0.5, 0.5, 0.5]          # one value for roughness and metallic
-//! learning_rate = 0.02
+//! learning_rate = 0.02            # absent: auto's for the step (variance 0.01, Adam 0.02)
 //! ```
 pub use crate::vocab::{check_texture, Filter, Init, Loss, Slot, TextureSpec, ROUGHNESS_FLOOR};
 use crate::{Error, Result};
@@ -550,7 +552,9 @@ impl Task {
 }
 
 mod optimizer;
-pub use optimizer::{named_cameras, task_method, task_regime, task_settings, OptimizerSpec};
+pub use optimizer::{
+    named_cameras, task_configuration, task_method, task_regime, task_settings, OptimizerSpec,
+};
 
 #[cfg(test)]
 mod tests;

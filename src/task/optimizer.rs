@@ -1,5 +1,6 @@
 //! The `[optimizer]` table of a task file and the optimizer settings a task asks for.
 use super::{Filter, Loss, Task};
+use crate::optim::auto::Configuration;
 use crate::optim::estimator::Regime;
 use crate::optim::{Choice, EstimatorOptions, Method, MethodChoice};
 use serde::Deserialize;
@@ -27,9 +28,10 @@ pub struct OptimizerSpec {
     /// [`MethodChoice`]), "baseline", "restir" or "recursive"; `--method` overrides it.
     #[serde(default)]
     pub method: MethodChoice,
-    /// The step taken with each gradient: "adam" (the default) or "variance".
+    /// The step taken with each gradient: "adam" or "variance" (None: `auto`'s,
+    /// [`crate::optim::auto`]).
     #[serde(default)]
-    pub step: crate::optim::StepKind,
+    pub step: Option<crate::optim::StepKind>,
     /// The variance-scaled step's options (`[optimizer.variance_step]`).
     #[serde(default)]
     pub variance_step: crate::optim::VarianceStepOptions,
@@ -52,9 +54,9 @@ pub struct OptimizerSpec {
     /// Adam learning rate of the exposures' logarithms.
     #[serde(default = "default_exposure_lr")]
     pub exposure_learning_rate: f32,
-    /// Learning-rate schedule over the run (constant when absent).
+    /// Learning-rate schedule over the run (None: `auto`'s, a cosine decay).
     #[serde(default)]
-    pub schedule: crate::optim::Schedule,
+    pub schedule: Option<crate::optim::Schedule>,
     /// Sparse Adam: entries with an exactly zero gradient keep their value and moments.
     #[serde(default)]
     pub adam_mask: bool,
@@ -66,13 +68,14 @@ pub struct OptimizerSpec {
     #[serde(default)]
     pub multiscale_levels: u32,
     /// Weight of the smoothness prior (0: off): the mean squared difference of observed
-    /// neighbouring texels, times this, is added to the loss that Adam descends.
+    /// neighbouring texels, times this, is added to the loss that the step descends (None:
+    /// `auto`'s by the sampling).
     #[serde(default)]
-    pub smoothness: f32,
+    pub smoothness: Option<f32>,
     /// The moment filter (`[optimizer.moment_filter]`: `levels` (0: off), `sigma`,
-    /// `log_space`, `own_weight`, `write_back`).
+    /// `log_space`, `own_weight`, `write_back`; None: `auto`'s for the step).
     #[serde(default)]
-    pub moment_filter: crate::optim::moment_filter::MomentFilterOptions,
+    pub moment_filter: Option<crate::optim::moment_filter::MomentFilterOptions>,
     /// Iterations between evaluation renders (image relMSE of an `eval_spp` render of every
     /// camera against its target, outside the timed budget); 0: none.
     #[serde(default = "default_eval_every")]
@@ -145,6 +148,25 @@ pub fn task_method(task: &Task, choice: MethodChoice, cameras: usize) -> Choice 
     choice.resolve(&task_regime(task, cameras))
 }
 
+/// The whole configuration of `task` seen by `cameras` cameras with the estimator `choice`:
+/// what the task sets, and `auto`'s choice for the rest ([`Configuration::choose`]).
+pub fn task_configuration(task: &Task, choice: MethodChoice, cameras: usize) -> Configuration {
+    let textures: Vec<(crate::vocab::Slot, bool)> = task
+        .textures
+        .iter()
+        .map(|t| (t.slot, t.learning_rate.is_some()))
+        .collect();
+    Configuration::choose(
+        &task_regime(task, cameras),
+        choice,
+        task.optimizer.step,
+        task.optimizer.moment_filter,
+        task.optimizer.schedule.clone(),
+        task.optimizer.smoothness,
+        &textures,
+    )
+}
+
 /// The sampling and sizes of `task` seen by `cameras` cameras, as `auto` reads them.
 pub fn task_regime(task: &Task, cameras: usize) -> Regime {
     Regime {
@@ -178,6 +200,12 @@ pub fn task_settings(
     method: Method,
     extra: &EstimatorOptions,
 ) -> crate::optim::Settings {
+    let seen = if cameras.is_empty() {
+        named_cameras(task)
+    } else {
+        cameras.len()
+    };
+    let config = task_configuration(task, MethodChoice::Fixed(method), seen);
     crate::optim::Settings {
         width: task.width,
         height: task.height,
@@ -194,14 +222,14 @@ pub fn task_settings(
             .estimator_options()
             .unwrap_or_default()
             .merged(extra),
-        step: task.optimizer.step,
+        step: config.step,
         variance_step: task.optimizer.variance_step,
-        schedule: task.optimizer.schedule.clone(),
+        schedule: config.schedule,
         adam: task.optimizer.adam,
         adam_mask: task.optimizer.adam_mask,
         multiscale_levels: task.optimizer.multiscale_levels,
-        smoothness: task.optimizer.smoothness,
-        moment_filter: task.optimizer.moment_filter,
+        smoothness: config.smoothness,
+        moment_filter: config.moment_filter,
         exposure_learning_rate: task
             .optimizer
             .optimize_exposure

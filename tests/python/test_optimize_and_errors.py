@@ -37,6 +37,20 @@ def test_optimize_a_dict_task_returns_errors_textures_and_outputs(tmp_path):
     assert r3.iterations == 8
 
 
+def test_a_run_whose_loss_does_not_fall_warns_with_what_to_try(tmp_path):
+    # Two texels start near their answer (the mean of the sphere's colors), and Adam without
+    # momentum at a constant rate of 0.5 moves each by about 0.5 per step on the gradient's
+    # noise: the loss stays above its start.
+    task = small_task(
+        tmp_path / "run", iterations=60, step="adam", schedule={"kind": "constant"},
+        adam={"beta1": 0.0},
+    )
+    task["textures"][0]["learning_rate"] = 0.5
+    with pytest.warns(RuntimeWarning, match="not converging"):
+        r = psrestir.optimize(task, method="baseline", progress=False)
+    assert len(r.warnings) == 1 and "--step variance" in r.warnings[0]
+
+
 def test_optimize_a_task_file_with_keyword_options(tmp_path):
     task = small_task(tmp_path / "out_file", iterations=50)
     toml = tmp_path / "task.toml"

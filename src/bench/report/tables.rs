@@ -226,6 +226,35 @@ pub fn auto_table(r: &BenchReport) -> String {
     s
 }
 
+/// The default configuration per scene (the contender `default`): what `auto` chose, its
+/// end over its start, and over the run of the others that ended lowest.
+pub fn default_table(r: &BenchReport) -> String {
+    let mut s = String::from(
+        "| scene | default (auto's choice) | texture ÷ start | lowest other run | texture ÷ it | \
+         image ÷ it |\n|---|---|---|---|---|---|\n",
+    );
+    for x in &r.scenes {
+        let Some(d) = x
+            .optimization
+            .as_ref()
+            .and_then(|o| o.auto.default_run.as_ref())
+        else {
+            continue;
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | **{}** | {} |",
+            x.name,
+            d.name,
+            ratio(d.over_start),
+            d.best,
+            ratio(d.over_best),
+            ratio(d.image_over_best),
+        );
+    }
+    s
+}
+
 /// Each run's settings (tuned or the task's) and, with `--tune`, the search's score on its
 /// own seed.
 pub fn settings_table(r: &BenchReport) -> String {

@@ -2,7 +2,7 @@
 //! optimized texture), its CPU reference, and what it shares with the variance-scaled step
 //! (`TextureSteps`).
 use super::moment_filter::MomentFilter;
-use super::{StepBuffers, TextureSteps};
+use super::{StepBuffers, StepKind, TextureSteps};
 use crate::gpu::Gpu;
 use crate::optim::PassTimer;
 use crate::render::params::{ParamSet, ParamTexture};
@@ -172,7 +172,7 @@ impl AdamPass {
             AdamParams {
                 offset: t.offset,
                 count: t.len() as u32,
-                lr: t.learning_rate,
+                lr: crate::optim::auto::texture_rate(t, StepKind::Adam),
                 beta1: options.beta1,
                 beta2: options.beta2,
                 eps: options.eps,
@@ -205,7 +205,14 @@ impl AdamPass {
             )
         };
         Ok(AdamPass(TextureSteps::new(
-            gpu, "adam", pipeline, set, filter, make, bind,
+            gpu,
+            "adam",
+            StepKind::Adam,
+            pipeline,
+            set,
+            filter,
+            make,
+            bind,
         )))
     }
 }

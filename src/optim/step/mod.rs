@@ -123,6 +123,7 @@ pub(crate) fn build(
 /// uniform, bind group and parameters.
 pub(crate) struct TextureSteps<P> {
     label: &'static str,
+    step: StepKind,
     pipeline: wgpu::ComputePipeline,
     textures: Vec<Vec<(wgpu::Buffer, wgpu::BindGroup, P)>>,
     pub(crate) filter: Option<MomentFilter>,
@@ -135,6 +136,7 @@ impl<P: bytemuck::Pod> TextureSteps<P> {
     pub(crate) fn new(
         gpu: &Gpu,
         label: &'static str,
+        step: StepKind,
         pipeline: wgpu::ComputePipeline,
         set: &ParamSet,
         filter: Option<MomentFilter>,
@@ -171,6 +173,7 @@ impl<P: bytemuck::Pod> TextureSteps<P> {
             .collect();
         TextureSteps {
             label,
+            step,
             pipeline,
             textures,
             filter,
@@ -192,7 +195,7 @@ impl<P: bytemuck::Pod> TextureSteps<P> {
         let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
         let mut rates = Vec::with_capacity(self.textures.len());
         for (k, (dispatches, tex)) in self.textures.iter_mut().zip(&set.textures).enumerate() {
-            let lr = tex.learning_rate * factor;
+            let lr = crate::optim::auto::texture_rate(tex, self.step) * factor;
             rates.push(lr);
             for (j, (u, g, p)) in dispatches.iter_mut().enumerate() {
                 let count = prepare(p, lr);

@@ -9,7 +9,7 @@
 //! that scalars the images hardly determine do not drift, and a lower-variance estimate gets
 //! closer to the optimum before its steps stop.
 use super::moment_filter::MomentFilter;
-use super::{StepBuffers, TextureSteps};
+use super::{StepBuffers, StepKind, TextureSteps};
 use crate::gpu::Gpu;
 use crate::optim::PassTimer;
 use crate::render::params::{ParamSet, ParamTexture};
@@ -159,7 +159,7 @@ impl VarianceStepPass {
             VarianceStepParams {
                 offset: t.offset,
                 count: t.len() as u32,
-                lr: t.learning_rate,
+                lr: crate::optim::auto::texture_rate(t, StepKind::Variance),
                 clip: options.clip,
                 beta: options.beta,
                 eps: options.eps,
@@ -195,6 +195,7 @@ impl VarianceStepPass {
         Ok(VarianceStepPass(TextureSteps::new(
             gpu,
             "variance_step",
+            StepKind::Variance,
             pipeline,
             set,
             filter,

@@ -1,0 +1,328 @@
+//! `auto`: the configuration a task leaves unset, chosen by its regime.
+//!
+//! A task that names only its scene, cameras, targets and textures gets the whole
+//! configuration from here: the estimator (by [`MethodChoice::Auto`]'s rule, from the samples
+//! per texel, the primal's share and the path depth), the step, its moment filter, each
+//! texture's learning rate, the schedule and the smoothness prior. Every key a task file, a
+//! flag or the library sets wins over the rule; the run log says what the rule chose and why.
+//!
+//! The rule, and what it rests on (docs/studies.md, "Defaults that fit the task"):
+//! - **The variance-scaled step**, whatever the regime. Adam divides each texel's step by
+//!   the root of its own second moment, so every texel moves by about the learning rate per
+//!   step however noisy its gradient: where a texel gets only bounced light, that walk is
+//!   speckle, and the indirect-lit bench scene `gallery` with Adam at its task's rate ended
+//!   above its start. The variance-scaled step moves a texel by its estimate over the
+//!   estimate's spread, less a threshold of one spread, clipped at one learning rate, so a
+//!   texel moves only as far as its gradient is sure and the rate is a distance in the
+//!   slot's units, not a scale tuned to the gradient's noise.
+//! - **Filtered moments over base color only** ([`moment_filter`]): over roughness and
+//!   metallic the filter blurred.
+//! - **Learning rates** of 0.01 per step ([`learning_rate`]).
+//! - **A cosine decay to 5%** over the run (its iterations or its time budget): the last
+//!   steps refine instead of walking.
+//! - **The smoothness prior** at 0.03 with sparse sampling, 0.01 with dense ([`smoothness`]):
+//!   with few samples per texel the images leave texels free that only a prior ties to their
+//!   neighbours. The multiscale gradient stays off.
+use super::estimator::Regime;
+use super::estimator::DENSE_SAMPLES_PER_TEXEL;
+use super::moment_filter::{MomentFilterOptions, SUGGESTED_LEVELS};
+use super::{Choice, MethodChoice, Schedule, ScheduleKind, StepKind};
+use crate::vocab::Slot;
+
+/// The step where a task names none.
+pub const STEP: StepKind = StepKind::Variance;
+
+/// The factor of the learning rate at the end of a run under the default schedule.
+pub const FINAL_FACTOR: f32 = 0.05;
+
+/// The learning rate of a texture that names none, for `step` and the texture's `slot`.
+///
+/// The variance-scaled step moves a texel by at most its clip (one learning rate by
+/// default) per step, so its rate is a distance in the slot's units: 0.01 for base color,
+/// metallic and roughness. Adam's is the rate that the bundled tasks chose for it (0.02):
+/// Adam moves every texel by about its rate per step.
+pub fn learning_rate(step: StepKind, slot: Slot) -> f32 {
+    let _ = slot;
+    match step {
+        StepKind::Variance => 0.01,
+        StepKind::Adam => 0.02,
+    }
+}
+
+/// The learning rate of texture `tex` under `step`: its own, or the step's default.
+pub fn texture_rate(tex: &crate::render::params::ParamTexture, step: StepKind) -> f32 {
+    tex.learning_rate
+        .unwrap_or_else(|| learning_rate(step, tex.slot))
+}
+
+/// The moment filter where a task sets none, for `step` over textures of `slots`: with the
+/// variance-scaled step over base color textures only, [`SUGGESTED_LEVELS`] levels of 3 x 3
+/// taps with the filter's other defaults; otherwise off. With Adam the filter, untuned, ended
+/// at 0.98-1.13x the plain baseline's texture error on the bench scenes. Over roughness or
+/// metallic it blurred: with the variance step, `vase` (roughness) ended above its start
+/// (0.318 from 0.238, against 0.213 unfiltered) and `dish` (metallic) at 0.461 against 0.340:
+/// a scalar's differences rarely exceed the edge-stopping scale, which is in texture units.
+pub fn moment_filter(step: StepKind, slots: &[Slot]) -> MomentFilterOptions {
+    let on = step == StepKind::Variance
+        && !slots.is_empty()
+        && slots.iter().all(|&s| s == Slot::BaseColor);
+    MomentFilterOptions {
+        levels: if on { SUGGESTED_LEVELS } else { 0 },
+        ..Default::default()
+    }
+}
+
+/// The weight of the smoothness prior where a task sets none, for a task in `regime`: 0.03
+/// where the gradient pass draws fewer than [`DENSE_SAMPLES_PER_TEXEL`] samples per texel and
+/// iteration, 0.01 from there (the values the bench tasks and the default task chose by scans
+/// of 0 / 0.003 / 0.01 / 0.03 / 0.1). With sparse samples the images leave texels free that
+/// only a prior ties to their neighbours: `lattice` with the rest of `auto`'s configuration
+/// ended at 0.118 observed-texel RMSE without it and 0.069 with 0.03 (twice the rate without
+/// it: 0.118 again).
+pub fn smoothness(regime: &Regime) -> f32 {
+    if regime.samples_per_texel() < DENSE_SAMPLES_PER_TEXEL {
+        0.03
+    } else {
+        0.01
+    }
+}
+
+/// The schedule where a task sets none: a cosine decay to [`FINAL_FACTOR`].
+pub fn schedule() -> Schedule {
+    Schedule {
+        kind: ScheduleKind::Cosine,
+        final_factor: FINAL_FACTOR,
+        ..Schedule::constant()
+    }
+}
+
+/// What a task left unset and asks `auto` for, beside the estimator.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Unset {
+    /// The step.
+    pub step: bool,
+    /// The moment filter.
+    pub moment_filter: bool,
+    /// The schedule.
+    pub schedule: bool,
+    /// Learning rates of textures (how many of them name none).
+    pub learning_rates: usize,
+}
+
+/// The whole configuration `auto` chose, with the reason of each choice.
+#[derive(Clone, Debug)]
+pub struct Configuration {
+    /// The estimator, and why.
+    pub estimator: Choice,
+    /// The step.
+    pub step: StepKind,
+    /// The moment filter.
+    pub moment_filter: MomentFilterOptions,
+    /// The schedule.
+    pub schedule: Schedule,
+    /// The weight of the smoothness prior.
+    pub smoothness: f32,
+    /// What `auto` chose and why, one line per choice (empty: nothing was left to it).
+    pub reasons: Vec<String>,
+}
+
+impl Configuration {
+    /// The configuration of a task in `regime` that asks for `method` and sets `step`,
+    /// `moment_filter`, `schedule` and `smoothness` where they are Some, over `textures`: each one's slot
+    /// and whether it names its learning rate.
+    pub fn choose(
+        regime: &Regime,
+        method: MethodChoice,
+        step: Option<StepKind>,
+        moment_filter: Option<MomentFilterOptions>,
+        schedule: Option<Schedule>,
+        smoothness: Option<f32>,
+        textures: &[(Slot, bool)],
+    ) -> Configuration {
+        let slots: Vec<Slot> = textures.iter().map(|t| t.0).collect();
+        let estimator = method.resolve(regime);
+        let mut reasons = Vec::new();
+        if estimator.automatic {
+            let why = estimator.reason.trim_start_matches("auto: ");
+            reasons.push(format!("estimator {}: {why}", estimator.method.name()));
+        }
+        let step = step.unwrap_or_else(|| {
+            reasons.push(format!(
+                "step {}: it moves a texel only as far as its gradient is sure, which needs no \
+                 tuning against the gradient's noise ({:.2} gradient samples per texel and \
+                 iteration, paths of {} vertices)",
+                STEP.name(),
+                regime.samples_per_texel(),
+                regime.max_depth
+            ));
+            STEP
+        });
+        let moment_filter = moment_filter.unwrap_or_else(|| {
+            let f = self::moment_filter(step, &slots);
+            if f.enabled() {
+                reasons.push(format!(
+                    "filtered moments, {} levels of {}x{} taps: the step's estimate and \
+                     variance averaged over texels that look alike",
+                    f.levels, f.taps, f.taps
+                ));
+            } else if step == StepKind::Variance {
+                reasons.push(
+                    "no moment filter: it blurs roughness and metallic textures, whose \
+                     differences rarely exceed its edge-stopping scale"
+                        .into(),
+                );
+            }
+            f
+        });
+        let schedule = schedule.unwrap_or_else(|| {
+            reasons.push(format!(
+                "learning rates decay as a cosine to {FINAL_FACTOR} of themselves over the run"
+            ));
+            self::schedule()
+        });
+        let smoothness = smoothness.unwrap_or_else(|| {
+            let w = self::smoothness(regime);
+            reasons.push(format!(
+                "smoothness prior {w} ({:.2} gradient samples per texel and iteration; 0.03 \
+                 below {DENSE_SAMPLES_PER_TEXEL}, where the images leave texels free that only \
+                 a prior ties to their neighbours; `smoothness = 0` turns it off)",
+                regime.samples_per_texel()
+            ));
+            w
+        });
+        let mut unset: Vec<Slot> = textures.iter().filter(|t| !t.1).map(|t| t.0).collect();
+        unset.dedup();
+        for slot in unset {
+            reasons.push(format!(
+                "learning rate {} for {} textures that name none (the {} step's)",
+                learning_rate(step, slot),
+                slot.name(),
+                step.name()
+            ));
+        }
+        Configuration {
+            estimator,
+            step,
+            moment_filter,
+            schedule,
+            smoothness,
+            reasons,
+        }
+    }
+
+    /// Put the estimator, step, moment filter and schedule into `settings` (the library's
+    /// way to the task files' defaults: [`Settings::new`](super::Settings::new) keeps the
+    /// plain ones, Adam without a filter or schedule; textures whose learning rate is None
+    /// take [`learning_rate`] of the step).
+    pub fn apply(&self, settings: &mut super::Settings) {
+        settings.method = self.estimator.method;
+        settings.step = self.step;
+        settings.moment_filter = self.moment_filter;
+        settings.schedule = self.schedule.clone();
+        settings.smoothness = self.smoothness;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::optim::Method;
+
+    fn regime(gradient_spp: u32, pixels: u64, texels: u64, max_depth: u32) -> Regime {
+        Regime {
+            primal_spp: 2,
+            gradient_spp,
+            pixels,
+            texels,
+            max_depth,
+        }
+    }
+
+    #[test]
+    fn an_unset_task_gets_the_variance_step_filtered_and_a_cosine_decay() {
+        // The indirect-lit bench scene's regime: two 128² views, a 256² texture, depth 3.
+        let r = regime(1, 2 * 128 * 128, 256 * 256, 3);
+        let c = Configuration::choose(
+            &r,
+            MethodChoice::Auto,
+            None,
+            None,
+            None,
+            None,
+            &[(Slot::BaseColor, false)],
+        );
+        assert_eq!(c.estimator.method, Method::Baseline);
+        assert_eq!(c.step, StepKind::Variance);
+        assert_eq!(c.moment_filter.levels, SUGGESTED_LEVELS);
+        assert_eq!(c.schedule.kind, ScheduleKind::Cosine);
+        assert_eq!(c.schedule.final_factor, FINAL_FACTOR);
+        // Sparse sampling (0.5 per texel): the stronger smoothness prior.
+        assert_eq!(c.smoothness, 0.03);
+        // One reason per choice: estimator, step, filter, schedule, prior, learning rate.
+        assert_eq!(c.reasons.len(), 6, "{:?}", c.reasons);
+        assert!(
+            c.reasons[1].contains("0.50 gradient samples"),
+            "{:?}",
+            c.reasons
+        );
+        assert!(c.reasons[5].contains("base_color"), "{:?}", c.reasons);
+        // Dense sampling (the default task's 2 per texel): the weaker one.
+        let dense = regime(2, 2 * 128 * 128, 256 * 128, 1);
+        assert_eq!(smoothness(&dense), 0.01);
+    }
+
+    #[test]
+    fn every_key_a_task_sets_wins() {
+        let r = regime(1, 128 * 128, 256 * 256, 1);
+        let f = MomentFilterOptions {
+            levels: 2,
+            ..Default::default()
+        };
+        let c = Configuration::choose(
+            &r,
+            MethodChoice::Fixed(Method::Recursive),
+            Some(StepKind::Adam),
+            Some(f),
+            Some(Schedule::constant()),
+            Some(0.0),
+            &[(Slot::BaseColor, true)],
+        );
+        assert_eq!(c.estimator.method, Method::Recursive);
+        assert_eq!(c.step, StepKind::Adam);
+        assert_eq!(c.moment_filter, f);
+        assert_eq!(c.schedule, Schedule::constant());
+        assert_eq!(c.smoothness, 0.0);
+        assert!(c.reasons.is_empty(), "{:?}", c.reasons);
+        // A step that is set decides the filter and the rates left unset.
+        let c = Configuration::choose(
+            &r,
+            MethodChoice::Auto,
+            Some(StepKind::Adam),
+            None,
+            None,
+            Some(0.1),
+            &[(Slot::Roughness, false)],
+        );
+        assert!(!c.moment_filter.enabled());
+        assert_eq!(learning_rate(c.step, Slot::Roughness), 0.02);
+    }
+
+    #[test]
+    fn the_filter_is_for_base_color_alone() {
+        let r = regime(1, 128 * 128, 256 * 256, 1);
+        let with = |textures: &[(Slot, bool)]| {
+            Configuration::choose(&r, MethodChoice::Auto, None, None, None, None, textures)
+        };
+        assert!(with(&[(Slot::BaseColor, true)]).moment_filter.enabled());
+        for scalar in [Slot::Roughness, Slot::Metallic] {
+            let c = with(&[(Slot::BaseColor, true), (scalar, true)]);
+            assert_eq!(c.step, StepKind::Variance);
+            assert!(!c.moment_filter.enabled());
+            assert!(
+                c.reasons.iter().any(|r| r.contains("no moment filter")),
+                "{:?}",
+                c.reasons
+            );
+        }
+    }
+}
