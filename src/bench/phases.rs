@@ -353,9 +353,10 @@ pub(super) fn optimization_phases(
             .map(|t| format!("{}", crate::optim::auto::learning_rate(s.step, t.slot)))
             .collect();
         format!(
-            "{d}; auto's rates {}, {}, no priors",
+            "{d}; auto's rates {}, {}, smoothness {}",
             rates.join(" / "),
-            s.schedule.describe()
+            s.schedule.describe(),
+            s.smoothness
         )
     };
     let min_observed = |r: &OptimizationRun| {

@@ -218,8 +218,8 @@ fn reconstruction_markdown(r: &BenchReport) -> String {
         md.push_str(
             "\n### The default configuration\n\nThe contender `default` runs each scene's \
              task stripped to its scene, cameras, targets, textures and sampling, every other \
-             choice `auto`'s (estimator, step, moment filter, learning rates, schedule; no \
-             priors); its observed-texel RMSE at the end over its start, and over the run of \
+             choice `auto`'s (estimator, step, moment filter, learning rates, schedule, \
+             smoothness prior); its observed-texel RMSE at the end over its start, and over the run of \
              the others that ended lowest:\n\n",
         );
         md.push_str(&defaults);
