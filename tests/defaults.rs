@@ -2,49 +2,10 @@
 //! configuration and ends below its start; a run whose loss does not fall says so.
 mod common;
 
-use psrestir::assets::authoring::{png_bytes, GltfBuilder};
+use common::write_plane_scene as write_scene;
 use psrestir::job::run::{run, RunOptions};
 use psrestir::task::Task;
-use serde_json::json;
 use std::path::Path;
-
-/// A lit plane seen from above, gray, or with a 4x4 base color texture (the truth).
-fn write_scene(path: &Path, textured: bool) {
-    let mut b = GltfBuilder::new();
-    let mut pbr = json!({"baseColorFactor": [0.5, 0.5, 0.5, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.6});
-    if textured {
-        let px: Vec<[u8; 4]> = (0..16u8)
-            .map(|k| [30 + 14 * k, 220 - 12 * k, 50 + 40 * (k % 5), 255])
-            .collect();
-        let img = b.add_image_embedded("truth", &png_bytes(4, 4, &px).unwrap(), "image/png");
-        let tex = b.add_texture(img, None);
-        pbr = json!({"baseColorTexture": {"index": tex}, "metallicFactor": 0.0, "roughnessFactor": 0.6});
-    }
-    let mat = b.add_material(json!({"name": "plane", "pbrMetallicRoughness": pbr}));
-    let mesh = b.add_mesh(
-        "plane",
-        &[
-            [-1.0, 0.0, -1.0],
-            [1.0, 0.0, -1.0],
-            [1.0, 0.0, 1.0],
-            [-1.0, 0.0, 1.0],
-        ],
-        Some(&[[0.0, 1.0, 0.0]; 4]),
-        Some(&[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]),
-        Some(&[0, 2, 1, 0, 3, 2]),
-        Some(mat),
-    );
-    let cam = b.add_camera("top", 0.8, Some(1.0));
-    let light = b.add_light(json!({"type": "point", "intensity": 6.0}));
-    let h = std::f32::consts::FRAC_1_SQRT_2;
-    let n = vec![
-        b.add_node(json!({"mesh": mesh})),
-        b.add_node(json!({"camera": cam, "translation": [0.0, 2.6, 0.0], "rotation": [-h, 0.0, 0.0, h]})),
-        b.add_node(json!({"translation": [0.3, 2.0, 0.4], "extensions": {"KHR_lights_punctual": {"light": light}}})),
-    ];
-    b.set_scene(&n);
-    b.write_glb(path).unwrap();
-}
 
 /// A 64² task in `dir` with `optimizer` as its `[optimizer]` keys and `rate` as its
 /// texture's `learning_rate` line (empty: none); its targets are renders of `truth` (the

@@ -1,48 +1,12 @@
 //! A run killed at random moments (SIGKILL) continues with --resume from its last checkpoint:
 //! the metrics have no gap and no repeat, no output is ever left half-written, and the result
 //! is as good as an uninterrupted run's.
-use psrestir::assets::authoring::{png_bytes, GltfBuilder};
-use serde_json::json;
+mod common;
+
+use common::write_plane_scene as write_scene;
 use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
-
-fn write_scene(path: &Path, textured: bool) {
-    let mut b = GltfBuilder::new();
-    let mut pbr = json!({"baseColorFactor": [0.5, 0.5, 0.5, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.6});
-    if textured {
-        let px: Vec<[u8; 4]> = (0..16u8)
-            .map(|k| [40 + 13 * k, 200 - 11 * k, 60 + 7 * (k % 5), 255])
-            .collect();
-        let img = b.add_image_embedded("truth", &png_bytes(4, 4, &px).unwrap(), "image/png");
-        let tex = b.add_texture(img, None);
-        pbr = json!({"baseColorTexture": {"index": tex}, "metallicFactor": 0.0, "roughnessFactor": 0.6});
-    }
-    let mat = b.add_material(json!({"name": "plane", "pbrMetallicRoughness": pbr}));
-    let mesh = b.add_mesh(
-        "plane",
-        &[
-            [-1.0, 0.0, -1.0],
-            [1.0, 0.0, -1.0],
-            [1.0, 0.0, 1.0],
-            [-1.0, 0.0, 1.0],
-        ],
-        Some(&[[0.0, 1.0, 0.0]; 4]),
-        Some(&[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]),
-        Some(&[0, 2, 1, 0, 3, 2]),
-        Some(mat),
-    );
-    let cam = b.add_camera("top", 0.8, Some(1.0));
-    let light = b.add_light(json!({"type": "point", "intensity": 6.0}));
-    let n = vec![
-        b.add_node(json!({"mesh": mesh})),
-        // Looking straight down (-90 degrees about X).
-        b.add_node(json!({"camera": cam, "translation": [0.0, 2.6, 0.0], "rotation": [-std::f32::consts::FRAC_1_SQRT_2, 0.0, 0.0, std::f32::consts::FRAC_1_SQRT_2]})),
-        b.add_node(json!({"translation": [0.3, 2.0, 0.4], "extensions": {"KHR_lights_punctual": {"light": light}}})),
-    ];
-    b.set_scene(&n);
-    b.write_glb(path).unwrap();
-}
 
 fn metrics(dir: &Path) -> Vec<(u32, f64)> {
     let text = std::fs::read_to_string(dir.join("metrics.csv")).unwrap();

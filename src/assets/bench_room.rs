@@ -37,6 +37,64 @@ fn panel(
     b.add_node(json!({"name": name, "mesh": mesh}))
 }
 
+/// The materials of a room's walls.
+struct Shell {
+    back: usize,
+    /// Whether the back wall has UVs (for a texture).
+    back_uv: bool,
+    floor: usize,
+    ceiling: usize,
+    left: usize,
+    right: usize,
+}
+
+/// A room `2w` wide and deep and `h` high, open at the front (+z): its back wall, floor,
+/// ceiling, left and right walls, in that order.
+fn shell(b: &mut GltfBuilder, (w, h): (f32, f32), m: Shell) -> Vec<usize> {
+    vec![
+        panel(
+            b,
+            "back",
+            [[-w, 0.0, -w], [w, 0.0, -w], [w, h, -w], [-w, h, -w]],
+            [0.0, 0.0, 1.0],
+            m.back_uv,
+            m.back,
+        ),
+        panel(
+            b,
+            "floor",
+            [[-w, 0.0, w], [w, 0.0, w], [w, 0.0, -w], [-w, 0.0, -w]],
+            [0.0, 1.0, 0.0],
+            false,
+            m.floor,
+        ),
+        panel(
+            b,
+            "ceiling",
+            [[-w, h, -w], [w, h, -w], [w, h, w], [-w, h, w]],
+            [0.0, -1.0, 0.0],
+            false,
+            m.ceiling,
+        ),
+        panel(
+            b,
+            "left",
+            [[-w, 0.0, w], [-w, 0.0, -w], [-w, h, -w], [-w, h, w]],
+            [1.0, 0.0, 0.0],
+            false,
+            m.left,
+        ),
+        panel(
+            b,
+            "right",
+            [[w, 0.0, -w], [w, 0.0, w], [w, h, w], [w, h, -w]],
+            [-1.0, 0.0, 0.0],
+            false,
+            m.right,
+        ),
+    ]
+}
+
 /// A room open at the front, lit by one lamp under its ceiling: most of what the camera sees
 /// is lit by light that bounced off another wall first (indirect light, `max_depth = 3`).
 /// The back wall's tiled base color texture is optimized.
@@ -82,48 +140,18 @@ pub fn write_room(dir: &Path) -> Result<()> {
     let red = plain(&mut b, "red", [0.7, 0.15, 0.12]);
     let green = plain(&mut b, "green", [0.15, 0.55, 0.2]);
     let (w, h) = (1.0f32, 2.0f32);
-    let mut nodes = vec![
-        panel(
-            &mut b,
-            "back",
-            [[-w, 0.0, -w], [w, 0.0, -w], [w, h, -w], [-w, h, -w]],
-            [0.0, 0.0, 1.0],
-            true,
-            tiled,
-        ),
-        panel(
-            &mut b,
-            "floor",
-            [[-w, 0.0, w], [w, 0.0, w], [w, 0.0, -w], [-w, 0.0, -w]],
-            [0.0, 1.0, 0.0],
-            false,
-            white,
-        ),
-        panel(
-            &mut b,
-            "ceiling",
-            [[-w, h, -w], [w, h, -w], [w, h, w], [-w, h, w]],
-            [0.0, -1.0, 0.0],
-            false,
-            white,
-        ),
-        panel(
-            &mut b,
-            "left",
-            [[-w, 0.0, w], [-w, 0.0, -w], [-w, h, -w], [-w, h, w]],
-            [1.0, 0.0, 0.0],
-            false,
-            red,
-        ),
-        panel(
-            &mut b,
-            "right",
-            [[w, 0.0, -w], [w, 0.0, w], [w, h, w], [w, h, -w]],
-            [-1.0, 0.0, 0.0],
-            false,
-            green,
-        ),
-    ];
+    let mut nodes = shell(
+        &mut b,
+        (w, h),
+        Shell {
+            back: tiled,
+            back_uv: true,
+            floor: white,
+            ceiling: white,
+            left: red,
+            right: green,
+        },
+    );
     // A block that hides part of the back wall from the lamp.
     let block = b.add_mesh(
         "block",
@@ -232,56 +260,26 @@ pub fn write_gallery(dir: &Path) -> Result<()> {
     let wood = plain(&mut b, "wood", [0.45, 0.3, 0.18]);
     let (w, h) = (1.2f32, 2.0f32);
     let (px, py0, py1, pz) = (0.6f32, 0.55f32, 1.45f32, -w + 0.01);
-    let mut nodes = vec![
-        panel(
-            &mut b,
-            "painting",
-            [[-px, py0, pz], [px, py0, pz], [px, py1, pz], [-px, py1, pz]],
-            [0.0, 0.0, 1.0],
-            true,
-            canvas,
-        ),
-        panel(
-            &mut b,
-            "back",
-            [[-w, 0.0, -w], [w, 0.0, -w], [w, h, -w], [-w, h, -w]],
-            [0.0, 0.0, 1.0],
-            false,
-            wall,
-        ),
-        panel(
-            &mut b,
-            "floor",
-            [[-w, 0.0, w], [w, 0.0, w], [w, 0.0, -w], [-w, 0.0, -w]],
-            [0.0, 1.0, 0.0],
-            false,
-            wood,
-        ),
-        panel(
-            &mut b,
-            "ceiling",
-            [[-w, h, -w], [w, h, -w], [w, h, w], [-w, h, w]],
-            [0.0, -1.0, 0.0],
-            false,
-            white,
-        ),
-        panel(
-            &mut b,
-            "left",
-            [[-w, 0.0, w], [-w, 0.0, -w], [-w, h, -w], [-w, h, w]],
-            [1.0, 0.0, 0.0],
-            false,
-            wall,
-        ),
-        panel(
-            &mut b,
-            "right",
-            [[w, 0.0, -w], [w, 0.0, w], [w, h, w], [w, h, -w]],
-            [-1.0, 0.0, 0.0],
-            false,
-            wall,
-        ),
-    ];
+    let mut nodes = vec![panel(
+        &mut b,
+        "painting",
+        [[-px, py0, pz], [px, py0, pz], [px, py1, pz], [-px, py1, pz]],
+        [0.0, 0.0, 1.0],
+        true,
+        canvas,
+    )];
+    nodes.extend(shell(
+        &mut b,
+        (w, h),
+        Shell {
+            back: wall,
+            back_uv: false,
+            floor: wood,
+            ceiling: white,
+            left: wall,
+            right: wall,
+        },
+    ));
     // The lamp's shade: a flat box under the lamp, which faces the ceiling from above the
     // painting's top edge (the painting lies below the lamp's plane: no direct light).
     let ly = py1 + 0.2;

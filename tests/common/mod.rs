@@ -363,3 +363,46 @@ pub fn render_image(r: &Renderer, size: u32, spp: u32, seed: u32, t: Techniques)
     .unwrap()
     .image
 }
+
+/// A glTF (GLB) of a lit plane seen from above by camera `top`: material `plane` gray, or
+/// with a 4x4 base color texture (a ground truth for optimization tests).
+pub fn write_plane_scene(path: &std::path::Path, textured: bool) {
+    let mut b = psrestir::assets::authoring::GltfBuilder::new();
+    let mut pbr = serde_json::json!({"baseColorFactor": [0.5, 0.5, 0.5, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.6});
+    if textured {
+        let px: Vec<[u8; 4]> = (0..16u8)
+            .map(|k| [40 + 13 * k, 200 - 11 * k, 60 + 7 * (k % 5), 255])
+            .collect();
+        let img = b.add_image_embedded(
+            "truth",
+            &psrestir::assets::authoring::png_bytes(4, 4, &px).unwrap(),
+            "image/png",
+        );
+        let tex = b.add_texture(img, None);
+        pbr = serde_json::json!({"baseColorTexture": {"index": tex}, "metallicFactor": 0.0, "roughnessFactor": 0.6});
+    }
+    let mat = b.add_material(serde_json::json!({"name": "plane", "pbrMetallicRoughness": pbr}));
+    let mesh = b.add_mesh(
+        "plane",
+        &[
+            [-1.0, 0.0, -1.0],
+            [1.0, 0.0, -1.0],
+            [1.0, 0.0, 1.0],
+            [-1.0, 0.0, 1.0],
+        ],
+        Some(&[[0.0, 1.0, 0.0]; 4]),
+        Some(&[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]),
+        Some(&[0, 2, 1, 0, 3, 2]),
+        Some(mat),
+    );
+    let cam = b.add_camera("top", 0.8, Some(1.0));
+    let light = b.add_light(serde_json::json!({"type": "point", "intensity": 6.0}));
+    let n = vec![
+        b.add_node(serde_json::json!({"mesh": mesh})),
+        // Looking straight down (-90 degrees about X).
+        b.add_node(serde_json::json!({"camera": cam, "translation": [0.0, 2.6, 0.0], "rotation": [-std::f32::consts::FRAC_1_SQRT_2, 0.0, 0.0, std::f32::consts::FRAC_1_SQRT_2]})),
+        b.add_node(serde_json::json!({"translation": [0.3, 2.0, 0.4], "extensions": {"KHR_lights_punctual": {"light": light}}})),
+    ];
+    b.set_scene(&n);
+    b.write_glb(path).unwrap();
+}
