@@ -38,7 +38,7 @@
 //!     slot: Slot::BaseColor,
 //!     resolution: [8, 8],
 //!     init: Init::Vector(vec![0.5; 3]),
-//!     learning_rate: 0.03,
+//!     learning_rate: Some(0.03), // None: the step's default (optim::auto)
 //! };
 //! let mut problem = Problem::new(scene.clone(), vec![0], &[texture], Default::default())?;
 //! let mut truth = scene;

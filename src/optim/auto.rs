@@ -150,7 +150,7 @@ impl Configuration {
             reasons.push(format!(
                 "step {}: it moves a texel only as far as its gradient is sure, which needs no \
                  tuning against the gradient's noise ({:.2} gradient samples per texel and \
-                 iteration, paths of {} vertices)",
+                 iteration, max_depth {})",
                 STEP.name(),
                 regime.samples_per_texel(),
                 regime.max_depth

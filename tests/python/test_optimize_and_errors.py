@@ -21,6 +21,8 @@ def test_optimize_a_dict_task_returns_errors_textures_and_outputs(tmp_path):
     r = psrestir.optimize(task, method="baseline", progress=False, callback=rows.append)
     assert isinstance(r, psrestir.Result)
     assert r.iterations == 6 and not r.interrupted
+    # Too short a run for the loss watch to judge (it needs two disjoint windows of 20).
+    assert r.warnings == []
     assert [row["iteration"] for row in rows] == [1, 2, 3, 4, 5, 6]
     assert all(np.isfinite(row["loss"]) for row in rows)
     assert r.final_rmse_observed < r.initial_rmse_observed
@@ -35,20 +37,6 @@ def test_optimize_a_dict_task_returns_errors_textures_and_outputs(tmp_path):
     assert r2.iterations == 6
     r3 = psrestir.optimize(task, iterations=8, resume=True)
     assert r3.iterations == 8
-
-
-def test_a_run_whose_loss_does_not_fall_warns_with_what_to_try(tmp_path):
-    # Two texels start near their answer (the mean of the sphere's colors), and Adam without
-    # momentum at a constant rate of 0.5 moves each by about 0.5 per step on the gradient's
-    # noise: the loss stays above its start.
-    task = small_task(
-        tmp_path / "run", iterations=60, step="adam", schedule={"kind": "constant"},
-        adam={"beta1": 0.0},
-    )
-    task["textures"][0]["learning_rate"] = 0.5
-    with pytest.warns(RuntimeWarning, match="not converging"):
-        r = psrestir.optimize(task, method="baseline", progress=False)
-    assert len(r.warnings) == 1 and "--step variance" in r.warnings[0]
 
 
 def test_optimize_a_task_file_with_keyword_options(tmp_path):
