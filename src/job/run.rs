@@ -110,6 +110,47 @@ fn exposed(mut img: Image, exposure: f32) -> Image {
     img
 }
 
+/// Log the configuration a run takes, then each choice `auto` made with its reason.
+fn log_configuration(
+    config: &crate::optim::auto::Configuration,
+    settings: &crate::optim::Settings,
+    set: &ParamSet,
+) {
+    let own = settings.estimator_options.describe(settings.method);
+    log::info!(
+        "gradient estimator: {}{}; step: {}{}; learning rates {}; schedule: {}; smoothness {}",
+        settings.method.name(),
+        if own.is_empty() {
+            String::new()
+        } else {
+            format!(" ({own})")
+        },
+        settings.step.name(),
+        if settings.moment_filter.enabled() {
+            format!(
+                " with filtered moments ({} levels)",
+                settings.moment_filter.levels
+            )
+        } else {
+            String::new()
+        },
+        set.textures
+            .iter()
+            .map(|t| format!(
+                "{} {}",
+                t.name(),
+                crate::optim::auto::texture_rate(t, settings.step)
+            ))
+            .collect::<Vec<_>>()
+            .join(", "),
+        settings.schedule.describe(),
+        settings.smoothness,
+    );
+    for reason in &config.reasons {
+        log::info!("auto: {reason}");
+    }
+}
+
 /// Image relMSE of an `spp`-sample render of every camera of `opt` against its target
 /// (mean over cameras), with the same seed at every call, so that differences between calls
 /// are the textures', not the noise's; and the renders.
@@ -276,39 +317,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         config.estimator.method,
         &opts.estimator_options,
     );
-    let own = settings.estimator_options.describe(settings.method);
-    log::info!(
-        "gradient estimator: {}{}; step: {}{}; learning rates {}; schedule: {}",
-        settings.method.name(),
-        if own.is_empty() {
-            String::new()
-        } else {
-            format!(" ({own})")
-        },
-        settings.step.name(),
-        if settings.moment_filter.enabled() {
-            format!(
-                " with filtered moments ({} levels)",
-                settings.moment_filter.levels
-            )
-        } else {
-            String::new()
-        },
-        prep.set
-            .textures
-            .iter()
-            .map(|t| format!(
-                "{} {}",
-                t.name(),
-                crate::optim::auto::texture_rate(t, settings.step)
-            ))
-            .collect::<Vec<_>>()
-            .join(", "),
-        settings.schedule.describe(),
-    );
-    for reason in &config.reasons {
-        log::info!("auto: {reason}");
-    }
+    log_configuration(&config, &settings, &prep.set);
     if settings.method == crate::optim::Method::Restir && task.max_depth > 1 {
         log::warn!(
             "ReSTIR with paths of {} vertices reuses each path's first vertex with the light \
