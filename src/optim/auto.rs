@@ -35,14 +35,14 @@ pub const STEP: StepKind = StepKind::Variance;
 /// The factor of the learning rate at the end of a run under the default schedule.
 pub const FINAL_FACTOR: f32 = 0.05;
 
-/// The learning rate of a texture that names none, for `step` and the texture's `slot`.
+/// The learning rate of a texture that names none, for `step` and the texture's slot (the
+/// same for every slot today: all three lie in [0, 1]).
 ///
 /// The variance-scaled step moves a texel by at most its clip (one learning rate by
-/// default) per step, so its rate is a distance in the slot's units: 0.01 for base color,
-/// metallic and roughness. Adam's is the rate that the bundled tasks chose for it (0.02):
-/// Adam moves every texel by about its rate per step.
-pub fn learning_rate(step: StepKind, slot: Slot) -> f32 {
-    let _ = slot;
+/// default) per step, so its rate is a distance in the slot's units: 0.01. Adam's is the
+/// rate that the bundled tasks chose for it (0.02): Adam moves every texel by about its rate
+/// per step.
+pub fn learning_rate(step: StepKind, _slot: Slot) -> f32 {
     match step {
         StepKind::Variance => 0.01,
         StepKind::Adam => 0.02,
@@ -94,19 +94,6 @@ pub fn schedule() -> Schedule {
         final_factor: FINAL_FACTOR,
         ..Schedule::constant()
     }
-}
-
-/// What a task left unset and asks `auto` for, beside the estimator.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Unset {
-    /// The step.
-    pub step: bool,
-    /// The moment filter.
-    pub moment_filter: bool,
-    /// The schedule.
-    pub schedule: bool,
-    /// Learning rates of textures (how many of them name none).
-    pub learning_rates: usize,
 }
 
 /// The whole configuration `auto` chose, with the reason of each choice.
