@@ -22,6 +22,7 @@
 //!
 //! The report (`bench.json`, `report.md`, plots and gradient images) is written by
 //! [`report`].
+mod contender;
 mod gradient;
 mod phases;
 pub mod report;
@@ -29,6 +30,7 @@ mod results;
 pub mod throughput;
 pub mod tune;
 
+pub use contender::{bare, Contender};
 use gradient::gradient_phase;
 use phases::{optimization_phases, primal_phase, settings, PrimalPhase};
 pub use results::*;
@@ -38,7 +40,7 @@ use crate::image_io::Image;
 use crate::job::run::rmse;
 use crate::job::Problem;
 use crate::optim::observed::rmse_observed;
-use crate::optim::{EstimatorOptions, Method, Optimizer, PassTimes, Settings, StepKind};
+use crate::optim::{EstimatorOptions, Method, Optimizer, PassTimes, Settings};
 use crate::task::task_settings;
 use crate::task::Task;
 use crate::{Error, Result};
@@ -67,194 +69,6 @@ impl Protocol {
             t.optimizer.filter = crate::vocab::Filter::Nearest;
         }
         t
-    }
-}
-
-/// An estimator with its step, optimized in the equal-time phase after the baseline with Adam
-/// (the reference of every ratio).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Contender {
-    /// The gradient estimator.
-    pub method: Method,
-    /// The step.
-    pub step: StepKind,
-    /// With filtered moments: the task's `[optimizer.moment_filter]`, or
-    /// [`moment_filter::SUGGESTED_LEVELS`](crate::optim::moment_filter::SUGGESTED_LEVELS)
-    /// levels with the other defaults where the task has none.
-    pub filtered: bool,
-    /// The default configuration ([`Contender::AUTO`]): the scene's task stripped to what a
-    /// task file naming only its scene, cameras, targets, textures and sampling gives, every
-    /// other choice `auto`'s ([`bare`]); method, step and filtered are what `auto` chose.
-    pub auto: bool,
-}
-
-/// `task` as a task file that names only its scene, cameras, targets, textures, sampling and
-/// budget gives it: the estimator, step, moment filter, learning rates, schedule and
-/// smoothness prior left to `auto` ([`crate::optim::auto`]), no multiscale gradient.
-pub fn bare(task: &Task) -> Task {
-    let mut t = task.clone();
-    let o = &mut t.optimizer;
-    o.method = crate::optim::MethodChoice::Auto;
-    o.step = None;
-    o.moment_filter = None;
-    o.schedule = None;
-    o.multiscale_levels = 0;
-    o.smoothness = None;
-    o.adam = Default::default();
-    o.variance_step = Default::default();
-    o.estimators.clear();
-    for tex in &mut t.textures {
-        tex.learning_rate = None;
-    }
-    t
-}
-
-impl Contender {
-    /// The reference of every run: the baseline with Adam, unfiltered.
-    pub const BASELINE: Contender = Contender {
-        method: Method::Baseline,
-        step: StepKind::Adam,
-        filtered: false,
-        auto: false,
-    };
-
-    /// The default configuration (see [`Contender::auto`]), before a scene resolves its
-    /// estimator, step and filter ([`Contender::on`]).
-    pub const AUTO: Contender = Contender {
-        method: Method::Baseline,
-        step: StepKind::Variance,
-        filtered: false,
-        auto: true,
-    };
-
-    /// The bench's default contenders: ReSTIR with Adam, the recursive estimator with Adam
-    /// and with the variance-scaled step, and the default configuration.
-    pub const DEFAULT: [Contender; 4] = [
-        Contender {
-            method: Method::Restir,
-            step: StepKind::Adam,
-            filtered: false,
-            auto: false,
-        },
-        Contender {
-            method: Method::Recursive,
-            step: StepKind::Adam,
-            filtered: false,
-            auto: false,
-        },
-        Contender {
-            method: Method::Recursive,
-            step: StepKind::Variance,
-            filtered: false,
-            auto: false,
-        },
-        Contender::AUTO,
-    ];
-
-    /// An estimator with Adam, unfiltered.
-    pub fn adam(method: Method) -> Contender {
-        Contender {
-            method,
-            step: StepKind::Adam,
-            filtered: false,
-            auto: false,
-        }
-    }
-
-    /// The contender on `task` seen by `cameras` cameras: for [`Contender::AUTO`], the
-    /// estimator, step and filter that `auto` chooses for the [`bare`] task.
-    pub fn on(&self, task: &Task, cameras: usize) -> Contender {
-        if !self.auto {
-            return *self;
-        }
-        let c =
-            crate::task::task_configuration(&bare(task), crate::optim::MethodChoice::Auto, cameras);
-        Contender {
-            method: c.estimator.method,
-            step: c.step,
-            filtered: c.moment_filter.enabled(),
-            auto: true,
-        }
-    }
-
-    /// Its settings on `task` (its cameras and the bench's options from `settings`): the
-    /// task's with its step and filter, or the [`bare`] task's.
-    pub fn settings(
-        &self,
-        task: &Task,
-        settings: impl Fn(&Task, Method) -> crate::optim::Settings,
-    ) -> crate::optim::Settings {
-        if self.auto {
-            return settings(&bare(task), self.method);
-        }
-        let mut s = settings(task, self.method);
-        self.apply(&mut s);
-        s
-    }
-
-    /// Put its step and filter into `s`.
-    pub fn apply(&self, s: &mut crate::optim::Settings) {
-        s.step = self.step;
-        if self.filtered && !s.moment_filter.enabled() {
-            s.moment_filter.levels = crate::optim::moment_filter::SUGGESTED_LEVELS;
-        } else if !self.filtered {
-            s.moment_filter.levels = 0;
-        }
-    }
-
-    /// How reports name it, e.g. `recursive, variance-scaled step, filtered moments`, or
-    /// `default (auto: baseline, variance-scaled step, filtered moments)`.
-    pub fn name(&self) -> String {
-        if self.auto {
-            let c = Contender {
-                auto: false,
-                ..*self
-            };
-            return format!("default (auto: {})", c.name());
-        }
-        let step = match self.step {
-            StepKind::Adam => "Adam",
-            StepKind::Variance => "variance-scaled step",
-        };
-        let filtered = if self.filtered {
-            ", filtered moments"
-        } else {
-            ""
-        };
-        format!("{}, {step}{filtered}", self.method.name())
-    }
-
-    /// Its key in file names (`recursive`, `recursive_variance`, `baseline_filtered`).
-    pub fn key(&self) -> String {
-        if self.auto {
-            return "default".into();
-        }
-        tune::contender_key(self.method, self.step, self.filtered)
-    }
-
-    /// Parse `METHOD`, `METHOD:STEP` (`recursive:variance`), either with `+filtered`
-    /// (`baseline+filtered`, `recursive:variance+filtered`), or `default` ([`Contender::AUTO`]).
-    pub fn parse(s: &str) -> std::result::Result<Contender, String> {
-        if s == "default" {
-            return Ok(Contender::AUTO);
-        }
-        let (s, filtered) = match s.strip_suffix("+filtered") {
-            Some(rest) => (rest, true),
-            None => (s, false),
-        };
-        let (m, st) = s.split_once(':').unwrap_or((s, "adam"));
-        let method: Method = m.parse().map_err(|e: Error| e.to_string())?;
-        let step = match st {
-            "adam" => StepKind::Adam,
-            "variance" => StepKind::Variance,
-            _ => return Err(format!("unknown step `{st}` (adam, variance)")),
-        };
-        Ok(Contender {
-            method,
-            step,
-            filtered,
-            auto: false,
-        })
     }
 }
 
@@ -714,6 +528,7 @@ fn first_creations(times: &[crate::gpu::PipelineTime]) -> Vec<crate::gpu::Pipeli
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::optim::StepKind;
 
     #[test]
     fn contenders_parse_with_their_step_and_filter() {
