@@ -7,7 +7,7 @@ use std::mem::size_of;
 
 #[test]
 fn every_bind_group_declaration_names_its_wgsl_bindings() {
-    use crate::gpu::shaders::{bindings, passes};
+    use crate::shader_library::{bindings, passes};
     let mut decls = vec![
         crate::render::RENDER_GROUP,
         crate::render::TRACE_RAYS_GROUP,
@@ -57,7 +57,7 @@ pub(crate) fn field_size<T, F>(_: impl Fn(&T) -> &F) -> usize {
 /// with `_` are padding). A WGSL member without a Rust field, a Rust field without a WGSL
 /// member, or two fields swapped fail here, without a GPU.
 pub(crate) fn check_mirror(pass: &str, name: &str, size: usize, fields: &[(&str, usize, usize)]) {
-    let module = crate::gpu::shaders::validate(pass).unwrap();
+    let module = crate::shader_library::validate(pass).unwrap();
     let mut layouter = naga::proc::Layouter::default();
     layouter.update(module.to_ctx()).unwrap();
     let (h, ty) = module
@@ -341,4 +341,49 @@ fn pass_uniform_mirrors_match_wgsl_field_by_field() {
         crate::optim::texture_export::ExportParams,
         [offset, width, height, channels]
     );
+}
+
+/// The GPU layer is the lowest: no file under `src/gpu` names a module above it (its composer
+/// gets the WGSL it composes from the caller, [`crate::shader_library`]).
+#[test]
+fn the_gpu_layer_imports_nothing_above_it() {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/src/gpu");
+    let above = [
+        "assets",
+        "bench",
+        "image_io",
+        "job",
+        "optim",
+        "render",
+        "scene",
+        "shader_library",
+        "task",
+        "vocab",
+    ];
+    let mut files = 0;
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|x| x != "rs") {
+            continue;
+        }
+        files += 1;
+        let text = std::fs::read_to_string(&path).unwrap();
+        for (n, line) in text.lines().enumerate() {
+            // Doc examples are written as a user of the crate would: `psrestir::` is allowed.
+            for module in above {
+                for form in [
+                    format!("crate::{module}"),
+                    format!("super::super::{module}"),
+                ] {
+                    assert!(
+                        !line.contains(&form),
+                        "{}:{}: the GPU layer names `{form}`: {line}",
+                        path.display(),
+                        n + 1
+                    );
+                }
+            }
+        }
+    }
+    assert!(files >= 5, "{files} files in src/gpu");
 }

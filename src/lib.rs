@@ -79,6 +79,7 @@ pub mod job;
 pub mod optim;
 pub mod render;
 pub mod scene;
+pub mod shader_library;
 pub mod task;
 pub mod vocab;
 

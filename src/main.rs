@@ -69,104 +69,10 @@ fn run(cli: Cli) -> Result<()> {
                 println!("wrote {}", p.display());
             }
         }
-        Command::Info { scene: path } => {
-            let sc = scene::load(&path)?;
-            println!("{}", path.display());
-            println!("  triangles: {}", sc.triangles.len());
-            println!("  materials: {}", sc.materials.len());
-            for m in &sc.materials {
-                println!(
-                    "    {}: base color {:?}{}, metallic {}, roughness {}{}, emissive {:?}{}",
-                    m.name,
-                    m.base_color.to_array(),
-                    if m.base_color_texture.is_some() {
-                        " x texture"
-                    } else {
-                        ""
-                    },
-                    m.metallic,
-                    m.roughness,
-                    if m.metallic_roughness_texture.is_some() {
-                        " x texture"
-                    } else {
-                        ""
-                    },
-                    m.emissive.to_array(),
-                    if m.double_sided { ", double-sided" } else { "" },
-                );
-            }
-            println!("  images: {}", sc.images.len());
-            for i in &sc.images {
-                println!("    {}: {}x{}", i.name, i.width, i.height);
-            }
-            println!("  cameras: {}", sc.cameras.len());
-            for (i, c) in sc.cameras.iter().enumerate() {
-                println!("    {i}: {} (yfov {:.3} rad)", c.name, c.yfov);
-            }
-            println!("  punctual lights: {}", sc.lights.len());
-            for l in &sc.lights {
-                println!(
-                    "    {}: {:?}, intensity {:?}",
-                    l.name,
-                    l.kind,
-                    l.intensity.to_array()
-                );
-            }
-            for w in &sc.warnings {
-                println!("  warning: {w}");
-            }
-        }
+        Command::Info { scene: path } => cmd_info(&path)?,
         Command::Bench(args) => cmd_bench(args)?,
-        Command::Estimators => {
-            println!(
-                "auto (the default): {}\n",
-                psrestir::optim::estimator::auto_rule()
-            );
-            for m in psrestir::optim::Method::ALL {
-                println!("{}: {}", m.name(), m.summary());
-                let toml = psrestir::optim::EstimatorOptions::defaults_toml(m);
-                if toml.is_empty() {
-                    println!("  no options\n");
-                } else {
-                    println!("  [optimizer.{}]", m.name());
-                    for line in toml.lines() {
-                        println!("  {line}");
-                    }
-                    println!();
-                }
-            }
-            println!(
-                "Set one with --estimator-option METHOD.KEY=VALUE, or in the task file's table; \
-                 docs/guide.md says what each option does."
-            );
-        }
-        Command::Adapter => {
-            let gpu = Gpu::new()?;
-            println!("{}", gpu.describe());
-            println!("device type: {:?}", gpu.info.device_type);
-            println!("timestamp queries: {}", gpu.timestamps);
-            let l = gpu.device.limits();
-            println!(
-                "max storage buffer binding: {} MiB, storage buffers per stage: {}, workgroups per dimension: {}",
-                l.max_storage_buffer_binding_size >> 20,
-                l.max_storage_buffers_per_shader_stage,
-                l.max_compute_workgroups_per_dimension
-            );
-            let offered = gpu
-                .adapter_features
-                .is_some_and(|f| f.contains(wgpu::Features::EXPERIMENTAL_RAY_QUERY));
-            println!(
-                "hardware ray queries: {}",
-                if offered { "offered" } else { "not offered" }
-            );
-            println!(
-                "tracing with: {} (PSRESTIR_TRACER=software|ray-query|auto chooses)",
-                match gpu.tracer {
-                    psrestir::gpu::Tracer::Software => "the software BVH (binned SAH, in WGSL)",
-                    psrestir::gpu::Tracer::RayQuery => "ray queries",
-                }
-            );
-        }
+        Command::Estimators => cmd_estimators(),
+        Command::Adapter => cmd_adapter()?,
         Command::MakeScenes { dir } => {
             assets::bundled::write_default_scene(&dir.join("default"))?;
             println!("wrote {}", dir.join("default").display());
@@ -175,6 +81,157 @@ fn run(cli: Cli) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// `psrestir info`: what a scene file holds.
+fn cmd_info(path: &std::path::Path) -> Result<()> {
+    let sc = scene::load(&path)?;
+    println!("{}", path.display());
+    println!("  triangles: {}", sc.triangles.len());
+    println!("  materials: {}", sc.materials.len());
+    for m in &sc.materials {
+        println!(
+            "    {}: base color {:?}{}, metallic {}, roughness {}{}, emissive {:?}{}",
+            m.name,
+            m.base_color.to_array(),
+            if m.base_color_texture.is_some() {
+                " x texture"
+            } else {
+                ""
+            },
+            m.metallic,
+            m.roughness,
+            if m.metallic_roughness_texture.is_some() {
+                " x texture"
+            } else {
+                ""
+            },
+            m.emissive.to_array(),
+            if m.double_sided { ", double-sided" } else { "" },
+        );
+    }
+    println!("  images: {}", sc.images.len());
+    for i in &sc.images {
+        println!("    {}: {}x{}", i.name, i.width, i.height);
+    }
+    println!("  cameras: {}", sc.cameras.len());
+    for (i, c) in sc.cameras.iter().enumerate() {
+        println!("    {i}: {} (yfov {:.3} rad)", c.name, c.yfov);
+    }
+    println!("  punctual lights: {}", sc.lights.len());
+    for l in &sc.lights {
+        println!(
+            "    {}: {:?}, intensity {:?}",
+            l.name,
+            l.kind,
+            l.intensity.to_array()
+        );
+    }
+    for w in &sc.warnings {
+        println!("  warning: {w}");
+    }
+    Ok(())
+}
+
+/// `psrestir estimators`: each estimator with its options at their defaults.
+fn cmd_estimators() {
+    println!(
+        "auto (the default): {}\n",
+        psrestir::optim::estimator::auto_rule()
+    );
+    for m in psrestir::optim::Method::all() {
+        println!("{}: {}", m.name(), m.summary());
+        let toml = psrestir::optim::EstimatorOptions::defaults_toml(m);
+        if toml.is_empty() {
+            println!("  no options\n");
+        } else {
+            println!("  [optimizer.{}]", m.name());
+            for line in toml.lines() {
+                println!("  {line}");
+            }
+            println!();
+        }
+    }
+    println!(
+        "Set one with --estimator-option METHOD.KEY=VALUE, or in the task file's table; \
+         docs/guide.md says what each option does."
+    );
+}
+
+/// `psrestir adapter`: the device psrestir runs on and what it offers.
+fn cmd_adapter() -> Result<()> {
+    let gpu = Gpu::new()?;
+    println!("{}", gpu.describe());
+    println!("device type: {:?}", gpu.info.device_type);
+    println!("timestamp queries: {}", gpu.timestamps);
+    let l = gpu.device.limits();
+    println!(
+        "max storage buffer binding: {} MiB, storage buffers per stage: {}, workgroups per dimension: {}",
+        l.max_storage_buffer_binding_size >> 20,
+        l.max_storage_buffers_per_shader_stage,
+        l.max_compute_workgroups_per_dimension
+    );
+    let offered = gpu
+        .adapter_features
+        .is_some_and(|f| f.contains(wgpu::Features::EXPERIMENTAL_RAY_QUERY));
+    println!(
+        "hardware ray queries: {}",
+        if offered { "offered" } else { "not offered" }
+    );
+    println!(
+        "tracing with: {} (PSRESTIR_TRACER=software|ray-query|auto chooses)",
+        match gpu.tracer {
+            psrestir::gpu::Tracer::Software => "the software BVH (binned SAH, in WGSL)",
+            psrestir::gpu::Tracer::RayQuery => "ray queries",
+        }
+    );
+    Ok(())
+}
+
+/// The camera of `psrestir render`: a frame of a camera file (`--cameras`, `--frame`) or one
+/// of the scene's (`--camera`), with the scene's defaults added.
+fn choose_camera(
+    sc: &mut scene::Scene,
+    path: &std::path::Path,
+    camera: Option<&str>,
+    cameras: Option<&std::path::Path>,
+    frame: &str,
+    no_default_env: bool,
+) -> Result<usize> {
+    let cam = match cameras {
+        Some(file) => {
+            if camera.is_some() {
+                bail!("give --camera or --cameras, not both");
+            }
+            let frames = scene::capture::load_frames(file)?;
+            let i = frames
+                .iter()
+                .position(|f| f.camera.name == frame)
+                .or_else(|| frame.parse::<usize>().ok().filter(|&i| i < frames.len()))
+                .with_context(|| {
+                    format!(
+                        "{}: no frame `{frame}` ({} frames: 0..{} or their names)",
+                        file.display(),
+                        frames.len(),
+                        frames.len()
+                    )
+                })?;
+            sc.cameras.push(frames[i].camera.clone());
+            sc.cameras.len() - 1
+        }
+        None => {
+            for note in sc.add_defaults(!no_default_env) {
+                log::warn!("{}: {note}", path.display());
+            }
+            sc.camera(camera)?
+        }
+    };
+    if cameras.is_some() {
+        for note in sc.add_defaults(!no_default_env) {
+            log::warn!("{}: {note}", path.display());
+        }
+    }
+    Ok(cam)
 }
 
 /// `psrestir render`.
@@ -216,39 +273,14 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
         map.scale = env_scale;
         sc.env = Some(map);
     }
-    let cam = match &cameras {
-        Some(file) => {
-            if camera.is_some() {
-                bail!("give --camera or --cameras, not both");
-            }
-            let frames = scene::capture::load_frames(file)?;
-            let i = frames
-                .iter()
-                .position(|f| f.camera.name == frame)
-                .or_else(|| frame.parse::<usize>().ok().filter(|&i| i < frames.len()))
-                .with_context(|| {
-                    format!(
-                        "{}: no frame `{frame}` ({} frames: 0..{} or their names)",
-                        file.display(),
-                        frames.len(),
-                        frames.len()
-                    )
-                })?;
-            sc.cameras.push(frames[i].camera.clone());
-            sc.cameras.len() - 1
-        }
-        None => {
-            for note in sc.add_defaults(!no_default_env) {
-                log::warn!("{}: {note}", path.display());
-            }
-            sc.camera(camera.as_deref())?
-        }
-    };
-    if cameras.is_some() {
-        for note in sc.add_defaults(!no_default_env) {
-            log::warn!("{}: {note}", path.display());
-        }
-    }
+    let cam = choose_camera(
+        &mut sc,
+        &path,
+        camera.as_deref(),
+        cameras.as_deref(),
+        &frame,
+        no_default_env,
+    )?;
     let (width, height) = size.unwrap_or_else(|| {
         match sc.cameras[cam].intrinsics {
             // A capture's own image size.
@@ -308,15 +340,10 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
     Ok(())
 }
 
-/// `psrestir optimize`.
-fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
-    let OptimizeArgs {
-        task,
-        estimator,
-        iterations,
-        time_budget,
-        out,
-        resume,
+/// The task of `psrestir optimize` with its flags applied (the task file's path, the task).
+fn task_with_flags(args: &OptimizeArgs) -> Result<(PathBuf, Task)> {
+    let &OptimizeArgs {
+        ref task,
         max_depth,
         primal,
         multiscale_levels,
@@ -334,8 +361,9 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
         moment_filter_own_weight,
         moment_filter_log,
         moment_filter_write_back,
+        ..
     } = args;
-    let path = task.unwrap_or_else(|| PathBuf::from(DEFAULT_TASK));
+    let path = task.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_TASK));
     let mut task = Task::load(&path)?;
     task.max_depth = max_depth.unwrap_or(task.max_depth);
     let adam = &mut task.optimizer.adam;
@@ -396,11 +424,25 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
     if let Some(s) = smoothness {
         task.optimizer.smoothness = Some(s);
     }
-    if let Some(b) = time_budget {
+    Ok((path, task))
+}
+
+/// `psrestir optimize`.
+fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
+    let (path, task) = task_with_flags(&args)?;
+    if let Some(b) = args.time_budget {
         if !(b.is_finite() && b > 0.0) {
             bail!("--time-budget must be a positive number of seconds");
         }
     }
+    let OptimizeArgs {
+        estimator,
+        iterations,
+        time_budget,
+        out,
+        resume,
+        ..
+    } = args;
     let (method, estimator_options) = estimator.resolve(task.optimizer.method)?;
     let gpu = Gpu::new()?;
     // Ctrl-C (or SIGTERM) finishes the iteration under way, then writes the checkpoint
@@ -430,6 +472,12 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
         },
     )
     .with_context(|| format!("optimizing {}", path.display()))?;
+    print_summary(&summary, &path);
+    Ok(())
+}
+
+/// What `psrestir optimize` prints at the end (and the exit after an interrupt).
+fn print_summary(summary: &job::run::RunSummary, path: &std::path::Path) {
     println!(
         "{} iterations in {:.1} s ({:.1} ms/iteration), final loss {:.4e}{}; outputs in {}",
         summary.iterations,
@@ -487,7 +535,6 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
         );
         std::process::exit(130);
     }
-    Ok(())
 }
 
 /// `psrestir bench`.

@@ -31,7 +31,7 @@ fn optimizer(gpu: &psrestir::gpu::Gpu, primal: PrimalMode) -> Optimizer {
     let settings = Settings {
         primal_spp: 2,
         primal,
-        method: Method::Baseline,
+        method: Method::BASELINE,
         seed: 21,
         ..Settings::new(W, W, vec![0])
     };

@@ -66,7 +66,7 @@ fn check_gradient_on(
         gradient_spp: 16,
         loss: Loss::L2,
         seed: 7,
-        method: psrestir::optim::Method::Baseline,
+        method: psrestir::optim::Method::BASELINE,
         estimator_options: Default::default(),
         schedule: Default::default(),
         adam: Default::default(),

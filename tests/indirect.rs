@@ -300,7 +300,7 @@ fn a_depth_3_model_recovers_a_concave_scenes_base_color_where_direct_light_canno
         .map(|i| 0.2 + 0.6 * ((i * 5 % 7) as f32 / 6.0))
         .collect();
     let settings = Settings {
-        method: Method::Baseline,
+        method: Method::BASELINE,
         primal_spp: 4,
         gradient_spp: 4,
         seed: 3,

@@ -76,7 +76,7 @@ fn setup_with(
         gradient_spp: 4,
         loss: Loss::L2,
         seed: 3,
-        method: psrestir::optim::Method::Baseline,
+        method: psrestir::optim::Method::BASELINE,
         estimator_options: Default::default(),
         schedule: Default::default(),
         adam: Default::default(),

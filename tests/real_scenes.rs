@@ -385,7 +385,7 @@ learning_rate = 0.05
         &gpu,
         &task,
         &RunOptions {
-            method: Method::Restir.into(),
+            method: Method::RESTIR.into(),
             out: Some(out.clone()),
             ..Default::default()
         },
@@ -425,7 +425,7 @@ learning_rate = 0.05
 /// The shadow scene with a 2x2 base color texture on the plane.
 fn masked_optimizer(gpu: &psrestir::gpu::Gpu, target: &Image) -> Optimizer {
     let settings = Settings {
-        method: Method::Baseline,
+        method: Method::BASELINE,
         primal_spp: 4,
         gradient_spp: 4,
         ..Settings::new(16, 16, vec![0])
@@ -502,7 +502,7 @@ fn the_exposure_of_a_camera_is_recovered() {
         *p = p.map(|v| 1.4 * v);
     }
     let settings = Settings {
-        method: Method::Baseline,
+        method: Method::BASELINE,
         primal_spp: 4,
         exposure_learning_rate: Some(0.05),
         // Adam's steps do not shrink with the gradient: the schedule ends the walk.

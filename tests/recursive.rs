@@ -70,11 +70,11 @@ fn fresh_term_is_the_baseline_gradient(gpu: &psrestir::gpu::Gpu, scene: &psresti
         gpu,
         &scene,
         set.clone(),
-        settings(Method::Baseline, 2, 3),
+        settings(Method::BASELINE, 2, 3),
         &target,
     )
     .unwrap();
-    let mut rec_settings = settings(Method::Recursive, 2, 3);
+    let mut rec_settings = settings(Method::RECURSIVE, 2, 3);
     rec_settings.estimator_options.put(&RecursiveOptions {
         weight: Some(1.0),
         ..Default::default()
@@ -139,7 +139,7 @@ fn check_unbiased_along_states(slot: Slot, filter: Filter, options: RecursiveOpt
         &gpu,
         &scene,
         set.clone(),
-        settings(Method::Baseline, 1, 1),
+        settings(Method::BASELINE, 1, 1),
         &blank,
     )
     .unwrap();
@@ -153,7 +153,7 @@ fn check_unbiased_along_states(slot: Slot, filter: Filter, options: RecursiveOpt
         &gpu,
         &scene,
         set.clone(),
-        settings(Method::Baseline, 2, 5),
+        settings(Method::BASELINE, 2, 5),
         &target,
     )
     .unwrap();
@@ -182,7 +182,7 @@ fn check_unbiased_along_states(slot: Slot, filter: Filter, options: RecursiveOpt
 
     // The recursion along the same states, restarted for each run with other seeds (the
     // iteration number picks the seed; its parity picks the adjoint buffer).
-    let mut rec_settings = settings(Method::Recursive, 2, 5);
+    let mut rec_settings = settings(Method::RECURSIVE, 2, 5);
     rec_settings.estimator_options.put(&options);
     let mut rec = Optimizer::new(&gpu, &scene, set, rec_settings, &target).unwrap();
     let mut per_state: Vec<Vec<Vec<f32>>> = vec![Vec::new(); k_states];
@@ -307,7 +307,7 @@ fn recovery(
 fn variance_step_matches_its_cpu_reference() {
     let Some(gpu) = gpu() else { return };
     let lr = 0.05;
-    let (mut opt, _) = recovery(&gpu, Method::Baseline, StepKind::Variance, lr);
+    let (mut opt, _) = recovery(&gpu, Method::BASELINE, StepKind::Variance, lr);
     let o = opt.settings().variance_step;
     let mut p = opt.read_params().unwrap();
     let n = p.len();
@@ -369,7 +369,7 @@ fn rmse(a: &[f32], b: &[f32]) -> f64 {
 fn recursive_estimator_recovers_a_texture_with_either_step() {
     let Some(gpu) = gpu() else { return };
     for (step, lr) in [(StepKind::Adam, 0.03), (StepKind::Variance, 0.03)] {
-        let (mut opt, truth) = recovery(&gpu, Method::Recursive, step, lr);
+        let (mut opt, truth) = recovery(&gpu, Method::RECURSIVE, step, lr);
         let before = rmse(&opt.read_params().unwrap(), &truth);
         for _ in 0..120 {
             opt.step().unwrap();
@@ -402,7 +402,7 @@ fn successive_recursive_estimates_on_the_default_task() {
     let prep = psrestir::job::Problem::from_task(&gpu, &task, out.path(), false).unwrap();
     let settings =
         |method| psrestir::task::task_settings(&task, &prep.cameras, method, &Default::default());
-    let mut base = Optimizer::for_problem(&gpu, &prep, settings(Method::Baseline)).unwrap();
+    let mut base = Optimizer::for_problem(&gpu, &prep, settings(Method::BASELINE)).unwrap();
     let (converged, _) = base.converged_adjoint(256, 0xad).unwrap();
     // The reference: 256 gradient spp (128 estimates of the task's 2).
     let n = base.read_params().unwrap().len();
@@ -430,7 +430,7 @@ fn successive_recursive_estimates_on_the_default_task() {
                 .unwrap()
         })
         .collect();
-    let mut rec = Optimizer::for_problem(&gpu, &prep, settings(Method::Recursive)).unwrap();
+    let mut rec = Optimizer::for_problem(&gpu, &prep, settings(Method::RECURSIVE)).unwrap();
     for j in 0..20u32 {
         rec.estimate_gradient_with_adjoint(200 + j, &converged)
             .unwrap();

@@ -139,7 +139,7 @@ fn optimizer_on(
         variance_step: Default::default(),
     };
     let base = Settings {
-        method: Method::Baseline,
+        method: Method::BASELINE,
         ..settings.clone()
     };
     let opt = Optimizer::new(gpu, &scene, set.clone(), base, &[Image::new(W, W)]).unwrap();
@@ -204,7 +204,7 @@ fn restir_without_reuse_equals_the_baseline(
             gradient_spp: 2,
             loss: Loss::L2,
             seed: 11,
-            method: Method::Baseline,
+            method: Method::BASELINE,
             estimator_options: EstimatorOptions::with(&opts),
             schedule: Default::default(),
             adam: Default::default(),
@@ -239,7 +239,7 @@ fn restir_without_reuse_equals_the_baseline(
             &scene,
             set,
             Settings {
-                method: Method::Restir,
+                method: Method::RESTIR,
                 ..settings
             },
             &[target],
@@ -312,13 +312,13 @@ fn check_unbiased_with_reuse(slot: Slot, filter: Filter, v: &[f32], t: &[f32]) {
     let Some(gpu) = gpu() else { return };
     let opts = RestirOptions::default();
     // Reference: many independent baseline estimates.
-    let mut base = optimizer(&gpu, slot, filter, Method::Baseline, opts, v, t);
+    let mut base = optimizer(&gpu, slot, filter, Method::BASELINE, opts, v, t);
     let reference: Vec<Vec<f32>> = (0..160)
         .map(|it| base.estimate_gradient(10_000 + it).unwrap().0)
         .collect();
     let (ref_mean, ref_se) = batch_mean(&reference, 16);
     // ReSTIR with temporal reuse, learning rate 0: the state evolves, the textures do not.
-    let mut re = optimizer(&gpu, slot, filter, Method::Restir, opts, v, t);
+    let mut re = optimizer(&gpu, slot, filter, Method::RESTIR, opts, v, t);
     let mut samples = Vec::new();
     for _ in 0..320 {
         re.step().unwrap();
@@ -414,7 +414,7 @@ fn shift_trial(gpu: &psrestir::gpu::Gpu, filter: Filter, seed: u32) -> ShiftTria
         verify_paths: true,
         ..Default::default()
     };
-    let (base_method, re_method) = (Method::Baseline, Method::Restir);
+    let (base_method, re_method) = (Method::BASELINE, Method::RESTIR);
     let mut base = optimizer_seeded(gpu, &slots, filter, base_method, opts, &a, &t, seed);
     let reference: Vec<Vec<f32>> = (0..160)
         .map(|it| base.estimate_gradient(10_000 + it).unwrap().0)
@@ -495,7 +495,7 @@ fn the_merge_pass_traces_no_ray() {
     // Static: the composed merge module contains no traversal code at all, so no run of it
     // can trace a ray; the candidate pass, which must trace, does contain it.
     let functions = |pass: &str| -> Vec<String> {
-        let m = psrestir::gpu::shaders::validate(pass).unwrap();
+        let m = psrestir::shader_library::validate(pass).unwrap();
         m.functions
             .iter()
             .filter_map(|(_, f)| f.name.clone())
@@ -524,7 +524,7 @@ fn the_merge_pass_traces_no_ray() {
         &gpu,
         Slot::Roughness,
         Filter::Bilinear,
-        Method::Restir,
+        Method::RESTIR,
         RestirOptions::default(),
         &[0.3, 0.5, 0.7, 0.4],
         &[0.8, 0.2, 0.4, 0.9],
@@ -570,7 +570,7 @@ fn stored_paths_keep_the_inputs_no_texture_replaces() {
         let b: Vec<f32> = (0..n).map(|i| 0.6 - 0.04 * (i % 5) as f32).collect();
         let t = vec![0.5; n];
         let o = (opts, &a[..], &t[..], 5);
-        let mut re = optimizer_on(&gpu, scene, slots, Filter::Bilinear, Method::Restir, o);
+        let mut re = optimizer_on(&gpu, scene, slots, Filter::Bilinear, Method::RESTIR, o);
         for it in 0..12 {
             re.write_params(if it % 2 == 0 { &a } else { &b }).unwrap();
             re.step().unwrap();
@@ -668,7 +668,7 @@ fn gradients_follow_a_sign_change() {
             &scene,
             set.clone(),
             Settings {
-                method: Method::Baseline,
+                method: Method::BASELINE,
                 ..settings.clone()
             },
             &[Image::new(W, W)],
@@ -683,7 +683,7 @@ fn gradients_follow_a_sign_change() {
     for filter in [Filter::Nearest, Filter::Bilinear] {
         let mut reference = Vec::new();
         for v in [0.3f32, 0.7] {
-            let mut b = one(filter, Method::Baseline, v);
+            let mut b = one(filter, Method::BASELINE, v);
             let mean = (0..64)
                 .map(|it| b.estimate_gradient(500 + it).unwrap().0[0] as f64)
                 .sum::<f64>()
@@ -694,7 +694,7 @@ fn gradients_follow_a_sign_change() {
             reference[0] * reference[1] < 0.0,
             "the scene does not flip the gradient: {reference:?}"
         );
-        let mut re = one(filter, Method::Restir, 0.3);
+        let mut re = one(filter, Method::RESTIR, 0.3);
         let mut phase = [Vec::new(), Vec::new()];
         for it in 0..80 {
             if it == 40 {
@@ -771,7 +771,7 @@ fn restir_beats_the_baseline_on_the_default_scene_at_low_sampling() {
     let truth = prep.reference.clone().unwrap();
     let mut final_rmse = [0f64; 2];
     let seeds = [1u32, 2, 3];
-    for (m, method) in [Method::Restir, Method::Baseline].into_iter().enumerate() {
+    for (m, method) in [Method::RESTIR, Method::BASELINE].into_iter().enumerate() {
         for &seed in &seeds {
             let settings = Settings {
                 seed,
@@ -815,7 +815,7 @@ fn the_shrunk_default_task_recovers_its_texture() {
     let prep = psrestir::job::Problem::from_task(&gpu, &task, dir.path(), false).unwrap();
     let truth = prep.reference.clone().unwrap();
     let settings =
-        psrestir::task::task_settings(&task, &prep.cameras, Method::Restir, &Default::default());
+        psrestir::task::task_settings(&task, &prep.cameras, Method::RESTIR, &Default::default());
     let mut opt =
         Optimizer::new(&gpu, &prep.scene, prep.set.clone(), settings, &prep.targets).unwrap();
     let observed = opt.observed_texels().unwrap().to_vec();
@@ -870,8 +870,8 @@ fn without_priors_at_tuned_settings_neither_estimator_drifts() {
     let dir = tempfile::tempdir().unwrap();
     let prep = psrestir::job::Problem::from_task(&gpu, &task, dir.path(), false).unwrap();
     let truth = prep.reference.clone().unwrap();
-    for method in [Method::Baseline, Method::Restir] {
-        let iterations = if method == Method::Restir { 150 } else { 164 };
+    for method in [Method::BASELINE, Method::RESTIR] {
+        let iterations = if method == Method::RESTIR { 150 } else { 164 };
         for seed in [1u32, 2, 3] {
             let restir = RestirOptions {
                 m_cap: 2.0,
@@ -924,7 +924,7 @@ fn a_restored_state_continues_like_the_original() {
             &gpu,
             Slot::BaseColor,
             Filter::Bilinear,
-            Method::Restir,
+            Method::RESTIR,
             RestirOptions {
                 target_smoothing,
                 ..Default::default()
@@ -967,7 +967,7 @@ fn a_restored_state_continues_like_the_original() {
     // A state without reservoirs: the next gradient starts from empty ones.
     let mut c = make();
     c.restore(&psrestir::optim::OptimizerState {
-        estimator: psrestir::optim::EstimatorState::new(Method::Restir),
+        estimator: psrestir::optim::EstimatorState::new(Method::RESTIR),
         ..state.clone()
     })
     .unwrap();
@@ -1028,7 +1028,7 @@ fn the_target_adjoint_is_a_moving_average_of_the_adjoints() {
             &gpu,
             Slot::BaseColor,
             Filter::Bilinear,
-            Method::Restir,
+            Method::RESTIR,
             opts,
             &[0.5; 12],
             &t,

@@ -510,7 +510,7 @@ fn light_and_bsdf_sampled_gradients_agree() {
         let settings = Settings {
             gradient_spp: 32,
             seed: 11,
-            method: Method::Baseline,
+            method: Method::BASELINE,
             ..Settings::new(w, w, vec![0])
         };
         // Target: darker than the current textures, so every observed texel has a gradient.

@@ -573,8 +573,7 @@ impl DiffRender {
 /// The estimators' names and one-line summaries.
 #[pyfunction]
 fn estimators() -> Vec<(String, String)> {
-    psrestir::Method::ALL
-        .iter()
+    psrestir::Method::all()
         .map(|m| (m.name().to_string(), m.summary().to_string()))
         .collect()
 }

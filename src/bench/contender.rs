@@ -47,7 +47,7 @@ pub fn bare(task: &Task) -> Task {
 impl Contender {
     /// The reference of every run: the baseline with Adam, unfiltered.
     pub const BASELINE: Contender = Contender {
-        method: Method::Baseline,
+        method: Method::BASELINE,
         step: StepKind::Adam,
         filtered: false,
         auto: false,
@@ -56,7 +56,7 @@ impl Contender {
     /// The default configuration (see [`Contender::auto`]), before a scene resolves its
     /// estimator, step and filter ([`Contender::on`]).
     pub const AUTO: Contender = Contender {
-        method: Method::Baseline,
+        method: Method::BASELINE,
         step: StepKind::Variance,
         filtered: false,
         auto: true,
@@ -66,19 +66,19 @@ impl Contender {
     /// and with the variance-scaled step, and the default configuration.
     pub const DEFAULT: [Contender; 4] = [
         Contender {
-            method: Method::Restir,
+            method: Method::RESTIR,
             step: StepKind::Adam,
             filtered: false,
             auto: false,
         },
         Contender {
-            method: Method::Recursive,
+            method: Method::RECURSIVE,
             step: StepKind::Adam,
             filtered: false,
             auto: false,
         },
         Contender {
-            method: Method::Recursive,
+            method: Method::RECURSIVE,
             step: StepKind::Variance,
             filtered: false,
             auto: false,

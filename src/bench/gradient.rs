@@ -99,10 +99,10 @@ fn equal_time_spp(
     // estimates would then take hours). Timed up to three times, then an error.
     let mut tries = 0;
     let (t1, t4) = loop {
-        let mut b1 = new(Method::Baseline, spp, seed ^ 0x71)?;
+        let mut b1 = new(Method::BASELINE, spp, seed ^ 0x71)?;
         let t1 = time_steps(&mut b1, untimed, timed)?;
         drop(b1);
-        let mut b4 = new(Method::Baseline, 4 * spp, seed ^ 0x72)?;
+        let mut b4 = new(Method::BASELINE, 4 * spp, seed ^ 0x72)?;
         let t4 = time_steps(&mut b4, untimed, timed)?;
         drop(b4);
         tries += 1;
@@ -255,7 +255,7 @@ fn reference_at(
     seed: u32,
 ) -> Result<(Vec<f32>, Vec<f64>)> {
     let mut r = new(
-        Method::Baseline,
+        Method::BASELINE,
         o.reference_spp.clamp(1, 64),
         seed ^ 0x5eed,
     )?;
@@ -389,9 +389,9 @@ pub(super) fn gradient_phase(
         re.restore(&kept)?;
         // A baseline at the estimator's state without the estimator's own.
         let baseline = |spp: u32, salt: u32| -> Result<Optimizer> {
-            let mut b = new(Method::Baseline, spp, seed ^ salt)?;
+            let mut b = new(Method::BASELINE, spp, seed ^ salt)?;
             b.restore(&crate::optim::OptimizerState {
-                estimator: crate::optim::EstimatorState::new(Method::Baseline),
+                estimator: crate::optim::EstimatorState::new(Method::BASELINE),
                 ..kept.clone()
             })?;
             Ok(b)

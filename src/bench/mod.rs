@@ -136,7 +136,7 @@ impl Default for BenchOptions {
         BenchOptions {
             budget_s: 60.0,
             scale: 1.0,
-            gradient_method: Method::Restir,
+            gradient_method: Method::RESTIR,
             warmup: 20,
             settle: 20,
             successive: 10,
@@ -275,72 +275,14 @@ impl Progress {
 
 /// Run the benchmark on the given task files and write the report into `o.out`.
 pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchReport> {
-    if !(o.budget_s > 0.0 && o.budget_s.is_finite()) {
-        return Err(Error::Invalid(format!(
-            "bench: the budget must be a positive number of seconds, not {}",
-            o.budget_s
-        )));
-    }
-    if !(o.scale > 0.0 && o.scale <= 64.0) {
-        return Err(Error::Invalid(format!(
-            "bench: --scale must be in (0, 64], not {}",
-            o.scale
-        )));
-    }
-    if o.eval_spp == 0
-        || o.reference_spp == 0
-        || o.reference_primal_spp == 0
-        || o.eval_spp > 1 << 16
-    {
-        return Err(Error::Invalid(format!(
-            "bench: --eval-spp ({}), --reference-spp ({}) and --reference-primal-spp ({}) must be \
-             at least 1 (eval at most 65536)",
-            o.eval_spp, o.reference_spp, o.reference_primal_spp
-        )));
-    }
-    if o.successive == 0 || o.successive > 4096 {
-        return Err(Error::Invalid(format!(
-            "bench: --successive must be in [1, 4096], not {}",
-            o.successive
-        )));
-    }
+    check_options(o)?;
     // Load every task first, so that a bad one fails before hours of measuring.
-    let mut loaded = Vec::new();
-    for p in tasks {
-        let mut t = o.protocol.apply(&scaled(&Task::load(p)?, o.scale));
-        if o.no_priors {
-            t.optimizer.multiscale_levels = 0;
-            t.optimizer.smoothness = Some(0.0);
-        }
-        if let Some(d) = o.max_depth {
-            crate::scene::MaxDepth::new(d)
-                .map_err(|m| Error::Invalid(format!("bench: --max-depth: {m}")))?;
-            t.max_depth = d;
-        }
-        loaded.push(t);
-    }
-    if o.gradient_only && o.end_to_end_only {
-        return Err(Error::Invalid(
-            "bench: --gradient-only and --end-to-end-only leave nothing to measure".into(),
-        ));
-    }
+    let loaded = tasks
+        .iter()
+        .map(|p| load_task(p, o))
+        .collect::<Result<Vec<Task>>>()?;
     std::fs::create_dir_all(&o.out).map_err(|e| Error::file(&o.out, e.to_string()))?;
-    // Steps of the progress bar per scene: targets, the primal and gradient phases (one per
-    // seed and the reference), the search and each estimator's optimization.
-    let contenders = if o.gradient_only {
-        0
-    } else {
-        o.contenders.len() as u64
-    };
-    // The baseline's optimization is the one step of the equal-time phase besides the
-    // contenders'.
-    let per_scene = if o.end_to_end_only {
-        2
-    } else {
-        o.repeats.max(1) as u64 + if o.gradient_only { 2 } else { 3 }
-    } + u64::from(o.tune && !o.gradient_only)
-        + contenders;
-    let progress = Progress::new(o.progress, loaded.len() as u64 * per_scene);
+    let progress = Progress::new(o.progress, loaded.len() as u64 * steps_per_scene(o));
     let mut report = BenchReport {
         version: env!("CARGO_PKG_VERSION").into(),
         adapter: gpu.describe(),
@@ -363,20 +305,7 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
     let pipelines_before = gpu.pipeline_times().len();
     // Every optimizer pass the bench may create compiles on a second device while the first
     // scene's targets render.
-    let mut helper = loaded.first().and_then(|task| {
-        let mut passes: Vec<&str> = Vec::new();
-        let all = [Contender::BASELINE, Contender::adam(o.gradient_method)];
-        for c in all.iter().chain(&o.contenders) {
-            let c = c.on(task, crate::task::named_cameras(task));
-            let s = c.settings(task, |t, m| task_settings(t, &[], m, &o.estimator_options));
-            for p in Optimizer::passes(&s) {
-                if !passes.contains(&p) {
-                    passes.push(p);
-                }
-            }
-        }
-        gpu.compile_elsewhere(&passes)
-    });
+    let mut helper = loaded.first().and_then(|task| compile_ahead(gpu, task, o));
     for task in &loaded {
         let name = scene_name(task);
         let dir = o.out.join(crate::image_io::file_safe(&name));
@@ -404,96 +333,11 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         let (optimization, finals) = if o.gradient_only {
             (None, None)
         } else {
-            let tuned = if o.tune {
-                let budget = o.tune_budget_s.unwrap_or(o.budget_s / 3.0);
-                let key = format!(
-                    "{} {}x{} {:?} scale {} priors {} primal {:?} options {:?} tuning {budget} s, psrestir {}",
-                    task.path.display(),
-                    task.width,
-                    task.height,
-                    o.protocol,
-                    o.scale,
-                    !o.no_priors,
-                    o.primal,
-                    o.estimator_options,
-                    env!("CARGO_PKG_VERSION"),
-                );
-                let mut t = Vec::new();
-                let all = std::iter::once(Contender::BASELINE).chain(o.contenders.iter().copied());
-                for c in all {
-                    // The default configuration is measured as it is, untuned.
-                    if c.auto {
-                        t.push(None);
-                        continue;
-                    }
-                    let mut s = settings(&prep, task, c.method, o);
-                    c.apply(&mut s);
-                    t.push(Some(tune::tune(
-                        gpu, &prep, &s, budget, &key, &dir, &progress,
-                    )?));
-                }
-                progress.done();
-                t
-            } else {
-                vec![None; 1 + o.contenders.len()]
-            };
+            let tuned = tune_contenders(gpu, task, &prep, o, &dir, &progress)?;
             let (r, f) = optimization_phases(gpu, task, &prep, o, tuned, &progress)?;
             (Some(r), Some(f))
         };
-        // The primal estimator of both phases (the task's, or the bench's --primal).
-        let primal = settings(&prep, task, o.gradient_method, o).primal;
-        let result = SceneResult {
-            name: name.clone(),
-            task: task.path.display().to_string(),
-            width: task.width,
-            height: task.height,
-            cameras: prep.cameras.len(),
-            texels: prep.set.textures.iter().map(|t| t.width * t.height).sum(),
-            primal_spp: task.optimizer.primal_spp,
-            gradient_spp: task.optimizer.gradient_spp,
-            gradient_method: o.gradient_method.name().into(),
-            baseline_spp_equal_time: g.baseline_spp_equal_time,
-            gradient_relmse_baseline: g.total_baseline,
-            gradient_relmse_estimator: g.total_estimator,
-            gradient_relmse_ratio: g.total_estimator / g.total_baseline,
-            gradient_relmse_baseline_equal_iterations: g.total_baseline_equal_iterations,
-            gradient_relmse_ratio_equal_iterations: g.total_estimator
-                / g.total_baseline_equal_iterations,
-            gradient_relmse_estimator_only_baseline: g.only_baseline,
-            gradient_relmse_estimator_only_estimator: g.only_estimator,
-            gradient_relmse_estimator_only_ratio: g.only_estimator / g.only_baseline,
-            gradient_relmse_estimator_only_baseline_equal_time: g.only_baseline_equal_time,
-            gradient_relmse_estimator_only_ratio_equal_time: g.only_estimator
-                / g.only_baseline_equal_time,
-            gradient_relmse_mean_baseline: g.mean_baseline,
-            gradient_relmse_mean_estimator: g.mean_estimator,
-            gradient_relmse_mean_ratio: g.mean_estimator / g.mean_baseline,
-            successive_estimates: o.successive,
-            gradient_relmse_per_texture: prep
-                .set
-                .textures
-                .iter()
-                .zip(&g.per_texture)
-                .map(|(t, p)| TextureGradientErrors {
-                    texture: t.name(),
-                    estimator_only_baseline: p.only_baseline,
-                    estimator_only_estimator: p.only_estimator,
-                    estimator_only_ratio: p.only_estimator / p.only_baseline,
-                    total_baseline_equal_iterations: p.total_baseline_equal_iterations,
-                    total_estimator: p.total_estimator,
-                    total_ratio_equal_iterations: p.total_estimator
-                        / p.total_baseline_equal_iterations,
-                })
-                .collect(),
-            ms_per_iteration_ratio: g.ms_ratio,
-            primal: primal.name().into(),
-            primal_relmse_independent: pp.relmse_independent,
-            primal_relmse_control_variate: pp.relmse_control_variate,
-            primal_relmse_ratio: pp.relmse_control_variate / pp.relmse_independent,
-            primal_ms_independent: pp.ms_independent,
-            primal_ms_control_variate: pp.ms_control_variate,
-            optimization,
-        };
+        let result = scene_result(name, task, &prep, o, &pp, &g, optimization);
         report::write_scene_files(&dir, &prep, &result, &g.snapshot, finals.as_ref())?;
         report.scenes.push(result);
         report.pipelines = first_creations(&gpu.pipeline_times()[pipelines_before..]);
@@ -502,6 +346,198 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
     }
     progress.finish();
     Ok(report)
+}
+
+/// An error naming the option when the bench's options cannot measure anything.
+fn check_options(o: &BenchOptions) -> Result<()> {
+    let bad = |m: String| Err(Error::Invalid(format!("bench: {m}")));
+    if !(o.budget_s > 0.0 && o.budget_s.is_finite()) {
+        return bad(format!(
+            "the budget must be a positive number of seconds, not {}",
+            o.budget_s
+        ));
+    }
+    if !(o.scale > 0.0 && o.scale <= 64.0) {
+        return bad(format!("--scale must be in (0, 64], not {}", o.scale));
+    }
+    if o.eval_spp == 0
+        || o.reference_spp == 0
+        || o.reference_primal_spp == 0
+        || o.eval_spp > 1 << 16
+    {
+        return bad(format!(
+            "--eval-spp ({}), --reference-spp ({}) and --reference-primal-spp ({}) must be at \
+             least 1 (eval at most 65536)",
+            o.eval_spp, o.reference_spp, o.reference_primal_spp
+        ));
+    }
+    if o.successive == 0 || o.successive > 4096 {
+        return bad(format!(
+            "--successive must be in [1, 4096], not {}",
+            o.successive
+        ));
+    }
+    if o.gradient_only && o.end_to_end_only {
+        return bad("--gradient-only and --end-to-end-only leave nothing to measure".into());
+    }
+    Ok(())
+}
+
+/// The task at `path` as the bench runs it: scaled, under the protocol, with the options'
+/// priors and depth.
+fn load_task(path: &Path, o: &BenchOptions) -> Result<Task> {
+    let mut t = o.protocol.apply(&scaled(&Task::load(path)?, o.scale));
+    if o.no_priors {
+        t.optimizer.multiscale_levels = 0;
+        t.optimizer.smoothness = Some(0.0);
+    }
+    if let Some(d) = o.max_depth {
+        crate::scene::MaxDepth::new(d)
+            .map_err(|m| Error::Invalid(format!("bench: --max-depth: {m}")))?;
+        t.max_depth = d;
+    }
+    Ok(t)
+}
+
+/// Steps of the progress bar per scene: targets, the primal and gradient phases (one per
+/// seed and the reference), the search and each run of the equal-time phase (the
+/// baseline's and the contenders').
+fn steps_per_scene(o: &BenchOptions) -> u64 {
+    let contenders = if o.gradient_only {
+        0
+    } else {
+        o.contenders.len() as u64
+    };
+    let phases = if o.end_to_end_only {
+        2
+    } else {
+        o.repeats.max(1) as u64 + if o.gradient_only { 2 } else { 3 }
+    };
+    phases + u64::from(o.tune && !o.gradient_only) + contenders
+}
+
+/// Compile every optimizer pass the bench may create on `task` on a second device.
+fn compile_ahead(gpu: &Gpu, task: &Task, o: &BenchOptions) -> Option<std::thread::JoinHandle<()>> {
+    let mut passes: Vec<&str> = Vec::new();
+    let all = [Contender::BASELINE, Contender::adam(o.gradient_method)];
+    for c in all.iter().chain(&o.contenders) {
+        let c = c.on(task, crate::task::named_cameras(task));
+        let s = c.settings(task, |t, m| task_settings(t, &[], m, &o.estimator_options));
+        for p in Optimizer::passes(&s) {
+            if !passes.contains(&p) {
+                passes.push(p);
+            }
+        }
+    }
+    gpu.compile_elsewhere(&passes)
+}
+
+/// With `--tune`, each run's settings searched on another seed (the baseline's first, then
+/// the contenders'; the default configuration untuned); without it, none.
+fn tune_contenders(
+    gpu: &Gpu,
+    task: &Task,
+    prep: &Problem,
+    o: &BenchOptions,
+    dir: &Path,
+    progress: &Progress,
+) -> Result<Vec<Option<tune::Tuned>>> {
+    if !o.tune {
+        return Ok(vec![None; 1 + o.contenders.len()]);
+    }
+    let budget = o.tune_budget_s.unwrap_or(o.budget_s / 3.0);
+    let key = format!(
+        "{} {}x{} {:?} scale {} priors {} primal {:?} options {:?} tuning {budget} s, psrestir {}",
+        task.path.display(),
+        task.width,
+        task.height,
+        o.protocol,
+        o.scale,
+        !o.no_priors,
+        o.primal,
+        o.estimator_options,
+        env!("CARGO_PKG_VERSION"),
+    );
+    let mut t = Vec::new();
+    for c in std::iter::once(Contender::BASELINE).chain(o.contenders.iter().copied()) {
+        // The default configuration is measured as it is, untuned.
+        if c.auto {
+            t.push(None);
+            continue;
+        }
+        let mut s = settings(prep, task, c.method, o);
+        c.apply(&mut s);
+        t.push(Some(tune::tune(
+            gpu, prep, &s, budget, &key, dir, progress,
+        )?));
+    }
+    progress.done();
+    Ok(t)
+}
+
+/// One scene's results from its phases.
+fn scene_result(
+    name: String,
+    task: &Task,
+    prep: &Problem,
+    o: &BenchOptions,
+    pp: &PrimalPhase,
+    g: &gradient::GradientPhase,
+    optimization: Option<OptimizationResult>,
+) -> SceneResult {
+    // The primal estimator of both phases (the task's, or the bench's --primal).
+    let primal = settings(prep, task, o.gradient_method, o).primal;
+    SceneResult {
+        name,
+        task: task.path.display().to_string(),
+        width: task.width,
+        height: task.height,
+        cameras: prep.cameras.len(),
+        texels: prep.set.textures.iter().map(|t| t.width * t.height).sum(),
+        primal_spp: task.optimizer.primal_spp,
+        gradient_spp: task.optimizer.gradient_spp,
+        gradient_method: o.gradient_method.name().into(),
+        baseline_spp_equal_time: g.baseline_spp_equal_time,
+        gradient_relmse_baseline: g.total_baseline,
+        gradient_relmse_estimator: g.total_estimator,
+        gradient_relmse_ratio: g.total_estimator / g.total_baseline,
+        gradient_relmse_baseline_equal_iterations: g.total_baseline_equal_iterations,
+        gradient_relmse_ratio_equal_iterations: g.total_estimator
+            / g.total_baseline_equal_iterations,
+        gradient_relmse_estimator_only_baseline: g.only_baseline,
+        gradient_relmse_estimator_only_estimator: g.only_estimator,
+        gradient_relmse_estimator_only_ratio: g.only_estimator / g.only_baseline,
+        gradient_relmse_estimator_only_baseline_equal_time: g.only_baseline_equal_time,
+        gradient_relmse_estimator_only_ratio_equal_time: g.only_estimator
+            / g.only_baseline_equal_time,
+        gradient_relmse_mean_baseline: g.mean_baseline,
+        gradient_relmse_mean_estimator: g.mean_estimator,
+        gradient_relmse_mean_ratio: g.mean_estimator / g.mean_baseline,
+        successive_estimates: o.successive,
+        gradient_relmse_per_texture: prep
+            .set
+            .textures
+            .iter()
+            .zip(&g.per_texture)
+            .map(|(t, p)| TextureGradientErrors {
+                texture: t.name(),
+                estimator_only_baseline: p.only_baseline,
+                estimator_only_estimator: p.only_estimator,
+                estimator_only_ratio: p.only_estimator / p.only_baseline,
+                total_baseline_equal_iterations: p.total_baseline_equal_iterations,
+                total_estimator: p.total_estimator,
+                total_ratio_equal_iterations: p.total_estimator / p.total_baseline_equal_iterations,
+            })
+            .collect(),
+        ms_per_iteration_ratio: g.ms_ratio,
+        primal: primal.name().into(),
+        primal_relmse_independent: pp.relmse_independent,
+        primal_relmse_control_variate: pp.relmse_control_variate,
+        primal_relmse_ratio: pp.relmse_control_variate / pp.relmse_independent,
+        primal_ms_independent: pp.ms_independent,
+        primal_ms_control_variate: pp.ms_control_variate,
+        optimization,
+    }
 }
 
 /// The scene's name: its folder's name (the bundled scenes' folders are their names).
@@ -535,11 +571,11 @@ mod tests {
         let c = Contender::parse("recursive:variance+filtered").unwrap();
         assert_eq!(
             (c.method, c.step, c.filtered),
-            (Method::Recursive, StepKind::Variance, true)
+            (Method::RECURSIVE, StepKind::Variance, true)
         );
         assert_eq!(c.key(), "recursive_variance_filtered");
         let c = Contender::parse("baseline").unwrap();
-        assert_eq!(c, Contender::adam(Method::Baseline));
+        assert_eq!(c, Contender::adam(Method::BASELINE));
         assert_eq!(c.key(), "baseline");
         assert_eq!(
             Contender::parse("baseline+filtered").unwrap().name(),
@@ -555,7 +591,7 @@ mod tests {
             s.moment_filter.levels,
             crate::optim::moment_filter::SUGGESTED_LEVELS
         );
-        Contender::adam(Method::Baseline).apply(&mut s);
+        Contender::adam(Method::BASELINE).apply(&mut s);
         assert!(!s.moment_filter.enabled());
     }
 }

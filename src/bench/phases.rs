@@ -59,7 +59,7 @@ pub(super) fn primal_phase(
                 Settings {
                     seed,
                     primal: mode,
-                    ..settings(prep, task, Method::Baseline, o)
+                    ..settings(prep, task, Method::BASELINE, o)
                 },
             )?;
             let mut times = PassTimes::default();
@@ -313,7 +313,7 @@ pub(super) fn optimization_phases(
     mut tuned: Vec<Option<tune::Tuned>>,
     progress: &Progress,
 ) -> Result<(OptimizationResult, FinalImages)> {
-    let init = Optimizer::for_problem(gpu, prep, settings(prep, task, Method::Baseline, o))?;
+    let init = Optimizer::for_problem(gpu, prep, settings(prep, task, Method::BASELINE, o))?;
     let (image_initial, _) = evaluate(&init, prep, task, o.eval_spp)?;
     let texture_initial = prep
         .reference
@@ -439,7 +439,7 @@ pub(super) fn optimization_phases(
         observed_fraction: observed.iter().filter(|&&b| b).count() as f64
             / observed.len().max(1) as f64,
         observed_texels: observed.iter().filter(|&&b| b).count() as u64,
-        schedule: settings(prep, task, Method::Baseline, o)
+        schedule: settings(prep, task, Method::BASELINE, o)
             .schedule
             .describe(),
         textures: prep.set.textures.iter().map(|t| t.name()).collect(),
@@ -466,7 +466,7 @@ fn auto_result(task: &Task, cameras: usize, runs: &[RunResult], start: f64) -> A
     let run = |m: Method| runs.iter().find(|r| r.key == Contender::adam(m).key());
     let over_best = |f: fn(&RunResult) -> f64| {
         let picked = f(run(choice.method)?);
-        let best = [Method::Baseline, Method::Restir]
+        let best = [Method::BASELINE, Method::RESTIR]
             .into_iter()
             .map(|m| run(m).map(f))
             .collect::<Option<Vec<f64>>>()?

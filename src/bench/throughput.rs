@@ -92,7 +92,7 @@ pub fn throughput(gpu: &Gpu, task: &Task, path: &Path, out: &Path) -> Result<Thr
         1e3 * best,
     )];
     let pixels: u64 = prep.cameras.len() as u64 * (task.width as u64 * task.height as u64);
-    for method in Method::ALL {
+    for method in Method::all() {
         let s = task_settings(task, &prep.cameras, method, &Default::default());
         let (primal_spp, gradient_spp) = (s.primal_spp as u64, s.gradient_spp as u64);
         let mut opt = Optimizer::for_problem(gpu, &prep, s)?;

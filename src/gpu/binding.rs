@@ -1,14 +1,20 @@
 //! Bind groups by name: each pass's layouts reflected from its WGSL by naga
-//! ([`Gpu::pass_layout`]), the groups declared beside the code that drives a pass
+//! ([`Gpu::pass_layout_in`]), the groups declared beside the code that drives a pass
 //! ([`GroupDecl`]) and bound by WGSL name ([`Gpu::bind`]).
-use super::{shaders, Gpu};
+use super::{shaders::Library, Gpu};
 use crate::Result;
 
 impl Gpu {
-    /// The layout of bind group `group` of `pass`, reflected from its WGSL
-    /// ([`shaders::bindings`]): the only way the passes build their layouts.
-    pub fn pass_layout(&self, pass: &str, group: u32) -> Result<wgpu::BindGroupLayout> {
-        let kinds: Vec<Binding> = shaders::bindings_for(pass, group, self.tracer)?
+    /// The layout of bind group `group` of `pass`, reflected from its WGSL in `library`
+    /// ([`Library::bindings`]): the only way the passes build their layouts.
+    pub fn pass_layout_in(
+        &self,
+        library: &Library,
+        pass: &str,
+        group: u32,
+    ) -> Result<wgpu::BindGroupLayout> {
+        let kinds: Vec<Binding> = library
+            .bindings_for(pass, group, self.tracer)?
             .into_iter()
             .map(|(_, k)| k)
             .collect();

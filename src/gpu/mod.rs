@@ -45,7 +45,7 @@ pub struct Gpu {
     lost: Arc<Mutex<Option<String>>>,
     /// The pipelines created so far and what each took ([`Gpu::pipeline_times`]).
     pipelines: Arc<Mutex<Vec<PipelineTime>>>,
-    /// Whether this is a second device compiling ahead for another ([`Gpu::compile_elsewhere`]).
+    /// Whether this is a second device compiling ahead for another ([`Gpu::compile_elsewhere_in`]).
     compiles_ahead: bool,
 }
 
@@ -139,7 +139,7 @@ impl Gpu {
     }
 
     /// A second device of the adapter [`Gpu::with_tracer`] picks, without logging it (for
-    /// [`Gpu::compile_elsewhere`]).
+    /// [`Gpu::compile_elsewhere_in`]).
     pub(crate) fn quiet(tracer: Tracer) -> Result<Gpu> {
         pollster::block_on(Self::new_async(Some(tracer), false))
     }
@@ -446,17 +446,18 @@ impl Gpu {
         ))
     }
 
-    /// Compile a compute pass from its WGSL file (composed with `shaders/shared`), with the
-    /// given bind group layouts, catching validation errors as [`Error::Shader`]. The driver
-    /// compiles it here, not at its first dispatch (`prepare.rs`), and the time it took is
-    /// recorded ([`Gpu::pipeline_times`]).
-    pub fn compute_pipeline(
+    /// Compile a compute pass from its WGSL file in `library` (composed with its imports),
+    /// with the given bind group layouts, catching validation errors as [`Error::Shader`].
+    /// The driver compiles it here, not at its first dispatch (`prepare.rs`), and the time it
+    /// took is recorded ([`Gpu::pipeline_times`]).
+    pub fn compute_pipeline_in(
         &self,
+        library: &shaders::Library,
         pass: &str,
         layouts: &[&wgpu::BindGroupLayout],
     ) -> Result<wgpu::ComputePipeline> {
         let start = std::time::Instant::now();
-        let source = shaders::compose_for(pass, self.tracer)?;
+        let source = library.compose_for(pass, self.tracer)?;
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = self
             .device
@@ -489,7 +490,7 @@ impl Gpu {
                 msg: e.to_string(),
             });
         }
-        self.compile_now(pass, &pipeline, layouts)?;
+        self.compile_now(library, pass, &pipeline, layouts)?;
         self.record_pipeline(pass, start);
         Ok(pipeline)
     }

@@ -5,11 +5,11 @@
 //! dispatch that uses it, not in `vkCreateComputePipelines`: on the project's 2-core machine
 //! the first iteration of the default task took 20.6 s instead of 0.1 s, inside the
 //! optimization's clock, and every equal-time figure taken on a cold shader cache was off by
-//! that much. [`Gpu::compute_pipeline`] therefore dispatches every new pipeline once with zero
+//! that much. [`Gpu::compute_pipeline_in`] therefore dispatches every new pipeline once with zero
 //! workgroups, on placeholder resources of the layout reflected from its WGSL: the driver
 //! compiles it (or loads it from Mesa's shader cache) and runs nothing. On a GPU, whose
 //! driver compiles at creation, this costs one empty submission per pipeline.
-use super::{shaders, Binding, Gpu};
+use super::{shaders::Library, Binding, Gpu};
 use crate::Result;
 use std::time::Instant;
 
@@ -26,7 +26,7 @@ pub struct PipelineTime {
     /// Wall-clock seconds of creation and compilation.
     pub seconds: f64,
     /// Whether a second device compiled it ahead, beside the first's work
-    /// ([`Gpu::compile_elsewhere`]); the first device's own creation of the pass follows.
+    /// ([`Gpu::compile_elsewhere_in`]); the first device's own creation of the pass follows.
     pub ahead: bool,
 }
 
@@ -67,13 +67,14 @@ impl Gpu {
     /// queries, GPUs only, where creation compiles) is left alone.
     pub(super) fn compile_now(
         &self,
+        library: &Library,
         pass: &str,
         pipeline: &wgpu::ComputePipeline,
         layouts: &[&wgpu::BindGroupLayout],
     ) -> Result<()> {
         let mut kinds = Vec::new();
         for g in 0..layouts.len() {
-            kinds.push(shaders::bindings_for(pass, g as u32, self.tracer)?);
+            kinds.push(library.bindings_for(pass, g as u32, self.tracer)?);
         }
         if kinds
             .iter()
@@ -175,7 +176,11 @@ impl Gpu {
     /// results land in the driver's cache, where this device's own creation of the same
     /// passes finds them. Join the handle before creating them here. `None` where it would
     /// not help: a GPU (creation compiles, in parallel already), or the cache switched off.
-    pub fn compile_elsewhere(&self, passes: &[&str]) -> Option<std::thread::JoinHandle<()>> {
+    pub fn compile_elsewhere_in(
+        &self,
+        library: &'static Library,
+        passes: &[&str],
+    ) -> Option<std::thread::JoinHandle<()>> {
         let cache_off = std::env::var("MESA_SHADER_CACHE_DISABLE")
             .is_ok_and(|v| matches!(v.as_str(), "1" | "true" | "TRUE" | "yes"));
         if self.info.device_type != wgpu::DeviceType::Cpu || cache_off || passes.is_empty() {
@@ -197,17 +202,17 @@ impl Gpu {
                 for pass in &passes {
                     let mut layouts = Vec::new();
                     for g in 0..4 {
-                        match shaders::bindings_for(pass, g, tracer) {
+                        match library.bindings_for(pass, g, tracer) {
                             Ok(b) if !b.is_empty() => {}
                             _ => break,
                         }
-                        match helper.pass_layout(pass, g) {
+                        match helper.pass_layout_in(library, pass, g) {
                             Ok(l) => layouts.push(l),
                             Err(_) => return,
                         }
                     }
                     let refs: Vec<&wgpu::BindGroupLayout> = layouts.iter().collect();
-                    if let Err(e) = helper.compute_pipeline(pass, &refs) {
+                    if let Err(e) = helper.compute_pipeline_in(library, pass, &refs) {
                         log::debug!("compiling `{pass}` on a second device: {e}");
                         return;
                     }

@@ -1,10 +1,12 @@
 //! WGSL composition and validation.
 //!
-//! Each pass is one file under `shaders/`, named after the pass. A line `#import shared/NAME`
-//! pastes `shaders/shared/NAME.wgsl` in place, once per composed module (later imports of the
-//! same file are dropped), so shared code stays in one place. A line `#import gen/NAME` pastes
-//! WGSL generated from Rust ([`GENERATED`]): constants that both sides use are defined once,
-//! in Rust. The composed source is validated with naga by `cargo test` without any GPU.
+//! A pass is one WGSL file named after it, found in a [`Library`] that the code creating
+//! pipelines assembles. A line `#import shared/NAME` pastes the library's `shared/NAME` in
+//! place, once per composed module (later imports of the same file are dropped), so shared
+//! code stays in one place. A line `#import gen/NAME` pastes WGSL generated from Rust (a
+//! [`Generator`]): constants that both sides use are defined once, in Rust. The composed
+//! source is validated with naga by `cargo test` without any GPU. This module knows no file
+//! of its own: it is the composer, below everything that owns WGSL.
 //!
 //! `#import shared/bvh` is where rays are traced. With [`Tracer::RayQuery`] the composer
 //! pastes `shared/bvh_ray_query` there instead (the same functions through hardware ray
@@ -16,10 +18,6 @@ use std::borrow::Cow;
 /// A generator of WGSL source.
 pub type Generator = fn() -> String;
 
-/// WGSL written by Rust: (name under `gen/`, generator). The estimators add theirs
-/// (`optim::estimator::GENERATED`).
-pub const GENERATED: &[(&str, Generator)] = &[("gen/abi", crate::gpu::abi::wgsl)];
-
 /// WGSL declaring `constants` (WGSL name, value) as `u32`s, generated from the Rust file
 /// `from`.
 pub fn constants_wgsl(from: &str, constants: &[(&str, u32)]) -> String {
@@ -28,121 +26,6 @@ pub fn constants_wgsl(from: &str, constants: &[(&str, u32)]) -> String {
         s.push_str(&format!("const {name}: u32 = {v}u;\n"));
     }
     s
-}
-
-/// Every WGSL file under `shaders/`: (path under `shaders/` without extension, source).
-pub const SHADERS: &[(&str, &str)] = &[
-    (
-        "shared/types",
-        include_str!("../../shaders/shared/types.wgsl"),
-    ),
-    ("shared/rng", include_str!("../../shaders/shared/rng.wgsl")),
-    (
-        "shared/sampling",
-        include_str!("../../shaders/shared/sampling.wgsl"),
-    ),
-    (
-        "shared/scene",
-        include_str!("../../shaders/shared/scene.wgsl"),
-    ),
-    (
-        "shared/triangle",
-        include_str!("../../shaders/shared/triangle.wgsl"),
-    ),
-    ("shared/bvh", include_str!("../../shaders/shared/bvh.wgsl")),
-    (
-        "shared/bvh_ray_query",
-        include_str!("../../shaders/shared/bvh_ray_query.wgsl"),
-    ),
-    (
-        "shared/wrap",
-        include_str!("../../shaders/shared/wrap.wgsl"),
-    ),
-    (
-        "shared/texture",
-        include_str!("../../shaders/shared/texture.wgsl"),
-    ),
-    (
-        "shared/brdf",
-        include_str!("../../shaders/shared/brdf.wgsl"),
-    ),
-    (
-        "shared/lights",
-        include_str!("../../shaders/shared/lights.wgsl"),
-    ),
-    (
-        "shared/camera",
-        include_str!("../../shaders/shared/camera.wgsl"),
-    ),
-    (
-        "shared/params",
-        include_str!("../../shaders/shared/params.wgsl"),
-    ),
-    (
-        "shared/integrator",
-        include_str!("../../shaders/shared/integrator.wgsl"),
-    ),
-    (
-        "shared/gradient_scatter",
-        include_str!("../../shaders/shared/gradient_scatter.wgsl"),
-    ),
-    (
-        "shared/adjoint_pixel",
-        include_str!("../../shaders/shared/adjoint_pixel.wgsl"),
-    ),
-    (
-        "shared/surface",
-        include_str!("../../shaders/shared/surface.wgsl"),
-    ),
-    (
-        "shared/path_encoding",
-        include_str!("../../shaders/shared/path_encoding.wgsl"),
-    ),
-    ("render", include_str!("../../shaders/render.wgsl")),
-    ("trace_rays", include_str!("../../shaders/trace_rays.wgsl")),
-    ("loss", include_str!("../../shaders/loss.wgsl")),
-    (
-        "texture_wrap_test",
-        include_str!("../../shaders/texture_wrap_test.wgsl"),
-    ),
-    (
-        "texture_export",
-        include_str!("../../shaders/texture_export.wgsl"),
-    ),
-    (
-        "observed_texels",
-        include_str!("../../shaders/observed_texels.wgsl"),
-    ),
-    ("primal_cv", include_str!("../../shaders/primal_cv.wgsl")),
-];
-
-/// Every WGSL file: those under `shaders/`, then the steps', the priors' and the
-/// estimators', which lie beside their drivers (a pass is named after its file; an
-/// estimator's other modules are imported as `<method>/<file stem>`).
-pub fn sources() -> impl Iterator<Item = (&'static str, &'static str)> {
-    let folders = [crate::optim::step::WGSL, crate::optim::prior::WGSL];
-    SHADERS.iter().copied().chain(
-        folders
-            .into_iter()
-            .chain(crate::optim::estimator::WGSL)
-            .flat_map(|files| files.iter().copied()),
-    )
-}
-
-/// The passes (top-level WGSL files with an entry point `main`).
-pub fn passes() -> impl Iterator<Item = &'static str> {
-    sources().map(|(n, _)| n).filter(|n| !n.contains('/'))
-}
-
-fn source(name: &str) -> Option<Cow<'static, str>> {
-    if let Some((_, s)) = sources().find(|(n, _)| *n == name) {
-        return Some(Cow::Borrowed(s));
-    }
-    GENERATED
-        .iter()
-        .chain(crate::optim::estimator::GENERATED)
-        .find(|(n, _)| *n == name)
-        .map(|(_, f)| Cow::Owned(f()))
 }
 
 /// How the passes trace rays: the WGSL BVH, or the device's ray queries.
@@ -156,314 +39,275 @@ pub enum Tracer {
     RayQuery,
 }
 
-/// The full WGSL of a pass with its imports pasted in, tracing with the software BVH.
-pub fn compose(pass: &str) -> Result<String> {
-    compose_for(pass, Tracer::Software)
+/// A library of WGSL files that passes are composed from: (name, source) pairs, a pass named
+/// after its file and every other module by the path `#import` names, and generators of WGSL
+/// from Rust (`gen/<name>`). Whoever creates the pipelines assembles it (the crate's is
+/// `psrestir::shader_library`).
+#[derive(Clone, Default)]
+pub struct Library {
+    files: Vec<(&'static str, &'static str)>,
+    generated: Vec<(&'static str, Generator)>,
 }
 
-/// The full WGSL of a pass with its imports pasted in, tracing with `tracer`.
-pub fn compose_for(pass: &str, tracer: Tracer) -> Result<String> {
-    let mut out = String::new();
-    let mut seen = Vec::new();
-    include(pass, tracer, &mut out, &mut seen, 0)?;
-    if tracer == Tracer::RayQuery && seen.iter().any(|s| s == "shared/bvh_ray_query") {
-        out.insert_str(0, "enable wgpu_ray_query;\n");
+impl Library {
+    /// An empty library.
+    pub fn new() -> Library {
+        Library::default()
     }
-    Ok(out)
-}
 
-fn include(
-    name: &str,
-    tracer: Tracer,
-    out: &mut String,
-    seen: &mut Vec<String>,
-    depth: u32,
-) -> Result<()> {
-    let name = match (name, tracer) {
-        ("shared/bvh", Tracer::RayQuery) => "shared/bvh_ray_query",
-        _ => name,
-    };
-    if seen.iter().any(|s| s == name) {
-        return Ok(());
+    /// This library with `files` added: (name, source); a pass is a name without `/`.
+    pub fn with_files(mut self, files: &[(&'static str, &'static str)]) -> Library {
+        self.files.extend_from_slice(files);
+        self
     }
-    if depth > 16 {
-        return Err(Error::Shader {
+
+    /// This library with generated modules added: (name under `gen/`, generator).
+    pub fn with_generated(mut self, generated: &[(&'static str, Generator)]) -> Library {
+        self.generated.extend_from_slice(generated);
+        self
+    }
+
+    /// Every file: (name, source).
+    pub fn sources(&self) -> impl Iterator<Item = (&'static str, &'static str)> + '_ {
+        self.files.iter().copied()
+    }
+
+    /// Every generated module: (name, generator).
+    pub fn generated(&self) -> impl Iterator<Item = (&'static str, Generator)> + '_ {
+        self.generated.iter().copied()
+    }
+
+    /// The passes (top-level files, each with an entry point `main`).
+    pub fn passes(&self) -> impl Iterator<Item = &'static str> + '_ {
+        self.sources().map(|(n, _)| n).filter(|n| !n.contains('/'))
+    }
+
+    /// The source of the file or generated module `name`.
+    pub fn source(&self, name: &str) -> Option<Cow<'static, str>> {
+        if let Some((_, s)) = self.sources().find(|(n, _)| *n == name) {
+            return Some(Cow::Borrowed(s));
+        }
+        self.generated
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, f)| Cow::Owned(f()))
+    }
+
+    /// The full WGSL of a pass with its imports pasted in, tracing with the software BVH.
+    pub fn compose(&self, pass: &str) -> Result<String> {
+        self.compose_for(pass, Tracer::Software)
+    }
+
+    /// The full WGSL of a pass with its imports pasted in, tracing with `tracer`.
+    pub fn compose_for(&self, pass: &str, tracer: Tracer) -> Result<String> {
+        let mut out = String::new();
+        let mut seen = Vec::new();
+        self.include(pass, tracer, &mut out, &mut seen, 0)?;
+        if tracer == Tracer::RayQuery && seen.iter().any(|s| s == "shared/bvh_ray_query") {
+            out.insert_str(0, "enable wgpu_ray_query;\n");
+        }
+        Ok(out)
+    }
+
+    fn include(
+        &self,
+        name: &str,
+        tracer: Tracer,
+        out: &mut String,
+        seen: &mut Vec<String>,
+        depth: u32,
+    ) -> Result<()> {
+        let name = match (name, tracer) {
+            ("shared/bvh", Tracer::RayQuery) => "shared/bvh_ray_query",
+            _ => name,
+        };
+        if seen.iter().any(|s| s == name) {
+            return Ok(());
+        }
+        if depth > 16 {
+            return Err(Error::Shader {
+                name: name.into(),
+                msg: "imports nested more than 16 deep".into(),
+            });
+        }
+        seen.push(name.to_string());
+        let src = self.source(name).ok_or_else(|| Error::Shader {
             name: name.into(),
-            msg: "imports nested more than 16 deep".into(),
-        });
-    }
-    seen.push(name.to_string());
-    let src = source(name).ok_or_else(|| Error::Shader {
-        name: name.into(),
-        msg: "no such WGSL file under shaders/ (nor a generated gen/ module)".into(),
-    })?;
-    out.push_str(&format!("// ---- {name}.wgsl\n"));
-    for line in src.lines() {
-        if let Some(dep) = line.trim().strip_prefix("#import ") {
-            include(dep.trim(), tracer, out, seen, depth + 1)?;
-            out.push_str(&format!("// ---- (back in) {name}.wgsl\n"));
-        } else {
-            out.push_str(line);
-            out.push('\n');
+            msg: "no such WGSL file in the shader library (nor a generated gen/ module)".into(),
+        })?;
+        out.push_str(&format!("// ---- {name}.wgsl\n"));
+        for line in src.lines() {
+            if let Some(dep) = line.trim().strip_prefix("#import ") {
+                self.include(dep.trim(), tracer, out, seen, depth + 1)?;
+                out.push_str(&format!("// ---- (back in) {name}.wgsl\n"));
+            } else {
+                out.push_str(line);
+                out.push('\n');
+            }
         }
+        Ok(())
     }
-    Ok(())
-}
 
-/// Parse and validate a composed pass with naga; errors carry the pass name and location.
-pub fn validate(pass: &str) -> Result<naga::Module> {
-    validate_for(pass, Tracer::Software)
-}
+    /// Parse and validate a composed pass with naga; errors carry the pass name and location.
+    pub fn validate(&self, pass: &str) -> Result<naga::Module> {
+        self.validate_for(pass, Tracer::Software)
+    }
 
-/// [`validate`] for the form of the pass that traces with `tracer`.
-pub fn validate_for(pass: &str, tracer: Tracer) -> Result<naga::Module> {
-    let src = compose_for(pass, tracer)?;
-    let module = naga::front::wgsl::parse_str(&src).map_err(|e| Error::Shader {
-        name: pass.into(),
-        msg: e.emit_to_string(&src),
-    })?;
-    let mut validator = naga::valid::Validator::new(
-        naga::valid::ValidationFlags::all(),
-        match tracer {
-            Tracer::Software => naga::valid::Capabilities::empty(),
-            Tracer::RayQuery => naga::valid::Capabilities::RAY_QUERY,
-        },
-    );
-    validator.validate(&module).map_err(|e| Error::Shader {
-        name: pass.into(),
-        msg: e.emit_to_string(&src),
-    })?;
-    if !module.entry_points.iter().any(|e| e.name == "main") {
-        return Err(Error::Shader {
+    /// [`Library::validate`] for the form of the pass that traces with `tracer`.
+    pub fn validate_for(&self, pass: &str, tracer: Tracer) -> Result<naga::Module> {
+        let src = self.compose_for(pass, tracer)?;
+        let module = naga::front::wgsl::parse_str(&src).map_err(|e| Error::Shader {
             name: pass.into(),
-            msg: "no entry point `main`".into(),
-        });
-    }
-    Ok(module)
-}
-
-/// The bindings of group `group` of a pass, reflected from its composed WGSL by naga:
-/// (variable name, kind) in binding order. Bind group layouts are built from this, so they
-/// cannot disagree with the shader; the bindings must be numbered 0, 1, 2, ... without gaps.
-pub fn bindings(pass: &str, group: u32) -> Result<Vec<(String, super::Binding)>> {
-    bindings_for(pass, group, Tracer::Software)
-}
-
-/// [`bindings`] of the form of the pass that traces with `tracer`.
-pub fn bindings_for(
-    pass: &str,
-    group: u32,
-    tracer: Tracer,
-) -> Result<Vec<(String, super::Binding)>> {
-    let module = validate_for(pass, tracer)?;
-    let mut found: Vec<(u32, String, super::Binding)> = Vec::new();
-    for (_, var) in module.global_variables.iter() {
-        let Some(rb) = &var.binding else { continue };
-        if rb.group != group {
-            continue;
+            msg: e.emit_to_string(&src),
+        })?;
+        let mut validator = naga::valid::Validator::new(
+            naga::valid::ValidationFlags::all(),
+            match tracer {
+                Tracer::Software => naga::valid::Capabilities::empty(),
+                Tracer::RayQuery => naga::valid::Capabilities::RAY_QUERY,
+            },
+        );
+        validator.validate(&module).map_err(|e| Error::Shader {
+            name: pass.into(),
+            msg: e.emit_to_string(&src),
+        })?;
+        if !module.entry_points.iter().any(|e| e.name == "main") {
+            return Err(Error::Shader {
+                name: pass.into(),
+                msg: "no entry point `main`".into(),
+            });
         }
-        let kind = match var.space {
-            naga::AddressSpace::Uniform => super::Binding::Uniform,
-            naga::AddressSpace::Handle
-                if matches!(
-                    module.types[var.ty].inner,
-                    naga::TypeInner::AccelerationStructure { .. }
-                ) =>
-            {
-                super::Binding::AccelerationStructure
+        Ok(module)
+    }
+
+    /// The bindings of group `group` of a pass, reflected from its composed WGSL by naga:
+    /// (variable name, kind) in binding order. Bind group layouts are built from this, so they
+    /// cannot disagree with the shader; the bindings must be numbered 0, 1, 2, ... without gaps.
+    pub fn bindings(&self, pass: &str, group: u32) -> Result<Vec<(String, super::Binding)>> {
+        self.bindings_for(pass, group, Tracer::Software)
+    }
+
+    /// [`Library::bindings`] of the form of the pass that traces with `tracer`.
+    pub fn bindings_for(
+        &self,
+        pass: &str,
+        group: u32,
+        tracer: Tracer,
+    ) -> Result<Vec<(String, super::Binding)>> {
+        let module = self.validate_for(pass, tracer)?;
+        let mut found: Vec<(u32, String, super::Binding)> = Vec::new();
+        for (_, var) in module.global_variables.iter() {
+            let Some(rb) = &var.binding else { continue };
+            if rb.group != group {
+                continue;
             }
-            naga::AddressSpace::Handle
-                if matches!(
-                    module.types[var.ty].inner,
-                    naga::TypeInner::Image {
-                        dim: naga::ImageDimension::D2,
-                        arrayed: false,
-                        class: naga::ImageClass::Storage {
-                            format: naga::StorageFormat::Rgba32Float,
-                            access: naga::StorageAccess::STORE,
-                        },
-                    }
-                ) =>
-            {
-                super::Binding::StorageTextureRgba32FloatWrite
-            }
-            naga::AddressSpace::Storage { access } => {
-                if access.contains(naga::StorageAccess::STORE) {
-                    super::Binding::StorageRw
-                } else {
-                    super::Binding::Storage
+            let kind = match var.space {
+                naga::AddressSpace::Uniform => super::Binding::Uniform,
+                naga::AddressSpace::Handle
+                    if matches!(
+                        module.types[var.ty].inner,
+                        naga::TypeInner::AccelerationStructure { .. }
+                    ) =>
+                {
+                    super::Binding::AccelerationStructure
                 }
-            }
-            other => {
+                naga::AddressSpace::Handle
+                    if matches!(
+                        module.types[var.ty].inner,
+                        naga::TypeInner::Image {
+                            dim: naga::ImageDimension::D2,
+                            arrayed: false,
+                            class: naga::ImageClass::Storage {
+                                format: naga::StorageFormat::Rgba32Float,
+                                access: naga::StorageAccess::STORE,
+                            },
+                        }
+                    ) =>
+                {
+                    super::Binding::StorageTextureRgba32FloatWrite
+                }
+                naga::AddressSpace::Storage { access } => {
+                    if access.contains(naga::StorageAccess::STORE) {
+                        super::Binding::StorageRw
+                    } else {
+                        super::Binding::Storage
+                    }
+                }
+                other => {
+                    return Err(Error::Shader {
+                        name: pass.into(),
+                        msg: format!(
+                            "binding {} of group {group}: unsupported {other:?}",
+                            rb.binding
+                        ),
+                    })
+                }
+            };
+            found.push((rb.binding, var.name.clone().unwrap_or_default(), kind));
+        }
+        found.sort_by_key(|b| b.0);
+        for (i, b) in found.iter().enumerate() {
+            if b.0 != i as u32 {
                 return Err(Error::Shader {
                     name: pass.into(),
                     msg: format!(
-                        "binding {} of group {group}: unsupported {other:?}",
-                        rb.binding
+                        "group {group} has no binding {i} (bindings must be 0, 1, 2, ...)"
                     ),
-                })
+                });
             }
-        };
-        found.push((rb.binding, var.name.clone().unwrap_or_default(), kind));
-    }
-    found.sort_by_key(|b| b.0);
-    for (i, b) in found.iter().enumerate() {
-        if b.0 != i as u32 {
-            return Err(Error::Shader {
-                name: pass.into(),
-                msg: format!("group {group} has no binding {i} (bindings must be 0, 1, 2, ...)"),
-            });
         }
+        Ok(found.into_iter().map(|(_, n, k)| (n, k)).collect())
     }
-    Ok(found.into_iter().map(|(_, n, k)| (n, k)).collect())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    #[test]
-    fn every_pass_validates_with_naga() {
-        let mut n = 0;
-        for pass in passes() {
-            for tracer in [Tracer::Software, Tracer::RayQuery] {
-                if let Err(e) = validate_for(pass, tracer) {
-                    panic!("{tracer:?}: {e}");
-                }
-            }
-            n += 1;
-        }
-        assert!(n >= 2);
+    fn toy() -> Library {
+        Library::new()
+            .with_files(&[
+                ("shared/a", "fn a() -> u32 { return K; }"),
+                (
+                    "shared/b",
+                    "#import shared/a\nfn b() -> u32 { return a(); }",
+                ),
+                ("shared/bvh", "fn trace() {}"),
+                ("shared/bvh_ray_query", "fn trace() {}"),
+                (
+                    "pass",
+                    "#import gen/k\n#import shared/a\n#import shared/b\n#import shared/bvh\n\
+                     @compute @workgroup_size(1) fn main() { trace(); _ = b(); }",
+                ),
+            ])
+            .with_generated(&[("gen/k", || constants_wgsl("test", &[("K", 7)]))])
     }
 
     #[test]
-    fn every_pass_has_contiguous_reflected_bindings() {
-        // texture_export binds a storage texture, which texture_export.rs lays out itself.
-        for pass in passes().filter(|&p| p != "texture_export") {
-            for group in 0..2 {
-                bindings(pass, group).unwrap_or_else(|e| panic!("{pass}: {e}"));
-            }
-        }
-        // The scene group as every tracing pass declares it (shared/scene.wgsl).
-        let scene = bindings("render", 0).unwrap();
-        assert_eq!(scene[0].0, "nodes");
-        assert_eq!(
-            scene[7],
-            ("scene".to_string(), crate::gpu::Binding::Uniform)
-        );
-        assert_eq!(bindings("loss", 0).unwrap()[6].0, "exposure_partial");
-        // With ray queries the tracing passes add the acceleration structure after the
-        // buffers; the merge, which traces nothing, is the same in both forms.
-        let rq = bindings_for("render", 0, Tracer::RayQuery).unwrap();
-        assert_eq!(rq.len(), scene.len() + 1);
-        assert_eq!(
-            rq.last().unwrap(),
-            &(
-                "scene_tlas".to_string(),
-                crate::gpu::Binding::AccelerationStructure
-            )
-        );
-        for pass in passes().filter(|&p| p != "texture_export") {
-            for group in 0..2 {
-                bindings_for(pass, group, Tracer::RayQuery)
-                    .unwrap_or_else(|e| panic!("{pass} with ray queries: {e}"));
-            }
-        }
-        assert_eq!(
-            compose_for("restir_merge", Tracer::RayQuery).unwrap(),
-            compose("restir_merge").unwrap()
-        );
-    }
-
-    #[test]
-    fn every_wgsl_file_is_registered() {
-        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/shaders");
-        let mut files = Vec::new();
-        for sub in ["", "shared/"] {
-            for e in std::fs::read_dir(format!("{dir}/{sub}")).unwrap() {
-                let p = e.unwrap().path();
-                if p.extension().is_some_and(|x| x == "wgsl") {
-                    let stem = p.file_stem().unwrap().to_string_lossy().to_string();
-                    files.push(format!("{sub}{stem}"));
-                }
-            }
-        }
-        for f in files {
-            assert!(source(&f).is_some(), "shaders/{f}.wgsl is not in SHADERS");
-        }
-        // The passes in the estimators' folders (a pass's name is its file's stem).
-        let estimators = concat!(env!("CARGO_MANIFEST_DIR"), "/src/optim/estimator");
-        let mut found = 0;
-        for e in std::fs::read_dir(estimators).unwrap() {
-            let d = e.unwrap().path();
-            if !d.is_dir() {
-                continue;
-            }
-            for f in std::fs::read_dir(&d).unwrap() {
-                let p = f.unwrap().path();
-                if p.extension().is_some_and(|x| x == "wgsl") {
-                    let stem = p.file_stem().unwrap().to_string_lossy().to_string();
-                    let dir = d.file_name().unwrap().to_string_lossy().to_string();
-                    assert!(
-                        source(&stem).is_some() || source(&format!("{dir}/{stem}")).is_some(),
-                        "{} is not in its estimator's WGSL list",
-                        p.display()
-                    );
-                    found += 1;
-                }
-            }
-        }
-        assert!(
-            found >= 6,
-            "only {found} WGSL files in the estimators' folders"
-        );
-    }
-
-    /// The constants every generated module declares.
-    fn generated_constants() -> Vec<(&'static str, String)> {
-        let mut out = Vec::new();
-        for (module, f) in GENERATED.iter().chain(crate::optim::estimator::GENERATED) {
-            for line in f().lines() {
-                if let Some(rest) = line.strip_prefix("const ") {
-                    out.push((*module, rest.split(':').next().unwrap().to_string()));
-                }
-            }
-        }
-        out
-    }
-
-    #[test]
-    fn generated_constants_are_unique_and_no_wgsl_file_defines_one() {
-        let consts = generated_constants();
-        assert!(consts.len() > 40, "{} constants", consts.len());
-        let mut names: Vec<&str> = consts.iter().map(|(_, n)| n.as_str()).collect();
-        names.sort();
-        let n = names.len();
-        names.dedup();
-        assert_eq!(names.len(), n, "a constant is generated twice");
-        for (file, source) in sources() {
-            for (module, name) in &consts {
-                assert!(
-                    !source.contains(&format!("const {name}:")),
-                    "{file}.wgsl defines {name}, which {module} generates"
-                );
-            }
-            // A statistics buffer (`stats`, `gstats`, `loss_stats`, ...) indexed by a digit.
-            for (i, _) in source.match_indices("stats[") {
-                let next = source[i + 6..].chars().next().unwrap_or(' ');
-                assert!(
-                    !next.is_ascii_digit(),
-                    "{file}.wgsl indexes a statistics buffer by a literal: {}",
-                    &source[i.saturating_sub(20)..(i + 10).min(source.len())]
-                );
-            }
-        }
+    fn imports_are_pasted_once_and_generated_modules_found() {
+        let lib = toy();
+        assert_eq!(lib.passes().collect::<Vec<_>>(), ["pass"]);
+        let src = lib.compose("pass").unwrap();
+        assert_eq!(src.matches("fn a()").count(), 1, "{src}");
+        assert!(src.contains("const K: u32 = 7u;"));
+        lib.validate("pass").unwrap();
+        let rq = lib.compose_for("pass", Tracer::RayQuery).unwrap();
+        assert!(rq.starts_with("enable wgpu_ray_query;"));
+        assert!(rq.contains("shared/bvh_ray_query.wgsl"));
     }
 
     #[test]
     fn a_broken_shader_is_reported_with_its_name() {
         let src = "fn main( { }";
         assert!(naga::front::wgsl::parse_str(src).is_err());
-        assert!(matches!(compose("no_such_pass"), Err(Error::Shader { .. })));
+        let lib = toy().with_files(&[("broken", src)]);
+        match lib.validate("broken") {
+            Err(Error::Shader { name, .. }) => assert_eq!(name, "broken"),
+            other => panic!("{other:?}"),
+        }
+        assert!(matches!(
+            lib.compose("no_such_pass"),
+            Err(Error::Shader { .. })
+        ));
     }
 }

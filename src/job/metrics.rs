@@ -1,11 +1,13 @@
 //! What `psrestir optimize` reports while it runs: the rows of `metrics.csv` (texture and
 //! image errors, measured outside the timed optimization), the mean pass times, the progress
-//! bar and the log lines about observed texels and exposures.
-use super::run::{evaluate, rmse};
+//! bar and the log lines about observed texels and exposures; and how they are measured
+//! and written (image error, texture RMSE, `metrics.csv`, `texture_errors.csv`).
 use super::Problem;
+use crate::image_io::{self, Image};
 use crate::optim::checkpoint::MetricRow;
 use crate::optim::{Optimizer, PassTimes};
 use crate::Result;
+use std::path::Path;
 
 /// The mean of the sampled iterations' pass times.
 #[derive(Default)]
@@ -131,7 +133,7 @@ impl Metrics<'_> {
 impl Metrics<'_> {
     /// Per texture, its observed-texel RMSE at the initial values and at `values` (empty
     /// without a ground truth).
-    pub(super) fn errors_per_texture(&self, values: &[f32]) -> Vec<super::run::TextureErrors> {
+    pub(super) fn errors_per_texture(&self, values: &[f32]) -> Vec<TextureErrors> {
         let p = self.prep;
         let Some(r) = p.reference.as_ref() else {
             return Vec::new();
@@ -143,7 +145,7 @@ impl Metrics<'_> {
             .textures
             .iter()
             .zip(per(&p.set.values).into_iter().zip(per(values)))
-            .map(|(t, (a, b))| super::run::TextureErrors {
+            .map(|(t, (a, b))| TextureErrors {
                 texture: t.name(),
                 initial_rmse_observed: a,
                 final_rmse_observed: b,
@@ -213,4 +215,96 @@ pub(super) fn log_exposures(prep: &Problem, opt: &Optimizer) {
         .map(|(&c, e)| format!("{} {e:.4}", prep.scene.cameras[c].name))
         .collect();
     log::info!("exposures: {}", list.join(", "));
+}
+
+/// One optimized texture's observed-texel RMSE at the start and at the end of a run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TextureErrors {
+    /// `material_slot`.
+    pub texture: String,
+    /// At the initial values.
+    pub initial_rmse_observed: f64,
+    /// At the end.
+    pub final_rmse_observed: f64,
+}
+
+/// A render as it is compared with its target: times the camera's exposure.
+pub(super) fn exposed(mut img: Image, exposure: f32) -> Image {
+    for p in &mut img.rgb {
+        *p = p.map(|v| v * exposure);
+    }
+    img
+}
+
+/// Image relMSE of an `spp`-sample render of every camera of `opt` against its target
+/// (mean over cameras), with the same seed at every call, so that differences between calls
+/// are the textures', not the noise's; and the renders.
+pub fn evaluate(
+    opt: &Optimizer,
+    targets: &[Image],
+    spp: u32,
+    seed: u32,
+) -> Result<(f64, Vec<Image>)> {
+    let mut sum = 0.0;
+    let mut images = Vec::new();
+    for (k, target) in targets.iter().enumerate() {
+        let img = exposed(
+            opt.render(
+                k,
+                spp,
+                crate::optim::pass_seed(seed, u32::MAX - 2, k as u32, crate::optim::Seeds::EVAL),
+            )?,
+            opt.exposure()[k],
+        );
+        sum += crate::optim::loss::image_relmse(&img, target);
+        images.push(img);
+    }
+    Ok((sum / targets.len().max(1) as f64, images))
+}
+
+/// Root-mean-square difference.
+pub fn rmse(a: &[f32], b: &[f32]) -> f64 {
+    let s: f64 = a.iter().zip(b).map(|(x, y)| ((x - y) as f64).powi(2)).sum();
+    (s / a.len().max(1) as f64).sqrt()
+}
+
+/// The columns of metrics.csv.
+pub const METRICS_HEADER: &str =
+    "iteration,elapsed_s,loss,texture_rmse,texture_rmse_observed,image_relmse,learning_rate";
+
+/// Write `texture_errors.csv` atomically: per optimized texture, its observed-texel RMSE at
+/// the start and at the end of the run.
+pub fn write_texture_errors(path: &Path, errors: &[TextureErrors]) -> Result<()> {
+    let mut s = String::from("texture,initial_rmse_observed,final_rmse_observed\n");
+    for t in errors {
+        s.push_str(&format!(
+            "{},{:.6e},{:.6e}\n",
+            t.texture, t.initial_rmse_observed, t.final_rmse_observed
+        ));
+    }
+    image_io::write_atomic(path, s.as_bytes())
+}
+
+/// Write metrics.csv atomically. Empty fields: not measured at that iteration (texture
+/// errors without a ground truth, image error between evaluations, the loss of the start).
+pub fn write_metrics(path: &Path, rows: &[MetricRow]) -> Result<()> {
+    let opt = |v: Option<f64>| {
+        v.filter(|v| v.is_finite())
+            .map(|v| format!("{v:.6e}"))
+            .unwrap_or_default()
+    };
+    let mut s = format!("{METRICS_HEADER}\n");
+    for r in rows {
+        s.push_str(&format!(
+            "{},{:.4},{},{},{},{},{}\n",
+            r.iteration,
+            r.elapsed_s,
+            opt(r.loss),
+            opt(r.texture_rmse),
+            opt(r.texture_rmse_observed),
+            opt(r.image_relmse),
+            opt(r.learning_rate),
+        ));
+    }
+    image_io::write_atomic(path, s.as_bytes())
 }

@@ -3,6 +3,7 @@
 //! above [`crate::optim`] (the optimizer knows nothing of task files) and [`crate::task`].
 pub mod export;
 mod metrics;
+mod outputs;
 pub mod plot;
 pub mod problem;
 pub mod run;

@@ -329,7 +329,7 @@ fn targets_key(task: &Task, truth: &Path) -> Result<u64> {
 /// A hash of every WGSL source the passes are built from.
 fn renderer_fingerprint() -> u64 {
     let mut h = 0xcbf2_9ce4_8422_2325u64;
-    for (name, source) in crate::gpu::shaders::sources() {
+    for (name, source) in crate::shader_library::sources() {
         fnv1a(&mut h, name.as_bytes());
         fnv1a(&mut h, source.as_bytes());
     }

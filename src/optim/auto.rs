@@ -238,7 +238,7 @@ mod tests {
             None,
             &[(Slot::BaseColor, false)],
         );
-        assert_eq!(c.estimator.method, Method::Baseline);
+        assert_eq!(c.estimator.method, Method::BASELINE);
         assert_eq!(c.step, StepKind::Variance);
         assert_eq!(c.moment_filter.levels, SUGGESTED_LEVELS);
         assert_eq!(c.schedule.kind, ScheduleKind::Cosine);
@@ -267,14 +267,14 @@ mod tests {
         };
         let c = Configuration::choose(
             &r,
-            MethodChoice::Fixed(Method::Recursive),
+            MethodChoice::Fixed(Method::RECURSIVE),
             Some(StepKind::Adam),
             Some(f),
             Some(Schedule::constant()),
             Some(0.0),
             &[(Slot::BaseColor, true)],
         );
-        assert_eq!(c.estimator.method, Method::Recursive);
+        assert_eq!(c.estimator.method, Method::RECURSIVE);
         assert_eq!(c.step, StepKind::Adam);
         assert_eq!(c.moment_filter, f);
         assert_eq!(c.schedule, Schedule::constant());

@@ -266,7 +266,7 @@ mod tests {
         };
         // Without reservoirs (the baseline) as well.
         let mut base = c.clone();
-        base.state.estimator = EstimatorState::new(crate::optim::Method::Baseline);
+        base.state.estimator = EstimatorState::new(crate::optim::Method::BASELINE);
         base.state.previous = None;
         base.state.control_variate = None;
         base.save(&p).unwrap();

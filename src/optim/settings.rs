@@ -249,32 +249,32 @@ mod tests {
             ),
             (
                 "optimizer.restir.m_cap",
-                Box::new(|s| s.estimator_options.set(Method::Restir, "m_cap", 0.0.into())),
+                Box::new(|s| s.estimator_options.set(Method::RESTIR, "m_cap", 0.0.into())),
             ),
             (
                 "optimizer.restir",
                 Box::new(|s| {
                     s.estimator_options
-                        .set(Method::Restir, "m_capp", 8.0.into())
+                        .set(Method::RESTIR, "m_capp", 8.0.into())
                 }),
             ),
             (
                 "optimizer.recursive.weight",
                 Box::new(|s| {
                     s.estimator_options
-                        .set(Method::Recursive, "weight", 0.0.into())
+                        .set(Method::RECURSIVE, "weight", 0.0.into())
                 }),
             ),
             (
                 "optimizer.recursive.min_weight",
                 Box::new(|s| {
                     s.estimator_options
-                        .set(Method::Recursive, "min_weight", 2.0.into())
+                        .set(Method::RECURSIVE, "min_weight", 2.0.into())
                 }),
             ),
             (
                 "optimizer.baseline.m_cap",
-                Box::new(|s| s.estimator_options.set(Method::Baseline, "m_cap", 8.into())),
+                Box::new(|s| s.estimator_options.set(Method::BASELINE, "m_cap", 8.into())),
             ),
             (
                 "optimizer.variance_step.clip",

@@ -1,9 +1,11 @@
 //! Reading the files a scene refers to: with a size limit, and only data URIs or files
 //! inside the scene's folder.
-use super::load::MAX_FILE_BYTES;
 use crate::{Error, Result};
 use base64::Engine;
 use std::path::{Component, Path, PathBuf};
+
+/// Largest scene, buffer or image file psrestir reads (bytes).
+pub const MAX_FILE_BYTES: u64 = 4 << 30;
 
 /// A whole file, refused past `MAX_FILE_BYTES`.
 pub(super) fn read_file(path: &Path) -> Result<Vec<u8>> {

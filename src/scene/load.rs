@@ -1,21 +1,19 @@
-//! glTF 2.0 loading (`.gltf` and `.glb`) into a world-space [`Scene`]. One idea, one file
-//! (about 700 lines): the reader of one format, node hierarchy to lights and images.
+//! glTF 2.0 loading (`.gltf` and `.glb`) into a world-space [`Scene`]: the reader of one
+//! format, node hierarchy to lights and images (meshes in `load/mesh.rs`).
 //!
 //! External files are read only from the scene's folder and below: absolute paths, `..` and
 //! URIs with a scheme other than `data:` are refused.
 use super::files::{percent_decode, read_file, read_uri};
 use super::{
-    in_bounds, Camera, Material, PunctualKind, PunctualLight, Scene, TextureSlot, Triangle, Wrap,
-    MAX_COORD,
+    in_bounds, Camera, Material, PunctualKind, PunctualLight, Scene, TextureSlot, Wrap, MAX_COORD,
 };
 use crate::{Error, Result};
-use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
+use glam::{Mat4, Vec3, Vec4};
 use std::collections::HashMap;
 use std::f32::consts::PI;
 use std::path::{Path, PathBuf};
 
-/// Largest scene, buffer or image file psrestir reads (bytes).
-pub const MAX_FILE_BYTES: u64 = 4 << 30;
+mod mesh;
 /// Most triangles psrestir loads.
 pub const MAX_TRIANGLES: usize = 64 << 20;
 
@@ -450,166 +448,6 @@ impl<'a> Loader<'a> {
             let children: Vec<gltf::Node> = node.children().collect();
             for c in children.into_iter().rev() {
                 stack.push((c, world, depth + 1));
-            }
-        }
-        Ok(())
-    }
-
-    fn load_mesh(&mut self, mesh: &gltf::Mesh, world: Mat4) -> Result<()> {
-        let mesh_name = mesh
-            .name()
-            .map(|n| format!("mesh `{n}`"))
-            .unwrap_or_else(|| format!("mesh {}", mesh.index()));
-        let normal_m = Mat3::from_mat4(world).inverse().transpose();
-        let flip = Mat3::from_mat4(world).determinant() < 0.0;
-        for prim in mesh.primitives() {
-            let what = format!("{mesh_name} primitive {}", prim.index());
-            if prim.mode() != gltf::mesh::Mode::Triangles {
-                self.scene.warnings.push(format!(
-                    "{what}: mode {:?} is not a triangle list, skipped",
-                    prim.mode()
-                ));
-                continue;
-            }
-            let buffers = &self.buffers;
-            let reader = prim.reader(|b| buffers.get(b.index()).map(|v| v.as_slice()));
-            let Some(positions) = reader.read_positions() else {
-                self.scene
-                    .warnings
-                    .push(format!("{what}: no POSITION attribute, skipped"));
-                continue;
-            };
-            let positions: Vec<Vec3> = positions.map(Vec3::from).collect();
-            let normals: Option<Vec<Vec3>> =
-                reader.read_normals().map(|n| n.map(Vec3::from).collect());
-            let uvs: Option<Vec<Vec2>> = reader
-                .read_tex_coords(0)
-                .map(|t| t.into_f32().map(Vec2::from).collect());
-            let tangents: Option<Vec<Vec4>> =
-                reader.read_tangents().map(|t| t.map(Vec4::from).collect());
-            let indices: Vec<u32> = match reader.read_indices() {
-                Some(i) => i.into_u32().collect(),
-                None => (0..positions.len() as u32).collect(),
-            };
-            let nv = positions.len();
-            if let Some(bad) = indices.iter().find(|&&i| i as usize >= nv) {
-                return Err(self.err(format!("{what}: index {bad} out of range ({nv} vertices)")));
-            }
-            if normals.as_ref().is_some_and(|n| n.len() != nv)
-                || uvs.as_ref().is_some_and(|u| u.len() != nv)
-                || tangents.as_ref().is_some_and(|t| t.len() != nv)
-            {
-                return Err(self.err(format!("{what}: attribute counts differ")));
-            }
-            let material = self.material_index(prim.material().index());
-            if uvs.is_none() {
-                let m = &self.scene.materials[material as usize];
-                let textured = m.base_color_texture.is_some()
-                    || m.metallic_roughness_texture.is_some()
-                    || m.emissive_texture.is_some();
-                if textured {
-                    self.scene.warnings.push(format!(
-                        "{what}: no TEXCOORD_0 but material `{}` is textured: its textures are \
-                         read at UV (0, 0) there, and texture optimization of that material \
-                         gets no gradient from it",
-                        m.name
-                    ));
-                }
-            }
-            // Tangents of each face's vertices, for a normal-mapped material: the file's, or
-            // MikkTSpace's from the positions, normals and UV0.
-            let normal_mapped = self.scene.materials[material as usize]
-                .normal_texture
-                .is_some();
-            let face_tangents: Option<Vec<Vec4>> = match (&tangents, &uvs) {
-                _ if !normal_mapped => None,
-                (Some(t), _) => Some(indices.iter().map(|&i| t[i as usize]).collect()),
-                (None, Some(uv)) => {
-                    super::tangents::mikktspace(&positions, normals.as_deref(), uv, &indices)
-                }
-                (None, None) => {
-                    self.scene.warnings.push(format!(
-                        "{what}: material `{}` has a normal map but the primitive has no \
-                         TEXCOORD_0: the normal map is not applied there",
-                        self.scene.materials[material as usize].name
-                    ));
-                    None
-                }
-            };
-            let tangent_m = Mat3::from_mat4(world);
-            let (mut skipped, mut degenerate) = (0, 0);
-            for (fi, f) in indices.chunks_exact(3).enumerate() {
-                if self.scene.triangles.len() >= MAX_TRIANGLES {
-                    return Err(self.err(format!("more than {MAX_TRIANGLES} triangles")));
-                }
-                let mut idx = [f[0] as usize, f[1] as usize, f[2] as usize];
-                // Which of the face's vertices each corner is (the winding is reversed under
-                // a mirroring transform).
-                let mut corner = [0, 1, 2];
-                if flip {
-                    idx.swap(1, 2);
-                    corner.swap(1, 2);
-                }
-                let p = idx.map(|i| world.transform_point3(positions[i]));
-                if !p.iter().all(|&v| in_bounds(v)) {
-                    skipped += 1;
-                    continue;
-                }
-                let face = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
-                if face == Vec3::ZERO {
-                    // Zero area (collinear or repeated vertices): never hit, never a light.
-                    degenerate += 1;
-                    continue;
-                }
-                let n = idx.map(|i| match &normals {
-                    Some(ns) => {
-                        let v = (normal_m * ns[i]).normalize_or_zero();
-                        // Also catches vectors so short that normalizing them loses precision.
-                        if v.is_finite() && (v.length() - 1.0).abs() < 1e-4 {
-                            v
-                        } else {
-                            face
-                        }
-                    }
-                    None => face,
-                });
-                let uv = idx.map(|i| match &uvs {
-                    Some(u) if u[i].is_finite() => u[i],
-                    _ => Vec2::ZERO,
-                });
-                // A tangent is a direction on the surface (transformed like positions); a
-                // mirroring transform also mirrors the bitangent's handedness.
-                let t = match &face_tangents {
-                    Some(ft) => corner.map(|k| {
-                        let v = ft[3 * fi + k];
-                        let d = (tangent_m * v.truncate()).normalize_or_zero();
-                        let w = if (v.w < 0.0) != flip { -1.0 } else { 1.0 };
-                        if d.is_finite() {
-                            d.extend(w)
-                        } else {
-                            Vec4::ZERO
-                        }
-                    }),
-                    None => [Vec4::ZERO; 3],
-                };
-                self.scene.triangles.push(Triangle {
-                    p,
-                    n,
-                    uv,
-                    t,
-                    material,
-                });
-            }
-            if skipped > 0 {
-                self.scene.warnings.push(format!(
-                    "{what}: {skipped} triangles with non-finite positions or positions \
-                     beyond ±{MAX_COORD:e} skipped"
-                ));
-            }
-            if degenerate > 0 {
-                self.scene.warnings.push(format!(
-                    "{what}: {degenerate} degenerate (zero-area) triangles skipped"
-                ));
             }
         }
         Ok(())

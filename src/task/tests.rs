@@ -101,7 +101,7 @@ fn the_method_defaults_to_auto_and_resolves_by_the_tasks_sampling() {
     // 32x16 pixels over 8x8 texels: dense, the baseline.
     assert_eq!(
         task_method(&t, t.optimizer.method, 1).method,
-        Method::Baseline
+        Method::BASELINE
     );
     // 64x64 texels, sparse (1 gradient sample per 8 texels); a 32-spp primal: ReSTIR.
     let paper = GOOD
@@ -109,13 +109,13 @@ fn the_method_defaults_to_auto_and_resolves_by_the_tasks_sampling() {
         .replace("resolution = [8, 8]", "resolution = [64, 64]");
     let t = Task::parse(&paper, Path::new("t.toml")).unwrap();
     let c = task_method(&t, t.optimizer.method, 1);
-    assert_eq!((c.method, c.automatic), (Method::Restir, true));
+    assert_eq!((c.method, c.automatic), (Method::RESTIR, true));
     // A named estimator is kept.
     let fixed = paper.replace("primal_spp = 32", "primal_spp = 32\nmethod = \"baseline\"");
     let t = Task::parse(&fixed, Path::new("t.toml")).unwrap();
     assert_eq!(
         task_method(&t, t.optimizer.method, 1).method,
-        Method::Baseline
+        Method::BASELINE
     );
     let e = err(&GOOD.replace("iterations = 10", "iterations = 10\nmethod = \"restri\""));
     assert!(

@@ -133,7 +133,7 @@ fn auto(r: &Regime) -> Choice {
     let (d, q) = (r.samples_per_texel(), r.primal_ratio());
     let (method, why) = if r.max_depth > 1 {
         (
-            Method::Baseline,
+            Method::BASELINE,
             format!(
                 "indirect light (paths of {} vertices): ReSTIR's kept samples carry the light \
                  they brought back when drawn, which the other surfaces' textures change",
@@ -142,12 +142,12 @@ fn auto(r: &Regime) -> Choice {
         )
     } else if d >= DENSE_SAMPLES_PER_TEXEL {
         (
-            Method::Baseline,
+            Method::BASELINE,
             format!("dense sampling (from {DENSE_SAMPLES_PER_TEXEL}): reuse has little to add"),
         )
     } else if q >= RESTIR_PRIMAL_RATIO {
         (
-            Method::Restir,
+            Method::RESTIR,
             format!(
                 "sparse sampling and an expensive primal (from {RESTIR_PRIMAL_RATIO} primal \
                  samples per gradient sample): ReSTIR's merge adds little to an iteration"
@@ -155,7 +155,7 @@ fn auto(r: &Regime) -> Choice {
         )
     } else if r.texels < RESTIR_MAX_TEXELS_CHEAP_PRIMAL {
         (
-            Method::Restir,
+            Method::RESTIR,
             format!(
                 "sparse sampling, {} texels (under {RESTIR_MAX_TEXELS_CHEAP_PRIMAL}): ReSTIR's \
                  merge leaves the budget enough iterations",
@@ -164,7 +164,7 @@ fn auto(r: &Regime) -> Choice {
         )
     } else {
         (
-            Method::Baseline,
+            Method::BASELINE,
             format!(
                 "sparse sampling but a cheap primal and {} texels (from \
                  {RESTIR_MAX_TEXELS_CHEAP_PRIMAL}): ReSTIR's merge would cost more iterations \
@@ -244,20 +244,20 @@ mod tests {
         // The default task: 2 cameras of 128², 2 gradient spp, 256x128 texels: dense.
         assert_eq!(
             pick(regime(4, 2, 2 * 128 * 128, 256 * 128)),
-            Method::Baseline
+            Method::BASELINE
         );
         // A bench scene, both protocols: sparse and small.
-        assert_eq!(pick(regime(2, 1, 128 * 128, 256 * 256)), Method::Restir);
-        assert_eq!(pick(regime(32, 1, 128 * 128, 256 * 256)), Method::Restir);
+        assert_eq!(pick(regime(2, 1, 128 * 128, 256 * 256)), Method::RESTIR);
+        assert_eq!(pick(regime(32, 1, 128 * 128, 256 * 256)), Method::RESTIR);
         // At scale 4: a cheap primal over 1024² texels takes the baseline, the paper's
         // primal ReSTIR.
-        assert_eq!(pick(regime(2, 1, 512 * 512, 1024 * 1024)), Method::Baseline);
-        assert_eq!(pick(regime(32, 1, 512 * 512, 1024 * 1024)), Method::Restir);
-        assert_eq!(pick(regime(8, 1, 512 * 512, 1024 * 1024)), Method::Restir);
-        assert_eq!(pick(regime(7, 1, 512 * 512, 1024 * 1024)), Method::Baseline);
+        assert_eq!(pick(regime(2, 1, 512 * 512, 1024 * 1024)), Method::BASELINE);
+        assert_eq!(pick(regime(32, 1, 512 * 512, 1024 * 1024)), Method::RESTIR);
+        assert_eq!(pick(regime(8, 1, 512 * 512, 1024 * 1024)), Method::RESTIR);
+        assert_eq!(pick(regime(7, 1, 512 * 512, 1024 * 1024)), Method::BASELINE);
         // The density's threshold: one sample per texel.
-        assert_eq!(pick(regime(32, 1, 64 * 64, 64 * 64)), Method::Baseline);
-        assert_eq!(pick(regime(32, 1, 64 * 64 - 1, 64 * 64)), Method::Restir);
+        assert_eq!(pick(regime(32, 1, 64 * 64, 64 * 64)), Method::BASELINE);
+        assert_eq!(pick(regime(32, 1, 64 * 64 - 1, 64 * 64)), Method::RESTIR);
         let c = MethodChoice::Auto.resolve(&regime(2, 1, 128 * 128, 256 * 256));
         assert!(
             c.automatic && c.reason.contains("0.25 gradient samples"),
@@ -269,13 +269,13 @@ mod tests {
             ..regime(32, 1, 128 * 128, 256 * 256)
         };
         let c = MethodChoice::Auto.resolve(&deep);
-        assert_eq!(c.method, Method::Baseline);
+        assert_eq!(c.method, Method::BASELINE);
         assert!(c.reason.contains("3 vertices"), "{c:?}");
     }
 
     #[test]
     fn a_named_estimator_is_kept_whatever_the_regime() {
-        for m in Method::ALL {
+        for m in Method::all() {
             for r in [regime(32, 1, 100, 10_000), regime(2, 2, 10_000, 100)] {
                 let c = MethodChoice::Fixed(m).resolve(&r);
                 assert_eq!((c.method, c.automatic), (m, false));
@@ -298,7 +298,7 @@ mod tests {
         let t: T = toml::from_str("method = \"auto\"").unwrap();
         assert_eq!(t.method, MethodChoice::Auto);
         let t: T = toml::from_str("method = \"restir\"").unwrap();
-        assert_eq!(t.method, MethodChoice::Fixed(Method::Restir));
+        assert_eq!(t.method, MethodChoice::Fixed(Method::RESTIR));
         assert!(toml::from_str::<T>("method = \"fast\"").is_err());
     }
 }

@@ -1,7 +1,13 @@
-//! Gradient estimators. Each one lives in its own module and owns its pipelines, bind groups,
-//! buffers, GPU struct mirrors, memory plan, checkpoint state and fault counters; the
-//! optimizer calls it through the `Estimator` trait once per iteration, after the primal render and
-//! the loss have written every camera's adjoint.
+//! Gradient estimators. Each one lives in its own folder with everything of its own: its
+//! Rust, its WGSL, its part of the GPU contract (generated as `gen/<name>`), its uniforms'
+//! mirrors and their tests, its options ([`Options`]) and its pipelines, bind groups,
+//! buffers, memory plan, checkpoint state and fault counters. A folder exports one value, its
+//! [`Kind`]: name, summary, options, WGSL, bind groups, passes, limits, memory, builder and
+//! warnings. [`REGISTRY`] lists them, and is the one line to add for a new estimator; the
+//! optimizer, the CLI, task files, checkpoints and the bench see a [`Method`] (a handle on a
+//! kind) and its options table only (the seam test in `tests.rs` holds it). The optimizer
+//! calls an estimator through the [`Estimator`] trait once per iteration, after the primal
+//! render and the loss have written every camera's adjoint.
 //!
 //! - [`baseline`]: plain Monte Carlo, every sample adds its derivative to the texels it
 //!   touches (`gradient.wgsl`).
@@ -10,85 +16,188 @@
 //! - [`recursive`]: a recursive control variate on the gradient: fresh samples evaluated at
 //!   the current and the previous state correct the running estimate
 //!   (`recursive_gradient.wgsl`, `recursive_combine.wgsl`).
-//!
-//! Each lives in its own folder with everything of its own: its Rust, its WGSL, its part of
-//! the GPU contract (generated as `gen/<name>`), its uniforms' mirrors and their tests, and
-//! its options ([`Options`], read from its table in [`EstimatorOptions`]). This module is the
-//! registry, the one place that names each folder's items: [`Method`], `build`, `passes`,
-//! `memory`, `max_cameras`, the options' checks and tuning, `WGSL` and `GENERATED`. Nothing
-//! else names them (the seam test in `tests.rs` holds it), so that the optimizer, the CLI, task
-//! files, checkpoints and the bench see a method's name and its options table only.
-pub mod baseline;
 mod choice;
-pub mod recursive;
-pub mod restir;
+mod options;
+mod state;
 
 pub use choice::{
     rule as auto_rule, Choice, MethodChoice, Regime, DENSE_SAMPLES_PER_TEXEL,
     RESTIR_MAX_TEXELS_CHEAP_PRIMAL, RESTIR_PRIMAL_RATIO,
 };
+pub use options::{EstimatorOptions, Options, OptionsKind, TuningAxis, TypedAxis};
+pub use state::EstimatorState;
 
-use super::{FaultCounts, PassTimer, Settings};
-use crate::gpu::Gpu;
+use super::{FaultCounts, PassTimer, Scale, Settings};
+use crate::gpu::shaders::Generator;
+use crate::gpu::{Gpu, GroupDecl};
 use crate::render::layout::GpuCameraInfo;
 use crate::render::{GpuScene, Techniques};
 use crate::Result;
-use recursive::RecursiveOptions;
-use restir::RestirOptions;
 
-/// The gradient estimator. The library's default is the one that ends lower on the bundled
-/// default task at equal time, each at its own best settings (docs/studies.md, "Which
-/// estimator is the default"): on the machines measured so far, the baseline. Task files and
-/// the command line default to [`MethodChoice::Auto`], which picks one by the task's regime.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Method {
-    /// Plain Monte Carlo: every candidate adds its value to the texels it touches.
-    #[default]
-    Baseline,
-    /// Parameter-space ReSTIR.
-    Restir,
-    /// The recursive control variate on the gradient.
-    Recursive,
+/// Declares each estimator's folder and lists its [`Kind`] in [`REGISTRY`].
+macro_rules! registry {
+    ($($(#[$attr:meta])* $folder:ident),* $(,)?) => {
+        $($(#[$attr])* pub mod $folder;)*
+        /// Every estimator, in the order reports list them: the one place that names each
+        /// folder. The first is the baseline, the reference of every comparison.
+        pub const REGISTRY: &[&Kind] = &[$($(#[$attr])* &$folder::KIND),*];
+    };
 }
 
+// A new estimator: its folder, exporting `KIND`, and its name here. The toy (tests only)
+// is the registry's own test: it is nothing but its folder and this entry.
+registry!(
+    baseline,
+    restir,
+    recursive,
+    #[cfg(test)]
+    toy
+);
+
+/// An estimator as its folder exports it: everything the rest of the crate knows of it.
+pub struct Kind {
+    /// The name used on the command line, in task files, checkpoints and reports.
+    pub name: &'static str,
+    /// What it does, in one line.
+    pub summary: &'static str,
+    /// Its options (the task file's `[optimizer.<name>]` table).
+    pub options: OptionsKind,
+    /// Its WGSL files: (name, source), a pass named after its file, another module as
+    /// `<name>/<file stem>` (what `#import` names).
+    pub wgsl: &'static [(&'static str, &'static str)],
+    /// The WGSL it generates from its Rust (`gen/<name>`).
+    pub generated: &'static [(&'static str, Generator)],
+    /// Its bind-group declarations (checked against its WGSL by the contract test).
+    pub groups: &'static [GroupDecl],
+    /// The passes it creates, the slowest to compile first.
+    pub passes: &'static [&'static str],
+    /// The most cameras it can use in one optimization (None: no limit of its own).
+    pub max_cameras: Option<usize>,
+    /// The buffers it allocates, by label, size in bytes and what the size scales with.
+    pub memory: fn(&Sizes) -> Vec<(String, u64, Scale)>,
+    /// What the user should know before a run with it under `conditions` (logged).
+    pub warnings: fn(&Conditions) -> Vec<String>,
+    pub(crate) build: fn(&Setup) -> Result<Box<dyn Estimator>>,
+}
+
+/// The sizes an estimator's memory plan scales with.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Sizes {
+    /// Parameter scalars of all optimized textures.
+    pub params: u64,
+    /// Texels of all optimized textures.
+    pub texels: u64,
+    /// Of those, the texels a camera observes.
+    pub observed: u64,
+    /// Pixels of all cameras.
+    pub pixels: u64,
+}
+
+/// What a run's warnings depend on.
+#[derive(Clone, Copy, Debug)]
+pub struct Conditions {
+    /// Vertices of a camera path (1: direct light only).
+    pub max_depth: u32,
+}
+
+/// No buffers of its own.
+pub fn no_memory(_: &Sizes) -> Vec<(String, u64, Scale)> {
+    Vec::new()
+}
+
+/// Nothing to warn of.
+pub fn no_warnings(_: &Conditions) -> Vec<String> {
+    Vec::new()
+}
+
+/// The gradient estimator: a handle on its [`Kind`] in the [`REGISTRY`]. The library's
+/// default is the one that ends lower on the bundled default task at equal time, each at its
+/// own best settings (docs/studies.md, "Which estimator is the default"): on the machines
+/// measured so far, the baseline. Task files and the command line default to
+/// [`MethodChoice::Auto`], which picks one by the task's regime.
+#[derive(Clone, Copy)]
+pub struct Method(&'static Kind);
+
 impl Method {
+    /// Plain Monte Carlo: every candidate adds its value to the texels it touches.
+    pub const BASELINE: Method = Method(&baseline::KIND);
+    /// Parameter-space ReSTIR.
+    pub const RESTIR: Method = Method(&restir::KIND);
+    /// The recursive control variate on the gradient.
+    pub const RECURSIVE: Method = Method(&recursive::KIND);
+
+    /// The estimator whose folder exports `kind`.
+    pub const fn of(kind: &'static Kind) -> Method {
+        Method(kind)
+    }
+
     /// Every estimator, in the order reports list them.
-    pub const ALL: [Method; 3] = [Method::Baseline, Method::Restir, Method::Recursive];
+    pub fn all() -> impl Iterator<Item = Method> {
+        REGISTRY.iter().map(|k| Method(k))
+    }
 
     /// The name used on the command line, in task files and in reports.
     pub fn name(self) -> &'static str {
-        match self {
-            Method::Baseline => "baseline",
-            Method::Restir => "restir",
-            Method::Recursive => "recursive",
-        }
+        self.0.name
     }
 
     /// What it does, in one line.
     pub fn summary(self) -> &'static str {
-        match self {
-            Method::Baseline => {
-                "plain Monte Carlo: every sample adds its derivative to the texels it touches"
-            }
-            Method::Restir => {
-                "parameter-space ReSTIR: two reservoirs per observed texel reused across iterations"
-            }
-            Method::Recursive => {
-                "a recursive control variate: each sample at the current and the previous \
-                 state corrects a running estimate"
-            }
-        }
+        self.0.summary
+    }
+
+    /// Everything the registry knows of it.
+    pub fn kind(self) -> &'static Kind {
+        self.0
     }
 
     /// Every estimator's name.
     pub fn names() -> Vec<&'static str> {
-        Method::ALL.iter().map(|m| m.name()).collect()
+        Method::all().map(|m| m.name()).collect()
     }
 
     /// The estimator called `name`.
     pub fn by_name(name: &str) -> Option<Method> {
-        Method::ALL.into_iter().find(|m| m.name() == name)
+        Method::all().find(|m| m.name() == name)
+    }
+}
+
+impl Default for Method {
+    fn default() -> Method {
+        Method::BASELINE
+    }
+}
+
+impl PartialEq for Method {
+    fn eq(&self, other: &Method) -> bool {
+        self.name() == other.name()
+    }
+}
+
+impl Eq for Method {}
+
+impl std::hash::Hash for Method {
+    fn hash<H: std::hash::Hasher>(&self, h: &mut H) {
+        self.name().hash(h)
+    }
+}
+
+impl std::fmt::Debug for Method {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl serde::Serialize for Method {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for Method {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Method, D::Error> {
+        let name = String::deserialize(d)?;
+        name.parse().map_err(serde::de::Error::custom)
     }
 }
 
@@ -107,272 +216,6 @@ impl std::str::FromStr for Method {
 impl std::fmt::Display for Method {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())
-    }
-}
-
-/// An estimator's options as its folder defines them: read from and written to that
-/// estimator's table in [`EstimatorOptions`] (missing keys take their defaults).
-pub trait Options:
-    Clone + Default + serde::Serialize + serde::de::DeserializeOwned + std::fmt::Debug
-{
-    /// The estimator they belong to.
-    const METHOD: Method;
-    /// The options whose default is to be absent (an `Option` left `None`).
-    const OPTIONAL: &'static [&'static str] = &[];
-    /// An error naming the option (its key in the table) and what is wrong.
-    fn check(&self) -> std::result::Result<(), (String, String)>;
-    /// A short description for reports (empty: nothing to say), e.g. `M cap 8`.
-    fn describe(&self) -> String;
-}
-
-/// Every estimator's options, one table of TOML values per method name: the task file's
-/// `[optimizer.<method>]` tables, with the command line's `--estimator-option
-/// METHOD.KEY=VALUE` on top. The optimizer, the job and the bench only pass the tables on;
-/// each estimator reads its own ([`Options`]) and [`EstimatorOptions::check`] asks each to
-/// check its table.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
-#[serde(transparent)]
-pub struct EstimatorOptions {
-    tables: std::collections::BTreeMap<String, toml::Table>,
-}
-
-impl EstimatorOptions {
-    /// Options with one estimator's table: `options`.
-    pub fn with<T: Options>(options: &T) -> EstimatorOptions {
-        let mut o = EstimatorOptions::default();
-        o.put(options);
-        o
-    }
-
-    /// `method`'s table (empty: every option at its default).
-    pub fn table(&self, method: Method) -> toml::Table {
-        self.tables.get(method.name()).cloned().unwrap_or_default()
-    }
-
-    /// Replace `method`'s table.
-    pub fn set_table(&mut self, method: Method, table: toml::Table) {
-        self.tables.insert(method.name().to_string(), table);
-    }
-
-    /// These tables with `over`'s options on top, option by option.
-    pub fn merged(mut self, over: &EstimatorOptions) -> EstimatorOptions {
-        for (name, table) in &over.tables {
-            let mine = self.tables.entry(name.clone()).or_default();
-            for (k, v) in table {
-                mine.insert(k.clone(), v.clone());
-            }
-        }
-        self
-    }
-
-    /// Set one option of `method`'s table.
-    pub fn set(&mut self, method: Method, key: &str, value: toml::Value) {
-        self.tables
-            .entry(method.name().to_string())
-            .or_default()
-            .insert(key.to_string(), value);
-    }
-
-    /// Apply `METHOD.KEY=VALUE` (the value as TOML, or else as a string: `restir.m_cap=16`,
-    /// `restir.confidence=candidates`).
-    pub fn assign(&mut self, assignment: &str) -> Result<()> {
-        let bad = |why: String| {
-            crate::Error::Invalid(format!("--estimator-option `{assignment}`: {why}"))
-        };
-        let (path, value) = assignment
-            .split_once('=')
-            .ok_or_else(|| bad("expected METHOD.KEY=VALUE".into()))?;
-        let (method, key) = path
-            .trim()
-            .split_once('.')
-            .ok_or_else(|| bad("expected METHOD.KEY=VALUE".into()))?;
-        let method = method.parse::<Method>().map_err(|e| bad(e.to_string()))?;
-        let value = value.trim();
-        let value = toml::from_str::<toml::Table>(&format!("v = {value}"))
-            .ok()
-            .and_then(|mut t| t.remove("v"))
-            .unwrap_or_else(|| toml::Value::String(value.to_string()));
-        self.set(method, key.trim(), value);
-        self.check_one(method)
-            .map_err(|(key, msg)| bad(format!("{key} {msg}")))
-    }
-
-    /// The options of `T`'s estimator, parsed from its table.
-    pub fn get<T: Options>(&self) -> std::result::Result<T, (String, String)> {
-        let key = format!("optimizer.{}", T::METHOD.name());
-        let o = T::deserialize(toml::Value::Table(self.table(T::METHOD)))
-            .map_err(|e| (key.clone(), e.to_string().trim().replace('\n', " ")))?;
-        o.check().map_err(|(k, m)| (format!("{key}.{k}"), m))?;
-        Ok(o)
-    }
-
-    /// Replace the table of `T`'s estimator by `options`.
-    pub fn put<T: Options>(&mut self, options: &T) {
-        let table = match toml::Value::try_from(options) {
-            Ok(toml::Value::Table(t)) => t,
-            _ => unreachable!("an estimator's options serialize to a table"),
-        };
-        self.set_table(T::METHOD, table);
-    }
-
-    /// Check `method`'s table: an error names the task-file key and what is wrong.
-    pub fn check_one(&self, method: Method) -> std::result::Result<(), (String, String)> {
-        match method {
-            Method::Baseline => {
-                let t = self.table(method);
-                match t.keys().next() {
-                    Some(k) => Err((
-                        format!("optimizer.baseline.{k}"),
-                        "is not an option: the baseline has none".into(),
-                    )),
-                    None => Ok(()),
-                }
-            }
-            Method::Restir => self.get::<RestirOptions>().map(|_| ()),
-            Method::Recursive => self.get::<RecursiveOptions>().map(|_| ()),
-        }
-    }
-
-    /// Check every table.
-    pub fn check(&self) -> std::result::Result<(), (String, String)> {
-        for name in self.tables.keys() {
-            let method = Method::by_name(name).ok_or_else(|| {
-                (
-                    format!("optimizer.{name}"),
-                    format!("is no gradient estimator ({})", Method::names().join(", ")),
-                )
-            })?;
-            self.check_one(method)?;
-        }
-        Ok(())
-    }
-
-    /// Every table as `METHOD.KEY=VALUE` assignments, comma-separated (`none` without any).
-    pub fn summary(&self) -> String {
-        let all: Vec<String> = self
-            .tables
-            .iter()
-            .flat_map(|(m, t)| t.iter().map(move |(k, v)| format!("{m}.{k}={v}")))
-            .collect();
-        if all.is_empty() {
-            "none".into()
-        } else {
-            all.join(", ")
-        }
-    }
-
-    /// `method`'s options at their defaults, as the TOML of its task-file table (empty when
-    /// it has none; options whose default is to be absent as comments).
-    pub fn defaults_toml(method: Method) -> String {
-        fn t<T: Options>() -> String {
-            let mut s = toml::to_string(&T::default()).unwrap_or_default();
-            for key in T::OPTIONAL {
-                s.push_str(&format!("# {key} = ...  (absent by default)\n"));
-            }
-            s
-        }
-        match method {
-            Method::Baseline => String::new(),
-            Method::Restir => t::<RestirOptions>(),
-            Method::Recursive => t::<RecursiveOptions>(),
-        }
-    }
-
-    /// A short description of `method`'s options for reports (empty for none).
-    pub fn describe(&self, method: Method) -> String {
-        fn d<T: Options>(o: &EstimatorOptions) -> String {
-            o.get::<T>().map(|t| t.describe()).unwrap_or_default()
-        }
-        match method {
-            Method::Baseline => String::new(),
-            Method::Restir => d::<RestirOptions>(self),
-            Method::Recursive => d::<RecursiveOptions>(self),
-        }
-    }
-
-    /// What `bench --tune` tries for `method`'s own options: for each option searched, in
-    /// search order, a function from the best table so far to the tables to try.
-    pub fn tuning(method: Method) -> Vec<TuningAxis> {
-        match method {
-            Method::Baseline => Vec::new(),
-            Method::Restir => typed_axes(restir::tuning()),
-            Method::Recursive => typed_axes(recursive::tuning()),
-        }
-    }
-}
-
-/// One option an estimator's search varies: the tables to try around the best so far.
-pub type TuningAxis = Box<dyn Fn(&toml::Table) -> Vec<toml::Table>>;
-
-/// An axis over typed options: the candidates a function of the options gives.
-pub type TypedAxis<T> = fn(&T) -> Vec<T>;
-
-fn typed_axes<T: Options + 'static>(axes: Vec<TypedAxis<T>>) -> Vec<TuningAxis> {
-    axes.into_iter()
-        .map(|axis| -> TuningAxis {
-            Box::new(move |table: &toml::Table| {
-                let mut o = EstimatorOptions::default();
-                o.set_table(T::METHOD, table.clone());
-                let best = o.get::<T>().unwrap_or_default();
-                axis(&best)
-                    .iter()
-                    .map(|c| {
-                        o.put(c);
-                        o.table(T::METHOD)
-                    })
-                    .collect()
-            })
-        })
-        .collect()
-}
-
-/// The part of an estimator's state that carries over to the next iteration, as the optimizer
-/// and its checkpoints hold it without knowing the estimator: the method that wrote it (its
-/// [`Method::name`]), named counters and named arrays of 32-bit words. Each estimator says
-/// what its names mean and checks them when it restores.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct EstimatorState {
-    /// The [`Method::name`] of the estimator that wrote it.
-    pub method: String,
-    /// Named counters.
-    pub counters: Vec<(String, u32)>,
-    /// Named arrays of 32-bit words (floats are stored as their bits).
-    pub arrays: Vec<(String, Vec<u32>)>,
-}
-
-impl EstimatorState {
-    /// An empty state written by `method`.
-    pub fn new(method: Method) -> EstimatorState {
-        EstimatorState {
-            method: method.name().to_string(),
-            ..Default::default()
-        }
-    }
-
-    /// The counter `name`, if the state has it.
-    pub fn counter(&self, name: &str) -> Option<u32> {
-        self.counters.iter().find(|(n, _)| n == name).map(|c| c.1)
-    }
-
-    /// The array `name`, if the state has it.
-    pub fn array(&self, name: &str) -> Option<&[u32]> {
-        self.arrays
-            .iter()
-            .find(|(n, _)| n == name)
-            .map(|a| a.1.as_slice())
-    }
-
-    /// An error unless the state was written by `method`.
-    pub fn check_method(&self, method: Method) -> Result<()> {
-        if self.method == method.name() {
-            return Ok(());
-        }
-        Err(crate::Error::Invalid(format!(
-            "the saved state was written by the {} gradient estimator, not by {}; resume with \
-             the same --method",
-            self.method,
-            method.name()
-        )))
     }
 }
 
@@ -469,44 +312,36 @@ pub(crate) trait Estimator: Send {
 
 /// The estimator of `settings.method`.
 pub(crate) fn build(setup: &Setup) -> Result<Box<dyn Estimator>> {
-    Ok(match setup.settings.method {
-        Method::Baseline => Box::new(baseline::Baseline::new(setup)?),
-        Method::Restir => Box::new(restir::Restir::new(setup)?),
-        Method::Recursive => Box::new(recursive::Recursive::new(setup)?),
-    })
+    (setup.settings.method.kind().build)(setup)
 }
 
-/// Every estimator's WGSL files: (name, source), a pass named after its file, another module
-/// as `<method>/<file stem>` (what `#import` names).
-pub(crate) const WGSL: [&[(&str, &str)]; 3] = [baseline::WGSL, restir::WGSL, recursive::WGSL];
+/// Every estimator's WGSL files (for the shader library).
+pub(crate) fn wgsl() -> impl Iterator<Item = &'static [(&'static str, &'static str)]> {
+    REGISTRY.iter().map(|k| k.wgsl)
+}
 
 /// The WGSL the estimators generate from their Rust (`gen/<method>`).
-pub(crate) const GENERATED: &[(&str, crate::gpu::shaders::Generator)] = &[
-    ("gen/restir", restir::abi::wgsl),
-    ("gen/recursive", recursive::abi::wgsl),
-];
+pub(crate) fn generated() -> impl Iterator<Item = &'static [(&'static str, Generator)]> {
+    REGISTRY.iter().map(|k| k.generated)
+}
 
 /// Every estimator's bind-group declarations (for the contract test).
 #[cfg(test)]
-pub(crate) fn groups() -> Vec<crate::gpu::GroupDecl> {
-    [baseline::GROUPS, restir::GROUPS, recursive::GROUPS].concat()
+pub(crate) fn groups() -> Vec<GroupDecl> {
+    REGISTRY
+        .iter()
+        .flat_map(|k| k.groups.iter().copied())
+        .collect()
 }
 
 /// The passes (WGSL files) `method` creates, the slowest to compile first.
 pub(crate) fn passes(method: Method) -> Vec<&'static str> {
-    match method {
-        Method::Baseline => baseline::PASSES.to_vec(),
-        Method::Restir => restir::PASSES.to_vec(),
-        Method::Recursive => recursive::PASSES.to_vec(),
-    }
+    method.kind().passes.to_vec()
 }
 
 /// The most cameras `method` can use in one optimization (None: no limit of its own).
 pub(crate) fn max_cameras(method: Method) -> Option<usize> {
-    match method {
-        Method::Baseline | Method::Recursive => None,
-        Method::Restir => Some(restir::MAX_CAMERAS),
-    }
+    method.kind().max_cameras
 }
 
 /// The buffers `method` allocates for `n_params` parameter scalars in `n_texels` texels of
@@ -518,12 +353,13 @@ pub(crate) fn memory(
     n_texels: u64,
     n_observed: u64,
     n_pixels: u64,
-) -> Vec<(String, u64, crate::optim::Scale)> {
-    match method {
-        Method::Baseline => Vec::new(),
-        Method::Restir => restir::memory(n_texels, n_observed, n_pixels),
-        Method::Recursive => recursive::memory(n_params),
-    }
+) -> Vec<(String, u64, Scale)> {
+    (method.kind().memory)(&Sizes {
+        params: n_params,
+        texels: n_texels,
+        observed: n_observed,
+        pixels: n_pixels,
+    })
 }
 
 #[cfg(test)]

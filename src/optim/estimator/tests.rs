@@ -1,11 +1,12 @@
 //! The registry's tests: estimator options as tables, and the seam.
 
 mod options_tests {
+    use super::super::restir::RestirOptions;
     use super::super::*;
 
     #[test]
     fn default_tables_round_trip_and_optional_keys_are_options() {
-        for m in Method::ALL {
+        for m in Method::all() {
             let toml = EstimatorOptions::defaults_toml(m);
             let table: toml::Table = toml::from_str(&toml).unwrap();
             let mut o = EstimatorOptions::default();
@@ -31,8 +32,8 @@ mod options_tests {
         assert_eq!(r.confidence, restir::Confidence::Candidates);
         // Over a task's table, option by option.
         let mut task = EstimatorOptions::default();
-        task.set(Method::Restir, "m_cap", toml::Value::Float(2.0));
-        task.set(Method::Restir, "temporal", toml::Value::Boolean(false));
+        task.set(Method::RESTIR, "m_cap", toml::Value::Float(2.0));
+        task.set(Method::RESTIR, "temporal", toml::Value::Boolean(false));
         let both: RestirOptions = task.merged(&o).get().unwrap();
         assert_eq!((both.m_cap, both.temporal), (16.0, false));
         for (bad, says) in [
@@ -42,7 +43,7 @@ mod options_tests {
             ("restir.m_capp=3", "m_capp"),
             ("restir.m_cap=-1", "optimizer.restir.m_cap"),
             ("recursive.min_weight=2", "optimizer.recursive.min_weight"),
-            ("baseline.m_cap=2", "the baseline has none"),
+            ("baseline.m_cap=2", "the baseline estimator has none"),
         ] {
             let e = EstimatorOptions::default()
                 .assign(bad)
@@ -155,7 +156,7 @@ mod seam_tests {
             .collect();
         let mut checked = 0;
         let mut violations = Vec::new();
-        for method in super::super::Method::ALL {
+        for method in super::super::Method::all() {
             let name = method.name();
             let folder = here.join(name);
             let inside = |p: &Path| p.starts_with(&folder);
@@ -174,14 +175,7 @@ mod seam_tests {
             };
             let own = decl(&|p| inside(p), true);
             let elsewhere = decl(&|p| !inside(p), false);
-            // The struct named like the method is its name's variant elsewhere
-            // (`Method::Restir`): not an internal.
-            let variant = format!("{:?}", method);
-            let mut internal: Vec<String> = own
-                .difference(&elsewhere)
-                .filter(|n| **n != variant)
-                .cloned()
-                .collect();
+            let mut internal: Vec<String> = own.difference(&elsewhere).cloned().collect();
             // The folder's modules by path, its WGSL modules and generated constants by
             // their import names.
             internal.push(format!("{name}::"));
@@ -214,7 +208,8 @@ mod seam_tests {
                 }
                 checked += 1;
             }
-            assert!(own.len() > 3, "{name}: {} declarations found", own.len());
+            // At least its `KIND` and its options (the toy has no more).
+            assert!(own.len() >= 2, "{name}: {} declarations found", own.len());
         }
         assert!(
             violations.is_empty(),

@@ -3,7 +3,7 @@
 //! material at its hit point and adds them, weighted by its pixel's adjoint, into the texels
 //! that the texture filter touches. Float additions are bounded compare-and-swap loops on
 //! 32-bit atomics; an exhausted bound is counted, never silently lost.
-use super::{Estimator, EstimatorState, Frame, Method, Setup};
+use super::{Estimator, EstimatorState, Frame, Kind, Method, OptionsKind, Setup};
 use crate::gpu::encode_timed_pass;
 use crate::gpu::Gpu;
 use crate::optim::{pass_seed, FaultCounts, PassKind, PassTimer, Seeds};
@@ -12,11 +12,20 @@ use crate::render::{Techniques, WORKGROUP};
 use crate::Result;
 use bytemuck::{Pod, Zeroable};
 
-/// Its WGSL: (name, source) of its passes and of the modules they import.
-pub(crate) const WGSL: &[(&str, &str)] = &[("gradient", include_str!("gradient.wgsl"))];
-
-/// The passes it creates, the slowest to compile first.
-pub(crate) const PASSES: [&str; 1] = ["gradient"];
+/// The baseline as the registry knows it.
+pub const KIND: Kind = Kind {
+    name: "baseline",
+    summary: "plain Monte Carlo: every sample adds its derivative to the texels it touches",
+    options: OptionsKind::NONE,
+    wgsl: &[("gradient", include_str!("gradient.wgsl"))],
+    generated: &[],
+    groups: &[GRADIENT_GROUP],
+    passes: &["gradient"],
+    max_cameras: None,
+    memory: super::no_memory,
+    warnings: super::no_warnings,
+    build: |setup| Ok(Box::new(Baseline::new(setup)?)),
+};
 
 /// Group 1 of `gradient.wgsl`.
 pub(crate) const GRADIENT_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
@@ -147,7 +156,7 @@ impl Estimator for Baseline {
     }
 
     fn snapshot(&self, _gpu: &Gpu, _iteration: u32) -> Result<EstimatorState> {
-        Ok(EstimatorState::new(Method::Baseline))
+        Ok(EstimatorState::new(Method::BASELINE))
     }
 
     fn restore(&mut self, _: &Gpu, _: Option<&EstimatorState>, _: u32) -> Result<()> {
@@ -165,10 +174,6 @@ impl Estimator for Baseline {
         Ok(())
     }
 }
-
-/// Its bind groups, for the contract test (`crate::contract_tests`).
-#[cfg(test)]
-pub(crate) const GROUPS: &[crate::gpu::GroupDecl] = &[GRADIENT_GROUP];
 
 #[cfg(test)]
 mod contract_tests {

@@ -18,7 +18,7 @@
 //!
 //! This folder holds the estimator whole: its Rust, its two WGSL passes, its part of the GPU
 //! contract (generated into WGSL as `gen/recursive`), its options and its counters.
-use super::{Diagnostics, Estimator, EstimatorState, Frame, Method, Setup};
+use super::{Diagnostics, Estimator, EstimatorState, Frame, Kind, Method, OptionsKind, Setup};
 use crate::gpu::{encode_timed_pass, grid_2d, Gpu};
 use crate::optim::{pass_seed, FaultCounts, PassKind, PassTimer, Scale, Seeds};
 use crate::render::layout::GpuCameraInfo;
@@ -26,17 +26,27 @@ use crate::render::WORKGROUP;
 use crate::{Error, Result};
 use bytemuck::{Pod, Zeroable};
 
-/// Its WGSL: (name, source) of its passes and of the modules they import.
-pub(crate) const WGSL: &[(&str, &str)] = &[
-    (
-        "recursive_gradient",
-        include_str!("recursive_gradient.wgsl"),
-    ),
-    ("recursive_combine", include_str!("recursive_combine.wgsl")),
-];
-
-/// The passes it creates, the slowest to compile first.
-pub(crate) const PASSES: [&str; 2] = ["recursive_gradient", "recursive_combine"];
+/// The recursive estimator as the registry knows it.
+pub const KIND: Kind = Kind {
+    name: "recursive",
+    summary: "a recursive control variate: each sample at the current and the previous state \
+              corrects a running estimate",
+    options: OptionsKind::of::<RecursiveOptions>(),
+    wgsl: &[
+        (
+            "recursive_gradient",
+            include_str!("recursive_gradient.wgsl"),
+        ),
+        ("recursive_combine", include_str!("recursive_combine.wgsl")),
+    ],
+    generated: &[("gen/recursive", abi::wgsl)],
+    groups: &[GRADIENT_GROUP, COMBINE_GROUP],
+    passes: &["recursive_gradient", "recursive_combine"],
+    max_cameras: None,
+    memory: |sizes| memory(sizes.params),
+    warnings: super::no_warnings,
+    build: |setup| Ok(Box::new(Recursive::new(setup)?)),
+};
 
 /// The GPU contract of this estimator: constants that its Rust and WGSL share.
 pub mod abi {
@@ -88,7 +98,7 @@ impl Default for RecursiveOptions {
 }
 
 impl crate::optim::estimator::Options for RecursiveOptions {
-    const METHOD: crate::optim::Method = crate::optim::Method::Recursive;
+    const METHOD: crate::optim::Method = crate::optim::Method::RECURSIVE;
     const OPTIONAL: &'static [&'static str] = &["weight"];
 
     fn check(&self) -> std::result::Result<(), (String, String)> {
@@ -113,11 +123,15 @@ impl crate::optim::estimator::Options for RecursiveOptions {
             None => format!("weight ≥ {}", self.min_weight),
         }
     }
+
+    fn tuning() -> Vec<crate::optim::estimator::TypedAxis<Self>> {
+        tuning()
+    }
 }
 
 /// What `bench --tune` searches for the recursive estimator: the lower bound of its adaptive
 /// weight (0.2, 0.5).
-pub(crate) fn tuning() -> Vec<crate::optim::estimator::TypedAxis<RecursiveOptions>> {
+fn tuning() -> Vec<crate::optim::estimator::TypedAxis<RecursiveOptions>> {
     vec![|b| {
         [0.2, 0.5]
             .map(|min_weight| RecursiveOptions { min_weight, ..*b })
@@ -199,7 +213,7 @@ const STATE: [&str; 6] = [
 ];
 
 /// The buffers the estimator allocates for `n_params` parameter scalars.
-pub(crate) fn memory(n_params: u64) -> Vec<(String, u64, Scale)> {
+fn memory(n_params: u64) -> Vec<(String, u64, Scale)> {
     std::iter::once("grad_prev")
         .chain(STATE)
         .map(|l| (format!("recursive {l}"), 4 * n_params, Scale::Texel))
@@ -396,7 +410,7 @@ impl Estimator for Recursive {
     }
 
     fn snapshot(&self, gpu: &Gpu, _iteration: u32) -> Result<EstimatorState> {
-        let mut s = EstimatorState::new(Method::Recursive);
+        let mut s = EstimatorState::new(Method::RECURSIVE);
         s.counters = vec![
             ("fresh_updates".into(), self.n_f),
             ("diff_updates".into(), self.n_dl),
@@ -481,8 +495,6 @@ impl Estimator for Recursive {
 }
 
 /// Its bind groups, for the contract test (`crate::contract_tests`).
-#[cfg(test)]
-pub(crate) const GROUPS: &[crate::gpu::GroupDecl] = &[GRADIENT_GROUP, COMBINE_GROUP];
 
 #[cfg(test)]
 mod contract_tests {

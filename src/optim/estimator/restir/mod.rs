@@ -24,11 +24,13 @@ mod diagnostics;
 mod options;
 mod params;
 mod reservoir_test;
+mod setup;
 
-use super::{Diagnostics, Estimator, EstimatorState, Frame, Method, Setup};
+use super::{
+    Conditions, Diagnostics, Estimator, EstimatorState, Frame, Kind, Method, OptionsKind, Setup,
+};
 use crate::gpu::encode_timed_pass;
 use crate::gpu::{grid_2d, Gpu};
-use crate::optim::Scale;
 use crate::optim::{pass_seed, FaultCounts, PassKind, PassTimer, Seeds};
 use crate::render::WORKGROUP;
 use crate::{Error, Result};
@@ -36,15 +38,12 @@ use crate::{Error, Result};
 pub mod abi;
 pub use abi::reservoir;
 pub use diagnostics::{state_names, MergeDiagnostics};
-pub(crate) use options::tuning;
 pub use options::{Confidence, RestirOptions, TARGET_SMOOTHING_INDEPENDENT};
-#[cfg(test)]
-pub(crate) use params::GROUPS;
 pub use params::{CandidateParams, MergeParams};
 pub(crate) use params::{CANDIDATES_GROUP, MERGE_GROUP};
 pub use reservoir_test::selection_trial;
-#[cfg(test)]
-pub(crate) use reservoir_test::RESERVOIR_TEST_GROUP;
+use setup::{candidate_camera, memory, merge_params, Buffers, Camera, PHASES};
+use reservoir_test::RESERVOIR_TEST_GROUP;
 
 /// Cameras a ReSTIR optimizer can use (the camera index has three bits in a reservoir).
 pub const MAX_CAMERAS: usize = abi::MAX_CAMERAS as usize;
@@ -70,22 +69,46 @@ use abi::merge_flag::{
     VERIFY as FLAG_VERIFY,
 };
 
-/// Its WGSL: (name, source) of its passes and of the modules they import.
-pub(crate) const WGSL: &[(&str, &str)] = &[
-    ("restir_candidates", include_str!("restir_candidates.wgsl")),
-    ("restir_merge", include_str!("restir_merge.wgsl")),
-    ("reservoir_test", include_str!("reservoir_test.wgsl")),
-    ("restir/reservoir", include_str!("reservoir.wgsl")),
-    (
-        "restir/reservoir_slots",
-        include_str!("reservoir_slots.wgsl"),
-    ),
-    ("restir/compact_path", include_str!("compact_path.wgsl")),
-    ("restir/target", include_str!("target.wgsl")),
-];
+/// ReSTIR as the registry knows it.
+pub const KIND: Kind = Kind {
+    name: "restir",
+    summary: "parameter-space ReSTIR: two reservoirs per observed texel reused across iterations",
+    options: OptionsKind::of::<RestirOptions>(),
+    wgsl: &[
+        ("restir_candidates", include_str!("restir_candidates.wgsl")),
+        ("restir_merge", include_str!("restir_merge.wgsl")),
+        ("reservoir_test", include_str!("reservoir_test.wgsl")),
+        ("restir/reservoir", include_str!("reservoir.wgsl")),
+        (
+            "restir/reservoir_slots",
+            include_str!("reservoir_slots.wgsl"),
+        ),
+        ("restir/compact_path", include_str!("compact_path.wgsl")),
+        ("restir/target", include_str!("target.wgsl")),
+    ],
+    generated: &[("gen/restir", abi::wgsl)],
+    groups: &[CANDIDATES_GROUP, MERGE_GROUP, RESERVOIR_TEST_GROUP],
+    passes: &["restir_candidates", "restir_merge"],
+    max_cameras: Some(MAX_CAMERAS),
+    memory: |sizes| memory(sizes.texels, sizes.observed, sizes.pixels),
+    warnings,
+    build: |setup| Ok(Box::new(Restir::new(setup)?)),
+};
 
-/// The passes it creates, the slowest to compile first.
-pub(crate) const PASSES: [&str; 2] = ["restir_candidates", "restir_merge"];
+/// What a run at `conditions` should know: beyond direct light, only the first vertex is
+/// reused.
+fn warnings(conditions: &Conditions) -> Vec<String> {
+    if conditions.max_depth <= 1 {
+        return Vec::new();
+    }
+    vec![format!(
+        "ReSTIR with paths of {} vertices reuses each path's first vertex with the light the \
+         rest of the path brought back when it was drawn, which the other surfaces' textures \
+         change since: its gradient lags them (the later vertices' derivatives are plain Monte \
+         Carlo). The baseline and the recursive estimator draw every vertex afresh",
+        conditions.max_depth
+    )]
+}
 const MERGE_STAT_EVALUATIONS: usize = abi::stat::MERGE_EVALUATIONS as usize;
 const MERGE_STAT_DROPPED: usize = abi::stat::MERGE_DROPPED as usize;
 const MERGE_STAT_VERIFIED: usize = abi::stat::MERGE_VERIFIED as usize;
@@ -93,78 +116,6 @@ const MERGE_STAT_VERIFY_MAX_ERROR: usize = abi::stat::MERGE_VERIFY_MAX_ERROR as 
 const CANDIDATE_STAT_LOST: usize = abi::stat::CANDIDATE_LOST as usize;
 const CANDIDATE_STAT_DROPPED: usize = abi::stat::CANDIDATE_DROPPED as usize;
 const CANDIDATE_STAT_UNMAPPED: usize = abi::stat::CANDIDATE_UNMAPPED as usize;
-
-/// The buffers ReSTIR allocates for `n_texels` texels of which `n_observed` are observed,
-/// and `n_pixels` pixels (all cameras'), by label, size in bytes and what the size scales
-/// with. Slot k of every observed texel lies in buffer `reservoir slots<k>`, so that each
-/// binding holds a quarter of the reservoirs.
-pub(crate) fn memory(n_texels: u64, n_observed: u64, n_pixels: u64) -> Vec<(String, u64, Scale)> {
-    let slot_bytes = n_observed * reservoir::WORDS as u64 * 4;
-    let mut out: Vec<(String, u64, Scale)> = (0..reservoir::SLOTS)
-        .map(|k| {
-            (
-                format!("reservoir slots{k}"),
-                slot_bytes,
-                Scale::ObservedTexel,
-            )
-        })
-        .collect();
-    out.extend([
-        (
-            "reservoir headers".to_string(),
-            n_observed * 4,
-            Scale::ObservedTexel,
-        ),
-        (
-            "observed texel list".to_string(),
-            n_observed * 4,
-            Scale::ObservedTexel,
-        ),
-        (
-            "observed texel map".to_string(),
-            n_texels.div_ceil(32) * STATE_BYTES_PER_32_TEXELS,
-            Scale::Texel,
-        ),
-        (
-            "target adjoints".to_string(),
-            STATE_BYTES_PER_PIXEL * n_pixels,
-            Scale::Pixel,
-        ),
-    ]);
-    out
-}
-
-/// The compaction map of `observed` (one flag per texel): per 32 texels, which are observed
-/// (bits) and how many observed texels come before them; and the list of observed texels.
-fn compaction_map(observed: &[bool]) -> (Vec<[u32; 2]>, Vec<u32>) {
-    let mut map = Vec::with_capacity(observed.len().div_ceil(32));
-    let mut list = Vec::new();
-    for (w, chunk) in observed.chunks(32).enumerate() {
-        let mut bits = 0u32;
-        let before = list.len() as u32;
-        for (b, &o) in chunk.iter().enumerate() {
-            if o {
-                bits |= 1 << b;
-                list.push((w * 32 + b) as u32);
-            }
-        }
-        map.push([bits, before]);
-    }
-    (map, list)
-}
-
-/// The candidate pass's phases (restir_candidates.wgsl, `phase`): the weights and the race,
-/// then the winners' paths.
-const PHASES: usize = 2;
-
-struct Camera {
-    /// Per phase (a queue write lands before the whole submission, so each phase's
-    /// parameters need their own buffer).
-    uniforms: [wgpu::Buffer; PHASES],
-    params: CandidateParams,
-    /// Per phase, then per parity of the iteration (the adjoints alternate).
-    groups: [[wgpu::BindGroup; 2]; PHASES],
-}
 
 /// The ReSTIR estimator's passes and buffers.
 pub(crate) struct Restir {
@@ -237,75 +188,17 @@ impl Restir {
             .estimator_options
             .get()
             .map_err(|(key, msg)| Error::Invalid(format!("{key} {msg}")))?;
-        let n_cams = s.cameras.len();
         let smoothing = o.target_smoothing_for(s.settings.primal);
-        let n_pixels = s.settings.width * s.settings.height;
         let candidate_layout = gpu.pass_layout("restir_candidates", 1)?;
         let merge_layout = gpu.pass_layout("restir_merge", 1)?;
         let candidate_pipeline =
             gpu.compute_pipeline("restir_candidates", &[&s.scene.layout, &candidate_layout])?;
         let merge_pipeline =
             gpu.compute_pipeline("restir_merge", &[&s.scene.layout, &merge_layout])?;
-        let (map, list) = compaction_map(s.observed);
-        let n_observed = list.len() as u64;
-        let n_all_pixels = s.adjoint[0].size() / 16;
-        let sizes = memory(s.scene.n_texels as u64, n_observed, n_all_pixels);
-        let size = |label: &str| sizes.iter().find(|b| b.0 == label).map_or(0, |b| b.1);
-        // wgpu binds no empty buffer: at least one word each.
-        let slots: Vec<wgpu::Buffer> = (0..reservoir::SLOTS)
-            .map(|k| {
-                let label = format!("reservoir slots{k}");
-                gpu.storage_zeroed(&label, size(&label).max(4))
-            })
-            .collect();
-        let headers = gpu.storage(
-            "reservoir headers",
-            bytemuck::cast_slice(&vec![reservoir::HEADER_FIRST_TWO; list.len().max(1)]),
-            wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-        );
-        let observed_list = gpu.storage(
-            "observed texel list",
-            bytemuck::cast_slice(if list.is_empty() { &[0u32][..] } else { &list }),
-            wgpu::BufferUsages::empty(),
-        );
-        let observed_map = gpu.storage(
-            "observed texel map",
-            bytemuck::cast_slice(if map.is_empty() {
-                &[[0u32; 2]][..]
-            } else {
-                &map
-            }),
-            wgpu::BufferUsages::empty(),
-        );
-        let candidate_stats = gpu.storage_zeroed("candidate stats", 16);
-        let merge_stats = gpu.storage_zeroed("merge stats", 16);
-        let target_len = n_all_pixels as u32;
-        let targets = gpu.storage_zeroed("target adjoints", size("target adjoints"));
+        let b = Buffers::new(s);
         let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
-        let merge_grid = grid_2d(n_observed as u32, WORKGROUP, max_dim);
-        let spp = s.settings.gradient_spp;
-        let mut origins = [[0.0; 4]; MAX_CAMERAS];
-        for (o, c) in origins.iter_mut().zip(s.cameras) {
-            *o = [c.origin[0], c.origin[1], c.origin[2], 0.0];
-        }
-        let merge_params = MergeParams {
-            n_observed: n_observed as u32,
-            n_pixels,
-            seed: 0,
-            flags: 0,
-            m_fresh: match o.confidence {
-                Confidence::Samples => spp as f32,
-                Confidence::Candidates => (2 * spp * n_cams as u32) as f32,
-            },
-            m_kept: 0.0,
-            inv_spp: 1.0 / spp as f32,
-            n_textures: s.set.textures.len() as u32,
-            stride: merge_grid.0 * WORKGROUP,
-            target_cur: 0,
-            target_prev: 0,
-            _pad: 0,
-            origins,
-        };
+        let merge_grid = grid_2d(b.n_observed, WORKGROUP, max_dim);
+        let merge_params = merge_params(s, &o, b.n_observed, merge_grid);
         let merge_uniform = gpu.uniform("merge params", bytemuck::bytes_of(&merge_params));
         let merge_groups = [0usize, 1].map(|p| {
             gpu.bind(
@@ -315,88 +208,36 @@ impl Restir {
                 &[
                     ("mp", &merge_uniform),
                     ("adjoint", &s.adjoint[p]),
-                    ("targets", &targets),
-                    ("slots0", &slots[0]),
-                    ("slots1", &slots[1]),
-                    ("slots2", &slots[2]),
-                    ("slots3", &slots[3]),
-                    ("headers", &headers),
+                    ("targets", &b.targets),
+                    ("slots0", &b.slots[0]),
+                    ("slots1", &b.slots[1]),
+                    ("slots2", &b.slots[2]),
+                    ("slots3", &b.slots[3]),
+                    ("headers", &b.headers),
                     ("grad", s.grad),
-                    ("mstats", &merge_stats),
-                    ("observed_list", &observed_list),
+                    ("mstats", &b.merge_stats),
+                    ("observed_list", &b.observed_list),
                 ],
             )
         });
-        let cams = s
-            .cameras
-            .iter()
-            .enumerate()
-            .map(|(k, &camera)| {
-                let params = CandidateParams {
-                    camera,
-                    seed: 0,
-                    spp,
-                    stride: s.grid.0 * WORKGROUP,
-                    inv_spp: 1.0 / spp as f32,
-                    camera_index: k as u32,
-                    adjoint_offset: k as u32 * n_pixels,
-                    positivize: o.positivization as u32,
-                    prev_targets: 0,
-                    smoothing: 0.0,
-                    target_cur: 0,
-                    target_prev: 0,
-                    phase: 0,
-                };
-                let uniforms: [wgpu::Buffer; PHASES] = std::array::from_fn(|phase| {
-                    gpu.uniform(
-                        &format!("candidate params {k} phase {phase}"),
-                        bytemuck::bytes_of(&params),
-                    )
-                });
-                let groups = std::array::from_fn(|phase| {
-                    [0usize, 1].map(|p| {
-                        gpu.bind(
-                            &CANDIDATES_GROUP,
-                            "restir_candidates",
-                            &candidate_layout,
-                            &[
-                                ("cp", &uniforms[phase]),
-                                ("adjoint", &s.adjoint[p]),
-                                ("slots0", &slots[0]),
-                                ("slots1", &slots[1]),
-                                ("slots2", &slots[2]),
-                                ("slots3", &slots[3]),
-                                ("headers", &headers),
-                                ("cstats", &candidate_stats),
-                                ("targets", &targets),
-                                ("observed_map", &observed_map),
-                                ("grad", s.grad),
-                            ],
-                        )
-                    })
-                });
-                Camera {
-                    uniforms,
-                    params,
-                    groups,
-                }
-            })
+        let cameras = (0..s.cameras.len())
+            .map(|k| candidate_camera(s, &o, k, &candidate_layout, &b))
             .collect();
         Ok(Restir {
             candidate_pipeline,
             merge_pipeline,
-            cameras: cams,
-            slots,
-            headers,
+            cameras,
             merge_uniform,
             merge_params,
             merge_groups,
             merge_grid,
-            candidate_stats,
-            merge_stats,
-            targets,
-            target_len,
-            map_bytes: observed_list.size() + observed_map.size(),
+            target_len: b.n_all_pixels,
+            map_bytes: b.observed_list.size() + b.observed_map.size(),
+            slots: b.slots,
+            headers: b.headers,
+            candidate_stats: b.candidate_stats,
+            merge_stats: b.merge_stats,
+            targets: b.targets,
             grid: s.grid,
             options: o,
             smoothing,
@@ -516,7 +357,7 @@ impl Estimator for Restir {
             .collect::<Result<Vec<_>>>()?;
         let headers: Vec<u32> = gpu.read_pod(&self.headers)?;
         let n_observed = self.merge_params.n_observed as usize;
-        let mut state = EstimatorState::new(Method::Restir);
+        let mut state = EstimatorState::new(Method::RESTIR);
         state.counters = vec![
             (state_names::HISTORY.into(), self.history),
             (state_names::WORDS.into(), reservoir::WORDS),
@@ -646,6 +487,7 @@ fn slots_holding(kept: &[u32]) -> (Vec<Vec<u32>>, Vec<u32>) {
 
 #[cfg(test)]
 mod tests {
+    use super::setup::compaction_map;
     use super::*;
 
     #[test]

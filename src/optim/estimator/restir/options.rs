@@ -71,7 +71,7 @@ impl Default for RestirOptions {
 }
 
 impl crate::optim::estimator::Options for RestirOptions {
-    const METHOD: crate::optim::Method = crate::optim::Method::Restir;
+    const METHOD: crate::optim::Method = crate::optim::Method::RESTIR;
     const OPTIONAL: &'static [&'static str] = &["target_smoothing"];
 
     fn check(&self) -> std::result::Result<(), (String, String)> {
@@ -100,11 +100,15 @@ impl crate::optim::estimator::Options for RestirOptions {
                 .map_or("by primal".to_string(), |b| b.to_string())
         )
     }
+
+    fn tuning() -> Vec<crate::optim::estimator::TypedAxis<Self>> {
+        tuning()
+    }
 }
 
 /// What `bench --tune` searches for ReSTIR, in order: the M cap (2, 32), whether it follows
 /// the learning-rate schedule, and the target smoothing (0, 0.9).
-pub(crate) fn tuning() -> Vec<crate::optim::estimator::TypedAxis<RestirOptions>> {
+fn tuning() -> Vec<crate::optim::estimator::TypedAxis<RestirOptions>> {
     vec![
         |b| {
             [2.0, 32.0]

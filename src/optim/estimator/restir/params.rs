@@ -84,9 +84,6 @@ pub struct MergeParams {
 }
 
 /// Its bind groups, for the contract test (`crate::contract_tests`).
-#[cfg(test)]
-pub(crate) const GROUPS: &[crate::gpu::GroupDecl] =
-    &[CANDIDATES_GROUP, MERGE_GROUP, super::RESERVOIR_TEST_GROUP];
 
 #[cfg(test)]
 mod contract_tests {

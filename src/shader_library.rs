@@ -1,0 +1,302 @@
+//! The crate's shader library: every WGSL file, assembled from the folders that own them
+//! (`shaders/` for the shared modules and the render's and optimizer's own passes, each
+//! step's, prior's and estimator's folder for theirs) and the WGSL that Rust generates. The
+//! GPU layer's composer ([`crate::gpu::shaders`]) knows none of them; the passes create
+//! their pipelines through the methods here, which hand it this library.
+use crate::gpu::shaders::{Generator, Library, Tracer};
+use crate::gpu::{Binding, Gpu};
+use crate::Result;
+use std::sync::LazyLock;
+
+/// Every WGSL file under `shaders/`: (path under `shaders/` without extension, source).
+pub const SHADERS: &[(&str, &str)] = &[
+    ("shared/types", include_str!("../shaders/shared/types.wgsl")),
+    ("shared/rng", include_str!("../shaders/shared/rng.wgsl")),
+    (
+        "shared/sampling",
+        include_str!("../shaders/shared/sampling.wgsl"),
+    ),
+    ("shared/scene", include_str!("../shaders/shared/scene.wgsl")),
+    (
+        "shared/triangle",
+        include_str!("../shaders/shared/triangle.wgsl"),
+    ),
+    ("shared/bvh", include_str!("../shaders/shared/bvh.wgsl")),
+    (
+        "shared/bvh_ray_query",
+        include_str!("../shaders/shared/bvh_ray_query.wgsl"),
+    ),
+    ("shared/wrap", include_str!("../shaders/shared/wrap.wgsl")),
+    (
+        "shared/texture",
+        include_str!("../shaders/shared/texture.wgsl"),
+    ),
+    ("shared/brdf", include_str!("../shaders/shared/brdf.wgsl")),
+    (
+        "shared/lights",
+        include_str!("../shaders/shared/lights.wgsl"),
+    ),
+    (
+        "shared/camera",
+        include_str!("../shaders/shared/camera.wgsl"),
+    ),
+    (
+        "shared/params",
+        include_str!("../shaders/shared/params.wgsl"),
+    ),
+    (
+        "shared/integrator",
+        include_str!("../shaders/shared/integrator.wgsl"),
+    ),
+    (
+        "shared/gradient_scatter",
+        include_str!("../shaders/shared/gradient_scatter.wgsl"),
+    ),
+    (
+        "shared/adjoint_pixel",
+        include_str!("../shaders/shared/adjoint_pixel.wgsl"),
+    ),
+    (
+        "shared/surface",
+        include_str!("../shaders/shared/surface.wgsl"),
+    ),
+    (
+        "shared/path_encoding",
+        include_str!("../shaders/shared/path_encoding.wgsl"),
+    ),
+    ("render", include_str!("../shaders/render.wgsl")),
+    ("trace_rays", include_str!("../shaders/trace_rays.wgsl")),
+    ("loss", include_str!("../shaders/loss.wgsl")),
+    (
+        "texture_wrap_test",
+        include_str!("../shaders/texture_wrap_test.wgsl"),
+    ),
+    (
+        "texture_export",
+        include_str!("../shaders/texture_export.wgsl"),
+    ),
+    (
+        "observed_texels",
+        include_str!("../shaders/observed_texels.wgsl"),
+    ),
+    ("primal_cv", include_str!("../shaders/primal_cv.wgsl")),
+];
+
+/// WGSL written by Rust: (name under `gen/`, generator).
+pub const GENERATED: &[(&str, Generator)] = &[("gen/abi", crate::gpu::abi::wgsl)];
+
+static LIBRARY: LazyLock<Library> = LazyLock::new(|| {
+    let mut library = Library::new()
+        .with_files(SHADERS)
+        .with_files(crate::optim::step::WGSL)
+        .with_files(crate::optim::prior::WGSL)
+        .with_generated(GENERATED);
+    for files in crate::optim::estimator::wgsl() {
+        library = library.with_files(files);
+    }
+    for generated in crate::optim::estimator::generated() {
+        library = library.with_generated(generated);
+    }
+    library
+});
+
+/// Every WGSL file of the crate: those under `shaders/`, then the steps', the priors' and
+/// the estimators', which lie beside their drivers (a pass is named after its file; an
+/// estimator's other modules are imported as `<method>/<file stem>`).
+pub fn library() -> &'static Library {
+    &LIBRARY
+}
+
+/// Every file of the library: (name, source).
+pub fn sources() -> impl Iterator<Item = (&'static str, &'static str)> {
+    library().sources()
+}
+
+/// The passes (top-level WGSL files with an entry point `main`).
+pub fn passes() -> impl Iterator<Item = &'static str> {
+    library().passes()
+}
+
+/// The full WGSL of a pass with its imports pasted in, tracing with the software BVH.
+pub fn compose(pass: &str) -> Result<String> {
+    library().compose(pass)
+}
+
+/// Parse and validate a composed pass with naga; errors carry the pass name and location.
+pub fn validate(pass: &str) -> Result<naga::Module> {
+    library().validate(pass)
+}
+
+/// The bindings of group `group` of a pass, reflected from its WGSL ([`Library::bindings`]).
+pub fn bindings(pass: &str, group: u32) -> Result<Vec<(String, Binding)>> {
+    library().bindings(pass, group)
+}
+
+/// [`bindings`] of the form of the pass that traces with `tracer`.
+pub fn bindings_for(pass: &str, group: u32, tracer: Tracer) -> Result<Vec<(String, Binding)>> {
+    library().bindings_for(pass, group, tracer)
+}
+
+impl Gpu {
+    /// Compile the crate's pass `pass` ([`Gpu::compute_pipeline_in`] with [`library`]).
+    pub fn compute_pipeline(
+        &self,
+        pass: &str,
+        layouts: &[&wgpu::BindGroupLayout],
+    ) -> Result<wgpu::ComputePipeline> {
+        self.compute_pipeline_in(library(), pass, layouts)
+    }
+
+    /// The layout of bind group `group` of the crate's pass `pass` ([`Gpu::pass_layout_in`]).
+    pub fn pass_layout(&self, pass: &str, group: u32) -> Result<wgpu::BindGroupLayout> {
+        self.pass_layout_in(library(), pass, group)
+    }
+
+    /// Compile the crate's `passes` on a second device ([`Gpu::compile_elsewhere_in`]).
+    pub fn compile_elsewhere(&self, passes: &[&str]) -> Option<std::thread::JoinHandle<()>> {
+        self.compile_elsewhere_in(library(), passes)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_pass_validates_with_naga() {
+        let mut n = 0;
+        for pass in passes() {
+            for tracer in [Tracer::Software, Tracer::RayQuery] {
+                if let Err(e) = library().validate_for(pass, tracer) {
+                    panic!("{tracer:?}: {e}");
+                }
+            }
+            n += 1;
+        }
+        assert!(n >= 2);
+    }
+
+    #[test]
+    fn every_pass_has_contiguous_reflected_bindings() {
+        // texture_export binds a storage texture, which texture_export.rs lays out itself.
+        for pass in passes().filter(|&p| p != "texture_export") {
+            for group in 0..2 {
+                bindings(pass, group).unwrap_or_else(|e| panic!("{pass}: {e}"));
+            }
+        }
+        // The scene group as every tracing pass declares it (shared/scene.wgsl).
+        let scene = bindings("render", 0).unwrap();
+        assert_eq!(scene[0].0, "nodes");
+        assert_eq!(scene[7], ("scene".to_string(), Binding::Uniform));
+        assert_eq!(bindings("loss", 0).unwrap()[6].0, "exposure_partial");
+        // With ray queries the tracing passes add the acceleration structure after the
+        // buffers; the merge, which traces nothing, is the same in both forms.
+        let rq = bindings_for("render", 0, Tracer::RayQuery).unwrap();
+        assert_eq!(rq.len(), scene.len() + 1);
+        assert_eq!(
+            rq.last().unwrap(),
+            &("scene_tlas".to_string(), Binding::AccelerationStructure)
+        );
+        for pass in passes().filter(|&p| p != "texture_export") {
+            for group in 0..2 {
+                bindings_for(pass, group, Tracer::RayQuery)
+                    .unwrap_or_else(|e| panic!("{pass} with ray queries: {e}"));
+            }
+        }
+        assert_eq!(
+            library()
+                .compose_for("restir_merge", Tracer::RayQuery)
+                .unwrap(),
+            compose("restir_merge").unwrap()
+        );
+    }
+
+    #[test]
+    fn every_wgsl_file_is_registered() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/shaders");
+        let mut files = Vec::new();
+        for sub in ["", "shared/"] {
+            for e in std::fs::read_dir(format!("{dir}/{sub}")).unwrap() {
+                let p = e.unwrap().path();
+                if p.extension().is_some_and(|x| x == "wgsl") {
+                    let stem = p.file_stem().unwrap().to_string_lossy().to_string();
+                    files.push(format!("{sub}{stem}"));
+                }
+            }
+        }
+        for f in files {
+            assert!(
+                library().source(&f).is_some(),
+                "shaders/{f}.wgsl is not in SHADERS"
+            );
+        }
+        // The passes in the estimators' folders (a pass's name is its file's stem).
+        let estimators = concat!(env!("CARGO_MANIFEST_DIR"), "/src/optim/estimator");
+        let mut found = 0;
+        for e in std::fs::read_dir(estimators).unwrap() {
+            let d = e.unwrap().path();
+            if !d.is_dir() {
+                continue;
+            }
+            for f in std::fs::read_dir(&d).unwrap() {
+                let p = f.unwrap().path();
+                if p.extension().is_some_and(|x| x == "wgsl") {
+                    let stem = p.file_stem().unwrap().to_string_lossy().to_string();
+                    let dir = d.file_name().unwrap().to_string_lossy().to_string();
+                    assert!(
+                        library().source(&stem).is_some()
+                            || library().source(&format!("{dir}/{stem}")).is_some(),
+                        "{} is not in its estimator's WGSL list",
+                        p.display()
+                    );
+                    found += 1;
+                }
+            }
+        }
+        assert!(
+            found >= 6,
+            "only {found} WGSL files in the estimators' folders"
+        );
+    }
+
+    /// The constants every generated module declares.
+    fn generated_constants() -> Vec<(&'static str, String)> {
+        let mut out = Vec::new();
+        for (module, f) in library().generated() {
+            for line in f().lines() {
+                if let Some(rest) = line.strip_prefix("const ") {
+                    out.push((module, rest.split(':').next().unwrap().to_string()));
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn generated_constants_are_unique_and_no_wgsl_file_defines_one() {
+        let consts = generated_constants();
+        assert!(consts.len() > 40, "{} constants", consts.len());
+        let mut names: Vec<&str> = consts.iter().map(|(_, n)| n.as_str()).collect();
+        names.sort();
+        let n = names.len();
+        names.dedup();
+        assert_eq!(names.len(), n, "a constant is generated twice");
+        for (file, source) in sources() {
+            for (module, name) in &consts {
+                assert!(
+                    !source.contains(&format!("const {name}:")),
+                    "{file}.wgsl defines {name}, which {module} generates"
+                );
+            }
+            // A statistics buffer (`stats`, `gstats`, `loss_stats`, ...) indexed by a digit.
+            for (i, _) in source.match_indices("stats[") {
+                let next = source[i + 6..].chars().next().unwrap_or(' ');
+                assert!(
+                    !next.is_ascii_digit(),
+                    "{file}.wgsl indexes a statistics buffer by a literal: {}",
+                    &source[i.saturating_sub(20)..(i + 10).min(source.len())]
+                );
+            }
+        }
+    }
+}
