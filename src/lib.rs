@@ -76,6 +76,8 @@ pub mod error;
 pub mod gpu;
 pub mod image_io;
 pub mod job;
+#[cfg(test)]
+mod layering_tests;
 pub mod optim;
 pub mod render;
 pub mod scene;

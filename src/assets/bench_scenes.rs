@@ -10,6 +10,8 @@ use glam::Vec3;
 use serde_json::json;
 use std::path::Path;
 
+mod room;
+
 /// Names of the benchmark scenes, in the order `psrestir bench` runs them.
 pub const BENCH_SCENES: [&str; 6] = ["vase", "lattice", "dish", "sphere", "room", "gallery"];
 
@@ -22,8 +24,8 @@ pub fn write_bench_scenes(dir: &Path) -> Result<()> {
     write_lattice(&dir.join("lattice"))?;
     write_dish(&dir.join("dish"))?;
     write_sphere(&dir.join("sphere"))?;
-    super::bench_room::write_room(&dir.join("room"))?;
-    super::bench_room::write_gallery(&dir.join("gallery"))
+    room::write_room(&dir.join("room"))?;
+    room::write_gallery(&dir.join("gallery"))
 }
 
 pub(super) fn create(dir: &Path) -> Result<()> {

@@ -34,87 +34,8 @@ pub fn write_default_scene(dir: &Path) -> Result<()> {
     b.use_extension("KHR_texture_transform");
     b.use_extension("KHR_materials_emissive_strength");
 
-    // Floor: external checker texture, tiled twice by KHR_texture_transform.
-    let mut checker = Vec::new();
-    for y in 0..64 {
-        for x in 0..64 {
-            let on = ((x / 8) + (y / 8)) % 2 == 0;
-            checker.push(if on {
-                [srgb8(0.7), srgb8(0.7), srgb8(0.68), 255]
-            } else {
-                [srgb8(0.2), srgb8(0.25), srgb8(0.3), 255]
-            });
-        }
-    }
-    std::fs::write(dir.join("floor.png"), png_bytes(64, 64, &checker)?)
-        .map_err(|e| crate::Error::file(dir.join("floor.png"), e.to_string()))?;
-    let floor_img = b.add_image_uri("floor", "floor.png");
-    let repeat = b.add_sampler(json!({"wrapS": 10497, "wrapT": 10497, "magFilter": 9729}));
-    let floor_tex = b.add_texture(floor_img, Some(repeat));
-    let floor_mat = b.add_material(json!({
-        "name": "floor",
-        "pbrMetallicRoughness": {
-            "baseColorTexture": {"index": floor_tex,
-                "extensions": {"KHR_texture_transform": {"scale": [2.0, 2.0]}}},
-            "metallicFactor": 0.0, "roughnessFactor": 0.8
-        }
-    }));
-    let s = 4.0;
-    let floor = b.add_mesh(
-        "floor",
-        &[[-s, 0.0, -s], [s, 0.0, -s], [s, 0.0, s], [-s, 0.0, s]],
-        Some(&[[0.0, 1.0, 0.0]; 4]),
-        Some(&[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]),
-        Some(&[0, 2, 1, 0, 3, 2]),
-        Some(floor_mat),
-    );
-
-    // Sphere: embedded base color texture, external metallic-roughness texture.
-    let (w, h) = (128u32, 64u32);
-    let mut color = Vec::new();
-    for y in 0..h {
-        for x in 0..w {
-            let band = (x / 16 + y / 16) % 3;
-            let c = match band {
-                0 => [0.8, 0.2, 0.1],
-                1 => [0.1, 0.5, 0.8],
-                _ => [0.9, 0.8, 0.3],
-            };
-            color.push([srgb8(c[0]), srgb8(c[1]), srgb8(c[2]), 255]);
-        }
-    }
-    let color_png = png_bytes(w, h, &color)?;
-    let color_img = b.add_image_embedded("sphere_color", &color_png, "image/png");
-    let color_tex = b.add_texture(color_img, None);
-    let mut mr = Vec::new();
-    for y in 0..32u32 {
-        for x in 0..64u32 {
-            let rough = 0.15 + 0.8 * x as f32 / 63.0;
-            let metal = if (y / 8) % 2 == 0 { 0 } else { 255 };
-            mr.push([0, (rough * 255.0) as u8, metal, 255]);
-        }
-    }
-    std::fs::write(dir.join("sphere_mr.png"), png_bytes(64, 32, &mr)?)
-        .map_err(|e| crate::Error::file(dir.join("sphere_mr.png"), e.to_string()))?;
-    let mr_img = b.add_image_uri("sphere_mr", "sphere_mr.png");
-    let mr_tex = b.add_texture(mr_img, None);
-    let sphere_mat = b.add_material(json!({
-        "name": "sphere",
-        "pbrMetallicRoughness": {
-            "baseColorTexture": {"index": color_tex},
-            "metallicRoughnessTexture": {"index": mr_tex},
-            "metallicFactor": 1.0, "roughnessFactor": 1.0
-        }
-    }));
-    let (p, n, t, idx) = uv_sphere([0.0, 0.0, 0.0], 1.0, 100, 50);
-    let sphere = b.add_mesh(
-        "sphere",
-        &p,
-        Some(&n),
-        Some(&t),
-        Some(&idx),
-        Some(sphere_mat),
-    );
+    let floor = add_floor(&mut b, dir)?;
+    let sphere = add_sphere(&mut b, dir)?;
 
     // Cube without normals (flat normals computed on load), inside a rotated, scaled group.
     let cube_mat = b.add_material(json!({
@@ -176,6 +97,96 @@ pub fn write_default_scene(dir: &Path) -> Result<()> {
     b.write_gltf(&dir.join("scene.gltf"), false)?;
 
     write_sky(&dir.join("sky.exr"))
+}
+
+/// The default scene's floor: an external checker texture, tiled twice by
+/// KHR_texture_transform. Returns its mesh.
+fn add_floor(b: &mut GltfBuilder, dir: &Path) -> Result<usize> {
+    // Floor: external checker texture, tiled twice by KHR_texture_transform.
+    let mut checker = Vec::new();
+    for y in 0..64 {
+        for x in 0..64 {
+            let on = ((x / 8) + (y / 8)) % 2 == 0;
+            checker.push(if on {
+                [srgb8(0.7), srgb8(0.7), srgb8(0.68), 255]
+            } else {
+                [srgb8(0.2), srgb8(0.25), srgb8(0.3), 255]
+            });
+        }
+    }
+    std::fs::write(dir.join("floor.png"), png_bytes(64, 64, &checker)?)
+        .map_err(|e| crate::Error::file(dir.join("floor.png"), e.to_string()))?;
+    let floor_img = b.add_image_uri("floor", "floor.png");
+    let repeat = b.add_sampler(json!({"wrapS": 10497, "wrapT": 10497, "magFilter": 9729}));
+    let floor_tex = b.add_texture(floor_img, Some(repeat));
+    let floor_mat = b.add_material(json!({
+        "name": "floor",
+        "pbrMetallicRoughness": {
+            "baseColorTexture": {"index": floor_tex,
+                "extensions": {"KHR_texture_transform": {"scale": [2.0, 2.0]}}},
+            "metallicFactor": 0.0, "roughnessFactor": 0.8
+        }
+    }));
+    let s = 4.0;
+    Ok(b.add_mesh(
+        "floor",
+        &[[-s, 0.0, -s], [s, 0.0, -s], [s, 0.0, s], [-s, 0.0, s]],
+        Some(&[[0.0, 1.0, 0.0]; 4]),
+        Some(&[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]),
+        Some(&[0, 2, 1, 0, 3, 2]),
+        Some(floor_mat),
+    ))
+}
+
+/// The default scene's sphere: an embedded base color texture and an external
+/// metallic-roughness texture. Returns its mesh.
+fn add_sphere(b: &mut GltfBuilder, dir: &Path) -> Result<usize> {
+    // Sphere: embedded base color texture, external metallic-roughness texture.
+    let (w, h) = (128u32, 64u32);
+    let mut color = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            let band = (x / 16 + y / 16) % 3;
+            let c = match band {
+                0 => [0.8, 0.2, 0.1],
+                1 => [0.1, 0.5, 0.8],
+                _ => [0.9, 0.8, 0.3],
+            };
+            color.push([srgb8(c[0]), srgb8(c[1]), srgb8(c[2]), 255]);
+        }
+    }
+    let color_png = png_bytes(w, h, &color)?;
+    let color_img = b.add_image_embedded("sphere_color", &color_png, "image/png");
+    let color_tex = b.add_texture(color_img, None);
+    let mut mr = Vec::new();
+    for y in 0..32u32 {
+        for x in 0..64u32 {
+            let rough = 0.15 + 0.8 * x as f32 / 63.0;
+            let metal = if (y / 8) % 2 == 0 { 0 } else { 255 };
+            mr.push([0, (rough * 255.0) as u8, metal, 255]);
+        }
+    }
+    std::fs::write(dir.join("sphere_mr.png"), png_bytes(64, 32, &mr)?)
+        .map_err(|e| crate::Error::file(dir.join("sphere_mr.png"), e.to_string()))?;
+    let mr_img = b.add_image_uri("sphere_mr", "sphere_mr.png");
+    let mr_tex = b.add_texture(mr_img, None);
+    let sphere_mat = b.add_material(json!({
+        "name": "sphere",
+        "pbrMetallicRoughness": {
+            "baseColorTexture": {"index": color_tex},
+            "metallicRoughnessTexture": {"index": mr_tex},
+            "metallicFactor": 1.0, "roughnessFactor": 1.0
+        }
+    }));
+    let (p, n, t, idx) = uv_sphere([0.0, 0.0, 0.0], 1.0, 100, 50);
+    Ok(b.add_mesh(
+        "sphere",
+        &p,
+        Some(&n),
+        Some(&t),
+        Some(&idx),
+        Some(sphere_mat),
+    ))
 }
 
 /// A small sky (64x32, equirectangular): bright zenith, horizon glow, dark ground.

@@ -1,9 +1,8 @@
 //! Writing glTF assets: a glTF/GLB writer (`authoring`, also used for `optimized.glb` and by
 //! the tests) and the generators of the bundled scenes (`bundled`: `scenes/default`;
-//! `bench_scenes` and `bench_room`: `scenes/bench`), run as `psrestir make-scenes`. Reading scenes is
+//! `bench_scenes`, with the indirect-lit scenes in `bench_scenes/room.rs`: `scenes/bench`), run as `psrestir make-scenes`. Reading scenes is
 //! `crate::scene`'s job.
 
 pub mod authoring;
-pub mod bench_room;
 pub mod bench_scenes;
 pub mod bundled;

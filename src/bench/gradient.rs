@@ -320,7 +320,6 @@ pub(super) fn gradient_phase(
         )
     };
     let repeats = o.repeats.max(1);
-    let n = repeats as f64;
     let mut out = GradientPhase::new(spp, prep.set.textures.len());
     // Where each optimized texture lies in a gradient.
     let ranges: Vec<_> = prep
@@ -362,7 +361,6 @@ pub(super) fn gradient_phase(
                 k
             }
         };
-        let s0 = (k.floor() as u32).max(1);
 
         // The converged adjoint at the state, and the reference gradient under it.
         progress.message(format!(
@@ -370,90 +368,151 @@ pub(super) fn gradient_phase(
             rep + 1
         ));
         let (converged, reference) = reference_at(&new, o, &state, seed)?;
-
-        // Total: the estimator's next gradient with its own primal render, and the baseline's at the
-        // task's spp and around the equal-time spp under the adjoint of that same render
-        // (common random numbers). Every figure is still an estimator under the adjoint of
-        // one task-spp primal render, so each expected error is what a user gets; sharing
-        // the render takes the primal's noise out of the comparison, which with one render
-        // per estimate and seed dominated it (`sphere`, paper protocol, a render of its own
-        // for each: the baseline's total error at 1 / 2 / 3 gradient spp was 17.2 / 1.3 /
-        // about 7e-8, not falling with the spp, against 3.7e-8 estimator-only at 1 spp).
-        // The baseline continues from the estimator's state without its own (ReSTIR's
-        // reservoirs, the recursive running estimate): the same
-        // textures (and, with the control-variate primal, the same carried image and
-        // statistics).
-        let it = re.iteration;
-        let (g_estimator_total, _) = re.estimate_gradient(it)?;
-        let adjoint_total = re.read_adjoint(it)?;
-        re.restore(&kept)?;
-        // A baseline at the estimator's state without the estimator's own.
-        let baseline = |spp: u32, salt: u32| -> Result<Optimizer> {
-            let mut b = new(Method::BASELINE, spp, seed ^ salt)?;
-            b.restore(&crate::optim::OptimizerState {
-                estimator: crate::optim::EstimatorState::new(Method::BASELINE),
-                ..kept.clone()
-            })?;
-            Ok(b)
-        };
-        let baseline_at = |spp: u32, salt: u32, adjoint: &[f32]| -> Result<Vec<f32>> {
-            baseline(spp, salt)?.estimate_gradient_with_adjoint(it + 1, adjoint)
-        };
-        let total = |spp, salt| -> Result<f64> {
-            Ok(gradient_relmse(
-                &baseline_at(spp, salt, &adjoint_total)?,
-                &reference,
-            ))
-        };
-        let g_baseline_total = baseline_at(spp, 0xea, &adjoint_total)?;
-        let errors = [&g_estimator_total, &g_baseline_total];
-        out.add(Errors::Total, errors, &reference, &ranges, n);
-        out.total_baseline +=
-            interpolate_in_inverse_spp(k, s0, total(s0, 0xe9)?, total(s0 + 1, 0xeb)?) / n;
-
-        // Estimator-only: both under the converged adjoint. The estimator first draws `settle` more
-        // estimates under it at the same textures, so that its reservoirs hold samples
-        // chosen for the integrand it is measured on. Measured right after the warm-up, its
-        // reservoirs were filled under the noisy adjoints of its own primal renders, and the
-        // switch of adjoint, not the reuse, dominated the error. The textures stay where they
-        // are: under one fixed adjoint, Adam pushes every texel the same way at every step
-        // (on `vase`, 20 such steps made both estimators' errors 5-8x larger).
-        for j in 0..o.settle {
-            re.estimate_gradient_with_adjoint(it + j, &converged)?;
-        }
-        let g_estimator_only = re.estimate_gradient_with_adjoint(it + o.settle, &converged)?;
-        let (mean_estimator, mean_baseline) = successive_means(
-            re,
-            &|salt| baseline(spp, salt),
-            &converged,
-            it,
+        let at = SeedRun {
+            new: &new,
             o,
-            &g_estimator_only,
-        )?;
-        out.mean_estimator += gradient_relmse(&mean_estimator, &reference) / n;
-        out.mean_baseline += gradient_relmse(&mean_baseline, &reference) / n;
-        let b_only = baseline_at(spp, 0xea, &converged)?;
-        let only = |spp, salt| -> Result<f64> {
-            Ok(gradient_relmse(
-                &baseline_at(spp, salt, &converged)?,
-                &reference,
-            ))
+            seed,
+            spp,
+            it: re.iteration,
+            kept,
+            reference,
+            ranges: &ranges,
+            n: repeats as f64,
+            k,
         };
-        let errors = [&g_estimator_only, &b_only];
-        out.add(Errors::EstimatorOnly, errors, &reference, &ranges, n);
-        out.only_baseline_equal_time +=
-            interpolate_in_inverse_spp(k, s0, only(s0, 0xe9)?, only(s0 + 1, 0xeb)?) / n;
-        out.baseline_spp_equal_time = k;
-        if rep == 0 {
-            out.snapshot = GradientSnapshot {
-                reference: reference.iter().map(|&v| v as f32).collect(),
-                baseline: b_only,
-                estimator: g_estimator_only,
-                estimator_name: o.gradient_method.name().to_string(),
-                baseline_spp: spp,
-            };
-        }
+        at.total(&mut re, &mut out)?;
+        at.estimator_only(re, &converged, &mut out, rep == 0)?;
         progress.done();
     }
     Ok(out)
+}
+
+/// One seed's measurements after the warm-up: the estimator's state, the reference under
+/// the converged adjoint, and the baseline's spp at equal time.
+struct SeedRun<'a> {
+    new: &'a NewOptimizer<'a>,
+    o: &'a BenchOptions,
+    seed: u32,
+    /// The task's gradient spp.
+    spp: u32,
+    /// The estimator's iteration after the warm-up.
+    it: u32,
+    /// Its state then.
+    kept: crate::optim::OptimizerState,
+    reference: Vec<f64>,
+    ranges: &'a [std::ops::Range<usize>],
+    /// Seeds averaged over.
+    n: f64,
+    /// The baseline's gradient spp at the estimator's time per iteration.
+    k: f64,
+}
+
+impl SeedRun<'_> {
+    /// A baseline at the estimator's state without the estimator's own (ReSTIR's
+    /// reservoirs, the recursive running estimate): the same textures (and, with the
+    /// control-variate primal, the same carried image and statistics).
+    fn baseline(&self, spp: u32, salt: u32) -> Result<Optimizer> {
+        let mut b = (self.new)(Method::BASELINE, spp, self.seed ^ salt)?;
+        b.restore(&crate::optim::OptimizerState {
+            estimator: crate::optim::EstimatorState::new(Method::BASELINE),
+            ..self.kept.clone()
+        })?;
+        Ok(b)
+    }
+
+    /// That baseline's gradient under `adjoint`.
+    fn baseline_at(&self, spp: u32, salt: u32, adjoint: &[f32]) -> Result<Vec<f32>> {
+        self.baseline(spp, salt)?
+            .estimate_gradient_with_adjoint(self.it + 1, adjoint)
+    }
+
+    /// The baseline's error under `adjoint` at the equal-time spp, interpolated in 1/spp
+    /// between the whole spp around it.
+    fn baseline_equal_time(&self, adjoint: &[f32]) -> Result<f64> {
+        let s0 = (self.k.floor() as u32).max(1);
+        let e = |spp, salt| -> Result<f64> {
+            Ok(gradient_relmse(
+                &self.baseline_at(spp, salt, adjoint)?,
+                &self.reference,
+            ))
+        };
+        Ok(interpolate_in_inverse_spp(
+            self.k,
+            s0,
+            e(s0, 0xe9)?,
+            e(s0 + 1, 0xeb)?,
+        ))
+    }
+
+    /// Total: the estimator's next gradient with its own primal render, and the baseline's
+    /// at the task's spp and around the equal-time spp under the adjoint of that same render
+    /// (common random numbers). Every figure is still an estimator under the adjoint of one
+    /// task-spp primal render, so each expected error is what a user gets; sharing the
+    /// render takes the primal's noise out of the comparison, which with one render per
+    /// estimate and seed dominated it (`sphere`, paper protocol, a render of its own for
+    /// each: the baseline's total error at 1 / 2 / 3 gradient spp was 17.2 / 1.3 / about
+    /// 7e-8, not falling with the spp, against 3.7e-8 estimator-only at 1 spp). The
+    /// estimator is restored to its state after.
+    fn total(&self, re: &mut Optimizer, out: &mut GradientPhase) -> Result<()> {
+        let (g_estimator, _) = re.estimate_gradient(self.it)?;
+        let adjoint = re.read_adjoint(self.it)?;
+        re.restore(&self.kept)?;
+        let g_baseline = self.baseline_at(self.spp, 0xea, &adjoint)?;
+        let errors = [&g_estimator, &g_baseline];
+        out.add(Errors::Total, errors, &self.reference, self.ranges, self.n);
+        out.total_baseline += self.baseline_equal_time(&adjoint)? / self.n;
+        Ok(())
+    }
+
+    /// Estimator-only: both under the converged adjoint. The estimator first draws `settle`
+    /// more estimates under it at the same textures, so that its reservoirs hold samples
+    /// chosen for the integrand it is measured on. Measured right after the warm-up, its
+    /// reservoirs were filled under the noisy adjoints of its own primal renders, and the
+    /// switch of adjoint, not the reuse, dominated the error. The textures stay where they
+    /// are: under one fixed adjoint, Adam pushes every texel the same way at every step (on
+    /// `vase`, 20 such steps made both estimators' errors 5-8x larger).
+    fn estimator_only(
+        &self,
+        mut re: Optimizer,
+        converged: &[f32],
+        out: &mut GradientPhase,
+        snapshot: bool,
+    ) -> Result<()> {
+        let (it, o) = (self.it, self.o);
+        for j in 0..o.settle {
+            re.estimate_gradient_with_adjoint(it + j, converged)?;
+        }
+        let g_estimator = re.estimate_gradient_with_adjoint(it + o.settle, converged)?;
+        let (mean_estimator, mean_baseline) = successive_means(
+            re,
+            &|salt| self.baseline(self.spp, salt),
+            converged,
+            it,
+            o,
+            &g_estimator,
+        )?;
+        out.mean_estimator += gradient_relmse(&mean_estimator, &self.reference) / self.n;
+        out.mean_baseline += gradient_relmse(&mean_baseline, &self.reference) / self.n;
+        let g_baseline = self.baseline_at(self.spp, 0xea, converged)?;
+        let errors = [&g_estimator, &g_baseline];
+        out.add(
+            Errors::EstimatorOnly,
+            errors,
+            &self.reference,
+            self.ranges,
+            self.n,
+        );
+        out.only_baseline_equal_time += self.baseline_equal_time(converged)? / self.n;
+        out.baseline_spp_equal_time = self.k;
+        if snapshot {
+            out.snapshot = GradientSnapshot {
+                reference: self.reference.iter().map(|&v| v as f32).collect(),
+                baseline: g_baseline,
+                estimator: g_estimator,
+                estimator_name: o.gradient_method.name().to_string(),
+                baseline_spp: self.spp,
+            };
+        }
+        Ok(())
+    }
 }

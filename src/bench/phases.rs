@@ -156,15 +156,16 @@ pub(super) struct OptimizationRun {
     pub(super) per_texture_observed: Vec<f64>,
 }
 
-pub(super) fn optimization_phase(
+/// The optimizer of one run of the equal-time phase: the contender's settings on the task,
+/// with its search's best where it was tuned, every pass compiled.
+fn contender_optimizer(
     gpu: &Gpu,
     task: &Task,
     prep: &Problem,
     o: &BenchOptions,
     who: Contender,
     tuned: Option<&tune::Tunable>,
-    progress: &Progress,
-) -> Result<OptimizationRun> {
+) -> Result<Optimizer> {
     let mut s = who.settings(task, |t, m| settings(prep, t, m, o));
     if let Some(t) = tuned {
         t.apply(&mut s);
@@ -179,30 +180,74 @@ pub(super) fn optimization_phase(
             t.learning_rate = None;
         }
     }
+    Ok(opt)
+}
+
+/// The estimator's counters over a run, sampled every few iterations: the first sampled
+/// iteration, the last, the sums of their differences since the first, and their values at
+/// the last. 32 bits on the GPU, they may wrap over a long run, never between two samples,
+/// so they are summed as wrapping differences.
+#[derive(Default)]
+struct Counted(
+    Option<(
+        u32,
+        u32,
+        Vec<(&'static str, f64)>,
+        crate::optim::estimator::Diagnostics,
+    )>,
+);
+
+impl Counted {
+    fn sample(&mut self, opt: &Optimizer) -> Result<()> {
+        let now = opt.estimator_counters()?;
+        match &mut self.0 {
+            None => {
+                let sums = now.iter().map(|(n, _)| (*n, 0.0)).collect();
+                self.0 = Some((opt.iteration, opt.iteration, sums, now));
+            }
+            Some((_, to, sums, last)) => {
+                for ((s, (_, v)), (_, l)) in sums.iter_mut().zip(&now).zip(last.iter()) {
+                    s.1 += (*v as u32).wrapping_sub(*l as u32) as f64;
+                }
+                *last = now;
+                *to = opt.iteration;
+            }
+        }
+        Ok(())
+    }
+
+    /// Each counter's rise per iteration between the first and the last sample.
+    fn per_iteration(self) -> Vec<(String, f64)> {
+        match self.0 {
+            Some((from, to, sums, _)) if to > from => sums
+                .into_iter()
+                .map(|(n, s)| (n.to_string(), s / (to - from) as f64))
+                .collect(),
+            _ => Vec::new(),
+        }
+    }
+}
+
+pub(super) fn optimization_phase(
+    gpu: &Gpu,
+    task: &Task,
+    prep: &Problem,
+    o: &BenchOptions,
+    who: Contender,
+    tuned: Option<&tune::Tunable>,
+    progress: &Progress,
+) -> Result<OptimizationRun> {
+    let mut opt = contender_optimizer(gpu, task, prep, o, who, tuned)?;
     let truth = prep.reference.as_deref();
-    let texture_rmse = |v: &[f32]| truth.map(|r| rmse(v, r)).unwrap_or(f64::NAN);
     let observed = opt.observed_texels()?.to_vec();
     // Every pass compiled before the clock starts.
     opt.prepare()?;
-    let texture_rmse_observed = |v: &[f32]| {
-        truth
-            .map(|r| rmse_observed(&prep.set, v, r, &observed))
-            .unwrap_or(f64::NAN)
-    };
     let points = o.curve_points.max(2);
     let mut next_eval = 1u32;
     let mut curve = Vec::new();
     let mut seconds = 0.0;
     let mut passes: Option<(PassTimes, u32)> = None;
-    // The estimator's counters: the first sampled iteration, the last, the sums of their
-    // differences since the first, and their values at the last.
-    type Counted = (
-        u32,
-        u32,
-        Vec<(&'static str, f64)>,
-        crate::optim::estimator::Diagnostics,
-    );
-    let mut counted: Option<Counted> = None;
+    let mut counted = Counted::default();
     let mut last_image = None;
     let name = who.name();
     loop {
@@ -234,40 +279,9 @@ pub(super) fn optimization_phase(
                 s.add(&t);
                 *n += 1;
             }
-            // The estimator's counters (32 bits on the GPU: they may wrap over a long run,
-            // never between two samples), summed as wrapping differences.
-            let now = opt.estimator_counters()?;
-            match &mut counted {
-                None => {
-                    let sums = now.iter().map(|(n, _)| (*n, 0.0)).collect();
-                    counted = Some((opt.iteration, opt.iteration, sums, now));
-                }
-                Some((_, to, sums, last)) => {
-                    for ((s, (_, v)), (_, l)) in sums.iter_mut().zip(&now).zip(last.iter()) {
-                        s.1 += (*v as u32).wrapping_sub(*l as u32) as f64;
-                    }
-                    *last = now;
-                    *to = opt.iteration;
-                }
-            }
+            counted.sample(&opt)?;
         }
-        let values = opt.read_params()?;
-        let factor = match (opt.last_learning_rates().first(), prep.set.textures.first()) {
-            (Some(&l), Some(t)) => {
-                let rate = crate::optim::auto::texture_rate(t, opt.settings().step);
-                (rate > 0.0).then(|| l as f64 / rate as f64)
-            }
-            _ => None,
-        };
-        curve.push(CurvePoint {
-            iteration: opt.iteration,
-            seconds,
-            loss: stats.loss,
-            texture_rmse: texture_rmse(&values),
-            texture_rmse_observed: texture_rmse_observed(&values),
-            learning_rate_factor: factor,
-            image_relmse: None,
-        });
+        curve.push(curve_point(&opt, prep, &observed, stats.loss, seconds)?);
     }
     // The loop ends with an evaluation at the end of the budget.
     let final_image = match last_image {
@@ -289,18 +303,174 @@ pub(super) fn optimization_phase(
         ms_per_iteration: 1000.0 * seconds / iterations.max(1) as f64,
         iterations,
         passes: passes.map(|(s, n)| s.divided(n as f64)),
-        counters_per_iteration: match counted {
-            Some((from, to, sums, _)) if to > from => sums
-                .into_iter()
-                .map(|(n, s)| (n.to_string(), s / (to - from) as f64))
-                .collect(),
-            _ => Vec::new(),
-        },
+        counters_per_iteration: counted.per_iteration(),
         state_bytes_per_texel: opt.state_bytes_per_texel(),
         curve,
         final_image,
         per_texture_observed,
     })
+}
+
+/// The point of the error curve after an iteration that took the run to `seconds`.
+fn curve_point(
+    opt: &Optimizer,
+    prep: &Problem,
+    observed: &[bool],
+    loss: f64,
+    seconds: f64,
+) -> Result<CurvePoint> {
+    let values = opt.read_params()?;
+    let truth = prep.reference.as_deref();
+    let factor = match (opt.last_learning_rates().first(), prep.set.textures.first()) {
+        (Some(&l), Some(t)) => {
+            let rate = crate::optim::auto::texture_rate(t, opt.settings().step);
+            (rate > 0.0).then(|| l as f64 / rate as f64)
+        }
+        _ => None,
+    };
+    Ok(CurvePoint {
+        iteration: opt.iteration,
+        seconds,
+        loss,
+        texture_rmse: truth.map(|r| rmse(&values, r)).unwrap_or(f64::NAN),
+        texture_rmse_observed: truth
+            .map(|r| rmse_observed(&prep.set, &values, r, observed))
+            .unwrap_or(f64::NAN),
+        learning_rate_factor: factor,
+        image_relmse: None,
+    })
+}
+
+/// The errors every run starts from: the initial textures' image relMSE, texture RMSE over
+/// all and over the observed texels, and which texels are observed.
+struct Start {
+    image: f64,
+    texture: f64,
+    texture_observed: f64,
+    observed: Vec<bool>,
+}
+
+impl Start {
+    fn measure(gpu: &Gpu, task: &Task, prep: &Problem, o: &BenchOptions) -> Result<Start> {
+        let init = Optimizer::for_problem(gpu, prep, settings(prep, task, Method::BASELINE, o))?;
+        let (image, _) = evaluate(&init, prep, task, o.eval_spp)?;
+        let truth = prep.reference.as_deref();
+        let observed = init.observed_texels()?.to_vec();
+        Ok(Start {
+            image,
+            texture: truth.map(|r| rmse(&prep.set.values, r)).unwrap_or(f64::NAN),
+            texture_observed: truth
+                .map(|r| rmse_observed(&prep.set, &prep.set.values, r, &observed))
+                .unwrap_or(f64::NAN),
+            observed,
+        })
+    }
+
+    /// The curve's first point.
+    fn point(&self) -> CurvePoint {
+        CurvePoint {
+            iteration: 0,
+            seconds: 0.0,
+            loss: f64::NAN,
+            texture_rmse: self.texture,
+            texture_rmse_observed: self.texture_observed,
+            learning_rate_factor: None,
+            image_relmse: Some(self.image),
+        }
+    }
+
+    /// A run's result: its last errors (the start's where it measured none), their ratios
+    /// over the baseline's (`first`), the observed-texel RMSE at a third of the budget (the
+    /// last point before it) and its lowest, and its curve from the start.
+    fn result(
+        &self,
+        o: &BenchOptions,
+        who: Contender,
+        run: OptimizationRun,
+        first: Option<&RunResult>,
+        settings: String,
+        tuned: Option<tune::Tuned>,
+    ) -> RunResult {
+        let (t, to) = run
+            .curve
+            .last()
+            .map(|p| (p.texture_rmse, p.texture_rmse_observed))
+            .unwrap_or((self.texture, self.texture_observed));
+        let i = run
+            .curve
+            .iter()
+            .rev()
+            .find_map(|p| p.image_relmse)
+            .unwrap_or(self.image);
+        let (ib, tob) = first.map_or((i, to), |b| (b.image_relmse, b.texture_rmse_observed));
+        let third = run
+            .curve
+            .iter()
+            .take_while(|p| p.seconds <= o.budget_s / 3.0)
+            .last()
+            .map(|p| p.texture_rmse_observed)
+            .unwrap_or(self.texture_observed);
+        let min = run
+            .curve
+            .iter()
+            .map(|p| p.texture_rmse_observed)
+            .fold(self.texture_observed, f64::min);
+        let mut curve = vec![self.point()];
+        curve.extend_from_slice(&run.curve);
+        RunResult {
+            name: who.name(),
+            key: who.key(),
+            method: who.method.name().to_string(),
+            image_relmse: i,
+            image_relmse_ratio: i / ib,
+            texture_rmse: t,
+            texture_rmse_observed: to,
+            texture_rmse_observed_ratio: to / tob,
+            texture_rmse_observed_third: third,
+            texture_rmse_observed_min: min,
+            texture_rmse_observed_per_texture: run.per_texture_observed,
+            ms_per_iteration: run.ms_per_iteration,
+            iterations: run.iterations,
+            passes: run.passes,
+            diagnostics_per_iteration: run.counters_per_iteration,
+            state_bytes_per_texel: run.state_bytes_per_texel,
+            settings,
+            tuned,
+            curve,
+        }
+    }
+}
+
+/// How a run's settings read in the report: its tuned (or untuned) settings, and for the
+/// default configuration the rates and schedule `auto` gave.
+fn describe_run(
+    task: &Task,
+    prep: &Problem,
+    o: &BenchOptions,
+    who: Contender,
+    t: Option<&tune::Tunable>,
+) -> String {
+    let s = who.settings(task, |t, m| settings(prep, t, m, o));
+    let d = t
+        .cloned()
+        .unwrap_or_else(|| tune::Tunable::untuned(&s))
+        .describe(who.method);
+    if !who.auto {
+        return d;
+    }
+    // The rates and schedule `auto` gave, which the scale above multiplies.
+    let rates: Vec<String> = prep
+        .set
+        .textures
+        .iter()
+        .map(|t| format!("{}", crate::optim::auto::learning_rate(s.step, t.slot)))
+        .collect();
+    format!(
+        "{d}; auto's rates {}, {}, smoothness {}",
+        rates.join(" / "),
+        s.schedule.describe(),
+        s.smoothness
+    )
 }
 
 /// The equal-time optimization of every run (phase 2: the baseline with Adam, then the
@@ -313,86 +483,7 @@ pub(super) fn optimization_phases(
     mut tuned: Vec<Option<tune::Tuned>>,
     progress: &Progress,
 ) -> Result<(OptimizationResult, FinalImages)> {
-    let init = Optimizer::for_problem(gpu, prep, settings(prep, task, Method::BASELINE, o))?;
-    let (image_initial, _) = evaluate(&init, prep, task, o.eval_spp)?;
-    let texture_initial = prep
-        .reference
-        .as_deref()
-        .map(|r| rmse(&prep.set.values, r))
-        .unwrap_or(f64::NAN);
-    let observed = init.observed_texels()?.to_vec();
-    let texture_observed_initial = prep
-        .reference
-        .as_deref()
-        .map(|r| rmse_observed(&prep.set, &prep.set.values, r, &observed))
-        .unwrap_or(f64::NAN);
-    drop(init);
-    let start = CurvePoint {
-        iteration: 0,
-        seconds: 0.0,
-        loss: f64::NAN,
-        texture_rmse: texture_initial,
-        texture_rmse_observed: texture_observed_initial,
-        learning_rate_factor: None,
-        image_relmse: Some(image_initial),
-    };
-    let describe = |who: Contender, t: Option<&tune::Tunable>| {
-        let s = who.settings(task, |t, m| settings(prep, t, m, o));
-        let d = t
-            .cloned()
-            .unwrap_or_else(|| tune::Tunable::untuned(&s))
-            .describe(who.method);
-        if !who.auto {
-            return d;
-        }
-        // The rates and schedule `auto` gave, which the scale above multiplies.
-        let rates: Vec<String> = prep
-            .set
-            .textures
-            .iter()
-            .map(|t| format!("{}", crate::optim::auto::learning_rate(s.step, t.slot)))
-            .collect();
-        format!(
-            "{d}; auto's rates {}, {}, smoothness {}",
-            rates.join(" / "),
-            s.schedule.describe(),
-            s.smoothness
-        )
-    };
-    let min_observed = |r: &OptimizationRun| {
-        r.curve
-            .iter()
-            .map(|p| p.texture_rmse_observed)
-            .fold(texture_observed_initial, f64::min)
-    };
-    let last = |r: &OptimizationRun| -> (f64, f64, f64) {
-        let t = r
-            .curve
-            .last()
-            .map(|p| (p.texture_rmse, p.texture_rmse_observed))
-            .unwrap_or((texture_initial, texture_observed_initial));
-        let i = r
-            .curve
-            .iter()
-            .rev()
-            .find_map(|p| p.image_relmse)
-            .unwrap_or(image_initial);
-        (t.0, t.1, i)
-    };
-    // The observed-texel RMSE at a third of the budget (the last point before it).
-    let third = |r: &OptimizationRun| -> f64 {
-        r.curve
-            .iter()
-            .take_while(|p| p.seconds <= o.budget_s / 3.0)
-            .last()
-            .map(|p| p.texture_rmse_observed)
-            .unwrap_or(texture_observed_initial)
-    };
-    let with_start = |c: &[CurvePoint]| {
-        let mut v = vec![start.clone()];
-        v.extend_from_slice(c);
-        v
-    };
+    let start = Start::measure(gpu, task, prep, o)?;
     let runs_of = std::iter::once(Contender::BASELINE)
         .chain(o.contenders.iter().copied())
         .map(|c| c.on(task, prep.cameras.len()));
@@ -404,38 +495,23 @@ pub(super) fn optimization_phases(
     };
     for (who, tuned) in runs_of.zip(tuned) {
         let t_best = tuned.as_ref().map(|t| &t.best);
-        let run = optimization_phase(gpu, task, prep, o, who, t_best, progress)?;
-        let (t, to, i) = last(&run);
-        let (ib, tob) = runs
-            .first()
-            .map_or((i, to), |b| (b.image_relmse, b.texture_rmse_observed));
-        runs.push(RunResult {
-            name: who.name(),
-            key: who.key(),
-            method: who.method.name().to_string(),
-            image_relmse: i,
-            image_relmse_ratio: i / ib,
-            texture_rmse: t,
-            texture_rmse_observed: to,
-            texture_rmse_observed_ratio: to / tob,
-            texture_rmse_observed_third: third(&run),
-            texture_rmse_observed_min: min_observed(&run),
-            texture_rmse_observed_per_texture: run.per_texture_observed.clone(),
-            ms_per_iteration: run.ms_per_iteration,
-            iterations: run.iterations,
-            passes: run.passes,
-            diagnostics_per_iteration: run.counters_per_iteration,
-            state_bytes_per_texel: run.state_bytes_per_texel,
-            settings: describe(who, t_best),
-            tuned: tuned.clone(),
-            curve: with_start(&run.curve),
-        });
-        finals.runs.push((who.name(), run.final_image));
+        let mut run = optimization_phase(gpu, task, prep, o, who, t_best, progress)?;
+        let empty = Image {
+            width: 0,
+            height: 0,
+            rgb: Vec::new(),
+        };
+        let image = std::mem::replace(&mut run.final_image, empty);
+        let described = describe_run(task, prep, o, who, t_best);
+        let result = start.result(o, who, run, runs.first(), described, tuned.clone());
+        runs.push(result);
+        finals.runs.push((who.name(), image));
     }
+    let observed = &start.observed;
     let result = OptimizationResult {
-        image_relmse_initial: image_initial,
-        texture_rmse_initial: texture_initial,
-        texture_rmse_observed_initial: texture_observed_initial,
+        image_relmse_initial: start.image,
+        texture_rmse_initial: start.texture,
+        texture_rmse_observed_initial: start.texture_observed,
         observed_fraction: observed.iter().filter(|&&b| b).count() as f64
             / observed.len().max(1) as f64,
         observed_texels: observed.iter().filter(|&&b| b).count() as u64,
@@ -448,11 +524,11 @@ pub(super) fn optimization_phases(
                 &prep.set,
                 &prep.set.values,
                 r,
-                &observed,
+                observed,
             ),
             None => vec![f64::NAN; prep.set.textures.len()],
         },
-        auto: auto_result(task, prep.cameras.len(), &runs, texture_observed_initial),
+        auto: auto_result(task, prep.cameras.len(), &runs, start.texture_observed),
         runs,
     };
     Ok((result, finals))

@@ -32,21 +32,19 @@ fn resample(values: &[f32], w: u32, h: u32, nw: u32, nh: u32) -> Vec<f32> {
     out
 }
 
-/// Write `out` (.glb): the scene at `source` with the textures of `set` set to `values`.
-pub fn write_glb(
-    source: &Path,
-    out: &Path,
-    scene: &Scene,
-    set: &ParamSet,
-    values: &[f32],
-) -> Result<()> {
-    let (mut json, buffers, image_bytes) = crate::scene::load_source(source)?;
+/// A builder holding the glTF `json` whose `buffers` are merged into one binary chunk,
+/// with the images stored by URI (`image_bytes`) moved into it too.
+fn single_buffer(
+    mut json: Value,
+    buffers: &[Vec<u8>],
+    image_bytes: &[Option<Vec<u8>>],
+) -> GltfBuilder {
     let mut b = GltfBuilder {
         json: Value::Null,
         bin: Vec::new(),
     };
     let mut base = Vec::new();
-    for data in &buffers {
+    for data in buffers {
         while b.bin.len() % 4 != 0 {
             b.bin.push(0);
         }
@@ -77,6 +75,19 @@ pub fn write_glb(
             img["mimeType"] = json!(mime(bytes));
         }
     }
+    b
+}
+
+/// Write `out` (.glb): the scene at `source` with the textures of `set` set to `values`.
+pub fn write_glb(
+    source: &Path,
+    out: &Path,
+    scene: &Scene,
+    set: &ParamSet,
+    values: &[f32],
+) -> Result<()> {
+    let (json, buffers, image_bytes) = crate::scene::load_source(source)?;
+    let mut b = single_buffer(json, &buffers, &image_bytes);
     let sampler = b
         .add_sampler(json!({"wrapS": 10497, "wrapT": 10497, "magFilter": 9729, "minFilter": 9729}));
     let n_json_materials = b.json["materials"].as_array().map(|a| a.len()).unwrap_or(0);

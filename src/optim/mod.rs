@@ -95,6 +95,58 @@ pub struct Optimizer {
     pub iteration: u32,
 }
 
+/// The buffers an iteration passes from one pass to the next: the adjoints of both parities
+/// (RGBA per pixel of all cameras), the gradient, the step's two moments and the
+/// statistics, for `n_pixels` pixels and `n_params` parameter scalars.
+fn iteration_buffers(
+    gpu: &Gpu,
+    n_pixels: u32,
+    n_params: u64,
+) -> ([wgpu::Buffer; 2], wgpu::Buffer, [wgpu::Buffer; 2], Stats) {
+    let adjoint_size = n_pixels as u64 * 16;
+    let adjoint = [
+        gpu.storage_zeroed("adjoint even", adjoint_size),
+        gpu.storage_zeroed("adjoint odd", adjoint_size),
+    ];
+    let grad = gpu.storage_zeroed("gradient", n_params * 4);
+    let moments = [
+        gpu.storage_zeroed("adam moment1", n_params * 4),
+        gpu.storage_zeroed("adam moment2", n_params * 4),
+    ];
+    let stats = Stats {
+        primal: gpu.storage_zeroed("primal stats", 16),
+        adam: gpu.storage_zeroed("adam stats", 16),
+    };
+    (adjoint, grad, moments, stats)
+}
+
+/// The constants of the settings' cameras at the settings' image size.
+fn camera_infos(
+    scene: &Scene,
+    settings: &Settings,
+) -> Result<Vec<crate::render::layout::GpuCameraInfo>> {
+    settings
+        .cameras
+        .iter()
+        .map(|&cam| {
+            let c = scene
+                .cameras
+                .get(cam)
+                .ok_or_else(|| Error::Invalid(format!("camera index {cam} out of range")))?;
+            Ok(camera_info(c, settings.width, settings.height))
+        })
+        .collect()
+}
+
+/// A timer with a slot for every pass of an iteration: primal, control variate and loss per
+/// camera, the estimator's passes (at most two per camera), smoothness, multiscale and the
+/// step (two dispatches with the moment filter) per texture, and the filter's levels.
+fn pass_timer(gpu: &Gpu, n_cams: u32, n_textures: usize, step: &dyn step::Step) -> PassTimer {
+    let filter_dispatches = step.filter().map_or(0, |f| f.dispatches());
+    let per_texture = 4 * n_textures as u32;
+    PassTimer::new(gpu, 6 * n_cams + 2 + per_texture + filter_dispatches)
+}
+
 impl Optimizer {
     /// Upload the scene with its optimized textures and one target image per camera.
     pub fn new(
@@ -106,14 +158,7 @@ impl Optimizer {
     ) -> Result<Optimizer> {
         let (w, h) = (settings.width, settings.height);
         check_inputs(&settings, targets)?;
-        let mut camera_infos = Vec::new();
-        for &cam in &settings.cameras {
-            let c = scene
-                .cameras
-                .get(cam)
-                .ok_or_else(|| Error::Invalid(format!("camera index {cam} out of range")))?;
-            camera_infos.push(camera_info(c, w, h));
-        }
+        let camera_infos = camera_infos(scene, &settings)?;
         // The textures and the scene first: which texels the cameras observe decides what
         // ReSTIR allocates.
         memory_plan(&set, &settings, targets.len(), 0).check(gpu)?;
@@ -126,11 +171,11 @@ impl Optimizer {
         plan.check(gpu)?;
         log::info!("{}", plan.summary());
 
-        let n_pixels = w * h;
         let n_cams = targets.len() as u32;
-        let n_params = set.values.len() as u64;
-        let accum = gpu.storage_zeroed("primal accum", n_pixels as u64 * 16);
-        let accum_prev = gpu.storage_zeroed("primal accum_prev", n_pixels as u64 * 16);
+        let (accum, accum_prev) = (
+            gpu.storage_zeroed("primal accum", (w * h) as u64 * 16),
+            gpu.storage_zeroed("primal accum_prev", (w * h) as u64 * 16),
+        );
         let control_variate = match settings.primal {
             PrimalMode::ControlVariate => Some(primal::ControlVariate::new(
                 gpu,
@@ -142,20 +187,8 @@ impl Optimizer {
             )?),
             PrimalMode::Independent => None,
         };
-        let adjoint_size = (n_pixels * n_cams) as u64 * 16;
-        let adjoint = [
-            gpu.storage_zeroed("adjoint even", adjoint_size),
-            gpu.storage_zeroed("adjoint odd", adjoint_size),
-        ];
-        let grad = gpu.storage_zeroed("gradient", n_params * 4);
-        let moments = [
-            gpu.storage_zeroed("adam moment1", n_params * 4),
-            gpu.storage_zeroed("adam moment2", n_params * 4),
-        ];
-        let stats = Stats {
-            primal: gpu.storage_zeroed("primal stats", 16),
-            adam: gpu.storage_zeroed("adam stats", 16),
-        };
+        let (adjoint, grad, moments, stats) =
+            iteration_buffers(gpu, w * h * n_cams, set.values.len() as u64);
         let loss = loss::LossPass::new(gpu, settings.loss, (w, h), targets, &accum, &adjoint)?;
         let estimator = estimator::build(&estimator::Setup {
             gpu,
@@ -198,12 +231,7 @@ impl Optimizer {
                 stats: &stats.adam,
             },
         )?;
-        let filter_dispatches = step.filter().map_or(0, |f| f.dispatches());
-        // Primal, control variate and loss per camera, the estimator's passes (at most two
-        // per camera), smoothness, multiscale and the step (two dispatches with the moment
-        // filter) per texture, and the filter's levels.
-        let per_texture = 4 * set.textures.len() as u32;
-        let timer = PassTimer::new(gpu, 6 * n_cams + 2 + per_texture + filter_dispatches);
+        let timer = pass_timer(gpu, n_cams, set.textures.len(), step.as_ref());
         gpu.check("optimizer setup")?;
         Ok(Optimizer {
             gpu: gpu.clone(),
@@ -218,12 +246,7 @@ impl Optimizer {
             stats,
             loss,
             targets: targets.to_vec(),
-            exposure: ExposureState {
-                values: vec![1.0; targets.len()],
-                m1: vec![0.0; targets.len()],
-                m2: vec![0.0; targets.len()],
-                steps: 0,
-            },
+            exposure: ExposureState::identity(targets.len()),
             grid,
             step,
             accum,

@@ -78,6 +78,18 @@ pub struct ExposureState {
     pub steps: u32,
 }
 
+impl ExposureState {
+    /// `n` cameras at exposure 1, before any step.
+    pub fn identity(n: usize) -> ExposureState {
+        ExposureState {
+            values: vec![1.0; n],
+            m1: vec![0.0; n],
+            m2: vec![0.0; n],
+            steps: 0,
+        }
+    }
+}
+
 impl Optimizer {
     /// The gradient of the last iteration or estimate, laid out like the parameters.
     pub fn read_gradient(&self) -> Result<Vec<f32>> {

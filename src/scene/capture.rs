@@ -208,19 +208,16 @@ fn colmap_lines(path: &Path) -> Result<Vec<(usize, String)>> {
         .collect())
 }
 
-/// Load a COLMAP text model from its folder (`cameras.txt`, `images.txt`). Images are
-/// looked for in the usual places: `../../images/NAME` (a `sparse/0` model of a COLMAP
-/// project), `images/NAME` and `NAME` beside the model.
-pub fn load_colmap(dir: &Path) -> Result<Vec<Frame>> {
-    let cam_path = dir.join("cameras.txt");
-    let img_path = dir.join("images.txt");
+/// The intrinsics of a COLMAP `cameras.txt`, by camera id: pinhole models, and the radial
+/// and OpenCV ones without distortion.
+fn colmap_cameras(cam_path: &Path) -> Result<std::collections::HashMap<String, Intrinsics>> {
     let mut cameras = std::collections::HashMap::new();
-    for (line_no, line) in colmap_lines(&cam_path)? {
+    for (line_no, line) in colmap_lines(cam_path)? {
         let t: Vec<&str> = line.split_whitespace().collect();
         if t.is_empty() {
             continue;
         }
-        let at = |m: String| bad(&cam_path, format!("line {line_no}: {m}"));
+        let at = |m: String| bad(cam_path, format!("line {line_no}: {m}"));
         if t.len() < 4 {
             return Err(at("expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS".into()));
         }
@@ -293,6 +290,15 @@ pub fn load_colmap(dir: &Path) -> Result<Vec<Frame>> {
         }
         cameras.insert(t[0].to_string(), k);
     }
+    Ok(cameras)
+}
+
+/// Load a COLMAP text model from its folder (`cameras.txt`, `images.txt`). Images are
+/// looked for in the usual places: `../../images/NAME` (a `sparse/0` model of a COLMAP
+/// project), `images/NAME` and `NAME` beside the model.
+pub fn load_colmap(dir: &Path) -> Result<Vec<Frame>> {
+    let img_path = dir.join("images.txt");
+    let cameras = colmap_cameras(&dir.join("cameras.txt"))?;
     let lines = colmap_lines(&img_path)?;
     let mut out = Vec::new();
     // Images come in pairs of lines: the pose, then the 2D points (possibly empty).

@@ -407,36 +407,46 @@ impl Scene {
     /// fails); scenes built in code are checked here before they reach the GPU, where such
     /// data would otherwise turn into NaN images or out-of-range reads.
     pub fn validate(&self) -> crate::Result<()> {
-        let bad = |msg: String| -> crate::Error {
-            if self.source.as_os_str().is_empty() {
-                crate::Error::Invalid(format!("invalid scene: {msg}"))
-            } else {
-                crate::Error::file(&self.source, msg)
-            }
-        };
+        let checks = [
+            Scene::check_geometry,
+            Scene::check_materials,
+            Scene::check_views_and_lights,
+        ];
+        checks
+            .iter()
+            .try_for_each(|check| check(self))
+            .map_err(|msg| {
+                if self.source.as_os_str().is_empty() {
+                    crate::Error::Invalid(format!("invalid scene: {msg}"))
+                } else {
+                    crate::Error::file(&self.source, msg)
+                }
+            })
+    }
+
+    /// [`Scene::validate`]'s triangles and images.
+    fn check_geometry(&self) -> Result<(), String> {
         let n_mat = self.materials.len();
         for (i, t) in self.triangles.iter().enumerate() {
             if t.material as usize >= n_mat {
-                return Err(bad(format!(
+                return Err(format!(
                     "triangle {i} uses material {} of {n_mat}",
                     t.material
-                )));
+                ));
             }
             if !t.p.iter().all(|&p| in_bounds(p)) {
-                return Err(bad(format!(
+                return Err(format!(
                     "triangle {i} has a non-finite vertex or one beyond ±{MAX_COORD:e}"
-                )));
+                ));
             }
             if t.n
                 .iter()
                 .any(|n| !n.is_finite() || (n.length() - 1.0).abs() > 1e-3)
             {
-                return Err(bad(format!(
-                    "triangle {i} has a normal that is not unit length"
-                )));
+                return Err(format!("triangle {i} has a normal that is not unit length"));
             }
             if t.uv.iter().any(|uv| !uv.is_finite()) {
-                return Err(bad(format!("triangle {i} has a non-finite UV")));
+                return Err(format!("triangle {i} has a non-finite UV"));
             }
         }
         for (i, img) in self.images.iter().enumerate() {
@@ -444,21 +454,26 @@ impl Scene {
                 || img.height == 0
                 || img.rgba.len() as u64 != img.width as u64 * img.height as u64
             {
-                return Err(bad(format!(
+                return Err(format!(
                     "image {i} (`{}`) is {}x{} but holds {} pixels",
                     img.name,
                     img.width,
                     img.height,
                     img.rgba.len()
-                )));
+                ));
             }
         }
+        Ok(())
+    }
+
+    /// [`Scene::validate`]'s materials and their textures.
+    fn check_materials(&self) -> Result<(), String> {
         for m in &self.materials {
             if !m.factors_valid() {
-                return Err(bad(format!(
+                return Err(format!(
                     "material `{}` has non-finite or negative factors",
                     m.name
-                )));
+                ));
             }
             let slots = [
                 &m.base_color_texture,
@@ -467,31 +482,36 @@ impl Scene {
             ];
             for s in slots.into_iter().flatten() {
                 if s.image >= self.images.len() {
-                    return Err(bad(format!(
+                    return Err(format!(
                         "material `{}` uses image {} of {}",
                         m.name,
                         s.image,
                         self.images.len()
-                    )));
+                    ));
                 }
                 if s.transform.iter().flatten().any(|v| !v.is_finite()) {
-                    return Err(bad(format!(
+                    return Err(format!(
                         "material `{}` has a non-finite texture transform",
                         m.name
-                    )));
+                    ));
                 }
             }
         }
+        Ok(())
+    }
+
+    /// [`Scene::validate`]'s cameras, lights and environment.
+    fn check_views_and_lights(&self) -> Result<(), String> {
         for c in &self.cameras {
             if !c.world.is_finite()
                 || !Camera::projection_valid(c.yfov, c.aspect)
                 || c.intrinsics.is_some_and(|k| !k.valid())
             {
-                return Err(bad(format!(
+                return Err(format!(
                     "camera `{}` has a non-finite transform, a field of view outside (0, pi), \
                      a non-positive aspect ratio or invalid intrinsics",
                     c.name
-                )));
+                ));
             }
         }
         for l in &self.lights {
@@ -508,11 +528,11 @@ impl Scene {
                     _ => true,
                 };
             if !ok {
-                return Err(bad(format!(
+                return Err(format!(
                     "light `{}` has non-finite values, a negative intensity or a position \
                      beyond ±{MAX_COORD:e}",
                     l.name
-                )));
+                ));
             }
         }
         if let Some(env) = &self.env {
@@ -522,11 +542,11 @@ impl Scene {
                 || !(env.scale.is_finite() && env.scale >= 0.0)
                 || env.rgb.iter().flatten().any(|v| !v.is_finite() || *v < 0.0)
             {
-                return Err(bad(
+                return Err(
                     "the environment map's size, pixels or scale are invalid (sizes must \
                      match, values be finite and non-negative)"
                         .into(),
-                ));
+                );
             }
         }
         Ok(())
