@@ -21,36 +21,6 @@ impl Optimizer {
         self.estimator.restore(&self.gpu, None, self.iteration)
     }
 
-    /// `grad` (laid out like the parameters) written to the gradient buffer, transformed on
-    /// the GPU by the passes `encode` records, and read back: how the tests check a pass that
-    /// acts on the gradient before Adam against its CPU twin. `what` names the caller in
-    /// errors.
-    pub(crate) fn transform_gradient(
-        &mut self,
-        what: &str,
-        grad: &[f32],
-        encode: impl FnOnce(&mut Optimizer, &mut wgpu::CommandEncoder),
-    ) -> Result<Vec<f32>> {
-        if grad.len() != self.set.values.len() {
-            return Err(Error::Invalid(format!(
-                "{what}: {} values for {} parameters",
-                grad.len(),
-                self.set.values.len()
-            )));
-        }
-        self.gpu
-            .queue
-            .write_buffer(&self.grad, 0, bytemuck::cast_slice(grad));
-        let mut enc = self
-            .gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(what) });
-        self.timer.begin();
-        encode(self, &mut enc);
-        self.gpu.queue.submit([enc.finish()]);
-        self.read_gradient()
-    }
-
     /// One gradient estimate at the current textures, as iteration `iteration` would draw it,
     /// without changing the textures. For ReSTIR this advances the reservoirs like an
     /// iteration does. Returns (gradient laid out like the parameters, loss).

@@ -12,6 +12,7 @@ pub mod loss;
 pub mod observed;
 pub mod primal;
 pub mod prior;
+mod problem;
 pub mod schedule;
 pub mod step;
 pub mod texture_export;
@@ -42,6 +43,9 @@ use estimator::Estimator;
 pub use estimator::{Choice, EstimatorOptions, EstimatorState, Method, MethodChoice};
 pub use primal::{ControlVariateSnapshot, PrimalMode};
 pub use prior::{multiscale, smoothness};
+#[cfg(feature = "test-hooks")]
+mod hooks;
+pub use problem::Problem;
 pub use schedule::{Schedule, ScheduleKind};
 pub use step::variance_step::VarianceStepOptions;
 pub use step::{adam, moment_filter, variance_step, StepKind};
@@ -83,10 +87,9 @@ pub struct Optimizer {
     /// buffer they were read from (one word per texel, nonzero: observed), which the
     /// multiscale and smoothness passes bind.
     observed: (Vec<bool>, wgpu::Buffer),
-    /// The multiscale gradient pass, built at the first step that uses it.
-    multiscale: Option<multiscale::Multiscale>,
-    /// The smoothness prior's pass, built at the first step that uses it.
-    smoothness: Option<smoothness::Smoothness>,
+    /// The priors the settings ask for, in the order they apply, built by
+    /// [`Optimizer::prepare`] (the first step's, or the caller's before it).
+    priors: Option<Vec<Box<dyn prior::Prior>>>,
     /// Fraction of the run done, for the learning-rate schedule.
     progress: f64,
     /// Learning rate of each texture in the last Adam step.
@@ -257,8 +260,7 @@ impl Optimizer {
             export_pipeline: std::sync::OnceLock::new(),
             camera_images: std::sync::OnceLock::new(),
             observed,
-            multiscale: None,
-            smoothness: None,
+            priors: None,
             progress: 0.0,
             last_learning_rates: Vec::new(),
             iteration: 0,
@@ -374,12 +376,7 @@ impl Optimizer {
             StepKind::Adam => "adam",
             StepKind::Variance => "variance_step",
         });
-        if settings.smoothness > 0.0 {
-            p.push("smoothness");
-        }
-        if settings.multiscale_levels > 0 {
-            p.push("multiscale_gradient");
-        }
+        p.extend(prior::passes(settings));
         if settings.moment_filter.enabled() {
             p.push("moment_filter");
         }
@@ -390,8 +387,20 @@ impl Optimizer {
     /// priors', which need the observed texels), so that no pipeline is compiled inside a
     /// timed iteration. `step` calls it too; calling it first only moves the work.
     pub fn prepare(&mut self) -> Result<()> {
-        self.prepare_smoothness()?;
-        self.prepare_multiscale()
+        if self.priors.is_none() {
+            self.priors = Some(prior::build(&prior::Setup {
+                gpu: &self.gpu,
+                set: &self.set,
+                settings: &self.settings,
+                grad: &self.grad,
+                params: &self.params.values,
+                observed: &self.observed,
+            })?);
+            for p in self.priors.iter().flatten() {
+                log::debug!("prior `{}` ready", p.pass());
+            }
+        }
+        Ok(())
     }
 
     /// One iteration: render, loss, gradient, step. Returns the loss of the render.
@@ -405,10 +414,10 @@ impl Optimizer {
             });
         self.encode_gradient(&mut enc, self.iteration, true);
         let t = self.iteration + 1;
-        if let Some(s) = &self.smoothness {
-            s.encode(&mut enc, &mut self.timer);
+        for p in self.priors.iter_mut().flatten() {
+            let (seed, it) = (self.settings.seed, self.iteration);
+            p.encode(&self.gpu, &mut enc, seed, it, &mut self.timer);
         }
-        self.encode_multiscale(&mut enc, self.iteration);
         let factor = self.settings.schedule.factor(self.iteration, self.progress);
         self.last_learning_rates =
             self.step

@@ -39,12 +39,6 @@ impl Optimizer {
     pub fn observed_texels(&self) -> Result<&[bool]> {
         Ok(&self.observed.0)
     }
-
-    /// [`Optimizer::observed_texels`] and the GPU buffer it was read from (one `u32` per
-    /// texel, nonzero where observed).
-    pub(crate) fn observed_mask(&self) -> &(Vec<bool>, wgpu::Buffer) {
-        &self.observed
-    }
 }
 
 /// Which texels of the optimized textures of `scene` the cameras `cameras` observe (tiled in

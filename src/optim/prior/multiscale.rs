@@ -130,41 +130,20 @@ impl Multiscale {
     }
 }
 
-impl crate::optim::Optimizer {
-    /// Build the pass at the first call when the settings ask for it (it needs the observed
-    /// texels, which take a render of their own).
-    pub(crate) fn prepare_multiscale(&mut self) -> Result<()> {
-        let levels = self.settings.multiscale_levels;
-        if levels > 0 && self.multiscale.is_none() {
-            let (_, mask) = self.observed_mask();
-            let m = Multiscale::new(&self.gpu, &self.set, &self.grad, mask, levels)?;
-            self.multiscale = Some(m);
-        }
-        Ok(())
+impl super::Prior for Multiscale {
+    fn pass(&self) -> &'static str {
+        "multiscale_gradient"
     }
 
-    /// The multiscale pass of `iteration` on the GPU applied to `grad` (laid out like the
-    /// parameters): it is written to the gradient buffer, transformed and read back. For
-    /// tests against [`reference()`]; an error when the settings have no multiscale levels.
-    pub fn apply_multiscale(&mut self, grad: &[f32], iteration: u32) -> Result<Vec<f32>> {
-        if self.settings.multiscale_levels == 0 {
-            return Err(crate::error::Error::Invalid(
-                "apply_multiscale: the settings have multiscale_levels = 0".into(),
-            ));
-        }
-        self.prepare_multiscale()?;
-        self.transform_gradient("apply_multiscale", grad, |opt, enc| {
-            opt.encode_multiscale(enc, iteration)
-        })
-    }
-
-    /// Record the pass for `iteration` when the settings ask for it (after
-    /// [`Self::prepare_multiscale`]).
-    pub(crate) fn encode_multiscale(&mut self, enc: &mut wgpu::CommandEncoder, iteration: u32) {
-        let seed = self.settings.seed;
-        if let Some(m) = &mut self.multiscale {
-            m.encode(&self.gpu, enc, seed, iteration, &mut self.timer);
-        }
+    fn encode(
+        &mut self,
+        gpu: &Gpu,
+        enc: &mut wgpu::CommandEncoder,
+        seed: u32,
+        iteration: u32,
+        timer: &mut crate::optim::timing::PassTimer,
+    ) {
+        Multiscale::encode(self, gpu, enc, seed, iteration, timer)
     }
 }
 

@@ -192,40 +192,20 @@ impl Smoothness {
     }
 }
 
-impl crate::optim::Optimizer {
-    /// Build the pass at the first call when the settings ask for it (it needs the observed
-    /// texels, which take a render of their own).
-    pub(crate) fn prepare_smoothness(&mut self) -> Result<()> {
-        let lambda = self.settings.smoothness;
-        if lambda > 0.0 && self.smoothness.is_none() {
-            let s = Smoothness::new(
-                &self.gpu,
-                &self.set,
-                &self.grad,
-                &self.params.values,
-                self.observed_mask(),
-                lambda,
-            )?;
-            self.smoothness = Some(s);
-        }
-        Ok(())
+impl super::Prior for Smoothness {
+    fn pass(&self) -> &'static str {
+        "smoothness"
     }
 
-    /// The gradient `grad` (laid out like the parameters) plus the prior's derivative at the
-    /// current parameters, computed on the GPU. For tests against [`reference()`]; an error
-    /// when the settings have no smoothness weight.
-    pub fn apply_smoothness(&mut self, grad: &[f32]) -> Result<Vec<f32>> {
-        if self.settings.smoothness <= 0.0 {
-            return Err(crate::error::Error::Invalid(
-                "apply_smoothness: the settings have smoothness = 0".into(),
-            ));
-        }
-        self.prepare_smoothness()?;
-        self.transform_gradient("apply_smoothness", grad, |opt, enc| {
-            if let Some(s) = &opt.smoothness {
-                s.encode(enc, &mut opt.timer);
-            }
-        })
+    fn encode(
+        &mut self,
+        _gpu: &Gpu,
+        enc: &mut wgpu::CommandEncoder,
+        _seed: u32,
+        _iteration: u32,
+        timer: &mut crate::optim::timing::PassTimer,
+    ) {
+        Smoothness::encode(self, enc, timer)
     }
 }
 

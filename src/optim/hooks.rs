@@ -1,0 +1,123 @@
+//! Test hooks (feature `test-hooks`, which the crate's own tests turn on): one pass of the
+//! optimizer run on given data and read back, so that a test can check the GPU pass
+//! against its CPU twin. Not part of the library's interface.
+use super::Optimizer;
+use crate::{Error, Result};
+
+impl Optimizer {
+    /// `grad` (laid out like the parameters) written to the gradient buffer, transformed on
+    /// the GPU by the passes `encode` records, and read back: how the tests check a pass that
+    /// acts on the gradient before Adam against its CPU twin. `what` names the caller in
+    /// errors.
+    pub(crate) fn transform_gradient(
+        &mut self,
+        what: &str,
+        grad: &[f32],
+        encode: impl FnOnce(&mut Optimizer, &mut wgpu::CommandEncoder),
+    ) -> Result<Vec<f32>> {
+        if grad.len() != self.set.values.len() {
+            return Err(Error::Invalid(format!(
+                "{what}: {} values for {} parameters",
+                grad.len(),
+                self.set.values.len()
+            )));
+        }
+        self.gpu
+            .queue
+            .write_buffer(&self.grad, 0, bytemuck::cast_slice(grad));
+        let mut enc = self
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(what) });
+        self.timer.begin();
+        encode(self, &mut enc);
+        self.gpu.queue.submit([enc.finish()]);
+        self.read_gradient()
+    }
+
+    /// `grad` through the prior whose pass is `pass`, as iteration `iteration` applies it;
+    /// an error naming `what` when the settings have no such prior.
+    fn apply_prior(
+        &mut self,
+        what: &str,
+        pass: &str,
+        grad: &[f32],
+        iteration: u32,
+    ) -> Result<Vec<f32>> {
+        self.prepare()?;
+        let priors = self.priors.take().unwrap_or_default();
+        let found = priors.iter().position(|p| p.pass() == pass);
+        let result = match found {
+            Some(k) => {
+                let mut priors = priors;
+                let seed = self.settings.seed;
+                let r = self.transform_gradient(what, grad, |opt, enc| {
+                    priors[k].encode(&opt.gpu, enc, seed, iteration, &mut opt.timer)
+                });
+                self.priors = Some(priors);
+                return r;
+            }
+            None => Err(Error::Invalid(format!(
+                "{what}: the settings do not ask for this prior"
+            ))),
+        };
+        self.priors = Some(priors);
+        result
+    }
+
+    /// The multiscale pass of `iteration` on the GPU applied to `grad` (laid out like the
+    /// parameters): it is written to the gradient buffer, transformed and read back. For
+    /// tests against [`super::multiscale::reference`]; an error when the settings have no
+    /// multiscale levels.
+    pub fn apply_multiscale(&mut self, grad: &[f32], iteration: u32) -> Result<Vec<f32>> {
+        self.apply_prior("apply_multiscale", "multiscale_gradient", grad, iteration)
+    }
+
+    /// The gradient `grad` (laid out like the parameters) plus the smoothness prior's
+    /// derivative at the current parameters, computed on the GPU. For tests against
+    /// [`super::smoothness::reference`]; an error when the settings have no smoothness
+    /// weight.
+    pub fn apply_smoothness(&mut self, grad: &[f32]) -> Result<Vec<f32>> {
+        let it = self.iteration;
+        self.apply_prior("apply_smoothness", "smoothness", grad, it)
+    }
+
+    /// The moment filter on the GPU applied to `pair` (two arrays laid out like the
+    /// parameters), guided by the current textures: texture by texture, the pair is written to
+    /// the filter's input, filtered and read back. For tests against [`super::moment_filter::reference`]; an error
+    /// when the settings have no moment filter. The optimizer's moments are not touched.
+    pub fn apply_moment_filter(&mut self, pair: [&[f32]; 2]) -> Result<[Vec<f32>; 2]> {
+        let n = self.set.values.len();
+        if pair.iter().any(|p| p.len() != n) {
+            return Err(crate::Error::Invalid(format!(
+                "apply_moment_filter: the pair must have {n} values each"
+            )));
+        }
+        let filter = self.step.filter();
+        let f = filter.ok_or_else(|| {
+            crate::Error::Invalid("apply_moment_filter: the settings have no moment filter".into())
+        })?;
+        let mut out = [vec![0.0f32; n], vec![0.0f32; n]];
+        for (k, t) in self.set.textures.iter().enumerate() {
+            let range = t.offset as usize..t.offset as usize + t.len();
+            for (buf, p) in f.input().iter().zip(pair) {
+                let values = bytemuck::cast_slice(&p[range.clone()]);
+                self.gpu.queue.write_buffer(buf, 0, values);
+            }
+            let mut enc = self
+                .gpu
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("apply_moment_filter"),
+                });
+            self.timer.begin();
+            f.encode(&mut enc, k, &mut self.timer);
+            self.gpu.queue.submit([enc.finish()]);
+            for (o, buf) in out.iter_mut().zip(f.output()) {
+                let filtered: Vec<f32> = self.gpu.read_pod(buf)?;
+                o[range.clone()].copy_from_slice(&filtered[..t.len()]);
+            }
+        }
+        Ok(out)
+    }
+}

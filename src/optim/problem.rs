@@ -1,0 +1,190 @@
+//! An optimization problem in memory: the scene, the cameras, the textures to recover and one
+//! target image per camera, and the optimizer made for it ([`Optimizer::for_problem`]). An
+//! application builds one from data it already holds ([`Problem::new`]); a task file
+//! describes one (`Problem::from_task`, in `job`).
+use super::{pass_seed, Optimizer, Settings};
+use crate::gpu::Gpu;
+use crate::image_io::Image;
+use crate::render::params::ParamSet;
+use crate::render::{RenderSettings, Renderer, Techniques};
+use crate::scene::Scene;
+use crate::vocab::{Filter, TextureSpec};
+use crate::{Error, Result};
+use std::path::Path;
+
+/// Scenes, targets and textures of an optimization, ready for an
+/// [`Optimizer`](crate::optim::Optimizer).
+#[derive(Clone, Debug)]
+pub struct Problem {
+    /// The scene to optimize (its geometry, lights and cameras are known and fixed).
+    pub scene: Scene,
+    /// Ground-truth scene, when the targets were rendered from one.
+    pub truth: Option<Scene>,
+    /// The cameras rendered every iteration (indices into `scene.cameras`).
+    pub cameras: Vec<usize>,
+    /// One target image per camera, in the order of `cameras` (empty until set).
+    pub targets: Vec<Image>,
+    /// The optimized textures, laid out in one array, at their initial values.
+    pub set: ParamSet,
+    /// Ground-truth texture values laid out like `set.values`, when known.
+    pub reference: Option<Vec<f32>>,
+    /// Per camera, a weight per pixel of its loss and gradient (0 leaves the pixel out);
+    /// None: every pixel counts fully.
+    pub masks: Vec<Option<Vec<f32>>>,
+    /// Per camera, the factor its render is multiplied by before the comparison (the
+    /// starting value when exposures are optimized).
+    pub exposure: Vec<f32>,
+    /// Per camera, the image a camera file gave its frame, if any.
+    pub frame_images: Vec<Option<std::path::PathBuf>>,
+}
+
+impl Problem {
+    /// A problem on `scene` seen by `cameras`, recovering `textures` (checked as a task file's
+    /// `[[textures]]` are). Give it targets with [`Problem::set_targets`] or
+    /// [`Problem::render_targets`] before optimizing.
+    pub fn new(
+        scene: Scene,
+        cameras: Vec<usize>,
+        textures: &[TextureSpec],
+        filter: Filter,
+    ) -> Result<Problem> {
+        if cameras.is_empty() {
+            return Err(Error::Invalid("a problem needs at least one camera".into()));
+        }
+        if let Some(&c) = cameras.iter().find(|&&c| c >= scene.cameras.len()) {
+            return Err(Error::Invalid(format!(
+                "camera {c} does not exist (the scene has {})",
+                scene.cameras.len()
+            )));
+        }
+        if textures.is_empty() {
+            return Err(Error::Invalid(
+                "name at least one texture to optimize".into(),
+            ));
+        }
+        for (i, t) in textures.iter().enumerate() {
+            crate::vocab::check_texture(t, &textures[..i])
+                .map_err(|(key, msg)| Error::Invalid(format!("textures[{i}].{key}: {msg}")))?;
+        }
+        let set = ParamSet::from_specs(&scene, textures, filter, Path::new("<problem>"))?;
+        Ok(Problem::without_targets(scene, cameras, set))
+    }
+
+    pub(crate) fn without_targets(scene: Scene, cameras: Vec<usize>, set: ParamSet) -> Problem {
+        let n = cameras.len();
+        Problem {
+            scene,
+            truth: None,
+            cameras,
+            targets: Vec::new(),
+            set,
+            reference: None,
+            masks: vec![None; n],
+            exposure: vec![1.0; n],
+            frame_images: vec![None; n],
+        }
+    }
+
+    /// Use `images` as the targets, one per camera, all `width` x `height`.
+    pub fn set_targets(&mut self, images: Vec<Image>) -> Result<()> {
+        if images.len() != self.cameras.len() {
+            return Err(Error::Invalid(format!(
+                "{} target images for {} cameras",
+                images.len(),
+                self.cameras.len()
+            )));
+        }
+        if let Some(i) = images
+            .iter()
+            .position(|im| (im.width, im.height) != (images[0].width, images[0].height))
+        {
+            return Err(Error::Invalid(format!(
+                "target {i} is {}x{}, target 0 is {}x{}",
+                images[i].width, images[i].height, images[0].width, images[0].height
+            )));
+        }
+        self.targets = images;
+        Ok(())
+    }
+
+    /// Render the targets from `truth` (the same geometry and cameras with the true
+    /// materials) at `spp` samples per pixel, and take the ground-truth texture values from
+    /// it for texture RMSE. The seed of camera `k` derives from `seed` as in a task run.
+    pub fn render_targets(
+        &mut self,
+        gpu: &Gpu,
+        truth: Scene,
+        width: u32,
+        height: u32,
+        spp: u32,
+        seed: u32,
+    ) -> Result<()> {
+        if truth.cameras.len() != self.scene.cameras.len() {
+            return Err(Error::Invalid(
+                "the target scene's cameras differ from the scene's".into(),
+            ));
+        }
+        let r = Renderer::new(gpu, &truth)?;
+        let mut targets = Vec::new();
+        for (k, &camera) in self.cameras.iter().enumerate() {
+            let settings = RenderSettings {
+                width,
+                height,
+                spp,
+                seed: pass_seed(seed, u32::MAX, k as u32, 2),
+                camera,
+                techniques: Techniques::Mis,
+            };
+            targets.push(r.render(&settings, |_| {})?.image);
+        }
+        self.set_truth(truth)?;
+        self.targets = targets;
+        Ok(())
+    }
+
+    /// Record the ground-truth scene and take the reference texture values from it.
+    pub(crate) fn set_truth(&mut self, truth: Scene) -> Result<()> {
+        let mut all = Vec::with_capacity(self.set.values.len());
+        for i in 0..self.set.textures.len() {
+            all.extend(self.set.reference_values(i, &truth).ok_or_else(|| {
+                Error::Invalid(format!(
+                    "the target scene has no material `{}`",
+                    self.set.textures[i].material_name
+                ))
+            })?);
+        }
+        self.reference = Some(all);
+        self.truth = Some(truth);
+        Ok(())
+    }
+}
+
+impl Optimizer {
+    /// An optimizer for `problem`: its scene, textures and targets, with the sampling options
+    /// of `settings` (whose cameras, width and height are taken from the problem).
+    pub fn for_problem(gpu: &Gpu, problem: &Problem, settings: Settings) -> Result<Optimizer> {
+        let first = problem.targets.first().ok_or_else(|| {
+            crate::Error::Invalid("the problem has no targets: set or render them first".into())
+        })?;
+        let settings = Settings {
+            width: first.width,
+            height: first.height,
+            cameras: problem.cameras.clone(),
+            ..settings
+        };
+        let mut opt = Optimizer::new(
+            gpu,
+            &problem.scene,
+            problem.set.clone(),
+            settings,
+            &problem.targets,
+        )?;
+        if problem.masks.iter().any(Option::is_some) {
+            opt.set_masks(&problem.masks)?;
+        }
+        if problem.exposure.iter().any(|&e| e != 1.0) {
+            opt.set_exposure(&problem.exposure)?;
+        }
+        Ok(opt)
+    }
+}
