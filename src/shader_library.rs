@@ -1,6 +1,7 @@
 //! The crate's shader library: every WGSL file, assembled from the folders that own them
-//! (`shaders/` for the shared modules and the render's and optimizer's own passes, each
-//! step's, prior's and estimator's folder for theirs) and the WGSL that Rust generates. The
+//! (`shaders/shared/` for the shared modules; a pass's file lies beside its driver, named
+//! after it: the renderer's in `src/render/`, the optimizer's in `src/optim/`, each step's,
+//! prior's and estimator's in its folder) and the WGSL that Rust generates. The
 //! GPU layer's composer ([`crate::gpu::shaders`]) knows none of them; the passes create
 //! their pipelines through the methods here, which hand it this library.
 use crate::gpu::shaders::{Generator, Library, Tracer};
@@ -8,8 +9,8 @@ use crate::gpu::{Binding, Gpu};
 use crate::Result;
 use std::sync::LazyLock;
 
-/// Every WGSL file under `shaders/`: (path under `shaders/` without extension, source).
-pub const SHADERS: &[(&str, &str)] = &[
+/// The shared WGSL modules: `shaders/shared/NAME.wgsl`, imported as `shared/NAME`.
+pub const SHARED: &[(&str, &str)] = &[
     ("shared/types", include_str!("../shaders/shared/types.wgsl")),
     ("shared/rng", include_str!("../shaders/shared/rng.wgsl")),
     (
@@ -64,22 +65,6 @@ pub const SHADERS: &[(&str, &str)] = &[
         "shared/path_encoding",
         include_str!("../shaders/shared/path_encoding.wgsl"),
     ),
-    ("render", include_str!("../shaders/render.wgsl")),
-    ("trace_rays", include_str!("../shaders/trace_rays.wgsl")),
-    ("loss", include_str!("../shaders/loss.wgsl")),
-    (
-        "texture_wrap_test",
-        include_str!("../shaders/texture_wrap_test.wgsl"),
-    ),
-    (
-        "texture_export",
-        include_str!("../shaders/texture_export.wgsl"),
-    ),
-    (
-        "observed_texels",
-        include_str!("../shaders/observed_texels.wgsl"),
-    ),
-    ("primal_cv", include_str!("../shaders/primal_cv.wgsl")),
 ];
 
 /// WGSL written by Rust: (name under `gen/`, generator).
@@ -87,7 +72,9 @@ pub const GENERATED: &[(&str, Generator)] = &[("gen/abi", crate::gpu::abi::wgsl)
 
 static LIBRARY: LazyLock<Library> = LazyLock::new(|| {
     let mut library = Library::new()
-        .with_files(SHADERS)
+        .with_files(SHARED)
+        .with_files(crate::render::WGSL)
+        .with_files(crate::optim::WGSL)
         .with_files(crate::optim::step::WGSL)
         .with_files(crate::optim::prior::WGSL)
         .with_generated(GENERATED);
@@ -213,50 +200,39 @@ mod tests {
 
     #[test]
     fn every_wgsl_file_is_registered() {
-        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/shaders");
-        let mut files = Vec::new();
-        for sub in ["", "shared/"] {
-            for e in std::fs::read_dir(format!("{dir}/{sub}")).unwrap() {
+        fn walk(dir: &std::path::Path, out: &mut Vec<std::path::PathBuf>) {
+            for e in std::fs::read_dir(dir).unwrap() {
                 let p = e.unwrap().path();
-                if p.extension().is_some_and(|x| x == "wgsl") {
-                    let stem = p.file_stem().unwrap().to_string_lossy().to_string();
-                    files.push(format!("{sub}{stem}"));
+                if p.is_dir() {
+                    walk(&p, out);
+                } else if p.extension().is_some_and(|x| x == "wgsl") {
+                    out.push(p);
                 }
             }
         }
-        for f in files {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let mut files = Vec::new();
+        walk(&root.join("shaders"), &mut files);
+        walk(&root.join("src"), &mut files);
+        for p in &files {
+            // A pass is named after its file; a shared module as `shared/<stem>`, an
+            // estimator's other modules as `<folder>/<stem>`.
+            let stem = p.file_stem().unwrap().to_string_lossy().to_string();
+            let dir = p.parent().unwrap().file_name().unwrap().to_string_lossy();
             assert!(
-                library().source(&f).is_some(),
-                "shaders/{f}.wgsl is not in SHADERS"
+                library().source(&stem).is_some()
+                    || library().source(&format!("{dir}/{stem}")).is_some(),
+                "{} is not in the shader library",
+                p.display()
             );
         }
-        // The passes in the estimators' folders (a pass's name is its file's stem).
-        let estimators = concat!(env!("CARGO_MANIFEST_DIR"), "/src/optim/estimator");
-        let mut found = 0;
-        for e in std::fs::read_dir(estimators).unwrap() {
-            let d = e.unwrap().path();
-            if !d.is_dir() {
-                continue;
-            }
-            for f in std::fs::read_dir(&d).unwrap() {
-                let p = f.unwrap().path();
-                if p.extension().is_some_and(|x| x == "wgsl") {
-                    let stem = p.file_stem().unwrap().to_string_lossy().to_string();
-                    let dir = d.file_name().unwrap().to_string_lossy().to_string();
-                    assert!(
-                        library().source(&stem).is_some()
-                            || library().source(&format!("{dir}/{stem}")).is_some(),
-                        "{} is not in its estimator's WGSL list",
-                        p.display()
-                    );
-                    found += 1;
-                }
-            }
-        }
-        assert!(
-            found >= 6,
-            "only {found} WGSL files in the estimators' folders"
-        );
+        assert!(files.len() > 30, "only {} WGSL files", files.len());
+        // Nothing but the shared modules under shaders/.
+        let top: Vec<_> = std::fs::read_dir(root.join("shaders"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+            .collect();
+        assert_eq!(top, ["shared"], "shaders/ holds the shared modules only");
     }
 
     /// The constants every generated module declares.

@@ -1,4 +1,4 @@
-//! The control-variate primal (shaders/primal_cv.wgsl): with textures that change every
+//! The control-variate primal (src/optim/primal_cv.wgsl): with textures that change every
 //! iteration, its image is an unbiased estimate of the current render (the mean over many
 //! independent runs matches a converged render), it has less variance than an independent
 //! render of the same spp, and checkpoints restore its running statistics exactly.

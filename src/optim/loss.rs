@@ -1,4 +1,4 @@
-//! Image losses: the loss pass on the GPU (`LossPass`, shaders/loss.wgsl, its uniform
+//! Image losses: the loss pass on the GPU (`LossPass`, src/optim/loss.wgsl, its uniform
 //! [`LossParams`]) and the CPU reference for it and for tests.
 use crate::gpu::{encode_timed_pass, grid_2d, Gpu, GroupDecl};
 use crate::image_io::Image;
@@ -81,7 +81,7 @@ mod tests {
     }
 }
 
-/// `LossParams` in shaders/loss.wgsl (a test checks the layout).
+/// `LossParams` in src/optim/loss.wgsl (a test checks the layout).
 /// The fields are documented in the WGSL twin.
 #[allow(missing_docs)]
 #[repr(C)]
@@ -112,7 +112,7 @@ pub(crate) const LOSS_GROUP: GroupDecl = GroupDecl {
     ],
 };
 
-/// The loss pass of every camera (shaders/loss.wgsl): the loss of the primal render (times
+/// The loss pass of every camera (src/optim/loss.wgsl): the loss of the primal render (times
 /// the camera's exposure) against the target with its mask, the adjoint image dL/dI into the
 /// iteration's adjoint buffer, and per workgroup the partial sums of the loss and of
 /// dL/d(exposure).

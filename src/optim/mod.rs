@@ -43,6 +43,15 @@ use estimator::Estimator;
 pub use estimator::{Choice, EstimatorOptions, EstimatorState, Method, MethodChoice};
 pub use primal::{ControlVariateSnapshot, PrimalMode};
 pub use prior::{multiscale, smoothness};
+/// The optimizer's own passes besides the steps', priors' and estimators' (a pass is named
+/// after its file, which lies beside its driver in this folder).
+pub(crate) const WGSL: &[(&str, &str)] = &[
+    ("loss", include_str!("loss.wgsl")),
+    ("primal_cv", include_str!("primal_cv.wgsl")),
+    ("observed_texels", include_str!("observed_texels.wgsl")),
+    ("texture_export", include_str!("texture_export.wgsl")),
+];
+
 #[cfg(feature = "test-hooks")]
 mod hooks;
 pub use problem::Problem;

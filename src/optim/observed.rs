@@ -1,4 +1,4 @@
-//! Observed texels (shaders/observed_texels.wgsl): which texels of the optimized textures a
+//! Observed texels (src/optim/observed_texels.wgsl): which texels of the optimized textures a
 //! camera sample of the task can reach, computed once per optimizer. The others get no
 //! gradient, keep their initial values, and are not determined by the images, so texture
 //! errors are reported over the observed ones as well ([`rmse_observed`]).
@@ -16,7 +16,7 @@ pub(crate) const OBSERVED_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
     names: &["op", "observed"],
 };
 
-/// `ObservedParams` in shaders/observed_texels.wgsl (a test checks the layout).
+/// `ObservedParams` in src/optim/observed_texels.wgsl (a test checks the layout).
 /// The fields are documented in the WGSL twin.
 #[allow(missing_docs)]
 #[repr(C)]

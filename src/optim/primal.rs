@@ -3,7 +3,7 @@
 //! - [`PrimalMode::Independent`]: a fresh `primal_spp` render of every camera, with random
 //!   numbers of its own.
 //! - [`PrimalMode::ControlVariate`]: the recursive control variate of Nicolet et al. 2023 in
-//!   path space (shaders/primal_cv.wgsl): the primal render also evaluates each of its samples
+//!   path space (src/optim/primal_cv.wgsl): the primal render also evaluates each of its samples
 //!   under the previous iteration's textures (the same path; no extra ray), and
 //!   `I_t = w (I_{t-1} - H_t) + F_t` carries the last image forward with a per-pixel weight
 //!   from running statistics.
@@ -48,7 +48,7 @@ impl PrimalMode {
     }
 }
 
-/// `PrimalCvParams` in shaders/primal_cv.wgsl (a test checks the layout).
+/// `PrimalCvParams` in src/optim/primal_cv.wgsl (a test checks the layout).
 /// The fields are documented in the WGSL twin.
 #[allow(missing_docs)]
 #[repr(C)]

@@ -1,4 +1,4 @@
-//! The `texture_export` pass (shaders/texture_export.wgsl): one optimized texture copied into
+//! The `texture_export` pass (src/optim/texture_export.wgsl): one optimized texture copied into
 //! an `Rgba32Float` GPU texture that an application can bind ([`Optimizer::create_texture`]).
 use super::Optimizer;
 use crate::gpu::grid_2d;
@@ -6,7 +6,7 @@ use crate::render::WORKGROUP;
 use crate::{Error, Result};
 use bytemuck::{Pod, Zeroable};
 
-/// `ExportParams` in shaders/texture_export.wgsl (a test checks the layout).
+/// `ExportParams` in src/optim/texture_export.wgsl (a test checks the layout).
 /// The fields are documented in the WGSL twin.
 #[allow(missing_docs)]
 #[repr(C)]

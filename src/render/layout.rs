@@ -1,5 +1,5 @@
 //! Rust mirrors of the renderer's GPU structs (shaders/shared/types.wgsl,
-//! shaders/shared/camera.wgsl, shaders/render.wgsl, shaders/trace_rays.wgsl). The test below
+//! shaders/shared/camera.wgsl, src/render/render.wgsl, src/render/trace_rays.wgsl). The test below
 //! checks every mirror in the crate, field by field, against naga's layout of its WGSL twin.
 use bytemuck::{Pod, Zeroable};
 

@@ -21,6 +21,13 @@ pub use params::ParamBuffers;
 use params::ParamSet;
 use std::time::Instant;
 
+/// The renderer's passes (a pass is named after its file, which lies beside this one).
+pub(crate) const WGSL: &[(&str, &str)] = &[
+    ("render", include_str!("render.wgsl")),
+    ("trace_rays", include_str!("trace_rays.wgsl")),
+    ("texture_wrap_test", include_str!("texture_wrap_test.wgsl")),
+];
+
 /// Group 1 of `render.wgsl` (the optimizer's primal render binds it too).
 pub(crate) const RENDER_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
     pass: "render",
