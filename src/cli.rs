@@ -243,8 +243,9 @@ pub(crate) struct OptimizeArgs {
 /// The arguments of `psrestir bench`.
 #[derive(clap::Args)]
 pub(crate) struct BenchArgs {
-    /// Scenes: names of bundled benchmark scenes (vase, lattice, dish, sphere), task
-    /// files, or folders holding task.toml (default: every bundled benchmark scene).
+    /// Scenes: names of bundled benchmark scenes (vase, lattice, dish, sphere, room,
+    /// gallery), task files, or folders holding task.toml (default: every bundled benchmark
+    /// scene).
     pub(crate) scenes: Vec<String>,
     /// Seconds of optimization per estimator and scene.
     #[arg(long, default_value_t = 60.0)]
@@ -255,11 +256,12 @@ pub(crate) struct BenchArgs {
     /// Multiply image and texture sizes (e.g. 4 for GPU-size runs, 0.5 for a quick look).
     #[arg(long, default_value_t = 1.0)]
     pub(crate) scale: f64,
-    /// ReSTIR iterations before the gradient error is measured.
+    /// Iterations of the estimator the gradient phase measures (`--gradient-method`) before
+    /// its gradient error is measured.
     #[arg(long, default_value_t = 20)]
     pub(crate) warmup: u32,
-    /// ReSTIR estimates under the converged adjoint, at the textures after the warm-up,
-    /// before its estimator-only gradient error is measured.
+    /// That estimator's estimates under the converged adjoint, at the textures after the
+    /// warm-up, before its estimator-only gradient error is measured.
     #[arg(long, default_value_t = 20)]
     pub(crate) settle: u32,
     /// Successive estimates averaged for the error of their mean (estimator-only).
@@ -354,9 +356,9 @@ pub(crate) enum Command {
         /// The scene (.gltf or .glb).
         scene: PathBuf,
     },
-    /// Benchmark baseline against ReSTIR (equal-time gradient error, equal-time optimization,
-    /// cost) on the bundled benchmark scenes or given tasks; writes bench.json, report.md and
-    /// plots.
+    /// Benchmark the estimators and the default configuration against the baseline
+    /// (gradient error, equal-time optimization, cost) on the bundled benchmark scenes or
+    /// given tasks; writes bench.json, report.md and plots.
     Bench(BenchArgs),
     /// Print the GPU adapter psrestir would use, its features and limits.
     Adapter,

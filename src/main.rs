@@ -509,14 +509,15 @@ fn print_summary(summary: &job::run::RunSummary, path: &std::path::Path) {
     if let Some(t) = summary.pass_times {
         let timed = t.total();
         println!(
-            "GPU time per iteration: primal {:.1} ms, loss {:.2} ms, gradient {:.1} ms, combine {:.1} ms, step {:.2} ms{}; \
+            "GPU time per iteration: primal {:.1} ms, loss {:.2} ms, gradient {:.1} ms, combine {:.1} ms, priors {:.2} ms, step {:.2} ms{}; \
              the other {:.1} ms of the {:.1} ms per iteration are outside these passes (untimed \
              copies and clears, submission, host work)",
             t.primal_ms,
             t.loss_ms,
             t.gradient_ms,
             t.combine_ms,
-            t.adam_ms,
+            t.prior_ms,
+            t.step_ms,
             if t.filter_ms > 0.0 {
                 format!(", moment filter {:.2} ms", t.filter_ms)
             } else {

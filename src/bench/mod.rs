@@ -1,18 +1,19 @@
 //! `psrestir bench`: the paper's measurements (docs/method.md, "How results are measured") of
 //! the estimators, one after the other on the same device, per scene (the gradient-error
-//! phase compares ReSTIR with the baseline; the equal-time phase runs the baseline with Adam
-//! and then every contender: an estimator with its step):
+//! phase compares one estimator, `gradient_method`, ReSTIR unless told, with the baseline;
+//! the equal-time phase runs the baseline with Adam and then every contender: an estimator
+//! with its step, and the default configuration):
 //!
-//! 1. gradient error: after `warmup` ReSTIR iterations, the relMSE of ReSTIR's next gradient
-//!    and of baseline gradients at the same parameter state, at equal iterations (the task's
-//!    spp) and at equal time (as many spp as fit in the time of one ReSTIR iteration), against
-//!    a reference from a converged adjoint (a `reference_primal_spp` primal render) and
-//!    `reference_spp` gradient samples. Each error is measured twice: *total*, under the
+//! 1. gradient error: after `warmup` iterations of the estimator, the relMSE of its next
+//!    gradient and of baseline gradients at the same parameter state, at equal iterations
+//!    (the task's spp) and at equal time (as many spp as fit in the time of one of its
+//!    iterations), against a reference from a converged adjoint (a `reference_primal_spp`
+//!    primal render) and `reference_spp` gradient samples. Each error is measured twice: *total*, under the
 //!    adjoint of a task-spp primal render (what a user gets), the same render for both
 //!    estimators and every baseline spp (common random numbers), and
 //!    *estimator-only*, both under the converged adjoint (what the reservoirs do), after
-//!    `settle` more ReSTIR estimates under it at the same textures (its reservoirs filled
-//!    for that integrand); and the estimator-only error of the mean of successive
+//!    `settle` more of its estimates under it at the same textures (ReSTIR's reservoirs
+//!    filled for that integrand); and the estimator-only error of the mean of successive
 //!    estimates (ReSTIR's share kept samples) against a mean of as many independent
 //!    baseline estimates;
 //! 2. equal-time optimization: the baseline and each contender optimize from the same start

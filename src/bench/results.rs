@@ -288,6 +288,32 @@ pub struct BenchReport {
     pub pipelines: Vec<crate::gpu::PipelineTime>,
 }
 
+impl BenchReport {
+    /// A report of no scene (for the tests of its tables' columns).
+    #[cfg(test)]
+    pub(crate) fn empty() -> BenchReport {
+        BenchReport {
+            version: String::new(),
+            adapter: String::new(),
+            budget_s: 0.0,
+            scale: 1.0,
+            gradient_method: String::new(),
+            warmup: 0,
+            settle: 0,
+            repeats: 0,
+            reference_spp: 0,
+            reference_primal_spp: 0,
+            protocol: Protocol::Default,
+            eval_spp: 0,
+            estimator_options: Default::default(),
+            no_priors: false,
+            tuned: false,
+            scenes: Vec::new(),
+            pipelines: Vec::new(),
+        }
+    }
+}
+
 /// What the gradient images show (one gradient of each estimator at one state).
 pub struct GradientSnapshot {
     /// The reference gradient.

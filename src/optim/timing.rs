@@ -10,7 +10,8 @@ pub(crate) enum PassKind {
     Loss,
     Gradient,
     Combine,
-    Adam,
+    Prior,
+    Step,
     Filter,
 }
 
@@ -27,9 +28,10 @@ pub struct PassTimes {
     /// The estimator's pass that combines the iteration's samples with what it kept
     /// (ReSTIR's merge, the recursive estimator's combination), if it has one.
     pub combine_ms: f64,
-    /// The step (Adam or the variance step), with the priors' passes before it when they
-    /// are on.
-    pub adam_ms: f64,
+    /// The priors' passes (smoothness, multiscale gradient), when they are on.
+    pub prior_ms: f64,
+    /// The step (Adam or the variance step; with the moment filter, both of its phases).
+    pub step_ms: f64,
     /// The moment filter's levels, when it is on.
     pub filter_ms: f64,
 }
@@ -41,7 +43,8 @@ impl PassTimes {
         self.loss_ms += other.loss_ms;
         self.gradient_ms += other.gradient_ms;
         self.combine_ms += other.combine_ms;
-        self.adam_ms += other.adam_ms;
+        self.prior_ms += other.prior_ms;
+        self.step_ms += other.step_ms;
         self.filter_ms += other.filter_ms;
     }
 
@@ -52,7 +55,8 @@ impl PassTimes {
             loss_ms: self.loss_ms / n,
             gradient_ms: self.gradient_ms / n,
             combine_ms: self.combine_ms / n,
-            adam_ms: self.adam_ms / n,
+            prior_ms: self.prior_ms / n,
+            step_ms: self.step_ms / n,
             filter_ms: self.filter_ms / n,
         }
     }
@@ -63,7 +67,8 @@ impl PassTimes {
             + self.loss_ms
             + self.gradient_ms
             + self.combine_ms
-            + self.adam_ms
+            + self.prior_ms
+            + self.step_ms
             + self.filter_ms
     }
 }
@@ -138,7 +143,8 @@ impl PassTimer {
                 PassKind::Loss => t.loss_ms += ms,
                 PassKind::Gradient => t.gradient_ms += ms,
                 PassKind::Combine => t.combine_ms += ms,
-                PassKind::Adam => t.adam_ms += ms,
+                PassKind::Prior => t.prior_ms += ms,
+                PassKind::Step => t.step_ms += ms,
                 PassKind::Filter => t.filter_ms += ms,
             }
         }

@@ -285,8 +285,8 @@ fn gradient_measured(r: &BenchReport) -> bool {
 /// The per-pass GPU times (markdown), for every run of the equal-time phase.
 pub fn pass_table(r: &BenchReport) -> String {
     let mut s = String::from(
-        "| scene | estimator, step | primal | loss | gradient | combine | step | moment filter | iteration | outside the passes | state B/texel | estimator's counters per iteration |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| scene | estimator, step | primal | loss | gradient | combine | priors | step | moment filter | iteration | outside the passes | state B/texel | estimator's counters per iteration |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for x in &r.scenes {
         let Some(o) = &x.optimization else { continue };
@@ -312,13 +312,14 @@ pub fn pass_table(r: &BenchReport) -> String {
                 Some(p) => {
                     let _ = writeln!(
                         s,
-                        "| {} | {name} | {:.1} | {:.1} | {:.1} | {} | {:.1} | {} | {ms:.1} | {:.1} | {bytes:.0} | {counters} |",
+                        "| {} | {name} | {:.1} | {:.1} | {:.1} | {} | {} | {:.1} | {} | {ms:.1} | {:.1} | {bytes:.0} | {counters} |",
                         x.name,
                         p.primal_ms,
                         p.loss_ms,
                         p.gradient_ms,
                         dash_if_zero(p.combine_ms, 1),
-                        p.adam_ms,
+                        dash_if_zero(p.prior_ms, 2),
+                        p.step_ms,
                         dash_if_zero(p.filter_ms, 2),
                         ms - p.total()
                     );
@@ -326,7 +327,7 @@ pub fn pass_table(r: &BenchReport) -> String {
                 None => {
                     let _ = writeln!(
                         s,
-                        "| {} | {name} | – | – | – | – | – | – | {ms:.1} | – | {bytes:.0} | {counters} |",
+                        "| {} | {name} | – | – | – | – | – | – | – | {ms:.1} | – | {bytes:.0} | {counters} |",
                         x.name
                     );
                 }
@@ -344,14 +345,15 @@ pub fn write_report(out: &Path, r: &BenchReport) -> Result<()> {
     write_atomic(&out.join("report.md"), report_markdown(r).as_bytes())
 }
 
+/// The header row of the headline table.
+pub const HEADLINE_COLUMNS: &str = "| scene | estimator, step | image relMSE | ÷ baseline | \
+                                    texture RMSE (observed texels) | ÷ baseline |";
+
 /// The headline (markdown): per scene and run, the reconstruction at equal time, image
 /// relMSE and observed-texel RMSE at the end of each run's budget with their ratios over the
 /// baseline with Adam, with the adapter it ran on.
 pub fn headline_table(r: &BenchReport) -> String {
-    let mut s = String::from(
-        "| scene | estimator, step | image relMSE | ÷ baseline | texture RMSE (observed \
-         texels) | ÷ baseline |\n|---|---|---|---|---|---|\n",
-    );
+    let mut s = format!("{HEADLINE_COLUMNS}\n|---|---|---|---|---|---|\n");
     for x in &r.scenes {
         let Some(o) = &x.optimization else { continue };
         let _ = writeln!(
@@ -424,7 +426,9 @@ pub fn replace_headline(text: &str, table: &str) -> std::result::Result<String, 
 pub fn write_docs(root: &Path, r: &BenchReport, command: &str) -> Result<()> {
     let readme = root.join("README.md");
     let text = std::fs::read_to_string(&readme).map_err(|e| Error::file(&readme, e.to_string()))?;
-    let new = replace_headline(&text, &headline_table(r)).map_err(|m| Error::file(&readme, m))?;
+    let at = source_state(root);
+    let headline = format!("{}Measured at {at}.\n", headline_table(r));
+    let new = replace_headline(&text, &headline).map_err(|m| Error::file(&readme, m))?;
     let docs = root.join("docs");
     if !docs.is_dir() {
         return Err(Error::file(
@@ -435,7 +439,7 @@ pub fn write_docs(root: &Path, r: &BenchReport, command: &str) -> Result<()> {
     let md = report_markdown(r).replacen(
         "# psrestir benchmark\n\n",
         &format!(
-            "# Results\n\nWritten by `{command}`; do not edit by hand (run it again). The \
+            "# Results\n\nWritten by `{command}` at {at}; do not edit by hand (run it again). The \
              measurements are described in [method.md](method.md#how-results-are-measured), \
              the studies behind the defaults in [studies.md](studies.md). The per-scene \
              images are in the bench's output folder.\n\n"
@@ -444,6 +448,28 @@ pub fn write_docs(root: &Path, r: &BenchReport, command: &str) -> Result<()> {
     );
     write_atomic(&docs.join("results.md"), md.as_bytes())?;
     write_atomic(&readme, new.as_bytes())
+}
+
+/// The checkout's commit, as the report names it: `commit <hash>`, and whether `src/` or
+/// `shaders/` differ from it (what the numbers depend on).
+fn source_state(root: &Path) -> String {
+    let git = |args: &[&str]| {
+        std::process::Command::new("git")
+            .arg("-C")
+            .arg(root)
+            .args(args)
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+    };
+    match git(&["rev-parse", "--short=12", "HEAD"]) {
+        Some(hash) => match git(&["status", "--porcelain", "--", "src", "shaders"]) {
+            Some(changes) if changes.is_empty() => format!("commit {hash}"),
+            _ => format!("commit {hash} with uncommitted changes to src/ or shaders/"),
+        },
+        None => "a commit git could not name".to_string(),
+    }
 }
 
 /// `report.md`: every table of the run, with what they measure.
@@ -590,5 +616,31 @@ mod tests {
         let readme =
             std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
         replace_headline(&readme, "x").unwrap();
+    }
+
+    /// The README's headline and docs/results.md have the columns the report writes today
+    /// (a table measured by an older bench would not), and name the commit they were
+    /// measured at.
+    #[test]
+    fn the_readme_and_results_have_todays_columns() {
+        let root = env!("CARGO_MANIFEST_DIR");
+        let readme = std::fs::read_to_string(format!("{root}/README.md")).unwrap();
+        let block = &readme[readme.find(HEADLINE_BEGIN).unwrap() + HEADLINE_BEGIN.len()..];
+        let block = &block[..block.find(HEADLINE_END).unwrap()];
+        assert_eq!(block.trim_start().lines().next(), Some(HEADLINE_COLUMNS));
+        assert!(block.contains("Measured at commit "), "{block}");
+        let results = std::fs::read_to_string(format!("{root}/docs/results.md")).unwrap();
+        assert!(results.contains(" at commit "));
+        let empty = |t: fn(&BenchReport) -> String| {
+            let r: BenchReport = BenchReport::empty();
+            t(&r).lines().next().unwrap().to_string()
+        };
+        for header in [
+            empty(tables::optimization_table),
+            empty(tables::settings_table),
+            empty(pass_table),
+        ] {
+            assert!(results.contains(&header), "docs/results.md lacks {header}");
+        }
     }
 }

@@ -117,7 +117,7 @@ impl Multiscale {
                 (p.width + sx).div_ceil(TILE),
                 (p.height + sy).div_ceil(TILE),
             );
-            let timing = timer.next(crate::optim::timing::PassKind::Adam);
+            let timing = timer.next(crate::optim::timing::PassKind::Prior);
             encode_timed_pass(
                 enc,
                 "multiscale_gradient",

@@ -186,7 +186,7 @@ impl Smoothness {
                 p.width.div_ceil(WORKGROUP_SIDE),
                 p.height.div_ceil(WORKGROUP_SIDE),
             );
-            let timing = timer.next(crate::optim::timing::PassKind::Adam);
+            let timing = timer.next(crate::optim::timing::PassKind::Prior);
             encode_timed_pass(enc, "smoothness", &self.pipeline, &[g], grid, timing);
         }
     }

@@ -201,7 +201,7 @@ impl<P: bytemuck::Pod> TextureSteps<P> {
                 let count = prepare(p, lr);
                 gpu.queue.write_buffer(u, 0, bytemuck::bytes_of(p));
                 let grid = grid_2d(count, WORKGROUP, max_dim);
-                let timing = timer.next(PassKind::Adam);
+                let timing = timer.next(PassKind::Step);
                 encode_timed_pass(enc, self.label, &self.pipeline, &[g], grid, timing);
                 if let (0, Some(f)) = (j, &self.filter) {
                     f.encode(enc, k, timer);
