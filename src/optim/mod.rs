@@ -371,7 +371,7 @@ impl Optimizer {
 
     /// The passes (WGSL files) that an optimizer with `settings` creates, its estimator's
     /// first (the slowest to compile), without the renderer's (`render`, `trace_rays`),
-    /// which a [`Problem`](crate::Problem) creates first. [`Gpu::compile_elsewhere`]
+    /// which a [`Problem`] creates first. [`Gpu::compile_elsewhere`]
     /// compiles them while the targets render; a test checks the list against what an
     /// optimizer creates.
     pub fn passes(settings: &Settings) -> Vec<&'static str> {

@@ -6,7 +6,7 @@
 //! warnings. [`REGISTRY`] lists them, and is the one line to add for a new estimator; the
 //! optimizer, the CLI, task files, checkpoints and the bench see a [`Method`] (a handle on a
 //! kind) and its options table only (the seam test in `tests.rs` holds it). The optimizer
-//! calls an estimator through the [`Estimator`] trait once per iteration, after the primal
+//! calls an estimator through the `Estimator` trait once per iteration, after the primal
 //! render and the loss have written every camera's adjoint.
 //!
 //! - [`baseline`]: plain Monte Carlo, every sample adds its derivative to the texels it

@@ -2,7 +2,7 @@
 //! ([`smoothness`], a term of the loss over observed neighbouring texels) and the multiscale
 //! gradient ([`multiscale`], each texel's gradient averaged with its blocks'). Each module
 //! holds its pass's driver and the mirror of its uniform; its WGSL lies beside it. The
-//! optimizer sees them through the [`Prior`] trait, built by [`build`] as its settings ask.
+//! optimizer sees them through the `Prior` trait, built by `build` as its settings ask.
 pub mod multiscale;
 pub mod smoothness;
 
