@@ -8,21 +8,9 @@ use std::path::{Path, PathBuf};
 /// `src/optim/estimator/restir/mod.rs`), without the binary's files and the test modules'
 /// own files.
 fn library_files() -> BTreeMap<Vec<String>, PathBuf> {
-    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
-        for e in std::fs::read_dir(dir).unwrap() {
-            let p = e.unwrap().path();
-            if p.is_dir() {
-                walk(&p, out);
-            } else if p.extension().is_some_and(|x| x == "rs") {
-                out.push(p);
-            }
-        }
-    }
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let mut all = Vec::new();
-    walk(&root, &mut all);
     let mut files = BTreeMap::new();
-    for p in all {
+    for p in files_under(&root, "rs") {
         let rel = p.strip_prefix(&root).unwrap().with_extension("");
         let mut module: Vec<String> = rel
             .components()
@@ -40,6 +28,20 @@ fn library_files() -> BTreeMap<Vec<String>, PathBuf> {
         files.insert(module, p);
     }
     files
+}
+
+/// Every file under `dir` (recursively) whose name ends in `.ext`.
+pub(crate) fn files_under(dir: &Path, ext: &str) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            out.extend(files_under(&p, ext));
+        } else if p.extension().is_some_and(|x| x == ext) {
+            out.push(p);
+        }
+    }
+    out
 }
 
 /// `source` without comments and without its `#[cfg(test)] mod ... { ... }` blocks.

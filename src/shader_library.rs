@@ -200,20 +200,10 @@ mod tests {
 
     #[test]
     fn every_wgsl_file_is_registered() {
-        fn walk(dir: &std::path::Path, out: &mut Vec<std::path::PathBuf>) {
-            for e in std::fs::read_dir(dir).unwrap() {
-                let p = e.unwrap().path();
-                if p.is_dir() {
-                    walk(&p, out);
-                } else if p.extension().is_some_and(|x| x == "wgsl") {
-                    out.push(p);
-                }
-            }
-        }
+        use crate::layering_tests::files_under;
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let mut files = Vec::new();
-        walk(&root.join("shaders"), &mut files);
-        walk(&root.join("src"), &mut files);
+        let mut files = files_under(&root.join("shaders"), "wgsl");
+        files.extend(files_under(&root.join("src"), "wgsl"));
         for p in &files {
             // A pass is named after its file; a shared module as `shared/<stem>`, an
             // estimator's other modules as `<folder>/<stem>`.

@@ -157,7 +157,7 @@ pub(super) struct OptimizationRun {
 }
 
 /// The optimizer of one run of the equal-time phase: the contender's settings on the task,
-/// with its search's best where it was tuned, every pass compiled.
+/// with its search's best where it was tuned.
 fn contender_optimizer(
     gpu: &Gpu,
     task: &Task,
