@@ -45,18 +45,13 @@ impl Optimizer {
         iteration: u32,
     ) -> Result<Vec<f32>> {
         self.prepare()?;
-        let priors = self.priors.take().unwrap_or_default();
-        let found = priors.iter().position(|p| p.pass() == pass);
-        let result = match found {
-            Some(k) => {
-                let mut priors = priors;
-                let seed = self.settings.seed;
-                let r = self.transform_gradient(what, grad, |opt, enc| {
-                    priors[k].encode(&opt.gpu, enc, seed, iteration, &mut opt.timer)
-                });
-                self.priors = Some(priors);
-                return r;
-            }
+        // Taken out for the call, which borrows the optimizer, and put back after.
+        let mut priors = self.priors.take().unwrap_or_default();
+        let seed = self.settings.seed;
+        let result = match priors.iter().position(|p| p.pass() == pass) {
+            Some(k) => self.transform_gradient(what, grad, |opt, enc| {
+                priors[k].encode(&opt.gpu, enc, seed, iteration, &mut opt.timer)
+            }),
             None => Err(Error::Invalid(format!(
                 "{what}: the settings do not ask for this prior"
             ))),
