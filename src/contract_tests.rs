@@ -178,7 +178,8 @@ fn scene_mirrors_match_wgsl_field_by_field() {
             env_scale,
             env_total,
             scene_radius,
-            max_depth
+            max_depth,
+            env_optimized
         ]
     );
     mirror!(

@@ -54,6 +54,10 @@ pub const SHARED: &[(&str, &str)] = &[
         include_str!("../shaders/shared/gradient_scatter.wgsl"),
     ),
     (
+        "shared/env_gradient",
+        include_str!("../shaders/shared/env_gradient.wgsl"),
+    ),
+    (
         "shared/adjoint_pixel",
         include_str!("../shaders/shared/adjoint_pixel.wgsl"),
     ),

@@ -13,6 +13,10 @@
 var<private> techniques: u32 = TECH_MIS;
 var<private> shadow_rays: u32 = 0u;
 var<private> bsdf_rays: u32 = 0u;
+// Whether camera_path calls the pass's differentiate_env(direction, factor) for every segment
+// that escapes to the environment (a gradient pass sets it when the environment is
+// optimized): shared/env_gradient.wgsl. The first vertex is then shaded on every material.
+var<private> env_gradients: bool = false;
 
 // One technique's sample: direction wi (world space), incident radiance along it (for delta
 // lights intensity / distance^2), and scale = MIS weight / density (1 / choice probability for
@@ -177,6 +181,10 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
     var first_wi = vec3f(0.0, 0.0, 1.0);
     var first_pdf = 0.0;
     var first_e = vec3f(0.0);
+    // With env_gradients: the direction of this step's escape to the environment (zero for
+    // none) and the MIS weight / density its radiance is multiplied by at its vertex.
+    var env_dir = vec3f(0.0);
+    var env_factor = 0.0;
     let steps = (1u + 3u * max_depth) * select(1u, 2u, replay && max_depth > 1u);
     for (var step = 0u; step < steps && stage != STAGE_DONE; step++) {
         var hit = Hit(ray_tmax, NONE, 0.0, 0.0);
@@ -193,6 +201,7 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
         var arrives = vec3f(0.0);
         // Whether eval_wi is the direction of the BSDF sample that leads to the next vertex.
         var to_next = false;
+        env_dir = vec3f(0.0);
         if stage == STAGE_SHADOW {
             nee_arrives = hit.tri == NONE;
             next_bsdf = true;
@@ -253,8 +262,12 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
                     } else {
                         arrives = le * w;
                     }
+                    if env_gradients && hit.tri == NONE {
+                        env_dir = ray_d;
+                        env_factor = w / bsdf_pdf;
+                    }
                 }
-                if max_depth > 1u {
+                if max_depth > 1u || any(env_dir != vec3f(0.0)) {
                     eval_wi = ray_d;
                     to_next = true;
                 }
@@ -315,15 +328,25 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
                 }
             } else {
                 out.e = le;
+                if env_gradients && tri == NONE && !replaying {
+                    differentiate_env(dir, vec3f(1.0));
+                }
                 stage = STAGE_DONE;
                 // (With replay, a path whose first vertex is not optimized may still reach one.)
-                shade = hit.tri != NONE && next_sf.valid && (!optimized_only || has_optimized(next_sf.material) || (replay && max_depth > 1u));
+                shade = hit.tri != NONE && next_sf.valid && (!optimized_only || has_optimized(next_sf.material) || (replay && max_depth > 1u) || env_gradients);
                 out.shaded = shade;
             }
         }
         if nee_arrives {
+            if env_gradients && ls.env {
+                env_dir = ls.wi;
+                env_factor = nee_weight / ls.pdf;
+            }
             if depth == 1u {
                 out.nee = DirectSample(ls.wi, ls.radiance, nee_weight / ls.pdf);
+                if any(env_dir != vec3f(0.0)) {
+                    eval_wi = ls.wi;
+                }
             } else {
                 eval_wi = ls.wi;
                 arrives = ls.radiance * (nee_weight / ls.pdf);
@@ -358,7 +381,9 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
                     f /= bsdf_pdf;
                 }
                 if depth == 1u {
-                    if state == 0u {
+                    if !to_next {
+                        // (A light sample's, evaluated for the environment's derivative.)
+                    } else if state == 0u {
                         first_weight = f;
                     } else {
                         first_weight_prev = f;
@@ -376,6 +401,15 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
                 } else {
                     ind_prev += b * f * arrives;
                 }
+            }
+            if any(env_dir != vec3f(0.0)) && !replaying {
+                // The escape's factor on the way to the pixel: the throughput to this vertex
+                // (1 at the first), its BRDF x cos, the MIS weight / density.
+                var through = vec3f(1.0);
+                if depth > 1u {
+                    through = first_weight * beta;
+                }
+                differentiate_env(env_dir, through * fc * env_factor);
             }
             if replaying && depth > 1u && has_optimized(vsf.material) {
                 var w = first_weight * beta * arrives;

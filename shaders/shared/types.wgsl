@@ -95,6 +95,12 @@ struct SceneInfo {
     scene_radius: f32,
     // Vertices of a camera path (1: direct light only; see shared/integrator.wgsl).
     max_depth: u32,
+    // 1 when the environment is optimized: the gradient passes differentiate it
+    // (shared/env_gradient.wgsl).
+    env_optimized: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 // An optimized texture: linear values, `channels` floats per texel from params[offset], row 0

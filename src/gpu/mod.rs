@@ -16,7 +16,7 @@ use std::sync::{Arc, Mutex};
 use wgpu::util::DeviceExt;
 
 /// Storage buffers that the largest pass binds at once (scene group plus pass group).
-pub const REQUIRED_STORAGE_BUFFERS: u32 = 20;
+pub const REQUIRED_STORAGE_BUFFERS: u32 = 21;
 
 const INSTALL_HINT: &str = "psrestir needs a Vulkan driver (or Metal/DX12 on other systems). \
 On Debian/Ubuntu without a GPU, install the CPU driver lavapipe: \

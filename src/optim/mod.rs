@@ -8,6 +8,7 @@ mod cameras;
 pub mod checkpoint;
 mod diff_render;
 pub mod estimator;
+pub mod light;
 pub mod loss;
 pub mod observed;
 pub mod primal;
@@ -79,6 +80,11 @@ pub struct Optimizer {
     targets: Vec<Image>,
     /// Exposures and their optimizer state.
     exposure: ExposureState,
+    /// The environment's gradient (light.rs), and the environment's fit when it is
+    /// optimized, with the gradient updates its passes lost or dropped.
+    env_grad: wgpu::Buffer,
+    env_fit: Option<light::EnvFit>,
+    env_faults: u32,
     grid: (u32, u32),
     step: Box<dyn step::Step>,
     accum: wgpu::Buffer,
@@ -202,6 +208,7 @@ impl Optimizer {
         let (adjoint, grad, moments, stats) =
             iteration_buffers(gpu, w * h * n_cams, set.values.len() as u64);
         let loss = loss::LossPass::new(gpu, settings.loss, (w, h), targets, &accum, &adjoint)?;
+        let env_grad = light::env_gradient_buffer(gpu, scene);
         let estimator = estimator::build(&estimator::Setup {
             gpu,
             scene: &renderer.scene,
@@ -210,6 +217,7 @@ impl Optimizer {
             cameras: &camera_infos,
             adjoint: &adjoint,
             grad: &grad,
+            env_grad: &env_grad,
             grid,
             observed: &observed.0,
         })?;
@@ -259,6 +267,9 @@ impl Optimizer {
             loss,
             targets: targets.to_vec(),
             exposure: ExposureState::identity(targets.len()),
+            env_grad,
+            env_fit: None,
+            env_faults: 0,
             grid,
             step,
             accum,
@@ -334,6 +345,7 @@ impl Optimizer {
         seed: u32,
     ) {
         self.timer.begin();
+        self.clear_environment_gradient(enc);
         if primal {
             self.encode_primal(enc, iteration);
         }
@@ -439,6 +451,7 @@ impl Optimizer {
         if let Some(lr) = self.settings.exposure_learning_rate {
             self.step_exposure(lr * factor)?;
         }
+        self.step_environment(factor)?;
         Ok(StepStats { loss })
     }
 
@@ -533,6 +546,8 @@ impl Optimizer {
             ..Default::default()
         };
         self.estimator.faults(&self.gpu, &mut f)?;
+        // The environment's gradient updates lost or dropped (light.rs).
+        f.lost_updates += self.env_faults;
         Ok(f)
     }
 

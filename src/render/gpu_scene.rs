@@ -28,6 +28,15 @@ pub struct GpuScene {
     pub param_count: u32,
     /// Number of texels of all optimized textures.
     pub n_texels: u32,
+    /// What [`GpuScene::update_environment`] rewrites: the lights as uploaded with each one's
+    /// power estimate, the scene's radius, and the buffers of the lights, the environment's
+    /// table and the scene's info.
+    lights: Vec<GpuLight>,
+    light_power: Vec<f64>,
+    radius: f32,
+    lights_buffer: wgpu::Buffer,
+    env_buffer: wgpu::Buffer,
+    info_buffer: wgpu::Buffer,
 }
 
 fn wrap_bits(w: Wrap) -> u32 {
@@ -301,7 +310,7 @@ fn gpu_lights(
     scene: &Scene,
     bvh: &bvh::Bvh,
     gpu_index: &[u32],
-) -> (Vec<GpuLight>, Vec<u32>, Vec<f32>, GpuSceneInfo) {
+) -> (Vec<GpuLight>, Vec<f64>, Vec<u32>, Vec<f32>, GpuSceneInfo) {
     let n_tris = scene.triangles.len();
     let (_, radius) = scene.bounding_sphere();
     use std::f64::consts::PI;
@@ -381,16 +390,23 @@ fn gpu_lights(
             power.push(p);
         }
     }
-    let total: f64 = power.iter().map(|&p| p.max(0.0)).sum();
-    if total <= 0.0 {
+    if !choose_lights(&mut lights, &power) {
         log::warn!(
             "{}: the scene has no light with positive power (no punctual light, emissive \
              triangle of non-zero area or environment): every render is black",
             scene.source.display()
         );
     }
+    info.n_lights = lights.len() as u32;
+    (lights, power, tri_light, env_table, info)
+}
+
+/// Each light's choice probability in proportion to its power, and the CDF over them; false
+/// when no light has positive power.
+fn choose_lights(lights: &mut [GpuLight], power: &[f64]) -> bool {
+    let total: f64 = power.iter().map(|&p| p.max(0.0)).sum();
     let mut acc = 0f64;
-    for (l, p) in lights.iter_mut().zip(&power) {
+    for (l, p) in lights.iter_mut().zip(power) {
         let pmf = if total > 0.0 { p.max(0.0) / total } else { 0.0 };
         acc += pmf;
         l.pmf = pmf as f32;
@@ -399,8 +415,7 @@ fn gpu_lights(
     if let Some(last) = lights.last_mut() {
         last.cdf = 1.0;
     }
-    info.n_lights = lights.len() as u32;
-    (lights, tri_light, env_table, info)
+    total > 0.0
 }
 
 /// Positions (vec4 per vertex) and shading attributes of the triangles, in BVH order.
@@ -488,7 +503,7 @@ impl GpuScene {
             )));
         }
 
-        let (lights, tri_light, env_table, info) = gpu_lights(scene, &bvh, &gpu_index);
+        let (lights, light_power, tri_light, env_table, info) = gpu_lights(scene, &bvh, &gpu_index);
         check("the environment map", env_table.len() * 4)?;
 
         let (positions, shading) = bvh_triangles(scene, &bvh, &tri_light);
@@ -557,6 +572,55 @@ impl GpuScene {
             bytes,
             param_count: param_set.values.len() as u32,
             n_texels: texel_offset,
+            lights,
+            light_power,
+            radius: scene.bounding_sphere().1,
+            lights_buffer: buffers[5].clone(),
+            env_buffer: buffers[6].clone(),
+            info_buffer: buffers[7].clone(),
         })
+    }
+}
+
+impl GpuScene {
+    /// Write a new environment of the uploaded one's size (the optimized environment): its
+    /// texels, and with `tables` its sampling tables and its share of the light choice, rebuilt
+    /// from these values. Between rebuilds the sampling follows the tables of the last one,
+    /// which every density the passes compute reads too, so the estimates stay unbiased; only
+    /// their variance grows as the environment drifts from the tables. `optimized` tells the
+    /// gradient passes to differentiate the environment.
+    pub fn update_environment(
+        &mut self,
+        gpu: &Gpu,
+        env: &crate::scene::EnvMap,
+        tables: bool,
+        optimized: bool,
+    ) -> Result<()> {
+        if (env.width, env.height) != (self.info.env_width, self.info.env_height) {
+            return Err(Error::Invalid(format!(
+                "a {}x{} environment for a scene uploaded with {}x{}",
+                env.width, env.height, self.info.env_width, self.info.env_height
+            )));
+        }
+        if tables {
+            let (table, _, _) = env.gpu_table();
+            gpu.queue
+                .write_buffer(&self.env_buffer, 0, bytemuck::cast_slice(&table));
+            if let Some(p) = self.light_power.get_mut(self.info.env_light as usize) {
+                *p = env.power(self.radius);
+                choose_lights(&mut self.lights, &self.light_power);
+                gpu.queue
+                    .write_buffer(&self.lights_buffer, 0, bytemuck::cast_slice(&self.lights));
+            }
+        } else {
+            let texels: Vec<f32> = env.rgb.iter().flatten().copied().collect();
+            gpu.queue
+                .write_buffer(&self.env_buffer, 0, bytemuck::cast_slice(&texels));
+        }
+        self.info.env_scale = env.scale;
+        self.info.env_optimized = optimized as u32;
+        gpu.queue
+            .write_buffer(&self.info_buffer, 0, bytemuck::bytes_of(&self.info));
+        Ok(())
     }
 }

@@ -132,6 +132,8 @@ pub struct GpuSceneInfo {
     pub env_total: f32,
     pub scene_radius: f32,
     pub max_depth: u32,
+    pub env_optimized: u32,
+    pub _pad: [u32; 3],
 }
 
 /// `CameraInfo` in camera.wgsl.

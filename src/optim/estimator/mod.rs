@@ -236,6 +236,9 @@ pub(crate) struct Setup<'a> {
     pub adjoint: &'a [wgpu::Buffer; 2],
     /// The gradient, laid out like the parameters.
     pub grad: &'a wgpu::Buffer,
+    /// The environment's gradient and counters (shared/env_gradient.wgsl), which the
+    /// gradient passes add to when the scene says the environment is optimized.
+    pub env_grad: &'a wgpu::Buffer,
     /// Workgroups of one camera's image in 8x8 tiles.
     pub grid: (u32, u32),
     /// Which texels the cameras observe (one flag per texel of all optimized textures).

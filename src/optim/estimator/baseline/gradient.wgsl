@@ -11,6 +11,7 @@
 #import shared/adjoint_pixel
 #import shared/integrator
 #import shared/gradient_scatter
+#import shared/env_gradient
 
 // Mirrored by GradientParams in src/optim/estimator/baseline/mod.rs.
 struct GradientParams {
@@ -34,6 +35,8 @@ struct GradientParams {
 @group(1) @binding(2) var<storage, read_write> grad: array<atomic<u32>>;
 // [0] samples, [1] lost updates (CAS bound exhausted), [2] dropped non-finite values.
 @group(1) @binding(3) var<storage, read_write> gstats: array<atomic<u32>, 4>;
+// dL/d(environment radiance) and its counters (shared/env_gradient.wgsl).
+@group(1) @binding(4) var<storage, read_write> env_grad: array<atomic<u32>>;
 
 // The adjoint of the pixel whose sample is being differentiated.
 var<private> pixel_adj: vec3f;
@@ -51,6 +54,8 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     }
     techniques = gp.techniques;
     pixel_adj = a.adj;
+    env_adj = a.adj;
+    env_gradients = scene.env_optimized != 0u;
     for (var s = 0u; s < gp.spp; s++) {
         rng_init(gp.seed, (gp.sample_offset + s) * a.n_pixels + a.pixel, 0u);
         let d = camera_direction(gp.camera, a.xy + rand2());

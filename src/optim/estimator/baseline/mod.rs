@@ -31,7 +31,7 @@ pub const KIND: Kind = Kind {
 pub(crate) const GRADIENT_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
     pass: "gradient",
     group: 1,
-    names: &["gp", "adjoint", "grad", "gstats"],
+    names: &["gp", "adjoint", "grad", "gstats", "env_grad"],
 };
 
 /// `GradientParams` in gradient.wgsl (a test checks the layout).
@@ -105,6 +105,7 @@ impl Baseline {
                             ("adjoint", &s.adjoint[p]),
                             ("grad", s.grad),
                             ("gstats", &stats),
+                            ("env_grad", s.env_grad),
                         ],
                     )
                 });

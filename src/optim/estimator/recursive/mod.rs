@@ -150,6 +150,7 @@ pub(crate) const GRADIENT_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
         "grad",
         "grad_prev",
         "rstats",
+        "env_grad",
     ],
 };
 
@@ -300,6 +301,7 @@ impl Recursive {
                             ("grad", s.grad),
                             ("grad_prev", &grad_prev),
                             ("rstats", &stats),
+                            ("env_grad", s.env_grad),
                         ],
                     )
                 });

@@ -9,6 +9,7 @@
 #import shared/rng
 #import shared/camera
 #import shared/integrator
+#import shared/env_gradient
 #import gen/recursive
 
 // Mirrored by RecursiveGradientParams in src/optim/estimator/recursive/mod.rs.
@@ -35,6 +36,9 @@ struct RecursiveGradientParams {
 @group(1) @binding(3) var<storage, read_write> grad: array<atomic<u32>>;
 @group(1) @binding(4) var<storage, read_write> grad_prev: array<atomic<u32>>;
 @group(1) @binding(5) var<storage, read_write> rstats: array<atomic<u32>, 4>;
+// dL/d(environment radiance) under the current state, plain Monte Carlo
+// (shared/env_gradient.wgsl): the environment has no running estimate here.
+@group(1) @binding(6) var<storage, read_write> env_grad: array<atomic<u32>>;
 
 const CAS_BOUND: u32 = 256u;
 
@@ -144,6 +148,8 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     }
     pixel_adj = adj;
     pixel_adj_prev = adj_prev;
+    env_adj = adj;
+    env_gradients = scene.env_optimized != 0u;
     for (var s = 0u; s < rp.spp; s++) {
         // The same random numbers as the baseline's sample s of this pixel.
         rng_init(rp.seed, s * n_pixels + pixel, 0u);

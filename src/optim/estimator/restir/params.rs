@@ -20,6 +20,7 @@ pub(crate) const CANDIDATES_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl
         "targets",
         "observed_map",
         "grad",
+        "env_grad",
     ],
 };
 /// Group 1 of `restir_merge.wgsl`.

@@ -27,6 +27,7 @@
 #import shared/adjoint_pixel
 #import shared/integrator
 #import shared/gradient_scatter
+#import shared/env_gradient
 #import gen/restir
 #import restir/compact_path
 #import restir/reservoir
@@ -75,6 +76,9 @@ struct CandidateParams {
 // derivatives are added here (shared/gradient_scatter.wgsl), cleared before this pass; the
 // merge adds the rest. Not written at depth 1.
 @group(1) @binding(10) var<storage, read_write> grad: array<atomic<u32>>;
+// dL/d(environment radiance) and its counters, plain Monte Carlo (shared/env_gradient.wgsl);
+// added in phase 0 only.
+@group(1) @binding(11) var<storage, read_write> env_grad: array<atomic<u32>>;
 
 // The index of texel t among the observed texels, or UNOBSERVED.
 fn observed_index(t: u32) -> u32 {
@@ -196,6 +200,8 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     compact_paths = true;
     let info = a.pixel | (cp.camera_index << INFO_CAMERA_SHIFT);
     pixel_adj = a.adj;
+    env_adj = a.adj;
+    env_gradients = scene.env_optimized != 0u && cp.phase == 0u;
     var adj_t_prev = vec3f(0.0);
     if cp.prev_targets != 0u {
         adj_t_prev = last * cp.inv_spp;

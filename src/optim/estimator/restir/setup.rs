@@ -216,6 +216,7 @@ pub(super) fn candidate_camera(
                     ("targets", &b.targets),
                     ("observed_map", &b.observed_map),
                     ("grad", s.grad),
+                    ("env_grad", s.env_grad),
                 ],
             )
         })

