@@ -1,7 +1,8 @@
 //! Generator of the benchmark scenes under `scenes/bench/` (run `psrestir make-scenes`): the
 //! paper's four experiments in miniature, a room lit mostly by indirect light and a gallery
-//! whose painting is lit only by bounced light, each a glTF scene holding the ground-truth
-//! texture and a task file that starts the optimized texture from a constant.
+//! whose painting is lit only by bounced light, and an object under a sky the fit is not
+//! given (`outdoor`), each a glTF scene holding the ground-truth texture and a task file that
+//! starts the optimized texture from a constant.
 use super::authoring::{box_triangles, lathe, png_bytes, quad_facing, uv_sphere, GltfBuilder};
 use super::bundled::{look_at, srgb8, write_sky};
 use crate::image_io::write_atomic;
@@ -10,10 +11,13 @@ use glam::Vec3;
 use serde_json::json;
 use std::path::Path;
 
+mod outdoor;
 mod room;
 
 /// Names of the benchmark scenes, in the order `psrestir bench` runs them.
-pub const BENCH_SCENES: [&str; 6] = ["vase", "lattice", "dish", "sphere", "room", "gallery"];
+pub const BENCH_SCENES: [&str; 7] = [
+    "vase", "lattice", "dish", "sphere", "room", "gallery", "outdoor",
+];
 
 /// Texture resolution of the ground truth and of the optimized textures.
 const TEX: u32 = 256;
@@ -25,7 +29,8 @@ pub fn write_bench_scenes(dir: &Path) -> Result<()> {
     write_dish(&dir.join("dish"))?;
     write_sphere(&dir.join("sphere"))?;
     room::write_room(&dir.join("room"))?;
-    room::write_gallery(&dir.join("gallery"))
+    room::write_gallery(&dir.join("gallery"))?;
+    outdoor::write_outdoor(&dir.join("outdoor"))
 }
 
 pub(super) fn create(dir: &Path) -> Result<()> {

@@ -154,6 +154,51 @@ pub(super) struct OptimizationRun {
     pub(super) state_bytes_per_texel: f64,
     pub(super) final_image: Image,
     pub(super) per_texture_observed: Vec<f64>,
+    pub(super) relit: Relit,
+}
+
+/// A run's relit error (mean over the task's `relight` environments) and, with the
+/// environment recovered, its strongest emission's angle from the truth's.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Relit {
+    pub(super) relmse: Option<f64>,
+    pub(super) psnr: Option<f64>,
+    pub(super) direction_error_deg: Option<f64>,
+}
+
+impl Relit {
+    fn measure(gpu: &Gpu, task: &Task, prep: &Problem, opt: &Optimizer) -> Result<Relit> {
+        let mut out = Relit::default();
+        let Some(truth) = prep.truth.as_ref() else {
+            return Ok(out);
+        };
+        if let (Some(env), Some(t)) = (opt.environment(), truth.env.as_ref()) {
+            out.direction_error_deg = Some(crate::job::relight::direction_error_deg(&env, t));
+        }
+        if task.relight.is_empty() {
+            return Ok(out);
+        }
+        let paths: Vec<_> = task.relight.iter().map(|p| task.resolve(p)).collect();
+        let envs = crate::job::relight::load_environments(&paths)?;
+        let set = crate::render::params::ParamSet {
+            textures: prep.set.textures.clone(),
+            values: opt.read_params()?,
+        };
+        let errors = crate::job::relight::Relight {
+            scene: &prep.scene,
+            set: &set,
+            truth,
+            cameras: &prep.cameras,
+            size: (prep.targets[0].width, prep.targets[0].height),
+            spp: 64,
+            seed: task.seed ^ 0x5e11,
+        }
+        .errors(gpu, &envs)?;
+        let n = errors.len() as f64;
+        out.relmse = Some(errors.iter().map(|e| e.relmse).sum::<f64>() / n);
+        out.psnr = Some(errors.iter().map(|e| e.psnr).sum::<f64>() / n);
+        Ok(out)
+    }
 }
 
 /// The optimizer of one run of the equal-time phase: the contender's settings on the task,
@@ -298,8 +343,10 @@ pub(super) fn optimization_phase(
         ),
         None => vec![f64::NAN; prep.set.textures.len()],
     };
+    let relit = Relit::measure(gpu, task, prep, &opt)?;
     progress.done();
     Ok(OptimizationRun {
+        relit,
         ms_per_iteration: 1000.0 * seconds / iterations.max(1) as f64,
         iterations,
         passes: passes.map(|(s, n)| s.divided(n as f64)),
@@ -417,7 +464,16 @@ impl Start {
             .fold(self.texture_observed, f64::min);
         let mut curve = vec![self.point()];
         curve.extend_from_slice(&run.curve);
+        let relit_ratio = match (run.relit.relmse, first.and_then(|b| b.relit_relmse)) {
+            (Some(a), Some(b)) => Some(a / b),
+            (Some(_), None) => Some(1.0),
+            _ => None,
+        };
         RunResult {
+            relit_relmse: run.relit.relmse,
+            relit_relmse_ratio: relit_ratio,
+            relit_psnr: run.relit.psnr,
+            light_direction_error_deg: run.relit.direction_error_deg,
             name: who.name(),
             key: who.key(),
             method: who.method.name().to_string(),

@@ -244,6 +244,16 @@ pub struct RunResult {
     pub settings: String,
     /// The search that chose them (`--tune`).
     pub tuned: Option<super::tune::Tuned>,
+    /// Relit image relMSE under the task's `relight` environments after a per-channel scale
+    /// alignment (mean over them; None without them).
+    pub relit_relmse: Option<f64>,
+    /// Over the baseline's (with Adam).
+    pub relit_relmse_ratio: Option<f64>,
+    /// PSNR (dB) of the same comparison, both clamped to [0, 1].
+    pub relit_psnr: Option<f64>,
+    /// With the environment recovered: its strongest emission's angle (degrees) from the
+    /// truth's.
+    pub light_direction_error_deg: Option<f64>,
     /// Its optimization curve.
     pub curve: Vec<CurvePoint>,
 }

@@ -6,6 +6,7 @@ mod metrics;
 mod outputs;
 pub mod plot;
 pub mod problem;
+pub mod relight;
 pub mod run;
 pub mod watch;
 

@@ -50,6 +50,15 @@ impl Problem {
         let mut p = Problem::without_targets(scene, cameras, set);
         p.exposure = exposure;
         p.frame_images = frame_images;
+        if let Some(spec) = &task.environment {
+            let start = spec.start(&task.base)?;
+            if spec.optimize {
+                p.recover_environment(start, spec.options())
+                    .map_err(|e| Error::file(&task.path, e.to_string()))?;
+            } else {
+                p.scene.env = Some(start);
+            }
+        }
         Ok(p)
     }
 

@@ -96,6 +96,11 @@ pub struct RunSummary {
     pub pipeline_s: f64,
     /// The optimized textures' layout, and their final values laid out as it says.
     pub set: ParamSet,
+    /// The relit errors under the task's `relight` environments (relight.csv), if any.
+    pub relit: Vec<super::relight::RelitError>,
+    /// With the environment recovered and a ground truth's environment known: the angle in
+    /// degrees between their directions of strongest emission.
+    pub light_direction_error_deg: Option<f64>,
 }
 
 /// Log the configuration a run takes, then each choice `auto` made with its reason.
@@ -205,6 +210,25 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         write_texture_errors(&out.join("texture_errors.csv"), &per_texture)?;
     }
     write_outputs(&out, task, &prep, &opt, &values, &session.rows)?;
+    let mut light_direction_error_deg = None;
+    if let Some(env) = opt.environment() {
+        // The recovered environment, lat-long with row 0 at the zenith like the inputs.
+        let img = crate::image_io::Image {
+            width: env.width,
+            height: env.height,
+            rgb: env.rgb.clone(),
+        };
+        img.save(&out.join("environment.exr"))?;
+        if let Some(truth) = prep.truth.as_ref().and_then(|t| t.env.as_ref()) {
+            let e = super::relight::direction_error_deg(&env, truth);
+            log::info!(
+                "the recovered environment's strongest emission is {e:.1} degrees from the \
+                 truth's"
+            );
+            light_direction_error_deg = Some(e);
+        }
+    }
+    let relit = relight_outputs(gpu, task, &prep, &values, &out)?;
     if task.optimizer.optimize_exposure || task.target.exposure.is_some() {
         log_exposures(&prep, &opt);
     }
@@ -236,7 +260,52 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
             textures: prep.set.textures.clone(),
             values,
         },
+        relit,
+        light_direction_error_deg,
     })
+}
+
+/// The relit errors under the task's `relight` environments, written to `relight.csv` (none
+/// without them or without a ground truth).
+fn relight_outputs(
+    gpu: &Gpu,
+    task: &Task,
+    prep: &Problem,
+    values: &[f32],
+    out: &Path,
+) -> Result<Vec<super::relight::RelitError>> {
+    let Some(truth) = prep.truth.as_ref().filter(|_| !task.relight.is_empty()) else {
+        return Ok(Vec::new());
+    };
+    let paths: Vec<PathBuf> = task.relight.iter().map(|p| task.resolve(p)).collect();
+    let envs = super::relight::load_environments(&paths)?;
+    let set = ParamSet {
+        textures: prep.set.textures.clone(),
+        values: values.to_vec(),
+    };
+    let relight = super::relight::Relight {
+        scene: &prep.scene,
+        set: &set,
+        truth,
+        cameras: &prep.cameras,
+        size: (task.width, task.height),
+        spp: task.target.spp.min(256),
+        seed: crate::optim::pass_seed(task.seed, u32::MAX - 5, 0, crate::optim::Seeds::EVAL),
+    };
+    let errors = relight.errors(gpu, &envs)?;
+    for e in &errors {
+        log::info!(
+            "relit under {}: relMSE {:.4e}, PSNR {:.2} dB (per-channel scales {:.3} {:.3} {:.3})",
+            e.environment,
+            e.relmse,
+            e.psnr,
+            e.scale[0],
+            e.scale[1],
+            e.scale[2]
+        );
+    }
+    super::relight::write_relight_csv(&out.join("relight.csv"), &errors)?;
+    Ok(errors)
 }
 
 /// The problem of `task` with its targets and the optimizer ready to step (every pipeline

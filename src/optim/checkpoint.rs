@@ -66,6 +66,9 @@ struct Stored {
     /// Per-camera exposures and their optimizer state.
     #[serde(default)]
     exposure: ExposureState,
+    /// The environment's fit, when it is optimized.
+    #[serde(default)]
+    environment: Option<crate::optim::light::EnvFitState>,
 }
 
 /// [`EstimatorState`] without its arrays' data.
@@ -104,6 +107,7 @@ impl Checkpoint {
             control_variate_floats: st.control_variate.as_ref().map(|c| c.state.len()),
             control_variate_iterations: st.control_variate.as_ref().map_or(0, |c| c.iterations),
             exposure: st.exposure.clone(),
+            environment: st.environment.clone(),
         };
         if st.m1.len() != st.params.len()
             || st.m2.len() != st.params.len()
@@ -208,6 +212,7 @@ impl Checkpoint {
                 estimator,
                 control_variate,
                 exposure: stored.exposure,
+                environment: stored.environment,
             },
         })
     }
@@ -262,6 +267,14 @@ mod tests {
                     m2: vec![0.01],
                     steps: 3,
                 },
+                environment: Some(crate::optim::light::EnvFitState {
+                    size: [2, 1],
+                    log: vec![0.5; 6],
+                    m1: vec![0.1; 6],
+                    m2: vec![0.01; 6],
+                    steps: 4,
+                    mean_luminance: 1.25,
+                }),
             },
         };
         // Without reservoirs (the baseline) as well.

@@ -55,7 +55,7 @@ pub(crate) const WGSL: &[(&str, &str)] = &[
 
 #[cfg(feature = "test-hooks")]
 mod hooks;
-pub use problem::Problem;
+pub use problem::{EnvironmentFit, Problem};
 pub use schedule::{Schedule, ScheduleKind};
 pub use step::variance_step::VarianceStepOptions;
 pub use step::{adam, moment_filter, variance_step, StepKind};

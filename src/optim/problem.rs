@@ -36,6 +36,18 @@ pub struct Problem {
     pub exposure: Vec<f32>,
     /// Per camera, the image a camera file gave its frame, if any.
     pub frame_images: Vec<Option<std::path::PathBuf>>,
+    /// The environment recovered with the textures, when it is not known: where it starts
+    /// (the scene's environment is that start) and how it is stepped.
+    pub environment: Option<EnvironmentFit>,
+}
+
+/// An environment to recover ([`Problem::recover_environment`]).
+#[derive(Clone, Debug)]
+pub struct EnvironmentFit {
+    /// The starting environment.
+    pub start: crate::scene::EnvMap,
+    /// How it is stepped.
+    pub options: super::light::EnvFitOptions,
 }
 
 impl Problem {
@@ -82,7 +94,23 @@ impl Problem {
             masks: vec![None; n],
             exposure: vec![1.0; n],
             frame_images: vec![None; n],
+            environment: None,
         }
+    }
+
+    /// Recover the environment with the textures, from `start` (which replaces the scene's
+    /// environment; the ground truth keeps its own).
+    pub fn recover_environment(
+        &mut self,
+        start: crate::scene::EnvMap,
+        options: super::light::EnvFitOptions,
+    ) -> Result<()> {
+        options
+            .check()
+            .map_err(|(k, m)| Error::Invalid(format!("environment.{k}: {m}")))?;
+        self.scene.env = Some(start.clone());
+        self.environment = Some(EnvironmentFit { start, options });
+        Ok(())
     }
 
     /// Use `images` as the targets, one per camera, all `width` x `height`.
@@ -184,6 +212,9 @@ impl Optimizer {
         }
         if problem.exposure.iter().any(|&e| e != 1.0) {
             opt.set_exposure(&problem.exposure)?;
+        }
+        if let Some(e) = &problem.environment {
+            opt.optimize_environment(&e.start, e.options.clone())?;
         }
         Ok(opt)
     }

@@ -63,6 +63,8 @@ pub struct OptimizerState {
     pub control_variate: Option<ControlVariateSnapshot>,
     /// Per-camera exposures and, when they are optimized, their Adam moments.
     pub exposure: ExposureState,
+    /// The environment's fit, when it is optimized.
+    pub environment: Option<super::light::EnvFitState>,
 }
 
 /// Per-camera exposures and the Adam moments of their logarithms.
@@ -183,6 +185,7 @@ impl Optimizer {
                 None => None,
             },
             exposure: self.exposure.clone(),
+            environment: self.environment_state().cloned(),
         })
     }
 
@@ -227,6 +230,9 @@ impl Optimizer {
         if state.exposure.values.len() == self.cams.len() {
             self.exposure = state.exposure.clone();
             self.upload_exposure();
+        }
+        if let Some(env) = &state.environment {
+            self.restore_environment(env)?;
         }
         self.iteration = state.iteration;
         self.gpu.check("restore optimizer state")

@@ -67,6 +67,31 @@ impl EnvMap {
         }
     }
 
+    /// The direction of texture coordinates (u, v) (shared/lights.wgsl's env_direction):
+    /// +Y up, u the azimuth from -Z towards +X, v the polar angle over pi.
+    pub fn direction(u: f32, v: f32) -> glam::Vec3 {
+        let (phi, theta) = (2.0 * std::f32::consts::PI * u, std::f32::consts::PI * v);
+        glam::Vec3::new(
+            theta.sin() * phi.sin(),
+            theta.cos(),
+            -theta.sin() * phi.cos(),
+        )
+    }
+
+    /// The direction of the texel of highest luminance (its centre): where the map emits most
+    /// strongly.
+    pub fn strongest_direction(&self) -> glam::Vec3 {
+        let lum = |c: &[f32; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+        let k = (0..self.rgb.len())
+            .max_by(|&a, &b| lum(&self.rgb[a]).total_cmp(&lum(&self.rgb[b])))
+            .unwrap_or(0);
+        let (i, j) = (k as u32 % self.width, k as u32 / self.width);
+        EnvMap::direction(
+            (i as f32 + 0.5) / self.width as f32,
+            (j as f32 + 0.5) / self.height as f32,
+        )
+    }
+
     /// Sampling density weight of each texel: luminance times sin(theta) (the solid angle of
     /// the texel row), scaled.
     fn weights(&self) -> Vec<f64> {

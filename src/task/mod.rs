@@ -225,6 +225,12 @@ pub struct Task {
     pub optimizer: OptimizerSpec,
     /// Textures to optimize.
     pub textures: Vec<TextureSpec>,
+    /// The environment recovered with the textures (`[environment]`; absent: it is known).
+    pub environment: Option<EnvironmentSpec>,
+    /// Environment maps (relative to the task) under which the recovered model and the
+    /// ground truth are rendered at the end of the run and compared (`relight.csv`).
+    #[serde(default)]
+    pub relight: Vec<PathBuf>,
     /// Folder of the task file; paths in the task are relative to it.
     #[serde(skip)]
     pub base: PathBuf,
@@ -526,6 +532,16 @@ impl Task {
             check_texture(tex, &self.textures[..i])
                 .map_err(|(key, msg)| self.bad(&format!("textures[{i}].{key}"), msg))?;
         }
+        if let Some(e) = &self.environment {
+            e.check()
+                .map_err(|(key, msg)| self.bad(&format!("environment.{key}"), msg))?;
+        }
+        if !self.relight.is_empty() && self.target.scene.is_none() {
+            return Err(self.bad(
+                "relight",
+                "relighting compares with the ground truth: it needs `target.scene`",
+            ));
+        }
         Ok(())
     }
 
@@ -551,7 +567,9 @@ impl Task {
     }
 }
 
+mod environment;
 mod optimizer;
+pub use environment::{EnvInit, EnvironmentSpec};
 pub use optimizer::{
     named_cameras, task_configuration, task_method, task_regime, task_settings, OptimizerSpec,
 };

@@ -197,6 +197,17 @@ fn reconstruction_markdown(r: &BenchReport) -> String {
         }
     );
     md.push_str(&settings_table(r));
+    let relit = tables::relit_table(r);
+    if relit.lines().count() > 2 {
+        md.push_str(
+            "\n### Relighting\n\nScenes whose task names `relight` environments: each run's \
+             recovered textures (and light, where the task recovers it) and the ground truth \
+             rendered under each held-out environment, compared after a per-channel scale \
+             (mean over the environments); the angle between the recovered and the true \
+             environment's strongest emission.\n\n",
+        );
+        md.push_str(&relit);
+    }
     let per_texture = per_texture_table(r);
     if !per_texture.is_empty() {
         md.push_str(

@@ -166,6 +166,33 @@ pub fn optimization_table(r: &BenchReport) -> String {
     s
 }
 
+/// The relit errors of the scenes whose tasks name `relight` environments (markdown; a
+/// header alone when none does).
+pub fn relit_table(r: &BenchReport) -> String {
+    let mut s = String::from(
+        "| scene | estimator, step | relit relMSE | ÷ baseline | relit PSNR (dB) | light \
+         direction error (°) | texture RMSE (observed) |\n|---|---|---|---|---|---|---|\n",
+    );
+    let opt = |v: Option<f64>, f: fn(f64) -> String| v.map_or("–".to_string(), f);
+    for x in &r.scenes {
+        let Some(o) = &x.optimization else { continue };
+        for c in o.runs.iter().filter(|c| c.relit_relmse.is_some()) {
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | **{}** | {} | {} | {:.4} |",
+                x.name,
+                c.name,
+                opt(c.relit_relmse, sci),
+                opt(c.relit_relmse_ratio, ratio),
+                opt(c.relit_psnr, |v| format!("{v:.2}")),
+                opt(c.light_direction_error_deg, |v| format!("{v:.1}")),
+                c.texture_rmse_observed,
+            );
+        }
+    }
+    s
+}
+
 /// Per texture of the scenes with several, each run's observed-texel RMSE at the end with its
 /// ratio over the baseline's (empty when no scene has several textures).
 pub fn per_texture_table(r: &BenchReport) -> String {
