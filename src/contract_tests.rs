@@ -262,7 +262,8 @@ fn pass_uniform_mirrors_match_wgsl_field_by_field() {
             norm,
             partial_offset,
             adjoint_offset,
-            exposure
+            gain,
+            gain_prev
         ]
     );
     mirror!(

@@ -206,13 +206,19 @@ pub(super) fn progress_message(rows: &[MetricRow]) -> String {
     msg
 }
 
-/// Log the cameras' exposures.
+/// Log the cameras' exposures and white balances.
 pub(super) fn log_exposures(prep: &Problem, opt: &Optimizer) {
     let list: Vec<String> = prep
         .cameras
         .iter()
         .zip(opt.exposure())
-        .map(|(&c, e)| format!("{} {e:.4}", prep.scene.cameras[c].name))
+        .zip(opt.white_balance())
+        .map(|((&c, e), wb)| {
+            format!(
+                "{} {e:.4} (white balance {:.3} {:.3} {:.3})",
+                prep.scene.cameras[c].name, wb[0], wb[1], wb[2]
+            )
+        })
         .collect();
     log::info!("exposures: {}", list.join(", "));
 }
@@ -228,10 +234,10 @@ pub struct TextureErrors {
     pub final_rmse_observed: f64,
 }
 
-/// A render as it is compared with its target: times the camera's exposure.
-pub(super) fn exposed(mut img: Image, exposure: f32) -> Image {
+/// A render as it is compared with its target: times the camera's gain per channel.
+pub(super) fn exposed(mut img: Image, gain: [f32; 3]) -> Image {
     for p in &mut img.rgb {
-        *p = p.map(|v| v * exposure);
+        *p = std::array::from_fn(|c| p[c] * gain[c]);
     }
     img
 }
@@ -254,7 +260,7 @@ pub fn evaluate(
                 spp,
                 crate::optim::pass_seed(seed, u32::MAX - 2, k as u32, crate::optim::Seeds::EVAL),
             )?,
-            opt.exposure()[k],
+            opt.gains()[k],
         );
         sum += crate::optim::loss::image_relmse(&img, target);
         images.push(img);

@@ -71,7 +71,7 @@ pub(super) fn write_outputs(
             task.target.spp.min(64),
             crate::optim::pass_seed(task.seed, u32::MAX - 1, k as u32, crate::optim::Seeds::EVAL),
         )?;
-        let img = exposed(img, opt.exposure()[k]);
+        let img = exposed(img, opt.gains()[k]);
         img.save(&out.join(format!("final_{}.exr", camera_file_name(&prep.scene, cam))))?;
         image_io::side_by_side(&img, &prep.targets[k]).save(&out.join(format!(
             "final_vs_target_{}.png",

@@ -50,6 +50,10 @@ impl Problem {
         let mut p = Problem::without_targets(scene, cameras, set);
         p.exposure = exposure;
         p.frame_images = frame_images;
+        p.white_balance_learning_rate = task
+            .optimizer
+            .optimize_white_balance
+            .then_some(task.optimizer.white_balance_learning_rate);
         if let Some(spec) = &task.environment {
             let start = spec.start(&task.base)?;
             if spec.optimize {

@@ -229,7 +229,10 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         }
     }
     let relit = relight_outputs(gpu, task, &prep, &values, &out)?;
-    if task.optimizer.optimize_exposure || task.target.exposure.is_some() {
+    if task.optimizer.optimize_exposure
+        || task.optimizer.optimize_white_balance
+        || task.target.exposure.is_some()
+    {
         log_exposures(&prep, &opt);
     }
     let faults = opt.faults()?;

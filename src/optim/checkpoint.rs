@@ -266,6 +266,10 @@ mod tests {
                     m1: vec![0.1],
                     m2: vec![0.01],
                     steps: 3,
+                    white_balance: vec![[1.1, 1.0, 0.9]],
+                    wb_m1: vec![[0.01; 3]],
+                    wb_m2: vec![[0.001; 3]],
+                    wb_steps: 2,
                 },
                 environment: Some(crate::optim::light::EnvFitState {
                     size: [2, 1],

@@ -101,8 +101,8 @@ impl Optimizer {
                 "the adjoint is not finite at pixel {i} (counting through the cameras)"
             )));
         }
-        // The w component carries an exposure for the loss pass's own exposure derivative;
-        // an external adjoint has none.
+        // The w component says whether the loss pass's own gain derivative may read the
+        // adjoint; an external adjoint is not one it wrote.
         let rgba: Vec<[f32; 4]> = adjoint.iter().map(|a| [a[0], a[1], a[2], 0.0]).collect();
         let t = self.iteration;
         self.gpu.queue.write_buffer(

@@ -92,8 +92,11 @@ pub struct LossParams {
     pub norm: f32,
     pub partial_offset: u32,
     pub adjoint_offset: u32,
-    pub exposure: f32,
-    pub _pad: [u32; 2],
+    pub _pad: [u32; 3],
+    pub gain: [f32; 3],
+    pub _pad1: u32,
+    pub gain_prev: [f32; 3],
+    pub _pad2: u32,
 }
 
 /// Group 0 of `loss.wgsl`.
@@ -113,9 +116,9 @@ pub(crate) const LOSS_GROUP: GroupDecl = GroupDecl {
 };
 
 /// The loss pass of every camera (src/optim/loss.wgsl): the loss of the primal render (times
-/// the camera's exposure) against the target with its mask, the adjoint image dL/dI into the
-/// iteration's adjoint buffer, and per workgroup the partial sums of the loss and of
-/// dL/d(exposure).
+/// the camera's gain: exposure times white balance) against the target with its mask, the
+/// adjoint image dL/dI into the iteration's adjoint buffer, and per workgroup the partial
+/// sums of the loss and of dL/d(gain) per channel.
 pub(crate) struct LossPass {
     pipeline: wgpu::ComputePipeline,
     grid: (u32, u32),
@@ -123,7 +126,7 @@ pub(crate) struct LossPass {
     n_groups: u32,
     /// Per workgroup and camera: the loss's partial sums.
     partial: wgpu::Buffer,
-    /// Per workgroup and camera: dL/d(exposure)'s partial sums.
+    /// Per workgroup and camera: dL/d(gain)'s partial sums (3 per workgroup).
     exposure_partial: wgpu::Buffer,
     /// LOSS_* counters.
     pub(crate) stats: wgpu::Buffer,
@@ -158,7 +161,7 @@ impl LossPass {
         let n_groups = n_pixels.div_ceil(WORKGROUP);
         let partial = gpu.storage_zeroed("loss partial sums", (n_groups * n_cams) as u64 * 4);
         let exposure_partial =
-            gpu.storage_zeroed("exposure partial sums", (n_groups * n_cams) as u64 * 4);
+            gpu.storage_zeroed("exposure partial sums", (n_groups * n_cams) as u64 * 12);
         let stats = gpu.storage_zeroed("loss stats", 16);
         let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
         let norm = 1.0 / (n_pixels as f32 * 3.0 * n_cams as f32);
@@ -175,8 +178,9 @@ impl LossPass {
                     norm,
                     partial_offset: k as u32 * n_groups,
                     adjoint_offset: k as u32 * n_pixels,
-                    exposure: 1.0,
-                    _pad: [0; 2],
+                    gain: [1.0; 3],
+                    gain_prev: [1.0; 3],
+                    ..Default::default()
                 };
                 // Mask weight 1 everywhere until set_targets says otherwise.
                 let data: Vec<[f32; 4]> =
@@ -241,12 +245,20 @@ impl LossPass {
         Ok(partial.iter().map(|&v| v as f64).sum())
     }
 
-    /// dL/d(exposure) of each camera from the last passes.
-    pub(crate) fn read_exposure_gradients(&self, gpu: &Gpu) -> Result<Vec<f64>> {
+    /// dL/d(gain) per channel of each camera from the last passes.
+    pub(crate) fn read_gain_gradients(&self, gpu: &Gpu) -> Result<Vec<[f64; 3]>> {
         let partial: Vec<f32> = gpu.read_pod(&self.exposure_partial)?;
         let n = self.n_groups as usize;
         Ok((0..self.cams.len())
-            .map(|k| partial[k * n..(k + 1) * n].iter().map(|&v| v as f64).sum())
+            .map(|k| {
+                let mut g = [0f64; 3];
+                for p in partial[3 * k * n..3 * (k + 1) * n].chunks_exact(3) {
+                    for c in 0..3 {
+                        g[c] += p[c] as f64;
+                    }
+                }
+                g
+            })
             .collect())
     }
 
@@ -265,10 +277,12 @@ impl LossPass {
         }
     }
 
-    /// Set each camera's exposure.
-    pub(crate) fn set_exposures(&mut self, gpu: &Gpu, values: &[f32]) {
-        for (k, &e) in values.iter().enumerate().take(self.cams.len()) {
-            self.cams[k].params.exposure = e;
+    /// Set each camera's gains (per channel), and those the adjoint of the last pass was
+    /// written with.
+    pub(crate) fn set_gains(&mut self, gpu: &Gpu, gains: &[[f32; 3]], previous: &[[f32; 3]]) {
+        for (k, (&g, &p)) in gains.iter().zip(previous).enumerate().take(self.cams.len()) {
+            self.cams[k].params.gain = g;
+            self.cams[k].params.gain_prev = p;
             self.upload(gpu, k);
         }
     }

@@ -1,14 +1,17 @@
 // Image loss and its adjoint dL/dI for one camera, from the primal render's accumulated
-// samples. The compared image is exposure x render; each pixel's terms are weighted by the
-// target's mask (its w; 0 leaves the pixel out of the loss and the gradient). The total loss
-// is the mean over all cameras' masked pixels and channels; partial sums per workgroup go to
-// loss_partial[partial_offset + group], and those of dL/d(exposure) to exposure_partial.
+// samples. The compared image is gain x render, per channel (the camera's exposure times its
+// white balance); each pixel's terms are weighted by the target's mask (its w; 0 leaves the
+// pixel out of the loss and the gradient). The total loss is the mean over all cameras'
+// masked pixels and channels; partial sums per workgroup go to
+// loss_partial[partial_offset + group], and those of dL/d(gain) per channel to
+// exposure_partial[3 (partial_offset + group) + channel].
 //
-// dL/d(exposure) = sum 2 w (e r - g) . r uses the render r twice; with one noisy render the
-// product's mean carries r's variance and pulls the exposure low (measured: 1.10 for a true
-// 1.4 at 4 spp). So it pairs this render with the previous iteration's image-space derivative
-// 2 w (e r' - g), made from independent samples (adjoint_prev holds it times that iteration's
-// exposure, which sits in its w). The one-step lag in the textures is the price.
+// dL/d(gain_c) = sum 2 w (k r - g)_c r_c uses the render r twice; with one noisy render the
+// product's mean carries r's variance and pulls the gain low (measured: 1.10 for a true 1.4 at
+// 4 spp). So it pairs this render with the previous iteration's image-space derivative
+// 2 w (k' r' - g), made from independent samples (adjoint_prev holds it times that
+// iteration's gain, lp.gain_prev; its w is 1 once written). The one-step lag in the textures
+// is the price.
 #import shared/types
 
 // Mirrored by LossParams in src/optim/loss.rs.
@@ -21,10 +24,13 @@ struct LossParams {
     partial_offset: u32,
     // Where this camera's pixels start in adjoint[].
     adjoint_offset: u32,
-    // The factor the render is multiplied by before the comparison.
-    exposure: f32,
     _pad0: u32,
     _pad1: u32,
+    _pad2: u32,
+    // The factors the render is multiplied by before the comparison, per channel, and those
+    // of the iteration that wrote adjoint_prev.
+    gain: vec3f,
+    gain_prev: vec3f,
 }
 
 const REL_EPS: f32 = 0.01;
@@ -38,10 +44,10 @@ const REL_EPS: f32 = 0.01;
 // [0] pixels whose loss or adjoint was not finite (left out of both).
 @group(0) @binding(5) var<storage, read_write> loss_stats: array<atomic<u32>, 4>;
 @group(0) @binding(6) var<storage, read_write> exposure_partial: array<f32>;
-// The previous iteration's adjoint (the other parity's buffer); w: its exposure, 0 if none.
+// The previous iteration's adjoint (the other parity's buffer); w: 1 once written, 0 if none.
 @group(0) @binding(7) var<storage, read> adjoint_prev: array<vec4f>;
 
-var<workgroup> partial: array<vec2f, 64>;
+var<workgroup> partial: array<vec4f, 64>;
 
 @compute @workgroup_size(64)
 fn main(@builtin(local_invocation_index) li: u32, @builtin(workgroup_id) wg: vec3u, @builtin(num_workgroups) groups: vec3u) {
@@ -49,11 +55,11 @@ fn main(@builtin(local_invocation_index) li: u32, @builtin(workgroup_id) wg: vec
     // is in (src/gpu grid_2d).
     let group = wg.x + wg.y * groups.x;
     let i = group * 64u + li;
-    var l = vec2f(0.0);
+    var l = vec4f(0.0);
     if i < lp.n_pixels {
         let a = accum[i];
         let rendered = a.xyz / max(a.w, 1.0);
-        let img = lp.exposure * rendered;
+        let img = lp.gain * rendered;
         let t = target_image[i];
         let g = t.xyz;
         let mask = t.w;
@@ -62,24 +68,24 @@ fn main(@builtin(local_invocation_index) li: u32, @builtin(workgroup_id) wg: vec
         if lp.kind == 1u {
             w = 1.0 / (g * g + vec3f(REL_EPS));
         }
-        // dL / d(exposure x render), then by the chain rule the adjoint of the render and the
-        // derivative with respect to the exposure.
+        // dL / d(gain x render), then by the chain rule the adjoint of the render and the
+        // derivative with respect to the gain.
         let d_img = 2.0 * diff * w * lp.norm * mask;
-        var adj = d_img * lp.exposure;
+        var adj = d_img * lp.gain;
         var term = dot(diff * diff, w) * lp.norm * mask;
         let prev = adjoint_prev[lp.adjoint_offset + i];
-        var d_exposure = 0.0;
+        var d_gain = vec3f(0.0);
         if prev.w > 0.0 {
-            d_exposure = dot(prev.xyz / prev.w, rendered);
+            d_gain = select(vec3f(0.0), prev.xyz / lp.gain_prev, lp.gain_prev > vec3f(0.0)) * rendered;
         }
-        if !(all(abs(adj) < vec3f(3.0e38)) && abs(term) < 3.0e38 && abs(d_exposure) < 3.0e38) {
+        if !(all(abs(adj) < vec3f(3.0e38)) && abs(term) < 3.0e38 && all(abs(d_gain) < vec3f(3.0e38))) {
             adj = vec3f(0.0);
             term = 0.0;
-            d_exposure = 0.0;
+            d_gain = vec3f(0.0);
             atomicAdd(&loss_stats[LOSS_STAT_DROPPED], 1u);
         }
-        adjoint[lp.adjoint_offset + i] = vec4f(adj, lp.exposure);
-        l = vec2f(term, d_exposure);
+        adjoint[lp.adjoint_offset + i] = vec4f(adj, 1.0);
+        l = vec4f(term, d_gain);
     }
     partial[li] = l;
     workgroupBarrier();
@@ -93,6 +99,9 @@ fn main(@builtin(local_invocation_index) li: u32, @builtin(workgroup_id) wg: vec
     // hold one entry per group of 64 pixels.
     if li == 0u && group * 64u < lp.n_pixels {
         loss_partial[lp.partial_offset + group] = partial[0].x;
-        exposure_partial[lp.partial_offset + group] = partial[0].y;
+        let e = 3u * (lp.partial_offset + group);
+        exposure_partial[e] = partial[0].y;
+        exposure_partial[e + 1u] = partial[0].z;
+        exposure_partial[e + 2u] = partial[0].w;
     }
 }

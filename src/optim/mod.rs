@@ -78,8 +78,11 @@ pub struct Optimizer {
     loss: loss::LossPass,
     /// The targets (CPU copies, for re-uploading them with masks).
     targets: Vec<Image>,
-    /// Exposures and their optimizer state.
+    /// Exposures and white balances and their optimizer state, the gains the last adjoint
+    /// was written with, and the white balances' learning rate when they are optimized.
     exposure: ExposureState,
+    gain_prev: Vec<[f32; 3]>,
+    white_balance_lr: Option<f32>,
     /// The environment's gradient (light.rs), and the environment's fit when it is
     /// optimized, with the gradient updates its passes lost or dropped.
     env_grad: wgpu::Buffer,
@@ -267,6 +270,8 @@ impl Optimizer {
             loss,
             targets: targets.to_vec(),
             exposure: ExposureState::identity(targets.len()),
+            gain_prev: vec![[1.0; 3]; targets.len()],
+            white_balance_lr: None,
             env_grad,
             env_fit: None,
             env_faults: 0,
@@ -448,9 +453,7 @@ impl Optimizer {
         self.finish_iteration(true);
         self.iteration = t;
         let loss = self.read_loss()?;
-        if let Some(lr) = self.settings.exposure_learning_rate {
-            self.step_exposure(lr * factor)?;
-        }
+        self.step_gains(factor)?;
         self.step_environment(factor)?;
         Ok(StepStats { loss })
     }

@@ -39,6 +39,9 @@ pub struct Problem {
     /// The environment recovered with the textures, when it is not known: where it starts
     /// (the scene's environment is that start) and how it is stepped.
     pub environment: Option<EnvironmentFit>,
+    /// The learning rate of the cameras' white balances, when they are optimized
+    /// ([`Optimizer::optimize_white_balance`]).
+    pub white_balance_learning_rate: Option<f32>,
 }
 
 /// An environment to recover ([`Problem::recover_environment`]).
@@ -95,6 +98,7 @@ impl Problem {
             exposure: vec![1.0; n],
             frame_images: vec![None; n],
             environment: None,
+            white_balance_learning_rate: None,
         }
     }
 
@@ -215,6 +219,9 @@ impl Optimizer {
         }
         if let Some(e) = &problem.environment {
             opt.optimize_environment(&e.start, e.options.clone())?;
+        }
+        if let Some(lr) = problem.white_balance_learning_rate {
+            opt.optimize_white_balance(lr)?;
         }
         Ok(opt)
     }

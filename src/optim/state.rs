@@ -67,7 +67,9 @@ pub struct OptimizerState {
     pub environment: Option<super::light::EnvFitState>,
 }
 
-/// Per-camera exposures and the Adam moments of their logarithms.
+/// Per-camera exposures and white balances, and the Adam moments of their logarithms. A
+/// camera's render is multiplied by its exposure times its white balance, per channel, before
+/// it is compared with its target.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ExposureState {
     /// The factor each camera's render is multiplied by.
@@ -78,6 +80,18 @@ pub struct ExposureState {
     pub m2: Vec<f32>,
     /// Adam steps taken.
     pub steps: u32,
+    /// Each camera's per-channel factors (empty: 1 everywhere).
+    #[serde(default)]
+    pub white_balance: Vec<[f32; 3]>,
+    /// Adam first moments of their logarithms.
+    #[serde(default)]
+    pub wb_m1: Vec<[f32; 3]>,
+    /// Adam second moments.
+    #[serde(default)]
+    pub wb_m2: Vec<[f32; 3]>,
+    /// Adam steps taken by the white balances.
+    #[serde(default)]
+    pub wb_steps: u32,
 }
 
 impl ExposureState {
@@ -88,7 +102,23 @@ impl ExposureState {
             m1: vec![0.0; n],
             m2: vec![0.0; n],
             steps: 0,
+            white_balance: vec![[1.0; 3]; n],
+            wb_m1: vec![[0.0; 3]; n],
+            wb_m2: vec![[0.0; 3]; n],
+            wb_steps: 0,
         }
+    }
+
+    /// Each camera's per-channel gain: its exposure times its white balance.
+    pub fn gains(&self) -> Vec<[f32; 3]> {
+        self.values
+            .iter()
+            .enumerate()
+            .map(|(k, &e)| {
+                let wb = self.white_balance.get(k).copied().unwrap_or([1.0; 3]);
+                wb.map(|w| w * e)
+            })
+            .collect()
     }
 }
 
@@ -228,7 +258,15 @@ impl Optimizer {
             cv.restore(&self.gpu, cv_snapshot)?;
         }
         if state.exposure.values.len() == self.cams.len() {
+            let n = self.cams.len();
             self.exposure = state.exposure.clone();
+            // Checkpoints written before white balances had none.
+            if self.exposure.white_balance.len() != n {
+                let e = &mut self.exposure;
+                (e.white_balance, e.wb_m1, e.wb_m2) =
+                    (vec![[1.0; 3]; n], vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+            }
+            self.gain_prev = self.exposure.gains();
             self.upload_exposure();
         }
         if let Some(env) = &state.environment {

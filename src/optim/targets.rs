@@ -1,5 +1,6 @@
-//! The targets' per-pixel masks and the per-camera exposures (optimized with Adam on their
-//! logarithms when [`super::Settings::exposure_learning_rate`] is set).
+//! The targets' per-pixel masks and the per-camera gains: exposures (optimized with Adam on
+//! their logarithms when [`super::Settings::exposure_learning_rate`] is set) and white
+//! balances (per-channel factors, [`Optimizer::optimize_white_balance`]).
 use super::{adam, Optimizer};
 use crate::{Error, Result};
 
@@ -63,6 +64,7 @@ impl Optimizer {
             )));
         }
         self.exposure.values = values.to_vec();
+        self.gain_prev = self.exposure.gains();
         self.upload_exposure();
         self.gpu.check("set exposure")
     }
@@ -72,30 +74,97 @@ impl Optimizer {
         &self.exposure.values
     }
 
-    pub(super) fn upload_exposure(&mut self) {
-        self.loss.set_exposures(&self.gpu, &self.exposure.values);
+    /// The current per-camera white balances (per-channel factors on top of the exposure).
+    pub fn white_balance(&self) -> &[[f32; 3]] {
+        &self.exposure.white_balance
     }
 
-    /// One Adam step of the exposures' logarithms from this iteration's dL/d(exposure).
-    pub(super) fn step_exposure(&mut self, lr: f32) -> Result<()> {
-        let gradients = self.loss.read_exposure_gradients(&self.gpu)?;
-        let e = &mut self.exposure;
-        e.steps += 1;
-        let t = e.steps as i32;
-        for (k, d) in gradients.into_iter().enumerate() {
-            // d/d(log e) = e d/de.
-            let g = (d * e.values[k] as f64) as f32;
-            if !g.is_finite() {
-                continue;
-            }
-            e.m1[k] = adam::BETA1 * e.m1[k] + (1.0 - adam::BETA1) * g;
-            e.m2[k] = adam::BETA2 * e.m2[k] + (1.0 - adam::BETA2) * g * g;
-            let m = e.m1[k] / (1.0 - adam::BETA1.powi(t));
-            let v = e.m2[k] / (1.0 - adam::BETA2.powi(t));
-            let log_e = e.values[k].ln() - lr * m / (v.sqrt() + adam::EPS);
-            e.values[k] = log_e.clamp(-20.0, 20.0).exp();
+    /// Each camera's per-channel gain, exposure times white balance: what its render is
+    /// multiplied by before the comparison.
+    pub fn gains(&self) -> Vec<[f32; 3]> {
+        self.exposure.gains()
+    }
+
+    /// Optimize each camera's white balance (per-channel gains over its exposure) with Adam
+    /// on their logarithms at learning rate `lr`. When the environment is recovered too, the
+    /// first camera's exposure and white balance stay as they are: light and camera response
+    /// share a scale and a tint that images do not fix, and the first camera is the
+    /// reference (the gauge).
+    pub fn optimize_white_balance(&mut self, lr: f32) -> Result<()> {
+        if !(lr.is_finite() && lr > 0.0 && lr <= 10.0) {
+            return Err(Error::Invalid(format!(
+                "optimizer.white_balance_learning_rate: must be a number in (0, 10], not {lr}"
+            )));
         }
+        self.white_balance_lr = Some(lr);
+        Ok(())
+    }
+
+    pub(super) fn upload_exposure(&mut self) {
+        let gains = self.exposure.gains();
+        self.loss.set_gains(&self.gpu, &gains, &self.gain_prev);
+    }
+
+    /// One Adam step of the exposures' and the white balances' logarithms (those optimized)
+    /// from this iteration's dL/d(gain), at schedule factor `factor`.
+    pub(super) fn step_gains(&mut self, factor: f32) -> Result<()> {
+        let (lr_e, lr_wb) = (self.settings.exposure_learning_rate, self.white_balance_lr);
+        if lr_e.is_none() && lr_wb.is_none() {
+            return Ok(());
+        }
+        let d = self.loss.read_gain_gradients(&self.gpu)?;
+        let gains = self.exposure.gains();
+        // The reference camera keeps its response while the light is recovered.
+        let first = usize::from(self.env_fit.is_some());
+        // d/d(log gain_c) = gain_c dL/d(gain_c).
+        let g: Vec<[f32; 3]> = (0..d.len())
+            .map(|k| std::array::from_fn(|c| (d[k][c] * gains[k][c] as f64) as f32))
+            .collect();
+        let e = &mut self.exposure;
+        if let Some(lr) = lr_e {
+            e.steps += 1;
+            let t = e.steps as i32;
+            for k in first..g.len() {
+                let gk: f32 = g[k].iter().sum();
+                if let Some(v) =
+                    adam_log_step(&mut e.m1[k], &mut e.m2[k], gk, t, lr * factor, e.values[k])
+                {
+                    e.values[k] = v;
+                }
+            }
+        }
+        if let Some(lr) = lr_wb {
+            e.wb_steps += 1;
+            let t = e.wb_steps as i32;
+            for k in first..g.len() {
+                for c in 0..3 {
+                    let (m1, m2) = (&mut e.wb_m1[k][c], &mut e.wb_m2[k][c]);
+                    if let Some(v) =
+                        adam_log_step(m1, m2, g[k][c], t, lr * factor, e.white_balance[k][c])
+                    {
+                        e.white_balance[k][c] = v;
+                    }
+                }
+            }
+        }
+        // The next loss pass pairs its render with this iteration's adjoint, written with
+        // the gains before this step.
+        self.gain_prev = gains;
         self.upload_exposure();
         Ok(())
     }
+}
+
+/// One Adam step of log(value) with gradient `g` (step `t`, rate `lr`); the new value, or None
+/// for a gradient that is not finite.
+fn adam_log_step(m1: &mut f32, m2: &mut f32, g: f32, t: i32, lr: f32, value: f32) -> Option<f32> {
+    if !g.is_finite() {
+        return None;
+    }
+    *m1 = adam::BETA1 * *m1 + (1.0 - adam::BETA1) * g;
+    *m2 = adam::BETA2 * *m2 + (1.0 - adam::BETA2) * g * g;
+    let m = *m1 / (1.0 - adam::BETA1.powi(t));
+    let v = *m2 / (1.0 - adam::BETA2.powi(t));
+    let log_v = value.ln() - lr * m / (v.sqrt() + adam::EPS);
+    Some(log_v.clamp(-20.0, 20.0).exp())
 }

@@ -532,6 +532,13 @@ impl Task {
             check_texture(tex, &self.textures[..i])
                 .map_err(|(key, msg)| self.bad(&format!("textures[{i}].{key}"), msg))?;
         }
+        let wb = o.white_balance_learning_rate;
+        if !(wb.is_finite() && wb > 0.0 && wb <= 10.0) {
+            return Err(self.bad(
+                "optimizer.white_balance_learning_rate",
+                "must be a number in (0, 10]",
+            ));
+        }
         if let Some(e) = &self.environment {
             e.check()
                 .map_err(|(key, msg)| self.bad(&format!("environment.{key}"), msg))?;

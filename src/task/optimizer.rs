@@ -54,6 +54,14 @@ pub struct OptimizerSpec {
     /// Adam learning rate of the exposures' logarithms.
     #[serde(default = "default_exposure_lr")]
     pub exposure_learning_rate: f32,
+    /// Optimize a per-camera white balance (a factor per channel over the exposure) with the
+    /// textures; with the environment recovered, the first camera's response is held (the
+    /// gauge of light against camera).
+    #[serde(default)]
+    pub optimize_white_balance: bool,
+    /// Adam learning rate of the white balances' logarithms.
+    #[serde(default = "default_exposure_lr")]
+    pub white_balance_learning_rate: f32,
     /// Learning-rate schedule over the run (None: `auto`'s, a cosine decay).
     #[serde(default)]
     pub schedule: Option<crate::optim::Schedule>,
