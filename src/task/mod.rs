@@ -7,6 +7,7 @@
 //! height = 128
 //! seed = 1
 //! output = "out/default"          # relative to the working directory
+//! # relight = ["dusk.exr"]        # held-out environments the result is judged under
 //!
 //! [target]                        # either a ground-truth scene rendered at `spp` ...
 //! scene = "scene.gltf"
@@ -75,6 +76,8 @@
 //! resolution = [64, 32]
 //! init = [0.5, 0.5, 0.5]          # one value for roughness and metallic
 //! learning_rate = 0.02            # absent: auto's for the step (variance 0.01, Adam 0.02)
+//!
+//! # [environment]                 # the environment recovered too: see [`EnvironmentSpec`]
 //! ```
 pub use crate::vocab::{check_texture, Filter, Init, Loss, Slot, TextureSpec, ROUGHNESS_FLOOR};
 use crate::{Error, Result};

@@ -123,3 +123,39 @@ fn the_method_defaults_to_auto_and_resolves_by_the_tasks_sampling() {
         "{e}"
     );
 }
+
+#[test]
+fn the_environment_table_parses_and_names_what_is_wrong() {
+    let with = |table: &str| format!("{GOOD}\n[environment]\n{table}\n");
+    let t = Task::parse(&with("resolution = [16, 8]\ninit = [0.4, 0.5, 0.6]"), Path::new("t.toml"))
+        .unwrap();
+    let e = t.environment.as_ref().unwrap();
+    assert!(e.optimize);
+    let start = e.start(Path::new(".")).unwrap();
+    assert_eq!((start.width, start.height), (16, 8));
+    assert_eq!(start.rgb[5], [0.4, 0.5, 0.6]);
+    for (table, key) in [
+        ("learning_rate = 0", "environment.learning_rate"),
+        ("rebuild_every = 0", "environment.rebuild_every"),
+        ("resolution = [0, 8]", "environment.resolution"),
+        ("resolution = [4096, 8]", "environment.resolution"),
+        ("init = -1.0", "environment.init"),
+        ("init = \"sky.exr\"\nresolution = [8, 4]", "environment.resolution"),
+        ("smoothness = -1", "environment.smoothness"),
+        ("gauge = \"median\"", "gauge"),
+        ("resolutoin = [8, 4]", "resolutoin"),
+    ] {
+        let e = err(&with(table));
+        assert!(e.contains("t.toml") && e.contains(key), "{table}: {e}");
+    }
+    // A start file that is not there names itself.
+    let t = Task::parse(&with("init = \"missing.exr\""), Path::new("t.toml")).unwrap();
+    let e = t.environment.unwrap().start(Path::new("d")).unwrap_err().to_string();
+    assert!(e.contains("missing.exr"), "{e}");
+    // Relighting needs a ground truth to compare with.
+    let photos = GOOD.replace("scene = \"gt.gltf\"", "images = { main = \"a.exr\" }");
+    let e = err(&format!("relight = [\"dusk.exr\"]\n{photos}"));
+    assert!(e.contains("relight") && e.contains("target.scene"), "{e}");
+    let e = err(&GOOD.replace("iterations = 10", "iterations = 10\nwhite_balance_learning_rate = 0"));
+    assert!(e.contains("optimizer.white_balance_learning_rate"), "{e}");
+}
