@@ -179,7 +179,8 @@ fn scene_mirrors_match_wgsl_field_by_field() {
             env_total,
             scene_radius,
             max_depth,
-            env_optimized
+            env_optimized,
+            env_bilinear
         ]
     );
     mirror!(

@@ -435,6 +435,48 @@ fn bench_tunes_each_estimator_and_reports_the_reconstruction_first() {
     assert_eq!(read()["scenes"][0]["runs"][1]["tuned"], runs[1]["tuned"]);
 }
 
+/// `outdoor` (its task recovers the environment and names held-out skies), shrunk: every run
+/// reports a relit error, its ratio, a PSNR and the recovered light's direction error, and
+/// report.md has the relighting table.
+#[test]
+fn bench_reports_the_relit_error_of_a_scene_under_unknown_light() {
+    let Some(gpu) = common::gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let task = resolve_scene("outdoor").unwrap();
+    let opts = BenchOptions {
+        budget_s: 1.0,
+        scale: 0.25,
+        end_to_end_only: true,
+        eval_spp: 4,
+        curve_points: 2,
+        contenders: Vec::new(),
+        out: dir.path().to_path_buf(),
+        progress: false,
+        ..Default::default()
+    };
+    bench(&gpu, &[task], &opts).unwrap();
+    let json: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("bench.json")).unwrap())
+            .unwrap();
+    let runs = json["scenes"][0]["optimization"]["runs"]
+        .as_array()
+        .unwrap();
+    assert!(!runs.is_empty());
+    for r in runs {
+        let relit = number(r, "relit_relmse");
+        assert!(relit > 0.0 && relit < 1.0, "relit relMSE {relit}");
+        assert_eq!(number(r, "relit_relmse_ratio"), 1.0);
+        assert!(number(r, "relit_psnr") > 10.0);
+        let angle = number(r, "light_direction_error_deg");
+        assert!((0.0..=180.0).contains(&angle), "{angle}");
+    }
+    let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
+    assert!(
+        md.contains("### Relighting") && md.contains("| outdoor | baseline, Adam |"),
+        "{md}"
+    );
+}
+
 #[test]
 fn bench_rejects_unknown_scenes_and_bad_options_clearly() {
     let e = resolve_scene("no_such_scene").unwrap_err().to_string();

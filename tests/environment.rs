@@ -1,6 +1,6 @@
-//! The environment as a parameter: its gradient (dL/d(texel radiance), nearest lookup) is
-//! unbiased against central finite differences of the loss, with direct light and at depth
-//! 3 (escapes after a bounce); the ReSTIR and recursive estimators give the same mean as the
+//! The environment as a parameter: its gradient (dL/d(texel radiance), nearest and bilinear
+//! lookups) is unbiased against central finite differences of the loss, with direct light
+//! and at depth 3 (escapes after a bounce); the ReSTIR and recursive estimators give the same mean as the
 //! baseline; and an optimization that starts from a uniform gray recovers a lit direction.
 mod common;
 
@@ -164,10 +164,9 @@ fn check_against_finite_differences(scene: Scene) {
     );
 }
 
-/// Direct light: camera rays that miss, light samples and BSDF samples of the environment at
-/// the first vertex.
-#[test]
-fn environment_gradient_matches_finite_differences() {
+/// The shadow scene seen so that the sky is in view, its environment looked up bilinearly
+/// or at the nearest texel.
+fn sky_in_view(bilinear: bool) -> Scene {
     let mut s = shadow_scene();
     s.cameras[0] = look_at(
         glam::Vec3::new(0.0, 1.2, 2.2),
@@ -175,7 +174,21 @@ fn environment_gradient_matches_finite_differences() {
         glam::Vec3::Y,
         1.1,
     );
-    check_against_finite_differences(s);
+    s.env_bilinear = bilinear;
+    s
+}
+
+/// Direct light: camera rays that miss, light samples and BSDF samples of the environment at
+/// the first vertex.
+#[test]
+fn environment_gradient_matches_finite_differences() {
+    check_against_finite_differences(sky_in_view(false));
+}
+
+/// The same with bilinear lookups: each escape's derivative spread over four texels.
+#[test]
+fn bilinear_environment_gradient_matches_finite_differences() {
+    check_against_finite_differences(sky_in_view(true));
 }
 
 /// Depth 3: the environment reached after bounces off the walls and the floor.

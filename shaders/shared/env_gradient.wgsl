@@ -5,9 +5,9 @@
 // segment that escapes to the environment (the camera ray, a BSDF sample, a light sample of
 // the environment) with the factor its radiance is multiplied by on the way to the pixel
 // (throughput x MIS weight / density); the pass sets env_adj to the pixel's adjoint. The
-// environment is looked up at the nearest texel (shared/lights.wgsl), so the derivative goes
-// to that texel alone. Plain Monte Carlo in every estimator: no reservoir holds the
-// environment's texels.
+// derivative goes to the texels the lookup read, with its weights (env_footprint in
+// shared/lights.wgsl: the nearest texel, or four bilinearly). Plain Monte Carlo in every
+// estimator: no reservoir holds the environment's texels.
 
 var<private> env_adj: vec3f;
 
@@ -32,10 +32,14 @@ fn env_grad_add(i: u32, v: f32) {
 }
 
 fn differentiate_env(d: vec3f, weight: vec3f) {
-    let ij = env_texel(env_uv(d));
-    let k = 3u * (ij.y * scene.env_width + ij.x);
+    let fp = env_footprint(d);
     let g = env_adj * weight * scene.env_scale;
-    for (var c = 0u; c < 3u; c++) {
-        env_grad_add(k + c, g[c]);
+    for (var j = 0u; j < 4u; j++) {
+        if fp.weight[j] != 0.0 {
+            let k = 3u * fp.texel[j];
+            for (var c = 0u; c < 3u; c++) {
+                env_grad_add(k + c, fp.weight[j] * g[c]);
+            }
+        }
     }
 }

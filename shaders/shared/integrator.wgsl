@@ -381,11 +381,11 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
                     f /= bsdf_pdf;
                 }
                 if depth == 1u {
-                    if !to_next {
-                        // (A light sample's, evaluated for the environment's derivative.)
-                    } else if state == 0u {
+                    // (At the first vertex a light sample is evaluated here only for the
+                    // environment's derivative.)
+                    if to_next && state == 0u {
                         first_weight = f;
-                    } else {
+                    } else if to_next {
                         first_weight_prev = f;
                     }
                 } else if to_next {

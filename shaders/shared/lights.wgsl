@@ -85,13 +85,48 @@ fn env_texel(uv: vec2f) -> vec2u {
     return vec2u(i, j);
 }
 
+// The texels a lookup in direction d reads and their weights: the nearest one (weight 1), or
+// with scene.env_bilinear the four around d's coordinates, texel centres apart, wrapping in
+// azimuth and clamped at the poles. The environment's derivative goes to the same texels
+// with the same weights (shared/env_gradient.wgsl).
+struct EnvFootprint {
+    texel: vec4u,
+    weight: vec4f,
+}
+
+fn env_footprint(d: vec3f) -> EnvFootprint {
+    let uv = env_uv(d);
+    let w = scene.env_width;
+    let h = scene.env_height;
+    if scene.env_bilinear == 0u {
+        let ij = env_texel(uv);
+        return EnvFootprint(vec4u(ij.y * w + ij.x, 0u, 0u, 0u), vec4f(1.0, 0.0, 0.0, 0.0));
+    }
+    let q = uv * vec2f(f32(w), f32(h)) - 0.5;
+    let f = floor(q);
+    let t = q - f;
+    let wi = i32(w);
+    let x0 = u32(((i32(f.x) % wi) + wi) % wi);
+    let x1 = (x0 + 1u) % w;
+    let y0 = u32(clamp(i32(f.y), 0, i32(h) - 1));
+    let y1 = u32(clamp(i32(f.y) + 1, 0, i32(h) - 1));
+    return EnvFootprint(
+        vec4u(y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1),
+        vec4f((1.0 - t.x) * (1.0 - t.y), t.x * (1.0 - t.y), (1.0 - t.x) * t.y, t.x * t.y),
+    );
+}
+
 fn env_radiance(d: vec3f) -> vec3f {
     if scene.env_width == 0u {
         return vec3f(0.0);
     }
-    let ij = env_texel(env_uv(d));
-    let k = 3u * (ij.y * scene.env_width + ij.x);
-    return vec3f(env[k], env[k + 1u], env[k + 2u]) * scene.env_scale;
+    let fp = env_footprint(d);
+    var c = vec3f(0.0);
+    for (var j = 0u; j < 4u; j++) {
+        let k = 3u * fp.texel[j];
+        c += fp.weight[j] * vec3f(env[k], env[k + 1u], env[k + 2u]);
+    }
+    return c * scene.env_scale;
 }
 
 // Solid-angle density of sampling direction d from the environment distribution (without the

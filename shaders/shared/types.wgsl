@@ -98,7 +98,8 @@ struct SceneInfo {
     // 1 when the environment is optimized: the gradient passes differentiate it
     // (shared/env_gradient.wgsl).
     env_optimized: u32,
-    _pad0: u32,
+    // 1: the environment is looked up bilinearly (shared/lights.wgsl, env_footprint).
+    env_bilinear: u32,
     _pad1: u32,
     _pad2: u32,
 }

@@ -56,6 +56,7 @@ impl Problem {
             .then_some(task.optimizer.white_balance_learning_rate);
         if let Some(spec) = &task.environment {
             let start = spec.start(&task.base)?;
+            p.scene.env_bilinear = spec.filter == Some(crate::vocab::Filter::Bilinear);
             if spec.optimize {
                 p.recover_environment(start, spec.options())
                     .map_err(|e| Error::file(&task.path, e.to_string()))?;

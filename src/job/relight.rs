@@ -84,9 +84,11 @@ pub struct Relight<'a> {
 impl Relight<'_> {
     /// The recovery's and the truth's renders under `env`, one per camera.
     pub fn render(&self, gpu: &Gpu, env: &EnvMap) -> Result<(Vec<Image>, Vec<Image>)> {
+        // Both looked up as the truth is (the held-out map is the truth's kind of light).
         let lit = |s: &Scene| {
             let mut s = s.clone();
             s.env = Some(env.clone());
+            s.env_bilinear = self.truth.env_bilinear;
             s
         };
         let recovered = Renderer::with_params(gpu, &lit(self.scene), self.set)?;

@@ -46,6 +46,10 @@ pub struct EnvFitOptions {
     /// The scale held fixed.
     #[serde(default)]
     pub gauge: Gauge,
+    /// Iterations at the start in which only the environment steps and the textures hold,
+    /// so that they do not absorb the starting light's error first.
+    #[serde(default)]
+    pub warmup_iterations: u32,
 }
 
 fn default_lr() -> f32 {
@@ -63,6 +67,7 @@ impl Default for EnvFitOptions {
             smoothness: 0.0,
             gray_world: 0.0,
             gauge: Gauge::None,
+            warmup_iterations: 0,
         }
     }
 }
@@ -273,6 +278,14 @@ impl Optimizer {
             .update_environment(&self.gpu, &state.env(), true, true)?;
         self.env_fit = Some(EnvFit { opts, state });
         self.gpu.check("optimize environment")
+    }
+
+    /// Whether the textures hold this iteration: the environment's warm-up
+    /// ([`EnvFitOptions::warmup_iterations`]) is not over.
+    pub(super) fn environment_warming_up(&self) -> bool {
+        self.env_fit
+            .as_ref()
+            .is_some_and(|f| f.state.steps < f.opts.warmup_iterations)
     }
 
     /// The environment as recovered so far (None unless it is optimized).

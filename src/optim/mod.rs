@@ -445,9 +445,20 @@ impl Optimizer {
             p.encode(&self.gpu, &mut enc, seed, it, &mut self.timer);
         }
         let factor = self.settings.schedule.factor(self.iteration, self.progress);
-        self.last_learning_rates =
-            self.step
-                .encode(&self.gpu, &mut enc, &self.set, factor, t, &mut self.timer);
+        // While the environment warms up the textures hold (light.rs).
+        let texture_factor = if self.environment_warming_up() {
+            0.0
+        } else {
+            factor
+        };
+        self.last_learning_rates = self.step.encode(
+            &self.gpu,
+            &mut enc,
+            &self.set,
+            texture_factor,
+            t,
+            &mut self.timer,
+        );
         self.timer.resolve(&mut enc);
         self.gpu.queue.submit([enc.finish()]);
         self.finish_iteration(true);

@@ -370,6 +370,7 @@ fn gpu_lights(
         env_light: u32::MAX,
         scene_radius: radius,
         max_depth: scene.max_depth.get(),
+        env_bilinear: scene.env_bilinear as u32,
         ..Default::default()
     };
     if let Some(env) = &scene.env {

@@ -133,7 +133,8 @@ pub struct GpuSceneInfo {
     pub scene_radius: f32,
     pub max_depth: u32,
     pub env_optimized: u32,
-    pub _pad: [u32; 3],
+    pub env_bilinear: u32,
+    pub _pad: [u32; 2],
 }
 
 /// `CameraInfo` in camera.wgsl.

@@ -363,6 +363,9 @@ pub struct Scene {
     pub lights: Vec<PunctualLight>,
     /// Optional environment light.
     pub env: Option<EnvMap>,
+    /// Whether the environment is looked up with bilinear weights over its four nearest
+    /// texel centres (wrapping in azimuth) instead of at its nearest texel.
+    pub env_bilinear: bool,
     /// Things skipped while loading, each naming what and why.
     pub warnings: Vec<String>,
     /// Vertices of the camera paths that render it (1, the default: direct light only).

@@ -10,6 +10,8 @@
 //! smoothness = 0.0                # prior on neighbouring texels' logarithms (0: off)
 //! gray_world = 0.0                # prior pulling the channels' means together (0: off)
 //! gauge = "none"                  # or "mean": its mean luminance held at the start's
+//! filter = "nearest"              # or "bilinear" lookups of the recovered map
+//! warmup_iterations = 0           # iterations in which only the environment steps
 //! # optimize = false              # the environment fixed at `init` instead (an assumption)
 //! ```
 use crate::optim::light::{EnvFitOptions, Gauge};
@@ -30,7 +32,9 @@ pub enum EnvInit {
     File(PathBuf),
 }
 
-/// The `[environment]` table.
+/// The `[environment]` table. It repeats [`EnvFitOptions`]' keys rather than flattening
+/// them in: serde refuses unknown keys only in a struct without flattened fields, and a
+/// misspelt key must be an error.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct EnvironmentSpec {
@@ -54,6 +58,12 @@ pub struct EnvironmentSpec {
     /// See [`EnvFitOptions`].
     #[serde(default)]
     pub gauge: Gauge,
+    /// See [`EnvFitOptions`].
+    #[serde(default)]
+    pub warmup_iterations: u32,
+    /// The lookup: "nearest" (the default) or "bilinear" (four texels, wrapping in azimuth).
+    #[serde(default)]
+    pub filter: Option<crate::vocab::Filter>,
     /// Whether it is recovered (true) or held at `init` (a fit that assumes a light).
     #[serde(default = "yes")]
     pub optimize: bool,
@@ -85,6 +95,7 @@ impl EnvironmentSpec {
             smoothness: self.smoothness,
             gray_world: self.gray_world,
             gauge: self.gauge,
+            warmup_iterations: self.warmup_iterations,
         }
     }
 

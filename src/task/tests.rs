@@ -127,8 +127,11 @@ fn the_method_defaults_to_auto_and_resolves_by_the_tasks_sampling() {
 #[test]
 fn the_environment_table_parses_and_names_what_is_wrong() {
     let with = |table: &str| format!("{GOOD}\n[environment]\n{table}\n");
-    let t = Task::parse(&with("resolution = [16, 8]\ninit = [0.4, 0.5, 0.6]"), Path::new("t.toml"))
-        .unwrap();
+    let t = Task::parse(
+        &with("resolution = [16, 8]\ninit = [0.4, 0.5, 0.6]"),
+        Path::new("t.toml"),
+    )
+    .unwrap();
     let e = t.environment.as_ref().unwrap();
     assert!(e.optimize);
     let start = e.start(Path::new(".")).unwrap();
@@ -140,7 +143,10 @@ fn the_environment_table_parses_and_names_what_is_wrong() {
         ("resolution = [0, 8]", "environment.resolution"),
         ("resolution = [4096, 8]", "environment.resolution"),
         ("init = -1.0", "environment.init"),
-        ("init = \"sky.exr\"\nresolution = [8, 4]", "environment.resolution"),
+        (
+            "init = \"sky.exr\"\nresolution = [8, 4]",
+            "environment.resolution",
+        ),
         ("smoothness = -1", "environment.smoothness"),
         ("gauge = \"median\"", "gauge"),
         ("resolutoin = [8, 4]", "resolutoin"),
@@ -150,12 +156,20 @@ fn the_environment_table_parses_and_names_what_is_wrong() {
     }
     // A start file that is not there names itself.
     let t = Task::parse(&with("init = \"missing.exr\""), Path::new("t.toml")).unwrap();
-    let e = t.environment.unwrap().start(Path::new("d")).unwrap_err().to_string();
+    let e = t
+        .environment
+        .unwrap()
+        .start(Path::new("d"))
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("missing.exr"), "{e}");
     // Relighting needs a ground truth to compare with.
     let photos = GOOD.replace("scene = \"gt.gltf\"", "images = { main = \"a.exr\" }");
     let e = err(&format!("relight = [\"dusk.exr\"]\n{photos}"));
     assert!(e.contains("relight") && e.contains("target.scene"), "{e}");
-    let e = err(&GOOD.replace("iterations = 10", "iterations = 10\nwhite_balance_learning_rate = 0"));
+    let e = err(&GOOD.replace(
+        "iterations = 10",
+        "iterations = 10\nwhite_balance_learning_rate = 0",
+    ));
     assert!(e.contains("optimizer.white_balance_learning_rate"), "{e}");
 }
