@@ -458,9 +458,7 @@ fn bench_reports_the_relit_error_of_a_scene_under_unknown_light() {
     let json: Value =
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("bench.json")).unwrap())
             .unwrap();
-    let runs = json["scenes"][0]["optimization"]["runs"]
-        .as_array()
-        .unwrap();
+    let runs = json["scenes"][0]["runs"].as_array().unwrap();
     assert!(!runs.is_empty());
     for r in runs {
         let relit = number(r, "relit_relmse");
