@@ -191,7 +191,6 @@ impl Optimizer {
         let plan = memory_plan(&set, &settings, targets.len(), n_observed);
         plan.check(gpu)?;
         log::info!("{}", plan.summary());
-
         let n_cams = targets.len() as u32;
         let (accum, accum_prev) = (
             gpu.storage_zeroed("primal accum", (w * h) as u64 * 16),
