@@ -175,25 +175,12 @@ impl Relit {
         if let (Some(env), Some(t)) = (opt.environment(), truth.env.as_ref()) {
             out.direction_error_deg = Some(crate::job::relight::direction_error_deg(&env, t));
         }
-        if task.relight.is_empty() {
+        let values = opt.read_params()?;
+        let errors =
+            crate::job::relight::task_errors(gpu, task, prep, values, 64, task.seed ^ 0x5e11)?;
+        if errors.is_empty() {
             return Ok(out);
         }
-        let paths: Vec<_> = task.relight.iter().map(|p| task.resolve(p)).collect();
-        let envs = crate::job::relight::load_environments(&paths)?;
-        let set = crate::render::params::ParamSet {
-            textures: prep.set.textures.clone(),
-            values: opt.read_params()?,
-        };
-        let errors = crate::job::relight::Relight {
-            scene: &prep.scene,
-            set: &set,
-            truth,
-            cameras: &prep.cameras,
-            size: (prep.targets[0].width, prep.targets[0].height),
-            spp: 64,
-            seed: task.seed ^ 0x5e11,
-        }
-        .errors(gpu, &envs)?;
         let n = errors.len() as f64;
         out.relmse = Some(errors.iter().map(|e| e.relmse).sum::<f64>() / n);
         out.psnr = Some(errors.iter().map(|e| e.psnr).sum::<f64>() / n);

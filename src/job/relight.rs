@@ -120,6 +120,42 @@ impl Relight<'_> {
     }
 }
 
+/// The relit errors of `values` (the textures of `prep`'s layout) under `task`'s `relight`
+/// environments, at `spp` samples per pixel from `seed`: none without them or without a
+/// ground truth. The run's outputs and the bench both measure with it.
+pub fn task_errors(
+    gpu: &Gpu,
+    task: &crate::task::Task,
+    prep: &crate::job::Problem,
+    values: Vec<f32>,
+    spp: u32,
+    seed: u32,
+) -> Result<Vec<RelitError>> {
+    let Some(truth) = prep.truth.as_ref().filter(|_| !task.relight.is_empty()) else {
+        return Ok(Vec::new());
+    };
+    let paths: Vec<_> = task.relight.iter().map(|p| task.resolve(p)).collect();
+    let envs = load_environments(&paths)?;
+    let set = ParamSet {
+        textures: prep.set.textures.clone(),
+        values,
+    };
+    let first = prep
+        .targets
+        .first()
+        .ok_or_else(|| Error::Invalid("relighting: the problem has no targets".into()))?;
+    Relight {
+        scene: &prep.scene,
+        set: &set,
+        truth,
+        cameras: &prep.cameras,
+        size: (first.width, first.height),
+        spp,
+        seed,
+    }
+    .errors(gpu, &envs)
+}
+
 /// The angle (degrees) between two environments' directions of strongest emission.
 pub fn direction_error_deg(a: &EnvMap, b: &EnvMap) -> f64 {
     let d = a.strongest_direction().dot(b.strongest_direction());

@@ -277,25 +277,12 @@ fn relight_outputs(
     values: &[f32],
     out: &Path,
 ) -> Result<Vec<super::relight::RelitError>> {
-    let Some(truth) = prep.truth.as_ref().filter(|_| !task.relight.is_empty()) else {
-        return Ok(Vec::new());
-    };
-    let paths: Vec<PathBuf> = task.relight.iter().map(|p| task.resolve(p)).collect();
-    let envs = super::relight::load_environments(&paths)?;
-    let set = ParamSet {
-        textures: prep.set.textures.clone(),
-        values: values.to_vec(),
-    };
-    let relight = super::relight::Relight {
-        scene: &prep.scene,
-        set: &set,
-        truth,
-        cameras: &prep.cameras,
-        size: (task.width, task.height),
-        spp: task.target.spp.min(256),
-        seed: crate::optim::pass_seed(task.seed, u32::MAX - 5, 0, crate::optim::Seeds::EVAL),
-    };
-    let errors = relight.errors(gpu, &envs)?;
+    let seed = crate::optim::pass_seed(task.seed, u32::MAX - 5, 0, crate::optim::Seeds::EVAL);
+    let spp = task.target.spp.min(256);
+    let errors = super::relight::task_errors(gpu, task, prep, values.to_vec(), spp, seed)?;
+    if errors.is_empty() {
+        return Ok(errors);
+    }
     for e in &errors {
         log::info!(
             "relit under {}: relMSE {:.4e}, PSNR {:.2} dB (per-channel scales {:.3} {:.3} {:.3})",

@@ -119,6 +119,21 @@ pub(super) struct EnvFit {
     pub state: EnvFitState,
 }
 
+/// The pairs of neighbouring texels of a `w` x `h` lat-long map: each with the next in its
+/// row (wrapping in azimuth) and the one below it.
+fn neighbour_pairs(w: usize, h: usize) -> Vec<(usize, usize)> {
+    let mut pairs = Vec::with_capacity(2 * w * h);
+    for j in 0..h {
+        for i in 0..w {
+            pairs.push((j * w + i, j * w + (i + 1) % w));
+            if j + 1 < h {
+                pairs.push((j * w + i, (j + 1) * w + i));
+            }
+        }
+    }
+    pairs
+}
+
 /// Solid angle of each row's texels (sin θ dθ dφ).
 fn row_weights(w: usize, h: usize) -> Vec<f64> {
     use std::f64::consts::PI;
@@ -189,22 +204,13 @@ impl EnvFitState {
         if opts.smoothness > 0.0 {
             // smoothness x mean over neighbour pairs (wrapping in azimuth) of squared
             // differences.
-            let pairs = (w * h + w * (h - 1)) as f32;
-            let k = 2.0 * opts.smoothness / (3.0 * pairs);
-            for j in 0..h {
-                for i in 0..w {
-                    let a = j * w + i;
-                    let mut nb = vec![j * w + (i + 1) % w];
-                    if j + 1 < h {
-                        nb.push((j + 1) * w + i);
-                    }
-                    for b in nb {
-                        for c in 0..3 {
-                            let d = self.log[3 * a + c] - self.log[3 * b + c];
-                            g[3 * a + c] += k * d;
-                            g[3 * b + c] -= k * d;
-                        }
-                    }
+            let pairs = neighbour_pairs(w, h);
+            let k = 2.0 * opts.smoothness / (3.0 * pairs.len() as f32);
+            for (a, b) in pairs {
+                for c in 0..3 {
+                    let d = self.log[3 * a + c] - self.log[3 * b + c];
+                    g[3 * a + c] += k * d;
+                    g[3 * b + c] -= k * d;
                 }
             }
         }
@@ -394,24 +400,14 @@ mod tests {
                 log: log.to_vec(),
                 ..s.clone()
             };
-            let (w, h) = (4usize, 3usize);
+            let pairs = neighbour_pairs(4, 3);
             let mut e = 0.0;
-            let pairs = (w * h + w * (h - 1)) as f64;
-            for j in 0..h {
-                for i in 0..w {
-                    let a = j * w + i;
-                    let mut nb = vec![j * w + (i + 1) % w];
-                    if j + 1 < h {
-                        nb.push((j + 1) * w + i);
-                    }
-                    for b in nb {
-                        for c in 0..3 {
-                            e += (t.log[3 * a + c] - t.log[3 * b + c]).powi(2) as f64;
-                        }
-                    }
+            for &(a, b) in &pairs {
+                for c in 0..3 {
+                    e += (t.log[3 * a + c] - t.log[3 * b + c]).powi(2) as f64;
                 }
             }
-            e *= 0.7 / (3.0 * pairs);
+            e *= 0.7 / (3.0 * pairs.len() as f64);
             let m = channel_means(&t.env()).map(f64::ln);
             let avg = m.iter().sum::<f64>() / 3.0;
             e + 0.3 * m.iter().map(|v| (v - avg).powi(2)).sum::<f64>()
