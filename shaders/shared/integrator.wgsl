@@ -18,6 +18,37 @@ var<private> bsdf_rays: u32 = 0u;
 // optimized): shared/env_gradient.wgsl. The first vertex is then shaded on every material.
 var<private> env_gradients: bool = false;
 
+// With record_paths (ReSTIR's candidates keeping whole paths, restir_candidates.wgsl), the
+// path's first PATH_RECORD_VERTICES vertices (triangle and fixed-point barycentrics, the
+// camera ray's hit first; with compact_paths every vertex is moved to the barycentrics stored)
+// and every sample that reaches an emitter from one of them (an arrival): the path of `n`
+// vertices that it ends, the direction from its last vertex, the radiance arriving (unweighted)
+// and its factor, MIS weight / density of the whole path (the BSDF samples' densities that led
+// to the last vertex included). Such a path's contribution is its radiance times every
+// vertex's BRDF x cos times the factor. camera_path also shades a first vertex without
+// optimized textures then.
+const PATH_RECORD_VERTICES: u32 = 3u;
+var<private> record_paths: bool = false;
+var<private> rec_tri: array<u32, PATH_RECORD_VERTICES>;
+var<private> rec_kb: array<vec2u, PATH_RECORD_VERTICES>;
+
+struct Arrival {
+    n: u32,
+    wi: vec3f,
+    radiance: vec3f,
+    scale: f32,
+}
+
+var<private> arrivals: array<Arrival, 6>;
+var<private> n_arrivals: u32 = 0u;
+
+fn record_arrival(n: u32, wi: vec3f, radiance: vec3f, scale: f32) {
+    if record_paths && n <= PATH_RECORD_VERTICES && n_arrivals < 6u {
+        arrivals[n_arrivals] = Arrival(n, wi, radiance, scale);
+        n_arrivals += 1u;
+    }
+}
+
 // One technique's sample: direction wi (world space), incident radiance along it (for delta
 // lights intensity / distance^2), and scale = MIS weight / density (1 / choice probability for
 // delta lights). The contribution is brdf_eval_cos(wo, wi) x radiance x scale; no sample has
@@ -185,6 +216,13 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
     // none) and the MIS weight / density its radiance is multiplied by at its vertex.
     var env_dir = vec3f(0.0);
     var env_factor = 0.0;
+    // With record_paths: 1 / the densities of the BSDF samples that led to this vertex (and
+    // to the next one), and the next vertex's triangle and barycentrics.
+    var path_scale = 1.0;
+    var path_scale_next = 1.0;
+    var next_tri = NONE;
+    var next_kb = vec2u(0u);
+    n_arrivals = 0u;
     let steps = (1u + 3u * max_depth) * select(1u, 2u, replay && max_depth > 1u);
     for (var step = 0u; step < steps && stage != STAGE_DONE; step++) {
         var hit = Hit(ray_tmax, NONE, 0.0, 0.0);
@@ -221,9 +259,14 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
                 dir = ls.wi;
                 front = ls.front;
             } else if continues && hit.tri != NONE {
-                if stage == STAGE_CAMERA && compact_paths {
-                    hit = stored_hit(hit.tri, vec2u(bary_round(hit.b1), bary_round(hit.b2)));
+                if compact_paths && (stage == STAGE_CAMERA || record_paths) {
+                    // (The distance is kept: a BSDF sample's hit on an emitter reads it.)
+                    next_kb = vec2u(bary_round(hit.b1), bary_round(hit.b2));
+                    let t = hit.t;
+                    hit = stored_hit(hit.tri, next_kb);
+                    hit.t = t;
                 }
+                next_tri = hit.tri;
                 next_sf = surface_at(ray_o, hit);
                 if stage == STAGE_CAMERA {
                     out.hit = hit;
@@ -256,6 +299,7 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
                 }
                 let w = mis_bsdf(bsdf_pdf, p_light);
                 if !(all(le == vec3f(0.0)) || w <= 0.0) {
+                    record_arrival(depth, ray_d, le, path_scale * w / bsdf_pdf);
                     if depth == 1u {
                         out.bsdf = DirectSample(ray_d, le, w / bsdf_pdf);
                         first_e = le * w;
@@ -333,11 +377,12 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
                 }
                 stage = STAGE_DONE;
                 // (With replay, a path whose first vertex is not optimized may still reach one.)
-                shade = hit.tri != NONE && next_sf.valid && (!optimized_only || has_optimized(next_sf.material) || (replay && max_depth > 1u) || env_gradients);
+                shade = hit.tri != NONE && next_sf.valid && (!optimized_only || has_optimized(next_sf.material) || (replay && max_depth > 1u) || env_gradients || record_paths);
                 out.shaded = shade;
             }
         }
         if nee_arrives {
+            record_arrival(depth, ls.wi, ls.radiance, path_scale * nee_weight / ls.pdf);
             if env_gradients && ls.env {
                 env_dir = ls.wi;
                 env_factor = nee_weight / ls.pdf;
@@ -425,6 +470,10 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
             // The hit becomes the next vertex: the first at the camera ray's hit.
             depth += 1u;
             vsf = next_sf;
+            if record_paths && depth <= PATH_RECORD_VERTICES {
+                rec_tri[depth - 1u] = next_tri;
+                rec_kb[depth - 1u] = next_kb;
+            }
             let gltf = gltf_inputs(vsf.material, vsf.uv);
             // The optimized inputs under each state, at one call site.
             for (var state = 0u; state < select(1u, 2u, both); state++) {
@@ -445,11 +494,13 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
                 later_optimized = later_optimized || has_optimized(vsf.material);
                 beta = beta_next;
                 beta_prev = beta_next_prev;
+                path_scale = path_scale_next;
                 if depth >= RR_VERTEX {
                     let q = min(max_component(beta * first_weight), 0.95);
                     if rand() < q {
                         beta /= q;
                         beta_prev /= q;
+                        path_scale /= q;
                     } else {
                         shade = false;
                     }
@@ -476,6 +527,7 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
                     ray_d = wi;
                     ray_tmax = 3.0e38;
                     stage = STAGE_BSDF;
+                    path_scale_next = path_scale / bsdf_pdf;
                     if depth == 1u {
                         first_wi = wi;
                         first_pdf = bsdf_pdf;

@@ -1,6 +1,7 @@
 //! Generator of the benchmark scenes under `scenes/bench/` (run `psrestir make-scenes`): the
 //! paper's four experiments in miniature, a room lit mostly by indirect light and a gallery
-//! whose painting is lit only by bounced light, and an object under a sky the fit is not
+//! whose painting is lit only by bounced light, an atelier whose floor and wall are both
+//! recovered, the wall lit only by the floor's bounce, and an object under a sky the fit is not
 //! given (`outdoor`), each a glTF scene holding the ground-truth texture and a task file that
 //! starts the optimized texture from a constant.
 use super::authoring::{box_triangles, lathe, png_bytes, quad_facing, uv_sphere, GltfBuilder};
@@ -15,8 +16,8 @@ mod outdoor;
 mod room;
 
 /// Names of the benchmark scenes, in the order `psrestir bench` runs them.
-pub const BENCH_SCENES: [&str; 7] = [
-    "vase", "lattice", "dish", "sphere", "room", "gallery", "outdoor",
+pub const BENCH_SCENES: [&str; 8] = [
+    "vase", "lattice", "dish", "sphere", "room", "gallery", "atelier", "outdoor",
 ];
 
 /// Texture resolution of the ground truth and of the optimized textures.
@@ -30,6 +31,7 @@ pub fn write_bench_scenes(dir: &Path) -> Result<()> {
     write_sphere(&dir.join("sphere"))?;
     room::write_room(&dir.join("room"))?;
     room::write_gallery(&dir.join("gallery"))?;
+    room::write_atelier(&dir.join("atelier"))?;
     outdoor::write_outdoor(&dir.join("outdoor"))
 }
 

@@ -187,7 +187,11 @@ impl Optimizer {
         let renderer = Renderer::with_param_buffers(gpu, scene, &set, &params)?;
         let grid = renderer.tile_grid(w, h);
         let observed = observed::observed_mask(gpu, &renderer.scene, &camera_infos, grid)?;
-        let n_observed = observed.0.iter().filter(|&&o| o).count() as u64;
+        let mut n_observed = observed.0.iter().filter(|&&o| o).count() as u64;
+        if estimator::restir::abi::reservoir::whole_paths(scene.max_depth.get()) {
+            // Whole paths reach texels no camera sees: ReSTIR keeps reservoirs for every texel.
+            n_observed = observed.0.len() as u64;
+        }
         let plan = memory_plan(&set, &settings, targets.len(), n_observed);
         plan.check(gpu)?;
         log::info!("{}", plan.summary());

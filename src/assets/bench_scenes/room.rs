@@ -337,3 +337,195 @@ learning_rate = 0.03
 "#,
     )
 }
+
+/// The floor of `atelier`: planks of varied tones along x, with dark seams.
+fn planks(u: f32, v: f32) -> [f32; 3] {
+    let rows = 8.0;
+    let row = (v * rows) as u32;
+    let (fv, shift) = ((v * rows).fract(), hash(row, 5) * 0.7);
+    let plank = ((u + shift) * 2.5) as u32;
+    if fv < 0.05 || ((u + shift) * 2.5).fract() < 0.012 {
+        return [0.12, 0.09, 0.07];
+    }
+    let tone = 0.75 + 0.25 * hash(row * 13 + plank, 9);
+    let grain = 0.92 + 0.08 * ((u * 40.0 + 7.0 * hash(row, plank)).sin());
+    let s = tone * grain;
+    [0.55 * s, 0.36 * s, 0.2 * s]
+}
+
+/// The back wall of `atelier`: a wallpaper of colored diamonds on a pale ground.
+fn wallpaper(u: f32, v: f32) -> [f32; 3] {
+    let n = 5.0;
+    let (x, y) = ((u * n).fract() - 0.5, (v * n).fract() - 0.5);
+    let (i, j) = ((u * n) as u32, (v * n) as u32);
+    if x.abs() + y.abs() < 0.32 {
+        match (hash(i + 17, j + 3) * 3.0) as u32 {
+            0 => [0.2, 0.35, 0.6],
+            1 => [0.65, 0.3, 0.25],
+            _ => [0.3, 0.5, 0.3],
+        }
+    } else {
+        [0.78, 0.74, 0.64]
+    }
+}
+
+/// A room whose floor and back wall are both recovered, and whose wall is lit only by the
+/// floor's bounce: a lamp under the ceiling near the open front shines down through a deep
+/// shade, which keeps its light off the walls, onto the planked floor; the light the floor
+/// sends back lights the wallpapered back wall (and the rest), paths of 3 vertices
+/// (`max_depth`). Both base color textures are optimized, seen by two cameras: the wall's
+/// gradient is in paths that cross the floor, and the floor's in paths that end at the wall.
+pub fn write_atelier(dir: &Path) -> Result<()> {
+    create(dir)?;
+    let mut b = GltfBuilder::new();
+    b.use_extension("KHR_materials_emissive_strength");
+    let textured = |b: &mut GltfBuilder, name: &str, f: fn(f32, f32) -> [f32; 3], r: f32| {
+        let pixels = texture(|u, v| {
+            let c = f(u, v);
+            [srgb8(c[0]), srgb8(c[1]), srgb8(c[2]), 255]
+        });
+        write_png(dir, &format!("{name}.png"), &pixels)?;
+        let img = b.add_image_uri(name, &format!("{name}.png"));
+        let tex = b.add_texture(img, None);
+        Ok::<_, crate::Error>(b.add_material(json!({
+            "name": name,
+            "pbrMetallicRoughness": {"baseColorTexture": {"index": tex},
+                "metallicFactor": 0.0, "roughnessFactor": r}
+        })))
+    };
+    let floor = textured(&mut b, "planks", planks, 0.6)?;
+    let wall = textured(&mut b, "wallpaper", wallpaper, 0.8)?;
+    let plain = |b: &mut GltfBuilder, name: &str, c: [f32; 3]| {
+        b.add_material(json!({
+            "name": name,
+            "pbrMetallicRoughness": {"baseColorFactor": [c[0], c[1], c[2], 1.0],
+                "metallicFactor": 0.0, "roughnessFactor": 0.9}
+        }))
+    };
+    let white = plain(&mut b, "white", [0.75, 0.75, 0.73]);
+    let dark = plain(&mut b, "shade", [0.05, 0.05, 0.05]);
+    let (w, h) = (1.0f32, 2.0f32);
+    let mut nodes = vec![
+        panel(
+            &mut b,
+            "back",
+            [[-w, 0.0, -w], [w, 0.0, -w], [w, h, -w], [-w, h, -w]],
+            [0.0, 0.0, 1.0],
+            true,
+            wall,
+        ),
+        panel(
+            &mut b,
+            "floor",
+            [[-w, 0.0, w], [w, 0.0, w], [w, 0.0, -w], [-w, 0.0, -w]],
+            [0.0, 1.0, 0.0],
+            true,
+            floor,
+        ),
+    ];
+    let sides = shell(
+        &mut b,
+        (w, h),
+        Shell {
+            back: white,
+            back_uv: false,
+            floor: white,
+            ceiling: white,
+            left: white,
+            right: white,
+        },
+    );
+    // The shell's ceiling and side walls (its back wall and floor are the textured ones).
+    nodes.extend_from_slice(&sides[2..]);
+    // The lamp (0.3 wide, 0.2 under the ceiling, facing down) in a shade 0.5 deep: its light
+    // leaves in a cone that reaches the floor and never the back wall.
+    let (lz, ly, half) = (0.45f32, h - 0.2, 0.15f32);
+    let depth = 0.5f32;
+    for (name, c, e) in [
+        (
+            "shade_l",
+            [-half - 0.01, ly - depth / 2.0, lz],
+            [0.01, depth / 2.0, half + 0.02],
+        ),
+        (
+            "shade_r",
+            [half + 0.01, ly - depth / 2.0, lz],
+            [0.01, depth / 2.0, half + 0.02],
+        ),
+        (
+            "shade_b",
+            [0.0, ly - depth / 2.0, lz - half - 0.01],
+            [half + 0.02, depth / 2.0, 0.01],
+        ),
+        (
+            "shade_f",
+            [0.0, ly - depth / 2.0, lz + half + 0.01],
+            [half + 0.02, depth / 2.0, 0.01],
+        ),
+        (
+            "shade_top",
+            [0.0, ly + 0.02, lz],
+            [half + 0.02, 0.01, half + 0.02],
+        ),
+    ] {
+        let mesh = b.add_mesh(name, &box_triangles(c, e), None, None, None, Some(dark));
+        nodes.push(b.add_node(json!({"name": name, "mesh": mesh})));
+    }
+    nodes.push(area_light(
+        &mut b,
+        "lamp",
+        [0.0, ly, lz],
+        [0.0, 0.0, lz],
+        2.0 * half,
+        [1.0, 0.93, 0.85],
+        60.0,
+    ));
+    nodes.push(camera(
+        &mut b,
+        "main",
+        0.7,
+        [0.0, 0.9, 3.2],
+        [0.0, 0.75, -w],
+    ));
+    nodes.push(camera(
+        &mut b,
+        "low",
+        0.65,
+        [0.8, 0.55, 2.4],
+        [-0.15, 0.45, -w],
+    ));
+    b.set_scene(&nodes);
+    b.write_gltf(&dir.join("scene.gltf"), false)?;
+    write_task(
+        dir,
+        r#"# Benchmark scene "atelier": recover the base colors of a planked floor and a papered
+# back wall, the wall lit only by the floor's bounce (the lamp's shade keeps its light on the
+# floor), seen by two cameras, with paths of 3 vertices (max_depth).
+# Written by `psrestir make-scenes`; paths are relative to this file.
+scene = "scene.gltf"
+cameras = ["main", "low"]
+width = 128
+height = 128
+seed = 8
+max_depth = 3
+# Lit by its lamp alone: no default environment through the open front.
+default_environment = false
+output = "out/bench/atelier"
+"#,
+        r#"
+[[textures]]
+material = "planks"
+slot = "base_color"
+resolution = [256, 256]
+init = [0.5, 0.5, 0.5]
+learning_rate = 0.03
+
+[[textures]]
+material = "wallpaper"
+slot = "base_color"
+resolution = [256, 256]
+init = [0.5, 0.5, 0.5]
+learning_rate = 0.03
+"#,
+    )
+}

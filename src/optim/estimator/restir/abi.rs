@@ -4,9 +4,11 @@
 
 /// ReSTIR's reservoirs in their compact form: word offsets within a reservoir, the packing
 /// of its words, a texel's slots and header (WGSL: `RES_*`, `INFO_*`, `RESERVOIR_WORDS`,
-/// `RESERVOIR_SLOTS`, `HEADER_*`). A reservoir stores its path as the camera ray's hit
-/// (triangle and barycentrics), the incident direction in the hit's shading frame and the
-/// incident radiance; everything else the BRDF needs is rebuilt from the scene
+/// `RESERVOIR_SLOTS`, `HEADER_*`). A reservoir stores its path as its vertices (triangle
+/// and barycentrics of each, up to [`MAX_PATH_VERTICES`]: the camera ray's hit first), the
+/// incident direction at the last one in its shading frame, the radiance arriving along it,
+/// and which vertex the texel's derivative is taken at; everything else the BRDFs need is
+/// rebuilt from the scene
 /// (`compact_path.wgsl` here, with `shared/path_encoding.wgsl`; the precision of each
 /// encoding is stated in [`super::compact`]).
 pub mod reservoir {
@@ -23,10 +25,30 @@ pub mod reservoir {
     pub const WI_X: u32 = 4;
     /// The second octahedral coordinate (24 bits) and the high byte of that target.
     pub const WI_Y: u32 = 5;
-    /// Incident radiance, RGB with a shared exponent (RGBE, 8 bits each).
+    /// Incident radiance at the last vertex, RGB with a shared exponent (RGBE, 8 bits each).
     pub const RADIANCE: u32 = 6;
+    /// The second vertex's triangle and barycentrics, packed as at TRI and BARY.
+    pub const TRI2: u32 = 7;
+    /// The second vertex's barycentrics' high bits.
+    pub const BARY2: u32 = 8;
+    /// The third vertex's triangle and barycentrics.
+    pub const TRI3: u32 = 9;
+    /// The third vertex's barycentrics' high bits.
+    pub const BARY3: u32 = 10;
+    /// The path's shape: its vertex count less one (bits 0..2) and the index of the vertex,
+    /// from 0, whose BRDF the texel's derivative is taken at (bits 2..4); 0 is the one-vertex
+    /// path of direct light (or of the first vertex with the radiance arriving along its
+    /// direction, beyond [`MAX_PATH_VERTICES`]).
+    pub const SHAPE: u32 = 11;
     /// Words per reservoir.
-    pub const WORDS: u32 = 7;
+    pub const WORDS: u32 = 12;
+    /// The path's words after W (`Candidate.words` in `reservoir.wgsl`).
+    pub const PATH_WORDS: u32 = WORDS - TRI;
+    /// Vertices a stored path holds: with `max_depth` up to this, a reservoir keeps whole
+    /// paths (every vertex re-evaluated under the current textures); beyond it, the first
+    /// vertex with the radiance arriving along its direction, the later vertices' derivatives
+    /// plain Monte Carlo.
+    pub const MAX_PATH_VERTICES: u32 = 3;
     /// Bits of the triangle index (ReSTIR handles scenes of up to 2^24 triangles).
     pub const TRI_BITS: u32 = 24;
     pub use crate::gpu::abi::path_encoding::{BARY_BITS, OCT_BITS};
@@ -54,6 +76,13 @@ pub mod reservoir {
     pub const HEADER_FIRST_TWO: u32 = 1 << HEADER_SLOT_BITS;
     /// Marks a texel no camera observes in the compaction map's lookups (u32::MAX).
     pub const UNOBSERVED: u32 = u32::MAX;
+
+    /// Whether reservoirs keep whole paths at `max_depth` (from two vertices to
+    /// [`MAX_PATH_VERTICES`]; `compact_path.wgsl`, `whole_paths`). Every texel of the
+    /// optimized textures then has reservoirs, not only those a camera sees.
+    pub fn whole_paths(max_depth: u32) -> bool {
+        max_depth > 1 && max_depth <= MAX_PATH_VERTICES
+    }
 
     /// The slot of sign `sign`'s reservoir in header `h`.
     pub fn header_slot(h: u32, sign: u32) -> u32 {
@@ -107,6 +136,13 @@ pub const CONSTANTS: &[(&str, u32)] = &[
     ("RES_WI_X", reservoir::WI_X),
     ("RES_WI_Y", reservoir::WI_Y),
     ("RES_RADIANCE", reservoir::RADIANCE),
+    ("RES_TRI2", reservoir::TRI2),
+    ("RES_BARY2", reservoir::BARY2),
+    ("RES_TRI3", reservoir::TRI3),
+    ("RES_BARY3", reservoir::BARY3),
+    ("RES_SHAPE", reservoir::SHAPE),
+    ("RES_PATH_WORDS", reservoir::PATH_WORDS),
+    ("MAX_PATH_VERTICES", reservoir::MAX_PATH_VERTICES),
     ("RES_TRI_BITS", reservoir::TRI_BITS),
     ("RESERVOIR_SLOTS", reservoir::SLOTS),
     ("HEADER_SLOT_BITS", reservoir::HEADER_SLOT_BITS),
@@ -144,4 +180,5 @@ const _: () = {
     assert!(reservoir::TECH_SHIFT > reservoir::CAMERA_SHIFT + 2);
     // Info words never have the key bit.
     assert!(reservoir::TECH_SHIFT + 1 < 32);
+    assert!(reservoir::PATH_WORDS == 10 && reservoir::MAX_PATH_VERTICES == 3);
 };

@@ -7,8 +7,9 @@
 // RESERVOIR_WORDS words (the layout, RES_*, is generated from abi.rs): the camera
 // sample that started it (pixel, camera, technique in RES_INFO), its weight sum (fresh
 // reservoirs) or unbiased contribution weight W (merged), and the path in its compact form
-// (compact_path.wgsl: the camera ray's hit, the incident direction in the hit's
-// shading frame, the incident radiance) with the path's target under the previous state:
+// (compact_path.wgsl: the path's vertices, the incident direction at the last one in its
+// shading frame, the radiance arriving there, the vertex of the texel's derivative) with the
+// path's target under the previous state:
 // for a fresh path the candidate pass computes it, for a merged one the merge stores the
 // target it had there, which is its target under the previous state at the next merge.
 // The path's factor for a texel (d(BRDF cos L_i)/d(texel) per image channel) is re-evaluated
@@ -54,7 +55,7 @@ struct Candidate {
     // The path's words after RES_W (compact_path.wgsl, path_words), with its target
     // under the previous iteration's textures and target adjoint (0 when the merge will not
     // reuse).
-    words: array<u32, 5>,
+    words: array<u32, RES_PATH_WORDS>,
 }
 
 fn slot_store(k: u32, i: u32, x: u32) {
@@ -159,7 +160,7 @@ fn reservoir_claim(k: u32, i: u32, w: f32, u: f32, c: Candidate) {
             return;
         }
         if slot_exchange(k, base + RES_INFO, key, c.info) {
-            for (var j = 0u; j < 5u; j++) {
+            for (var j = 0u; j < RES_PATH_WORDS; j++) {
                 slot_store(k, base + RES_TRI + j, c.words[j]);
             }
             return;

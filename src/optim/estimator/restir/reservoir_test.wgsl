@@ -46,6 +46,6 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
             atomicAdd(&failures[0], 1u);
         }
     } else {
-        reservoir_claim(0u, r, w, u, Candidate(c, array<u32, 5>(c, 0u, 0u, 0u, 0u)));
+        reservoir_claim(0u, r, w, u, Candidate(c, array<u32, RES_PATH_WORDS>(c, 0u, 0u, 0u, 0u, 0u, 0u, 0u, 0u, 0u)));
     }
 }

@@ -107,27 +107,43 @@ fn differentiate_later_vertex(mi: u32, uv: vec2f, wo: vec3f, wi: vec3f, mat: Sur
     scatter(materials[mi], uv, brdf_eval_cos_grad(mat, wo, wi), weight, pixel_adj);
 }
 
-// ts: the technique's sample; adj: the pixel's adjoint (for the value), adj_t: its target
-// adjoint; bg_prev and adj_t_prev: the path's BRDF derivatives and the pixel's target adjoint
-// under the previous iteration's state (unused unless cp.prev_targets).
-fn offer_technique(g: GradientSample, ts: TechniqueSample, bg_prev: BrdfGrad, adj: vec3f, adj_t: vec3f, adj_t_prev: vec3f, info: u32) {
-    let ds = ts.ds;
-    let bg = ts.grad;
-    if ds.scale == 0.0 {
+// A path offered to the texels of one vertex's optimized textures: that vertex's material
+// index and texture coordinates, its BRDF derivatives and what multiplies them (the path's
+// other factors, arriving_at) under the current and (with cp.prev_targets) the previous
+// textures, the path's MIS weight / density, and its words (compact_path.wgsl).
+struct Offer {
+    mi: u32,
+    uv: vec2f,
+    bg: BrdfGrad,
+    bg_prev: BrdfGrad,
+    li: vec3f,
+    li_prev: vec3f,
+    scale: f32,
+    words: array<u32, RES_PATH_WORDS>,
+    // Whether the first vertex's BSDF sample (the info word's technique bit).
+    bsdf: bool,
+}
+
+// adj: the pixel's adjoint (for the value), adj_t: its target adjoint; adj_t_prev: the
+// pixel's target adjoint under the previous iteration's state (unused unless
+// cp.prev_targets).
+fn offer_path(o: Offer, adj: vec3f, adj_t: vec3f, adj_t_prev: vec3f, info: u32) {
+    if o.scale == 0.0 {
         return;
     }
+    let m = materials[o.mi];
     for (var slot = 0u; slot < 3u; slot++) {
-        let pi = material_param(g.m, slot);
+        let pi = material_param(m, slot);
         if pi == NONE {
             continue;
         }
         let p = param_textures[pi];
-        let fp = footprint_merged(param_footprint(p, g.sf.uv));
+        let fp = footprint_merged(param_footprint(p, o.uv));
         let ch = p.channels;
-        let d = slot_factor(slot, bg, ds.radiance);
+        let d = slot_factor(slot, o.bg, o.li);
         var d_prev = vec3f(0.0);
         if cp.prev_targets != 0u {
-            d_prev = slot_factor(slot, bg_prev, ds.radiance);
+            d_prev = slot_factor(slot, o.bg_prev, o.li_prev);
         }
         for (var k = 0u; k < 4u; k++) {
             if fp.weight[k] == 0.0 {
@@ -140,7 +156,7 @@ fn offer_technique(g: GradientSample, ts: TechniqueSample, bg_prev: BrdfGrad, ad
             if !(abs(q_prev) < 3.0e38) {
                 q_prev = 0.0;
             }
-            let w = abs(q) * ds.scale;
+            let w = abs(q) * o.scale;
             if w == 0.0 {
                 continue;
             }
@@ -162,10 +178,78 @@ fn offer_technique(g: GradientSample, ts: TechniqueSample, bg_prev: BrdfGrad, ad
                     lost += 1u;
                 }
             } else {
-                reservoir_claim(slot, i, w, u, Candidate(info, path_words(g.tri, g.kb, ts.ko, ts.rgbe, q_prev)));
+                reservoir_claim(slot, i, w, u, Candidate(info | select(0u, 1u << INFO_TECH_SHIFT, o.bsdf), with_q_prev(o.words, q_prev)));
             }
         }
     }
+}
+
+// Technique t of the first vertex (beyond MAX_PATH_VERTICES or at depth 1): the radiance
+// arriving along its direction stored as drawn.
+fn technique_offer(g: GradientSample, t: u32) -> Offer {
+    let ts = technique_sample(g, t);
+    var o: Offer;
+    o.mi = g.sf.material;
+    o.uv = g.sf.uv;
+    o.bg = ts.grad;
+    o.bg_prev = ts.grad;
+    if cp.prev_targets != 0u {
+        // The path's derivatives under the previous textures, from the stored (rounded)
+        // directions, as the merge would evaluate them (path_factor).
+        o.bg_prev = vertex_grad_prev(ts.vertex);
+    }
+    o.li = ts.ds.radiance;
+    o.li_prev = ts.ds.radiance;
+    o.scale = ts.ds.scale;
+    o.bsdf = t == SAMPLE_BSDF;
+    o.words = path_words(array<u32, MAX_PATH_VERTICES>(g.tri, 0u, 0u), array<vec2u, MAX_PATH_VERTICES>(g.kb, vec2u(0u), vec2u(0u)), ts.ko, ts.rgbe, 0.0, 0u);
+    return o;
+}
+
+// The camera path's vertices (record_paths, shared/integrator.wgsl) rebuilt as the merge
+// rebuilds a stored path (compact_path.wgsl), once per camera sample.
+var<private> recorded: DecodedPath;
+
+// Whole paths: arrival a (a path that reaches an emitter from its last vertex), differentiated
+// at its vertex k, evaluated from the words the reservoir will keep exactly as the merge
+// evaluates them (the direction at the last vertex and the radiance rounded to their stored
+// forms). o.scale is 0 where vertex k's material has no optimized texture.
+fn arrival_offer(a: u32, k: u32) -> Offer {
+    var o: Offer;
+    o.scale = 0.0;
+    let ar = arrivals[a];
+    let n = ar.n;
+    if k >= n || n > recorded.n_valid || !has_optimized(recorded.pv[k].material) {
+        return o;
+    }
+    if !all(ar.radiance < vec3f(3.0e38)) {
+        dropped += 1u;
+        return o;
+    }
+    var dp = recorded;
+    dp.n = n;
+    dp.k = k;
+    let e = oct_encode(to_local(dp.frame[n - 1u], ar.wi));
+    let ko = vec2u(oct_round(e.x), oct_round(e.y));
+    dp.pv[n - 1u].wi = vec2f(oct_value(ko.x), oct_value(ko.y));
+    let rgbe = rgbe_pack(ar.radiance);
+    dp.radiance = rgbe_unpack(rgbe);
+    o.mi = dp.pv[k].material;
+    o.uv = dp.pv[k].uv;
+    o.bg = vertex_grad(dp.pv[k]);
+    o.li = arriving_at(dp, k);
+    o.bg_prev = o.bg;
+    o.li_prev = o.li;
+    if cp.prev_targets != 0u {
+        o.bg_prev = vertex_grad_prev(dp.pv[k]);
+        use_prev_params = true;
+        o.li_prev = arriving_at(dp, k);
+        use_prev_params = false;
+    }
+    o.scale = ar.scale;
+    o.bsdf = false;
+    o.words = path_words(rec_tri, rec_kb, ko, rgbe, 0.0, shape_word(n, k));
+    return o;
 }
 
 @compute @workgroup_size(64)
@@ -206,22 +290,35 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     if cp.prev_targets != 0u {
         adj_t_prev = last * cp.inv_spp;
     }
+    let whole = whole_paths();
+    record_paths = whole;
     for (var s = 0u; s < cp.spp; s++) {
         rng_init(cp.seed, s * a.n_pixels + a.pixel, 0u);
         let d = camera_direction(cp.camera, a.xy + rand2());
-        let g = gradient_sample(cp.camera.origin, d, false, true);
-        if !g.valid {
+        let g = gradient_sample(cp.camera.origin, d, false, !whole);
+        // Offers: the first vertex's two techniques, or with whole paths every arrival at
+        // every vertex (at most 6 arrivals of up to MAX_PATH_VERTICES vertices).
+        var n_offers = 2u;
+        if whole {
+            n_offers = n_arrivals * MAX_PATH_VERTICES;
+            var n = 0u;
+            for (var j = 0u; j < n_arrivals; j++) {
+                n = max(n, arrivals[j].n);
+            }
+            if n > 0u {
+                recorded = decode_path(cp.camera.origin, PathWords(rec_tri, rec_kb, vec2u(0u), vec3f(0.0), 0.0, n, 0u));
+            }
+        } else if !g.valid {
             continue;
         }
-        for (var t = 0u; t < 2u; t++) {
-            let ts = technique_sample(g, t);
-            var grad_prev = ts.grad;
-            if cp.prev_targets != 0u {
-                // The path's derivatives under the previous textures, from the stored
-                // (rounded) directions, as the merge would evaluate them (path_factor).
-                grad_prev = vertex_grad_prev(ts.vertex);
+        for (var j = 0u; j < n_offers; j++) {
+            var o: Offer;
+            if whole {
+                o = arrival_offer(j / MAX_PATH_VERTICES, j % MAX_PATH_VERTICES);
+            } else {
+                o = technique_offer(g, j);
             }
-            offer_technique(g, ts, grad_prev, a.adj, adj_t, adj_t_prev, info | (t << INFO_TECH_SHIFT));
+            offer_path(o, a.adj, adj_t, adj_t_prev, info);
         }
     }
     if cp.phase != 0u {

@@ -114,12 +114,12 @@ fn set_slot_word(k: u32, j: u32, x: u32) {
     }
 }
 
-// A stored path rebuilt: its info word, W, the path and its vertex.
+// A stored path rebuilt: its info word, W, the path and its vertices.
 struct Stored {
     info: u32,
     w: f32,
     path: PathWords,
-    sv: StoredVertex,
+    dp: DecodedPath,
 }
 
 // The RESERVOIR_WORDS words from word b of slot k's buffer, read in one switch.
@@ -153,10 +153,14 @@ fn slot_words(k: u32, b: u32) -> array<u32, RESERVOIR_WORDS> {
 // The reservoir in slot k of observed texel i.
 fn load(k: u32, i: u32) -> Stored {
     let w = slot_words(k, i * RESERVOIR_WORDS);
-    let path = unpack_path(array<u32, 5>(w[RES_TRI], w[RES_TRI + 1u], w[RES_TRI + 2u], w[RES_TRI + 3u], w[RES_TRI + 4u]));
+    var pw: array<u32, RES_PATH_WORDS>;
+    for (var j = 0u; j < RES_PATH_WORDS; j++) {
+        pw[j] = w[RES_TRI + j];
+    }
+    let path = unpack_path(pw);
     let info = w[RES_INFO];
     let cam = min((info >> INFO_CAMERA_SHIFT) & INFO_CAMERA_MASK, MAX_CAMERAS - 1u);
-    return Stored(info, bitcast<f32>(w[RES_W]), path, stored_vertex(mp.origins[cam].xyz, path));
+    return Stored(info, bitcast<f32>(w[RES_W]), path, decode_path(mp.origins[cam].xyz, path));
 }
 
 fn slot_w(k: u32, i: u32) -> f32 {
@@ -219,11 +223,11 @@ fn pixel_adjoints(info: u32) -> PixelAdjoints {
 // path_factor), under the current (prev = false) or previous textures.
 fn evaluate(st: Stored, ti: u32, local: u32, prev: bool) -> vec3f {
     evaluations += 1u;
-    if !st.sv.valid {
+    if !st.dp.valid {
         return vec3f(0.0);
     }
     use_prev_params = prev;
-    let e = path_factor(st.sv.vertex, st.path.radiance, ti, local);
+    let e = path_factor(st.dp.pv[st.dp.k], arriving_at(st.dp, st.dp.k), ti, local);
     use_prev_params = false;
     if !all(abs(e) < vec3f(3.0e38)) {
         dropped += 1u;

@@ -96,7 +96,14 @@ pub(super) struct Buffers {
 impl Buffers {
     pub(super) fn new(s: &Setup) -> Buffers {
         let gpu = s.gpu;
-        let (map, list) = compaction_map(s.observed);
+        // With whole paths, texels reached after a bounce get reservoirs too: every texel.
+        let every;
+        let mut observed = s.observed;
+        if reservoir::whole_paths(s.scene.info.max_depth) {
+            every = vec![true; s.observed.len()];
+            observed = &every;
+        }
+        let (map, list) = compaction_map(observed);
         let n_observed = list.len() as u64;
         let n_all_pixels = s.adjoint[0].size() / 16;
         let sizes = memory(s.scene.n_texels as u64, n_observed, n_all_pixels);
