@@ -478,7 +478,7 @@ pub fn write_atelier(dir: &Path) -> Result<()> {
         [0.0, 0.0, lz],
         2.0 * half,
         [1.0, 0.93, 0.85],
-        60.0,
+        100.0,
     ));
     nodes.push(camera(
         &mut b,
