@@ -244,8 +244,8 @@ pub(crate) struct OptimizeArgs {
 #[derive(clap::Args)]
 pub(crate) struct BenchArgs {
     /// Scenes: names of bundled benchmark scenes (vase, lattice, dish, sphere, room,
-    /// gallery), task files, or folders holding task.toml (default: every bundled benchmark
-    /// scene).
+    /// gallery, atelier, outdoor), task files, or folders holding task.toml (default: every
+    /// bundled benchmark scene).
     pub(crate) scenes: Vec<String>,
     /// Seconds of optimization per estimator and scene.
     #[arg(long, default_value_t = 60.0)]

@@ -250,7 +250,8 @@ fn pass_uniform_mirrors_match_wgsl_field_by_field() {
             mask,
             threshold,
             phase,
-            own_weight
+            own_weight,
+            variance_scale
         ]
     );
     mirror!(

@@ -279,6 +279,17 @@ fn recovery(
     step: StepKind,
     lr: f32,
 ) -> (Optimizer, Vec<f32>) {
+    recovery_correlated(gpu, method, step, lr, 0.0)
+}
+
+/// [`recovery`] with the variance-scaled step's `correlation`.
+fn recovery_correlated(
+    gpu: &psrestir::gpu::Gpu,
+    method: Method,
+    step: StepKind,
+    lr: f32,
+    correlation: f32,
+) -> (Optimizer, Vec<f32>) {
     let scene = shadow_scene();
     let mut spec = spec(Slot::BaseColor, [4, 4]);
     spec.learning_rate = Some(lr);
@@ -296,6 +307,7 @@ fn recovery(
     s.width = 32;
     s.height = 32;
     s.step = step;
+    s.variance_step.correlation = correlation;
     let probe = Optimizer::new(gpu, &scene, set.clone(), s.clone(), &[Image::new(32, 32)]).unwrap();
     probe.write_params(&truth).unwrap();
     let target = probe.render(0, 1024, 77).unwrap();
@@ -306,9 +318,18 @@ fn recovery(
 #[test]
 fn variance_step_matches_its_cpu_reference() {
     let Some(gpu) = gpu() else { return };
+    // Without and with a correlation that scales the moving variance (by 1.15 at 0.6).
+    for correlation in [0.0, 0.6] {
+        check_variance_step(&gpu, correlation);
+    }
+}
+
+fn check_variance_step(gpu: &psrestir::gpu::Gpu, correlation: f32) {
     let lr = 0.05;
-    let (mut opt, _) = recovery(&gpu, Method::BASELINE, StepKind::Variance, lr);
+    let (mut opt, _) =
+        recovery_correlated(gpu, Method::BASELINE, StepKind::Variance, lr, correlation);
     let o = opt.settings().variance_step;
+    assert_eq!(o.correlation, correlation);
     let mut p = opt.read_params().unwrap();
     let n = p.len();
     let (mut m, mut v) = (vec![0f32; n], vec![0f32; n]);

@@ -188,7 +188,7 @@ impl Optimizer {
         let grid = renderer.tile_grid(w, h);
         let observed = observed::observed_mask(gpu, &renderer.scene, &camera_infos, grid)?;
         let mut n_observed = observed.0.iter().filter(|&&o| o).count() as u64;
-        if estimator::restir::abi::reservoir::whole_paths(scene.max_depth.get()) {
+        if estimator::every_texel(settings.method, scene.max_depth.get()) {
             // Whole paths reach texels no camera sees: ReSTIR keeps reservoirs for every texel.
             n_observed = observed.0.len() as u64;
         }

@@ -77,6 +77,9 @@ pub struct Kind {
     pub memory: fn(&Sizes) -> Vec<(String, u64, Scale)>,
     /// What the user should know before a run with it under `conditions` (logged).
     pub warnings: fn(&Conditions) -> Vec<String>,
+    /// Whether, with paths of this many vertices, it keeps state for every texel rather
+    /// than the observed ones only (a path can reach any texel after a bounce).
+    pub every_texel: fn(u32) -> bool,
     pub(crate) build: fn(&Setup) -> Result<Box<dyn Estimator>>,
 }
 
@@ -340,6 +343,17 @@ pub(crate) fn groups() -> Vec<GroupDecl> {
 /// The passes (WGSL files) `method` creates, the slowest to compile first.
 pub(crate) fn passes(method: Method) -> Vec<&'static str> {
     method.kind().passes.to_vec()
+}
+
+/// Whether `method` keeps state for every texel at paths of `max_depth` vertices
+/// ([`Kind::every_texel`]).
+pub(crate) fn every_texel(method: Method, max_depth: u32) -> bool {
+    (method.kind().every_texel)(max_depth)
+}
+
+/// No estimator state beyond the observed texels, at any depth.
+pub(crate) fn observed_only(_max_depth: u32) -> bool {
+    false
 }
 
 /// The most cameras `method` can use in one optimization (None: no limit of its own).

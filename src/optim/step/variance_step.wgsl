@@ -4,7 +4,9 @@
 // exceeds its noise (threshold 0: -lr d / sqrt(Var[d]), clipped); no first moment.
 // Var[d] is the estimator's own tracked variance of its estimate d where it has one
 // (own_variance, the recursive estimator's), otherwise a moving variance of the gradient
-// kept in the moment buffers (moment1: mean, moment2: second moment, decay beta). A surer
+// kept in the moment buffers (moment1: mean, moment2: second moment, decay beta), times
+// variance_scale where successive estimates share samples (ReSTIR's kept paths): the moving
+// moments of a correlated series see a fraction of one estimate's spread. A surer
 // estimate (higher d / sqrt(Var[d])) takes a larger step, up to clip x lr; a pure-noise one
 // moves by lr times a standard normal shrunk by the threshold, so that a texel the images
 // hardly determine does not drift with errors that a running estimate repeats. Non-finite gradients leave their parameter
@@ -38,8 +40,10 @@ struct VarianceStepParams {
     phase: u32,
     // Phase STEP_PHASE_FILTERED: weight of the entry's own pair against the filtered one.
     own_weight: f32,
+    // The moving variance's factor for correlated successive estimates (variance_scale in
+    // variance_step.rs; 1 for independent ones).
+    variance_scale: f32,
     _pad0: u32,
-    _pad1: u32,
 }
 
 @group(0) @binding(0) var<uniform> vp: VarianceStepParams;
@@ -67,7 +71,7 @@ fn standing_variance(i: u32) -> f32 {
         return variance[i];
     }
     let mean = moment1[i] / vp.bias;
-    return max(moment2[i] / vp.bias - mean * mean, 0.0);
+    return max(moment2[i] / vp.bias - mean * mean, 0.0) * vp.variance_scale;
 }
 
 // In phase STEP_PHASE_PAIR, hand entry k's estimate and variance to the filter.
@@ -116,7 +120,7 @@ fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) grou
         moment1[i] = m;
         moment2[i] = v;
         let mean = m / vp.bias;
-        var_d = max(v / vp.bias - mean * mean, 0.0);
+        var_d = max(v / vp.bias - mean * mean, 0.0) * vp.variance_scale;
     }
     if vp.phase == STEP_PHASE_PAIR {
         write_pair(k, g, var_d);

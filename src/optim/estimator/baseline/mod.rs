@@ -24,6 +24,7 @@ pub const KIND: Kind = Kind {
     max_cameras: None,
     memory: super::no_memory,
     warnings: super::no_warnings,
+    every_texel: super::observed_only,
     build: |setup| Ok(Box::new(Baseline::new(setup)?)),
 };
 

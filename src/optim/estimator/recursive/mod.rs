@@ -45,6 +45,7 @@ pub const KIND: Kind = Kind {
     max_cameras: None,
     memory: |sizes| memory(sizes.params),
     warnings: super::no_warnings,
+    every_texel: super::observed_only,
     build: |setup| Ok(Box::new(Recursive::new(setup)?)),
 };
 

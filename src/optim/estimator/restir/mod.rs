@@ -92,23 +92,27 @@ pub const KIND: Kind = Kind {
     max_cameras: Some(MAX_CAMERAS),
     memory: |sizes| memory(sizes.texels, sizes.observed, sizes.pixels),
     warnings,
+    every_texel: abi::reservoir::whole_paths,
     build: |setup| Ok(Box::new(Restir::new(setup)?)),
 };
 
-/// What a run at `conditions` should know: beyond direct light, only the first vertex is
-/// reused.
+/// What a run at `conditions` should know: beyond [`abi::reservoir::MAX_PATH_VERTICES`]
+/// vertices, only the first vertex is reused.
 fn warnings(conditions: &Conditions) -> Vec<String> {
-    if conditions.max_depth <= 1 {
+    if conditions.max_depth <= abi::reservoir::MAX_PATH_VERTICES {
         return Vec::new();
     }
     vec![format!(
-        "ReSTIR with paths of {} vertices reuses each path's first vertex with the light the \
-         rest of the path brought back when it was drawn, which the other surfaces' textures \
-         change since: its gradient lags them (the later vertices' derivatives are plain Monte \
-         Carlo). The baseline and the recursive estimator draw every vertex afresh",
+        "ReSTIR keeps whole paths of up to {} vertices; with paths of {} it reuses each path's \
+         first vertex with the light the rest of the path brought back when it was drawn, \
+         which the other surfaces' textures change since: its gradient lags them (the later \
+         vertices' derivatives are plain Monte Carlo). The baseline and the recursive \
+         estimator draw every vertex afresh",
+        abi::reservoir::MAX_PATH_VERTICES,
         conditions.max_depth
     )]
 }
+
 const MERGE_STAT_EVALUATIONS: usize = abi::stat::MERGE_EVALUATIONS as usize;
 const MERGE_STAT_DROPPED: usize = abi::stat::MERGE_DROPPED as usize;
 const MERGE_STAT_VERIFIED: usize = abi::stat::MERGE_VERIFIED as usize;

@@ -17,11 +17,20 @@
 // iteration's textures and target adjoint (the merge's MIS weights need it): the same path,
 // one more BRDF-with-derivative evaluation per technique here, shared by the path's texels,
 // instead of one per texel and reservoir in the merge.
-// With indirect light the candidates are the first vertex's samples, the light arriving
-// along each (everything the rest of the path brings back) stored as its radiance; the later
-// vertices' derivatives are plain Monte Carlo (path replay, shared/integrator.wgsl), added
-// into the gradient as the baseline adds them; the merge adds the reservoirs' estimates to the
-// observed texels' (texels seen only after a bounce keep the plain Monte Carlo estimate).
+// With indirect light of up to MAX_PATH_VERTICES vertices (whole_paths), a candidate is a
+// whole path: every sample that reaches an emitter from a vertex of the camera path (light
+// sampling or BSDF sampling at any vertex; shared/integrator.wgsl records them) ends a path of
+// n vertices, which is offered to the texels of every vertex k whose material is optimized,
+// with value adjoint x radiance x (every other vertex's BRDF cos) x d(vertex k's BRDF cos) and
+// resampling weight |q| x MIS weight / (the whole path's density). The reservoir keeps the
+// path's vertices, its last direction and radiance and k (compact_path.wgsl), and the merge
+// re-evaluates every vertex under the current textures, so a kept sample follows every
+// surface's change; texels seen only after a bounce have reservoirs too (every texel is in
+// the map). The first vertex need not be optimized. Beyond MAX_PATH_VERTICES the candidates
+// are the first vertex's samples, the light arriving along each (everything the rest of the
+// path brings back) stored as its radiance; the later vertices' derivatives are then plain
+// Monte Carlo (path replay), added into the gradient as the baseline adds them, and the
+// merge adds the reservoirs' estimates to them.
 #import shared/rng
 #import shared/camera
 #import shared/adjoint_pixel
@@ -72,9 +81,9 @@ struct CandidateParams {
 // The compaction map: per 32 texels, which are observed (bits) and how many observed texels
 // come before them.
 @group(1) @binding(9) var<storage, read> observed_map: array<vec2u>;
-// The gradient (f32 bits, laid out like params[]): with indirect light the later vertices'
-// derivatives are added here (shared/gradient_scatter.wgsl), cleared before this pass; the
-// merge adds the rest. Not written at depth 1.
+// The gradient (f32 bits, laid out like params[]): beyond MAX_PATH_VERTICES the later
+// vertices' derivatives are added here (shared/gradient_scatter.wgsl), cleared before this
+// pass; the merge adds the rest. Not written at depth 1 or with whole paths.
 @group(1) @binding(10) var<storage, read_write> grad: array<atomic<u32>>;
 // dL/d(environment radiance) and its counters, plain Monte Carlo (shared/env_gradient.wgsl);
 // added in phase 0 only.

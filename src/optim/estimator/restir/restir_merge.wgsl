@@ -11,17 +11,18 @@
 // the confidences are the same for every reservoir (a function of the iteration count), never
 // a count carried by the reservoir itself, which would correlate with its weight.
 // Geometry, cameras and lights do not change during a texture optimization, so a stored path
-// (pixel, camera-ray hit, incident direction, incident radiance; visibility was tested when it
-// was drawn) stays a valid path with the same value of everything but the BRDF and the
-// adjoint. The shift is the identity in path space (Jacobian 1): a stored sample, fresh or
-// kept, is evaluated under the current textures from its compact form
-// (compact_path.wgsl): the hit is rebuilt from its triangle and barycentrics and the
-// camera's position (texture coordinates, shading frame, outgoing direction, the glTF
-// material's inputs there), and one BRDF-with-derivative evaluation gives its factor e; its
-// value is the pixel's adjoint times e, its target target_of(the pixel's target adjoint
-// times e). Its target under the previous state is stored with it: the candidate pass
-// computes it for a fresh sample, and the merge stores each merged sample's current target,
-// which is its previous-state target at the next merge. With the verify flag the merge
+// (pixel, its vertices from the camera ray's hit on, the incident direction and radiance at
+// the last one; visibility was tested when it was drawn) stays a valid path with the same
+// value of everything but the BRDFs and the adjoint. The shift is the identity in path space
+// (Jacobian 1): a stored sample, fresh or kept, is evaluated under the current textures from
+// its compact form (compact_path.wgsl): every vertex is rebuilt from its triangle and
+// barycentrics and the previous vertex's position (the camera's for the first): texture
+// coordinates, shading frame, the directions to its neighbours, the glTF material's inputs
+// there; its factor e is the derivative of vertex k's BRDF cos times the radiance times every
+// other vertex's BRDF cos; its value is the pixel's adjoint times e, its target
+// target_of(the pixel's target adjoint times e). Its target under the previous state is
+// stored with it: the candidate pass computes it for a fresh sample, and the merge stores
+// each merged sample's current target, which is its previous-state target at the next merge. With the verify flag the merge
 // evaluates every stored path under the previous state as well and compares. Nothing here
 // traces a ray: shared/bvh is not part of this pass (a test checks the composed module).
 // MIS: balance heuristic with confidences over the inputs' own targets.
@@ -268,8 +269,9 @@ fn evaluate_stored(k: u32, i: u32, ti: u32, local: u32, ch: u32, verify: bool) -
     return Evaluated(st.path.q_prev, with_adjoint(e, pa.value, ch), q);
 }
 
-// What the candidate pass added into gradient entry j: the later vertices' derivatives with
-// indirect light (the buffer was cleared before it); 0 at depth 1, where it is not cleared.
+// What the candidate pass added into gradient entry j: the later vertices' derivatives beyond
+// MAX_PATH_VERTICES (the buffer was cleared before it; with whole paths nothing, 0); 0 at
+// depth 1, where it is not cleared.
 fn take_later(j: u32) -> f32 {
     if scene.max_depth <= 1u {
         return 0.0;

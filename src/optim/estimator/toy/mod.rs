@@ -22,6 +22,7 @@ pub const KIND: Kind = Kind {
     max_cameras: None,
     memory: no_memory,
     warnings: no_warnings,
+    every_texel: super::observed_only,
     build: |setup| Ok(Box::new(Toy::new(setup)?)),
 };
 
