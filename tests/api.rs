@@ -369,7 +369,7 @@ fn a_2048_squared_texture_plans_within_the_device_with_restir() {
         height: 128,
         ..settings(Method::RESTIR)
     };
-    let plan = psrestir::optim::memory_plan(&set, &s, 4, 2048 * 2048);
+    let plan = psrestir::optim::memory_plan(&set, &s, 4, 2048 * 2048, 1);
     eprintln!("{}", plan.summary());
     plan.check(&gpu).unwrap();
     let per_observed = plan.bytes_per(psrestir::optim::Scale::ObservedTexel);
@@ -462,12 +462,16 @@ fn non_finite_values_are_dropped_and_counted_never_stored() {
             .array(psrestir::optim::estimator::restir::state_names::RESERVOIRS);
         assert_eq!(reservoirs.is_some(), method == Method::RESTIR);
         if let Some(r) = reservoirs {
-            // Weight, confidence and value words of every reservoir.
-            for res in r.chunks_exact(12) {
-                for w in [3, 4, 5, 6, 7] {
-                    let x = f32::from_bits(res[w]);
-                    assert!(x.is_finite(), "{method:?}: reservoir word {w} is {x}");
-                }
+            // The weight and the stored previous-state target (a bfloat16 in the high bits of
+            // the direction's words) of every reservoir.
+            use psrestir::optim::estimator::restir::abi::reservoir as layout;
+            let words = state.estimator.counter("reservoir words").unwrap() as usize;
+            for res in r.chunks_exact(words) {
+                let w = f32::from_bits(res[layout::W as usize]);
+                assert!(w.is_finite(), "{method:?}: reservoir weight {w}");
+                let hi = |k: u32| res[k as usize] >> layout::OCT_BITS;
+                let q = f32::from_bits((hi(layout::WI_X) | (hi(layout::WI_Y) << 8)) << 16);
+                assert!(q.is_finite(), "{method:?}: stored target {q}");
             }
         }
         let f = o.faults().unwrap();

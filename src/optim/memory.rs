@@ -88,12 +88,13 @@ impl MemoryPlan {
 const MIB: f64 = 1024.0 * 1024.0;
 
 /// The optimizer's buffers for textures `set` of which `n_observed` texels are observed,
-/// images as in `settings`, `n_cams` cameras.
+/// images as in `settings`, `n_cams` cameras, paths of `max_depth` vertices.
 pub fn memory_plan(
     set: &ParamSet,
     settings: &Settings,
     n_cams: usize,
     n_observed: u64,
+    max_depth: u32,
 ) -> MemoryPlan {
     let n_params = set.values.len() as u64;
     let n_texels: u64 = set
@@ -126,6 +127,7 @@ pub fn memory_plan(
         n_texels,
         n_observed,
         all_pixels,
+        max_depth,
     ));
     if settings.moment_filter.enabled() {
         buffers.extend(

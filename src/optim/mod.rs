@@ -182,7 +182,8 @@ impl Optimizer {
         let camera_infos = camera_infos(scene, &settings)?;
         // The textures and the scene first: which texels the cameras observe decides what
         // ReSTIR allocates.
-        memory_plan(&set, &settings, targets.len(), 0).check(gpu)?;
+        let max_depth = scene.max_depth.get();
+        memory_plan(&set, &settings, targets.len(), 0, max_depth).check(gpu)?;
         let params = ParamBuffers::new(gpu, &set);
         let renderer = Renderer::with_param_buffers(gpu, scene, &set, &params)?;
         let grid = renderer.tile_grid(w, h);
@@ -192,7 +193,7 @@ impl Optimizer {
             // Whole paths reach texels no camera sees: ReSTIR keeps reservoirs for every texel.
             n_observed = observed.0.len() as u64;
         }
-        let plan = memory_plan(&set, &settings, targets.len(), n_observed);
+        let plan = memory_plan(&set, &settings, targets.len(), n_observed, max_depth);
         plan.check(gpu)?;
         log::info!("{}", plan.summary());
         let n_cams = targets.len() as u32;

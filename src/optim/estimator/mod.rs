@@ -94,6 +94,8 @@ pub struct Sizes {
     pub observed: u64,
     /// Pixels of all cameras.
     pub pixels: u64,
+    /// Vertices of a camera path.
+    pub max_depth: u32,
 }
 
 /// What a run's warnings depend on.
@@ -370,12 +372,14 @@ pub(crate) fn memory(
     n_texels: u64,
     n_observed: u64,
     n_pixels: u64,
+    max_depth: u32,
 ) -> Vec<(String, u64, Scale)> {
     (method.kind().memory)(&Sizes {
         params: n_params,
         texels: n_texels,
         observed: n_observed,
         pixels: n_pixels,
+        max_depth,
     })
 }
 

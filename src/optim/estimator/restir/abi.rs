@@ -40,10 +40,13 @@ pub mod reservoir {
     /// path of direct light (or of the first vertex with the radiance arriving along its
     /// direction, beyond [`MAX_PATH_VERTICES`]).
     pub const SHAPE: u32 = 11;
-    /// Words per reservoir.
-    pub const WORDS: u32 = 12;
-    /// The path's words after W (`Candidate.words` in `reservoir.wgsl`).
-    pub const PATH_WORDS: u32 = WORDS - TRI;
+    /// Words per reservoir without whole paths (depth 1, or beyond [`MAX_PATH_VERTICES`]):
+    /// INFO to RADIANCE.
+    pub const WORDS: u32 = 7;
+    /// Words per reservoir with whole paths ([`whole_paths`]).
+    pub const WHOLE_PATH_WORDS: u32 = 12;
+    /// The path's words after W with whole paths (`Candidate.words` in `reservoir.wgsl`).
+    pub const PATH_WORDS: u32 = WHOLE_PATH_WORDS - TRI;
     /// Vertices a stored path holds: with `max_depth` up to this, a reservoir keeps whole
     /// paths (every vertex re-evaluated under the current textures); beyond it, the first
     /// vertex with the radiance arriving along its direction, the later vertices' derivatives
@@ -82,6 +85,15 @@ pub mod reservoir {
     /// optimized textures then has reservoirs, not only those a camera sees.
     pub fn whole_paths(max_depth: u32) -> bool {
         max_depth > 1 && max_depth <= MAX_PATH_VERTICES
+    }
+
+    /// Words per reservoir at `max_depth`.
+    pub fn words(max_depth: u32) -> u32 {
+        if whole_paths(max_depth) {
+            WHOLE_PATH_WORDS
+        } else {
+            WORDS
+        }
     }
 
     /// The slot of sign `sign`'s reservoir in header `h`.
@@ -129,6 +141,7 @@ pub mod stat {
 /// (WGSL name, value) of every constant.
 pub const CONSTANTS: &[(&str, u32)] = &[
     ("RESERVOIR_WORDS", reservoir::WORDS),
+    ("RESERVOIR_WORDS_MAX", reservoir::WHOLE_PATH_WORDS),
     ("RES_INFO", reservoir::INFO),
     ("RES_W", reservoir::W),
     ("RES_TRI", reservoir::TRI),

@@ -1,5 +1,5 @@
-// ReSTIR's compact path: what a reservoir keeps of a path in RESERVOIR_WORDS words (layout
-// RES_* from abi.rs, gen/restir), in the compact path encoding (shared/path_encoding.wgsl).
+// ReSTIR's compact path: what a reservoir keeps of a path in res_stride words (layout RES_*
+// from abi.rs, gen/restir: RESERVOIR_WORDS, or RESERVOIR_WORDS_MAX with whole paths), in the compact path encoding (shared/path_encoding.wgsl).
 // A path is its vertices (triangle and fixed-point barycentrics; the camera ray's hit first,
 // up to MAX_PATH_VERTICES), the incident direction at the last one (fixed point, in its
 // shading frame), the radiance arriving along it (RGBE: an emitter's, fixed while textures
@@ -163,4 +163,9 @@ fn with_q_prev(w: array<u32, RES_PATH_WORDS>, q: f32) -> array<u32, RES_PATH_WOR
 // vertices to MAX_PATH_VERTICES (abi.rs, reservoir::whole_paths).
 fn whole_paths() -> bool {
     return scene.max_depth > 1u && scene.max_depth <= MAX_PATH_VERTICES;
+}
+
+// Words per reservoir at the scene's depth (abi.rs, reservoir::words).
+fn reservoir_stride() -> u32 {
+    return select(RESERVOIR_WORDS, RESERVOIR_WORDS_MAX, whole_paths());
 }

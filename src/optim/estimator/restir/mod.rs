@@ -50,7 +50,8 @@ pub const MAX_CAMERAS: usize = abi::MAX_CAMERAS as usize;
 
 /// Bytes of ReSTIR state per observed texel: four reservoir slots (the kept positive and
 /// negative reservoirs and the fresh ones, [`reservoir::WORDS`] words each), a header word
-/// (slots and locks) and the texel's entry in the list of observed texels. Per texel of the
+/// (slots and locks) and the texel's entry in the list of observed texels (with whole paths,
+/// at depth 2 and 3, every texel counts as observed). Per texel of the
 /// textures it also keeps [`STATE_BYTES_PER_32_TEXELS`] per 32 texels (the compaction map),
 /// and per pixel of every camera [`STATE_BYTES_PER_PIXEL`].
 pub const STATE_BYTES_PER_OBSERVED_TEXEL: u64 =
@@ -90,7 +91,10 @@ pub const KIND: Kind = Kind {
     groups: &[CANDIDATES_GROUP, MERGE_GROUP, RESERVOIR_TEST_GROUP],
     passes: &["restir_candidates", "restir_merge"],
     max_cameras: Some(MAX_CAMERAS),
-    memory: |sizes| memory(sizes.texels, sizes.observed, sizes.pixels),
+    memory: |sizes| {
+        let words = reservoir::words(sizes.max_depth);
+        memory(sizes.texels, sizes.observed, sizes.pixels, words)
+    },
     warnings,
     every_texel: abi::reservoir::whole_paths,
     build: |setup| Ok(Box::new(Restir::new(setup)?)),
@@ -144,6 +148,8 @@ pub(crate) struct Restir {
     /// Bytes of the compaction map and the list of observed texels.
     map_bytes: u64,
     grid: (u32, u32),
+    /// Words per reservoir at the scene's depth ([`reservoir::words`]).
+    words: u32,
     options: RestirOptions,
     /// The target smoothing in use ([`RestirOptions::target_smoothing_for`]).
     smoothing: f32,
@@ -243,6 +249,7 @@ impl Restir {
             merge_stats: b.merge_stats,
             targets: b.targets,
             grid: s.grid,
+            words: reservoir::words(s.scene.info.max_depth),
             options: o,
             smoothing,
             history: 0,
@@ -364,12 +371,12 @@ impl Estimator for Restir {
         let mut state = EstimatorState::new(Method::RESTIR);
         state.counters = vec![
             (state_names::HISTORY.into(), self.history),
-            (state_names::WORDS.into(), reservoir::WORDS),
+            (state_names::WORDS.into(), self.words),
         ];
         state.arrays = vec![
             (
                 state_names::RESERVOIRS.into(),
-                kept_reservoirs(&slots, &headers[..n_observed]),
+                kept_reservoirs(&slots, &headers[..n_observed], self.words),
             ),
             (state_names::TARGETS.into(), gpu.read_pod(&self.targets)?),
         ];
@@ -397,21 +404,21 @@ impl Estimator for Restir {
                     .counter(state_names::HISTORY)
                     .ok_or_else(|| missing(state_names::HISTORY))?;
                 let words = r.counter(state_names::WORDS).unwrap_or(0);
-                if words != reservoir::WORDS {
+                if words != self.words {
                     return Err(Error::Invalid(format!(
                         "the saved ReSTIR state has reservoirs of {words} words, this version of \
-                         psrestir keeps {}: start afresh (without --resume)",
-                        reservoir::WORDS
+                         psrestir keeps {} at this path depth: start afresh (without --resume)",
+                        self.words
                     )));
                 }
-                let expected = n_observed * 2 * reservoir::WORDS as usize;
+                let expected = n_observed * 2 * self.words as usize;
                 if reservoirs.len() != expected {
                     return Err(Error::Invalid(format!(
                         "the saved ReSTIR state has {} words where this optimizer keeps {expected} \
                          ({n_observed} observed texels x 2 reservoirs x {} words): it was saved \
                          for other textures or cameras",
                         reservoirs.len(),
-                        reservoir::WORDS
+                        self.words
                     )));
                 }
                 if targets.len() as u64 * 4 != self.targets.size() {
@@ -430,10 +437,10 @@ impl Estimator for Restir {
             None => {
                 // The first iteration forms the target adjoint from its own adjoint alone.
                 self.history = 0;
-                vec![0; n_observed * 2 * reservoir::WORDS as usize]
+                vec![0; n_observed * 2 * self.words as usize]
             }
         };
-        let (slots, headers) = slots_holding(&kept);
+        let (slots, headers) = slots_holding(&kept, self.words);
         for (buffer, words) in self.slots.iter().zip(&slots) {
             if !words.is_empty() {
                 gpu.queue
@@ -461,9 +468,9 @@ impl Estimator for Restir {
 }
 
 /// The kept reservoirs (two per observed texel, sign 0 then sign 1) that `headers` point at
-/// in `slots` (slot k of every observed texel in `slots[k]`).
-fn kept_reservoirs(slots: &[Vec<u32>], headers: &[u32]) -> Vec<u32> {
-    let words = reservoir::WORDS as usize;
+/// in `slots` (slot k of every observed texel in `slots[k]`), `words` words each.
+fn kept_reservoirs(slots: &[Vec<u32>], headers: &[u32], words: u32) -> Vec<u32> {
+    let words = words as usize;
     let mut out = Vec::with_capacity(headers.len() * 2 * words);
     for (i, &h) in headers.iter().enumerate() {
         for sign in 0..2 {
@@ -475,9 +482,9 @@ fn kept_reservoirs(slots: &[Vec<u32>], headers: &[u32]) -> Vec<u32> {
 }
 
 /// Slots and headers that hold `kept` (two reservoirs per observed texel) in slots 0 and 1,
-/// with slots 2 and 3 free.
-fn slots_holding(kept: &[u32]) -> (Vec<Vec<u32>>, Vec<u32>) {
-    let words = reservoir::WORDS as usize;
+/// with slots 2 and 3 free, `words` words each.
+fn slots_holding(kept: &[u32], words: u32) -> (Vec<Vec<u32>>, Vec<u32>) {
+    let words = words as usize;
     let n = kept.len() / (2 * words);
     let mut slots = vec![vec![0; n * words]; reservoir::SLOTS as usize];
     for i in 0..n {
@@ -499,8 +506,8 @@ mod tests {
         let words = reservoir::WORDS as usize;
         // Two observed texels whose reservoirs are numbered by (texel, sign).
         let kept: Vec<u32> = (0..2 * 2 * words as u32).collect();
-        let (mut slots, mut headers) = slots_holding(&kept);
-        assert_eq!(kept_reservoirs(&slots, &headers), kept);
+        let (mut slots, mut headers) = slots_holding(&kept, reservoir::WORDS);
+        assert_eq!(kept_reservoirs(&slots, &headers, reservoir::WORDS), kept);
         // Texel 1's reservoirs move to slots 3 (sign 0) and 2 (sign 1), as a merge that
         // selected its fresh samples leaves them.
         let r = words..2 * words;
@@ -512,7 +519,7 @@ mod tests {
         headers[1] = 3 | (2 << reservoir::HEADER_SLOT_BITS);
         assert_eq!(reservoir::header_slot(headers[1], 0), 3);
         assert_eq!(reservoir::header_slot(headers[1], 1), 2);
-        assert_eq!(kept_reservoirs(&slots, &headers), kept);
+        assert_eq!(kept_reservoirs(&slots, &headers, reservoir::WORDS), kept);
     }
 
     #[test]

@@ -4,7 +4,7 @@
 #import restir/reservoir_slots
 
 // Streaming reservoir updates for parameter-space ReSTIR. A reservoir holds one path in
-// RESERVOIR_WORDS words (the layout, RES_*, is generated from abi.rs): the camera
+// res_stride words (the layout, RES_*, is generated from abi.rs): the camera
 // sample that started it (pixel, camera, technique in RES_INFO), its weight sum (fresh
 // reservoirs) or unbiased contribution weight W (merged), and the path in its compact form
 // (compact_path.wgsl: the path's vertices, the incident direction at the last one in its
@@ -22,7 +22,7 @@
 // estimate unbiased, and a_t is fixed before the gradient samples are drawn.
 // Only texels that a camera observes have reservoirs: observed texel i (the compaction map,
 // src/optim/estimator/restir/mod.rs) owns RESERVOIR_SLOTS slots, slot k at word
-// i * RESERVOIR_WORDS of buffer `slots<k>`, and header word i, which says which slot holds
+// i * res_stride of buffer `slots<k>`, and header word i, which says which slot holds
 // its positive (sign 0) and its negative (sign 1) reservoir: two distinct slots, so two are
 // free for the next iteration's fresh candidates (fresh_slot). The merge selects in place
 // and rewrites the header: a kept sample is never copied.
@@ -138,7 +138,7 @@ fn race_key(w: f32, u: f32) -> u32 {
 // the race (only an offer whose weight was added can win). Returns false if the addition ran
 // out of tries (the caller counts it as lost).
 fn reservoir_enter(k: u32, i: u32, w: f32, u: f32) -> bool {
-    let base = i * RESERVOIR_WORDS;
+    let base = i * res_stride;
     var old = slot_load(k, base + RES_W);
     for (var n = 0u; n < RESERVOIR_CAS_BOUND; n++) {
         if slot_exchange(k, base + RES_W, old, bitcast<u32>(bitcast<f32>(old) + w)) {
@@ -153,14 +153,14 @@ fn reservoir_enter(k: u32, i: u32, w: f32, u: f32) -> bool {
 // Phase 1 of the same offer (same w and u): if its key won, it takes the reservoir (its info
 // word for the key) and writes its path.
 fn reservoir_claim(k: u32, i: u32, w: f32, u: f32, c: Candidate) {
-    let base = i * RESERVOIR_WORDS;
+    let base = i * res_stride;
     let key = race_key(w, u);
     for (var n = 0u; n < RESERVOIR_CAS_BOUND; n++) {
         if slot_load(k, base + RES_INFO) != key {
             return;
         }
         if slot_exchange(k, base + RES_INFO, key, c.info) {
-            for (var j = 0u; j < RES_PATH_WORDS; j++) {
+            for (var j = 0u; j < res_stride - RES_TRI; j++) {
                 slot_store(k, base + RES_TRI + j, c.words[j]);
             }
             return;

@@ -5,6 +5,10 @@
 #import gen/abi
 #import gen/restir
 
+// Words per reservoir in this run: RESERVOIR_WORDS, or RESERVOIR_WORDS_MAX with whole paths
+// (the candidate and merge passes set it from the scene's depth, compact_path.wgsl).
+var<private> res_stride: u32 = RESERVOIR_WORDS;
+
 // The slot of sign s's reservoir in header h.
 fn header_slot(h: u32, s: u32) -> u32 {
     return (h >> (HEADER_SLOT_BITS * s)) & HEADER_SLOT_MASK;

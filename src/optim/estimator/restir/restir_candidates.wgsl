@@ -263,6 +263,7 @@ fn arrival_offer(a: u32, k: u32) -> Offer {
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {
+    res_stride = reservoir_stride();
     let linear = id.x + id.y * cp.stride;
     // This iteration's target adjoint of the pixel, for every pixel (the merge reads it for
     // kept paths from pixels that draw nothing now).

@@ -123,27 +123,27 @@ struct Stored {
     dp: DecodedPath,
 }
 
-// The RESERVOIR_WORDS words from word b of slot k's buffer, read in one switch.
-fn slot_words(k: u32, b: u32) -> array<u32, RESERVOIR_WORDS> {
-    var w: array<u32, RESERVOIR_WORDS>;
+// The res_stride words from word b of slot k's buffer (the rest 0), read in one switch.
+fn slot_words(k: u32, b: u32) -> array<u32, RESERVOIR_WORDS_MAX> {
+    var w: array<u32, RESERVOIR_WORDS_MAX>;
     switch k {
         case 0u: {
-            for (var j = 0u; j < RESERVOIR_WORDS; j++) {
+            for (var j = 0u; j < res_stride; j++) {
                 w[j] = slots0[b + j];
             }
         }
         case 1u: {
-            for (var j = 0u; j < RESERVOIR_WORDS; j++) {
+            for (var j = 0u; j < res_stride; j++) {
                 w[j] = slots1[b + j];
             }
         }
         case 2u: {
-            for (var j = 0u; j < RESERVOIR_WORDS; j++) {
+            for (var j = 0u; j < res_stride; j++) {
                 w[j] = slots2[b + j];
             }
         }
         default: {
-            for (var j = 0u; j < RESERVOIR_WORDS; j++) {
+            for (var j = 0u; j < res_stride; j++) {
                 w[j] = slots3[b + j];
             }
         }
@@ -153,7 +153,7 @@ fn slot_words(k: u32, b: u32) -> array<u32, RESERVOIR_WORDS> {
 
 // The reservoir in slot k of observed texel i.
 fn load(k: u32, i: u32) -> Stored {
-    let w = slot_words(k, i * RESERVOIR_WORDS);
+    let w = slot_words(k, i * res_stride);
     var pw: array<u32, RES_PATH_WORDS>;
     for (var j = 0u; j < RES_PATH_WORDS; j++) {
         pw[j] = w[RES_TRI + j];
@@ -165,11 +165,11 @@ fn load(k: u32, i: u32) -> Stored {
 }
 
 fn slot_w(k: u32, i: u32) -> f32 {
-    return bitcast<f32>(slot_word(k, i * RESERVOIR_WORDS + RES_W));
+    return bitcast<f32>(slot_word(k, i * res_stride + RES_W));
 }
 
 fn set_w(k: u32, i: u32, w: f32) {
-    set_slot_word(k, i * RESERVOIR_WORDS + RES_W, bitcast<u32>(w));
+    set_slot_word(k, i * res_stride + RES_W, bitcast<u32>(w));
 }
 
 // The weight sum of the fresh reservoir in slot k of texel i. If the candidate pass's second
@@ -177,7 +177,7 @@ fn set_w(k: u32, i: u32, w: f32) {
 // phases computed a key differently), it is emptied, counted as dropped, and 0.
 fn fresh_weight(k: u32, i: u32) -> f32 {
     let w = slot_w(k, i);
-    let info = i * RESERVOIR_WORDS + RES_INFO;
+    let info = i * res_stride + RES_INFO;
     if w != 0.0 && (slot_word(k, info) & INFO_KEY_BIT) != 0u {
         dropped += 1u;
         set_w(k, i, 0.0);
@@ -190,7 +190,7 @@ fn fresh_weight(k: u32, i: u32) -> f32 {
 // Store q as the target under the previous state of the reservoir in slot k of texel i (the
 // high bytes of its direction words).
 fn set_q_prev(k: u32, i: u32, q: f32) {
-    let b = i * RESERVOIR_WORDS;
+    let b = i * res_stride;
     let h = bf16_pack(q);
     let low = (1u << PATH_OCT_BITS) - 1u;
     set_slot_word(k, b + RES_WI_X, (slot_word(k, b + RES_WI_X) & low) | ((h & 0xffu) << PATH_OCT_BITS));
@@ -281,6 +281,7 @@ fn take_later(j: u32) -> f32 {
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {
+    res_stride = reservoir_stride();
     let i = id.x + id.y * mp.stride;
     if i >= mp.n_observed {
         return;
@@ -446,7 +447,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     for (var s = 0u; s < 2u; s++) {
         let k = fresh_slot(new_h, s);
         set_w(k, i, 0.0);
-        set_slot_word(k, i * RESERVOIR_WORDS + RES_INFO, 0u);
+        set_slot_word(k, i * res_stride + RES_INFO, 0u);
     }
     for (var c = 0u; c < ch; c++) {
         grad[p.offset + local * ch + c] = g[c] + take_later(p.offset + local * ch + c);

@@ -10,9 +10,14 @@ use crate::render::WORKGROUP;
 /// The buffers ReSTIR allocates for `n_texels` texels of which `n_observed` are observed,
 /// and `n_pixels` pixels (all cameras'), by label, size in bytes and what the size scales
 /// with. Slot k of every observed texel lies in buffer `reservoir slots<k>`, so that each
-/// binding holds a quarter of the reservoirs.
-pub(super) fn memory(n_texels: u64, n_observed: u64, n_pixels: u64) -> Vec<(String, u64, Scale)> {
-    let slot_bytes = n_observed * reservoir::WORDS as u64 * 4;
+/// binding holds a quarter of the reservoirs; `words` per reservoir.
+pub(super) fn memory(
+    n_texels: u64,
+    n_observed: u64,
+    n_pixels: u64,
+    words: u32,
+) -> Vec<(String, u64, Scale)> {
+    let slot_bytes = n_observed * words as u64 * 4;
     let mut out: Vec<(String, u64, Scale)> = (0..reservoir::SLOTS)
         .map(|k| {
             (
@@ -106,7 +111,8 @@ impl Buffers {
         let (map, list) = compaction_map(observed);
         let n_observed = list.len() as u64;
         let n_all_pixels = s.adjoint[0].size() / 16;
-        let sizes = memory(s.scene.n_texels as u64, n_observed, n_all_pixels);
+        let words = reservoir::words(s.scene.info.max_depth);
+        let sizes = memory(s.scene.n_texels as u64, n_observed, n_all_pixels, words);
         let size = |label: &str| sizes.iter().find(|b| b.0 == label).map_or(0, |b| b.1);
         // wgpu binds no empty buffer: at least one word each.
         let slots: Vec<wgpu::Buffer> = (0..reservoir::SLOTS)
