@@ -73,11 +73,11 @@ impl VarianceStepOptions {
 
 /// The factor that turns the moving variance of a gradient whose successive estimates have
 /// correlation `rho` (lag 1, decaying geometrically: rho^k at lag k) into the variance of one
-/// estimate, for moments of decay `beta`. The moving moments give E[v - m^2] = s^2 - Var[m],
-/// and the moving mean m of such a series has Var[m] = s^2 (1 - beta) (1 + beta rho) /
-/// ((1 + beta) (1 - beta rho)): close to s^2 itself when rho is near 1, so that the spread
-/// the moments see is a fraction of the estimate's. The step divides by s, the spread of the
-/// estimate it takes. 1 at rho = 0 would ignore the (1 - beta) / (1 + beta) that the mean
+/// estimate, for moments of decay `beta`. The moving moments give `E[v - m^2] = s^2 - Var[m]`,
+/// and the moving mean `m` of such a series has
+/// `Var[m] = s^2 (1 - beta) (1 + beta rho) / ((1 + beta) (1 - beta rho))`: close to `s^2`
+/// itself when rho is near 1, so that the spread the moments see is a fraction of the
+/// estimate's. The step divides by s, the spread of the estimate it takes. 1 at rho = 0 would ignore the (1 - beta) / (1 + beta) that the mean
 /// takes off even for independent estimates; that part is left as it was (the step's
 /// threshold was chosen with it), so the factor is the ratio of the two.
 pub fn variance_scale(rho: f32, beta: f32) -> f32 {

@@ -5,7 +5,7 @@
 /// ReSTIR's reservoirs in their compact form: word offsets within a reservoir, the packing
 /// of its words, a texel's slots and header (WGSL: `RES_*`, `INFO_*`, `RESERVOIR_WORDS`,
 /// `RESERVOIR_SLOTS`, `HEADER_*`). A reservoir stores its path as its vertices (triangle
-/// and barycentrics of each, up to [`MAX_PATH_VERTICES`]: the camera ray's hit first), the
+/// and barycentrics of each, up to `MAX_PATH_VERTICES`: the camera ray's hit first), the
 /// incident direction at the last one in its shading frame, the radiance arriving along it,
 /// and which vertex the texel's derivative is taken at; everything else the BRDFs need is
 /// rebuilt from the scene
