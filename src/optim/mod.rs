@@ -180,20 +180,15 @@ impl Optimizer {
         let (w, h) = (settings.width, settings.height);
         check_inputs(&settings, targets)?;
         let camera_infos = camera_infos(scene, &settings)?;
-        // The textures and the scene first: which texels the cameras observe decides what
-        // ReSTIR allocates.
-        let max_depth = scene.max_depth.get();
-        memory_plan(&set, &settings, targets.len(), 0, max_depth).check(gpu)?;
+        // Textures and scene first: the texels the paths reach decide what ReSTIR allocates.
+        let depth = scene.max_depth.get();
+        memory_plan(&set, &settings, targets.len(), 0, depth).check(gpu)?;
         let params = ParamBuffers::new(gpu, &set);
         let renderer = Renderer::with_param_buffers(gpu, scene, &set, &params)?;
         let grid = renderer.tile_grid(w, h);
         let observed = observed::observed_mask(gpu, &renderer.scene, &camera_infos, grid)?;
-        let mut n_observed = observed.0.iter().filter(|&&o| o).count() as u64;
-        if estimator::every_texel(settings.method, scene.max_depth.get()) {
-            // Whole paths reach texels no camera sees: ReSTIR keeps reservoirs for every texel.
-            n_observed = observed.0.len() as u64;
-        }
-        let plan = memory_plan(&set, &settings, targets.len(), n_observed, max_depth);
+        let n_state = state_texels(&observed.0, settings.method, depth);
+        let plan = memory_plan(&set, &settings, targets.len(), n_state, depth);
         plan.check(gpu)?;
         log::info!("{}", plan.summary());
         let n_cams = targets.len() as u32;
@@ -617,5 +612,15 @@ impl Optimizer {
             |_| {},
         )?;
         Ok(out.image)
+    }
+}
+
+/// The texels `method` keeps state for: the observed ones, or every texel where paths of
+/// `max_depth` vertices reach texels no camera sees ([`estimator::every_texel`]).
+fn state_texels(observed: &[bool], method: Method, max_depth: u32) -> u64 {
+    if estimator::every_texel(method, max_depth) {
+        observed.len() as u64
+    } else {
+        observed.iter().filter(|&&o| o).count() as u64
     }
 }

@@ -369,6 +369,55 @@ fn wallpaper(u: f32, v: f32) -> [f32; 3] {
     }
 }
 
+/// The lamp of `atelier` (0.3 wide, 0.2 under the ceiling at height `h`, facing down) in a
+/// shade of material `dark` 0.5 deep: its light leaves in a cone that reaches the floor and
+/// never the back wall. The nodes of the shade's sides and top, then the lamp's.
+fn shaded_lamp(b: &mut GltfBuilder, h: f32, dark: usize) -> Vec<usize> {
+    let mut nodes = Vec::new();
+    let (lz, ly, half) = (0.45f32, h - 0.2, 0.15f32);
+    let depth = 0.5f32;
+    for (name, c, e) in [
+        (
+            "shade_l",
+            [-half - 0.01, ly - depth / 2.0, lz],
+            [0.01, depth / 2.0, half + 0.02],
+        ),
+        (
+            "shade_r",
+            [half + 0.01, ly - depth / 2.0, lz],
+            [0.01, depth / 2.0, half + 0.02],
+        ),
+        (
+            "shade_b",
+            [0.0, ly - depth / 2.0, lz - half - 0.01],
+            [half + 0.02, depth / 2.0, 0.01],
+        ),
+        (
+            "shade_f",
+            [0.0, ly - depth / 2.0, lz + half + 0.01],
+            [half + 0.02, depth / 2.0, 0.01],
+        ),
+        (
+            "shade_top",
+            [0.0, ly + 0.02, lz],
+            [half + 0.02, 0.01, half + 0.02],
+        ),
+    ] {
+        let mesh = b.add_mesh(name, &box_triangles(c, e), None, None, None, Some(dark));
+        nodes.push(b.add_node(json!({"name": name, "mesh": mesh})));
+    }
+    nodes.push(area_light(
+        b,
+        "lamp",
+        [0.0, ly, lz],
+        [0.0, 0.0, lz],
+        2.0 * half,
+        [1.0, 0.93, 0.85],
+        100.0,
+    ));
+    nodes
+}
+
 /// A room whose floor and back wall are both recovered, and whose wall is lit only by the
 /// floor's bounce: a lamp under the ceiling near the open front shines down through a deep
 /// shade, which keeps its light off the walls, onto the planked floor; the light the floor
@@ -437,49 +486,7 @@ pub fn write_atelier(dir: &Path) -> Result<()> {
     );
     // The shell's ceiling and side walls (its back wall and floor are the textured ones).
     nodes.extend_from_slice(&sides[2..]);
-    // The lamp (0.3 wide, 0.2 under the ceiling, facing down) in a shade 0.5 deep: its light
-    // leaves in a cone that reaches the floor and never the back wall.
-    let (lz, ly, half) = (0.45f32, h - 0.2, 0.15f32);
-    let depth = 0.5f32;
-    for (name, c, e) in [
-        (
-            "shade_l",
-            [-half - 0.01, ly - depth / 2.0, lz],
-            [0.01, depth / 2.0, half + 0.02],
-        ),
-        (
-            "shade_r",
-            [half + 0.01, ly - depth / 2.0, lz],
-            [0.01, depth / 2.0, half + 0.02],
-        ),
-        (
-            "shade_b",
-            [0.0, ly - depth / 2.0, lz - half - 0.01],
-            [half + 0.02, depth / 2.0, 0.01],
-        ),
-        (
-            "shade_f",
-            [0.0, ly - depth / 2.0, lz + half + 0.01],
-            [half + 0.02, depth / 2.0, 0.01],
-        ),
-        (
-            "shade_top",
-            [0.0, ly + 0.02, lz],
-            [half + 0.02, 0.01, half + 0.02],
-        ),
-    ] {
-        let mesh = b.add_mesh(name, &box_triangles(c, e), None, None, None, Some(dark));
-        nodes.push(b.add_node(json!({"name": name, "mesh": mesh})));
-    }
-    nodes.push(area_light(
-        &mut b,
-        "lamp",
-        [0.0, ly, lz],
-        [0.0, 0.0, lz],
-        2.0 * half,
-        [1.0, 0.93, 0.85],
-        100.0,
-    ));
+    nodes.extend(shaded_lamp(&mut b, h, dark));
     nodes.push(camera(
         &mut b,
         "main",
