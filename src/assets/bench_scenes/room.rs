@@ -37,6 +37,15 @@ fn panel(
     b.add_node(json!({"name": name, "mesh": mesh}))
 }
 
+/// A dielectric material of base color `c` and roughness `r`, without textures.
+fn plain_material(b: &mut GltfBuilder, name: &str, c: [f32; 3], r: f64) -> usize {
+    b.add_material(json!({
+        "name": name,
+        "pbrMetallicRoughness": {"baseColorFactor": [c[0], c[1], c[2], 1.0],
+            "metallicFactor": 0.0, "roughnessFactor": r}
+    }))
+}
+
 /// The materials of a room's walls.
 struct Shell {
     back: usize,
@@ -129,13 +138,7 @@ pub fn write_room(dir: &Path) -> Result<()> {
         "pbrMetallicRoughness": {"baseColorTexture": {"index": tex},
             "metallicFactor": 0.0, "roughnessFactor": 0.6}
     }));
-    let plain = |b: &mut GltfBuilder, name: &str, c: [f32; 3]| {
-        b.add_material(json!({
-            "name": name,
-            "pbrMetallicRoughness": {"baseColorFactor": [c[0], c[1], c[2], 1.0],
-                "metallicFactor": 0.0, "roughnessFactor": 0.8}
-        }))
-    };
+    let plain = |b: &mut GltfBuilder, name: &str, c: [f32; 3]| plain_material(b, name, c, 0.8);
     let white = plain(&mut b, "white", [0.75, 0.75, 0.72]);
     let red = plain(&mut b, "red", [0.7, 0.15, 0.12]);
     let green = plain(&mut b, "green", [0.15, 0.55, 0.2]);
@@ -248,13 +251,7 @@ pub fn write_gallery(dir: &Path) -> Result<()> {
         "pbrMetallicRoughness": {"baseColorTexture": {"index": tex},
             "metallicFactor": 0.0, "roughnessFactor": 0.7}
     }));
-    let plain = |b: &mut GltfBuilder, name: &str, c: [f32; 3]| {
-        b.add_material(json!({
-            "name": name,
-            "pbrMetallicRoughness": {"baseColorFactor": [c[0], c[1], c[2], 1.0],
-                "metallicFactor": 0.0, "roughnessFactor": 0.8}
-        }))
-    };
+    let plain = |b: &mut GltfBuilder, name: &str, c: [f32; 3]| plain_material(b, name, c, 0.8);
     let white = plain(&mut b, "white", [0.8, 0.8, 0.78]);
     let wall = plain(&mut b, "wall", [0.6, 0.62, 0.66]);
     let wood = plain(&mut b, "wood", [0.45, 0.3, 0.18]);
@@ -444,13 +441,7 @@ pub fn write_atelier(dir: &Path) -> Result<()> {
     };
     let floor = textured(&mut b, "planks", planks, 0.6)?;
     let wall = textured(&mut b, "wallpaper", wallpaper, 0.8)?;
-    let plain = |b: &mut GltfBuilder, name: &str, c: [f32; 3]| {
-        b.add_material(json!({
-            "name": name,
-            "pbrMetallicRoughness": {"baseColorFactor": [c[0], c[1], c[2], 1.0],
-                "metallicFactor": 0.0, "roughnessFactor": 0.9}
-        }))
-    };
+    let plain = |b: &mut GltfBuilder, name: &str, c: [f32; 3]| plain_material(b, name, c, 0.9);
     let white = plain(&mut b, "white", [0.75, 0.75, 0.73]);
     let dark = plain(&mut b, "shade", [0.05, 0.05, 0.05]);
     let (w, h) = (1.0f32, 2.0f32);
