@@ -635,6 +635,68 @@ fn the_merge_pass_traces_no_ray() {
     assert!(d.evaluations > 0, "{d:?}");
 }
 
+/// The claim log keeps the offers that led their races when they entered them, and the claim
+/// pass lets the winners write their paths without tracing again; where the log is full the
+/// candidate pass traces the samples a second time and the winners write theirs. Either way
+/// the same offers win and write the same words: a log of one entry (full in every
+/// iteration) gives the gradients of the log that holds every leader, iteration after
+/// iteration with reuse, at depth 1 and with whole paths at depth 3.
+#[test]
+fn a_full_claim_log_writes_the_same_winners() {
+    let Some(gpu) = gpu() else { return };
+    for scene in [shadow_scene(), corner_scene(3)] {
+        let depth = scene.max_depth.get();
+        let run = |claim_entries: Option<u32>| {
+            let opts = RestirOptions {
+                claim_entries,
+                ..Default::default()
+            };
+            let o = (
+                opts,
+                &[0.3, 0.5, 0.7, 0.4][..],
+                &[0.8, 0.2, 0.4, 0.9][..],
+                7,
+            );
+            let slots = [Slot::Roughness];
+            let mut re = optimizer_on(
+                &gpu,
+                scene.clone(),
+                &slots,
+                Filter::Bilinear,
+                Method::RESTIR,
+                o,
+            );
+            let grads: Vec<Vec<f32>> = (0..6)
+                .map(|it| re.estimate_gradient(it).unwrap().0)
+                .collect();
+            (
+                grads,
+                MergeDiagnostics::of(&re).unwrap().unwrap(),
+                re.faults().unwrap(),
+            )
+        };
+        let (full, d_full, f_full) = run(None);
+        let (tiny, d_tiny, f_tiny) = run(Some(1));
+        eprintln!("depth {depth}: {d_full:?} / {d_tiny:?}");
+        assert!(d_full.logged > 0 && d_full.overflowed == 0, "{d_full:?}");
+        assert!(d_tiny.overflowed > 0 && d_tiny.logged == 6, "{d_tiny:?}");
+        assert_eq!(f_full, Default::default());
+        assert_eq!(f_tiny, Default::default());
+        assert!(full.iter().any(|g| g.iter().any(|x| *x != 0.0)));
+        for (it, (a, b)) in full.iter().zip(&tiny).enumerate() {
+            // The same reservoirs; the weight sums add the same offers (in an order the
+            // scheduling picks, the same on lavapipe): equal to float rounding.
+            for (i, (x, y)) in a.iter().zip(b).enumerate() {
+                assert!(
+                    (x - y).abs() <= 1e-5 * x.abs().max(1e-6),
+                    "depth {depth}, iteration {it}, parameter {i}: {x} with every leader logged, \
+                     {y} with a full log"
+                );
+            }
+        }
+    }
+}
+
 /// A stored path carries the material inputs that no optimized texture replaces
 /// (shaders/shared/surface.wgsl, fixed_pack), packed by which slots are optimized; the merge
 /// evaluates kept paths from them. For every combination of optimized slots on a material

@@ -16,7 +16,7 @@ use std::sync::{Arc, Mutex};
 use wgpu::util::DeviceExt;
 
 /// Storage buffers that the largest pass binds at once (scene group plus pass group).
-pub const REQUIRED_STORAGE_BUFFERS: u32 = 21;
+pub const REQUIRED_STORAGE_BUFFERS: u32 = 22;
 
 const INSTALL_HINT: &str = "psrestir needs a Vulkan driver (or Metal/DX12 on other systems). \
 On Debian/Ubuntu without a GPU, install the CPU driver lavapipe: \
@@ -588,6 +588,31 @@ pub fn encode_timed_pass(
         pass.set_bind_group(k as u32, *g, &[]);
     }
     pass.dispatch_workgroups(grid.0, grid.1, 1);
+}
+
+/// [`encode_timed_pass`] with its workgroup counts read from `args` at byte `offset` (x, y, z
+/// as u32; a zero count dispatches nothing).
+pub fn encode_timed_pass_indirect(
+    enc: &mut wgpu::CommandEncoder,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    groups: &[&wgpu::BindGroup],
+    args: (&wgpu::Buffer, u64),
+    timing: Option<(&wgpu::QuerySet, u32)>,
+) {
+    let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+        label: Some(label),
+        timestamp_writes: timing.map(|(q, k)| wgpu::ComputePassTimestampWrites {
+            query_set: q,
+            beginning_of_pass_write_index: Some(2 * k),
+            end_of_pass_write_index: Some(2 * k + 1),
+        }),
+    });
+    pass.set_pipeline(pipeline);
+    for (k, g) in groups.iter().enumerate() {
+        pass.set_bind_group(k as u32, *g, &[]);
+    }
+    pass.dispatch_workgroups_indirect(args.0, args.1);
 }
 
 #[cfg(test)]

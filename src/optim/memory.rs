@@ -123,10 +123,12 @@ pub fn memory_plan(
     }
     buffers.extend(estimator::memory(
         settings.method,
-        n_params,
+        &settings.estimator_options,
+        set,
         n_texels,
         n_observed,
         all_pixels,
+        settings.gradient_spp,
         max_depth,
     ));
     if settings.moment_filter.enabled() {

@@ -160,12 +160,13 @@ fn camera_infos(
 }
 
 /// A timer with a slot for every pass of an iteration: primal, control variate and loss per
-/// camera, the estimator's passes (at most two per camera), smoothness, multiscale and the
-/// step (two dispatches with the moment filter) per texture, and the filter's levels.
+/// camera, the estimator's passes (at most three per camera and two more), smoothness,
+/// multiscale and the step (two dispatches with the moment filter) per texture, and the
+/// filter's levels.
 fn pass_timer(gpu: &Gpu, n_cams: u32, n_textures: usize, step: &dyn step::Step) -> PassTimer {
     let filter_dispatches = step.filter().map_or(0, |f| f.dispatches());
     let per_texture = 4 * n_textures as u32;
-    PassTimer::new(gpu, 6 * n_cams + 2 + per_texture + filter_dispatches)
+    PassTimer::new(gpu, 6 * n_cams + 4 + per_texture + filter_dispatches)
 }
 
 impl Optimizer {

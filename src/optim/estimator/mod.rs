@@ -73,8 +73,9 @@ pub struct Kind {
     pub passes: &'static [&'static str],
     /// The most cameras it can use in one optimization (None: no limit of its own).
     pub max_cameras: Option<usize>,
-    /// The buffers it allocates, by label, size in bytes and what the size scales with.
-    pub memory: fn(&Sizes) -> Vec<(String, u64, Scale)>,
+    /// The buffers it allocates with its options, by label, size in bytes and what the size
+    /// scales with.
+    pub memory: fn(&Sizes, &EstimatorOptions) -> Vec<(String, u64, Scale)>,
     /// What the user should know before a run with it under `conditions` (logged).
     pub warnings: fn(&Conditions) -> Vec<String>,
     /// Whether, with paths of this many vertices, it keeps state for every texel rather
@@ -96,6 +97,30 @@ pub struct Sizes {
     pub pixels: u64,
     /// Vertices of a camera path.
     pub max_depth: u32,
+    /// Gradient samples per iteration (pixels of all cameras times the gradient spp).
+    pub gradient_samples: u64,
+    /// The most optimized textures one material has.
+    pub slots_per_material: u64,
+    /// The most texels one lookup of an optimized texture touches (1 nearest, 4 bilinear).
+    pub footprint: u64,
+}
+
+impl Sizes {
+    /// `slots_per_material` and `footprint` of the textures in `set`.
+    pub fn lookups(set: &crate::render::params::ParamSet) -> (u64, u64) {
+        let t = &set.textures;
+        let slots = t
+            .iter()
+            .map(|a| t.iter().filter(|b| b.material == a.material).count() as u64)
+            .max()
+            .unwrap_or(1);
+        let footprint = if t.iter().any(|a| a.filter == crate::vocab::Filter::Bilinear) {
+            4
+        } else {
+            1
+        };
+        (slots, footprint)
+    }
 }
 
 /// What a run's warnings depend on.
@@ -106,7 +131,7 @@ pub struct Conditions {
 }
 
 /// No buffers of its own.
-pub fn no_memory(_: &Sizes) -> Vec<(String, u64, Scale)> {
+pub fn no_memory(_: &Sizes, _: &EstimatorOptions) -> Vec<(String, u64, Scale)> {
     Vec::new()
 }
 
@@ -363,24 +388,33 @@ pub(crate) fn max_cameras(method: Method) -> Option<usize> {
     method.kind().max_cameras
 }
 
-/// The buffers `method` allocates for `n_params` parameter scalars in `n_texels` texels of
-/// which `n_observed` are observed, and `n_pixels` pixels (all cameras'), by label, size in
-/// bytes and what the size scales with.
+/// The buffers `method` allocates with `options` for the textures of `set` (`n_texels`
+/// texels of which `n_observed` are observed), `n_pixels` pixels (all cameras') and
+/// `gradient_spp` gradient samples per pixel, by label, size in bytes and what the size
+/// scales with.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn memory(
     method: Method,
-    n_params: u64,
+    options: &EstimatorOptions,
+    set: &crate::render::params::ParamSet,
     n_texels: u64,
     n_observed: u64,
     n_pixels: u64,
+    gradient_spp: u32,
     max_depth: u32,
 ) -> Vec<(String, u64, Scale)> {
-    (method.kind().memory)(&Sizes {
-        params: n_params,
+    let (slots_per_material, footprint) = Sizes::lookups(set);
+    let sizes = Sizes {
+        params: set.values.len() as u64,
         texels: n_texels,
         observed: n_observed,
         pixels: n_pixels,
         max_depth,
-    })
+        gradient_samples: n_pixels * u64::from(gradient_spp),
+        slots_per_material,
+        footprint,
+    };
+    (method.kind().memory)(&sizes, options)
 }
 
 #[cfg(test)]

@@ -43,7 +43,7 @@ pub const KIND: Kind = Kind {
     groups: &[GRADIENT_GROUP, COMBINE_GROUP],
     passes: &["recursive_gradient", "recursive_combine"],
     max_cameras: None,
-    memory: |sizes| memory(sizes.params),
+    memory: |sizes, _| memory(sizes.params),
     warnings: super::no_warnings,
     every_texel: super::observed_only,
     build: |setup| Ok(Box::new(Recursive::new(setup)?)),

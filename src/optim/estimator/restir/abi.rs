@@ -102,6 +102,43 @@ pub mod reservoir {
     }
 }
 
+/// The claim log (`claims`, `restir_claim.wgsl`): the offers that led their reservoir's race
+/// when they entered it, written by the candidate pass so that the winners' paths are written
+/// without tracing the samples again. A header of [`HEADER_WORDS`](claim::HEADER_WORDS) words, then entries of
+/// `reservoir words + 1` words each (WGSL `CLAIM_*`).
+pub mod claim {
+    /// Header: entries appended this iteration (may exceed the capacity: then the log
+    /// overflowed and the retracing claim runs).
+    pub const COUNT: u32 = 0;
+    /// Header: the claim pass's indirect dispatch (x, y, z): x = workgroups of its entries.
+    pub const ARGS: u32 = 1;
+    /// Header: the retracing claim's indirect dispatch (x, y, z) per camera, 0 unless the
+    /// log overflowed.
+    pub const FALLBACK_ARGS: u32 = 4;
+    /// Header: words per entry (written by the host).
+    pub const STRIDE: u32 = 7;
+    /// Header words.
+    pub const HEADER_WORDS: u32 = 8;
+    /// Entry: the reservoir (observed texel << 2 | slot).
+    pub const ADDR: u32 = 0;
+    /// Entry: its race key when it entered (complemented, [`super::reservoir::KEY_BIT`] set).
+    pub const KEY: u32 = 1;
+    /// Entry: the candidate's info word.
+    pub const INFO: u32 = 2;
+    /// Entry: the candidate's path words (a reservoir's words from TRI on).
+    pub const PATH: u32 = 3;
+    /// Workgroup size of the claim pass.
+    pub const WORKGROUP: u32 = 64;
+    /// Entries a log can hold (one 1-D indirect dispatch of the claim pass).
+    pub const MAX_ENTRIES: u32 = 65535 * WORKGROUP;
+
+    /// Words per entry with reservoirs of `words` words: an address, a key, and the reservoir's
+    /// words but its weight.
+    pub fn stride(words: u32) -> u32 {
+        words + 1
+    }
+}
+
 /// Cameras a ReSTIR optimizer can use (the camera index has three bits in a reservoir).
 pub const MAX_CAMERAS: u32 = reservoir::CAMERA_MASK + 1;
 
@@ -128,6 +165,13 @@ pub mod stat {
     /// `restir_candidates.wgsl`: candidates for texels outside the compaction map (texels
     /// that the observed-texel pass's strata missed), dropped.
     pub const CANDIDATE_UNMAPPED: u32 = 3;
+    /// `restir_candidates.wgsl`: offers entered in the claim log.
+    pub const CANDIDATE_LOGGED: u32 = 4;
+    /// `restir_candidates.wgsl`: offers the full claim log could not take (the retracing
+    /// claim then writes the winners' paths).
+    pub const CANDIDATE_OVERFLOWED: u32 = 5;
+    /// Slots of the candidate pass's statistics.
+    pub const CANDIDATE_SLOTS: u32 = 6;
     /// `restir_merge.wgsl`: kept paths evaluated.
     pub const MERGE_EVALUATIONS: u32 = 0;
     /// `restir_merge.wgsl`: non-finite values dropped.
@@ -175,6 +219,19 @@ pub const CONSTANTS: &[(&str, u32)] = &[
     ("CANDIDATE_STAT_LOST", stat::CANDIDATE_LOST),
     ("CANDIDATE_STAT_DROPPED", stat::CANDIDATE_DROPPED),
     ("CANDIDATE_STAT_UNMAPPED", stat::CANDIDATE_UNMAPPED),
+    ("CANDIDATE_STAT_LOGGED", stat::CANDIDATE_LOGGED),
+    ("CANDIDATE_STAT_OVERFLOWED", stat::CANDIDATE_OVERFLOWED),
+    ("CANDIDATE_STAT_SLOTS", stat::CANDIDATE_SLOTS),
+    ("CLAIM_COUNT", claim::COUNT),
+    ("CLAIM_ARGS", claim::ARGS),
+    ("CLAIM_FALLBACK_ARGS", claim::FALLBACK_ARGS),
+    ("CLAIM_STRIDE", claim::STRIDE),
+    ("CLAIM_HEADER_WORDS", claim::HEADER_WORDS),
+    ("CLAIM_ADDR", claim::ADDR),
+    ("CLAIM_KEY", claim::KEY),
+    ("CLAIM_INFO", claim::INFO),
+    ("CLAIM_PATH", claim::PATH),
+    ("CLAIM_WORKGROUP", claim::WORKGROUP),
     ("MERGE_STAT_EVALUATIONS", stat::MERGE_EVALUATIONS),
     ("MERGE_STAT_DROPPED", stat::MERGE_DROPPED),
     ("MERGE_STAT_VERIFIED", stat::MERGE_VERIFIED),
@@ -194,4 +251,7 @@ const _: () = {
     // Info words never have the key bit.
     assert!(reservoir::TECH_SHIFT + 1 < 32);
     assert!(reservoir::PATH_WORDS == 10 && reservoir::MAX_PATH_VERTICES == 3);
+    // An entry holds the reservoir's words from TRI on after ADDR, KEY and INFO.
+    assert!(claim::PATH == 3 && reservoir::TRI == 2);
+    assert!(claim::FALLBACK_ARGS + 3 <= claim::STRIDE && claim::STRIDE < claim::HEADER_WORDS);
 };

@@ -34,6 +34,12 @@ pub struct MergeDiagnostics {
     /// Candidates for texels outside the compaction map (texels that the observed-texel
     /// pass's strata missed), dropped by the candidate pass.
     pub unmapped: u64,
+    /// Offers entered in the claim log (the leaders of their reservoirs' races when they
+    /// entered them).
+    pub logged: u64,
+    /// Offers the full claim log could not take: each iteration where one did traced its
+    /// samples a second time.
+    pub overflowed: u64,
 }
 
 impl MergeDiagnostics {
@@ -41,6 +47,8 @@ impl MergeDiagnostics {
     const VERIFIED: &'static str = "merge verified";
     const MAX_RELATIVE_ERROR: &'static str = "merge max relative error";
     pub(super) const UNMAPPED: &'static str = "candidates unmapped";
+    pub(super) const LOGGED: &'static str = "claims logged";
+    pub(super) const OVERFLOWED: &'static str = "claims overflowed";
 
     pub(super) fn named(&self) -> Diagnostics {
         vec![
@@ -48,6 +56,8 @@ impl MergeDiagnostics {
             (Self::VERIFIED, self.verified as f64),
             (Self::MAX_RELATIVE_ERROR, f64::from(self.max_relative_error)),
             (Self::UNMAPPED, self.unmapped as f64),
+            (Self::LOGGED, self.logged as f64),
+            (Self::OVERFLOWED, self.overflowed as f64),
         ]
     }
 
@@ -67,6 +77,8 @@ impl MergeDiagnostics {
                     verified: v as u64,
                     max_relative_error: m as f32,
                     unmapped: u as u64,
+                    logged: get(Self::LOGGED).unwrap_or(0.0) as u64,
+                    overflowed: get(Self::OVERFLOWED).unwrap_or(0.0) as u64,
                 }),
                 _ => None,
             },

@@ -29,7 +29,7 @@ mod setup;
 use super::{
     Conditions, Diagnostics, Estimator, EstimatorState, Frame, Kind, Method, OptionsKind, Setup,
 };
-use crate::gpu::encode_timed_pass;
+use crate::gpu::{encode_timed_pass, encode_timed_pass_indirect};
 use crate::gpu::{grid_2d, Gpu};
 use crate::optim::{pass_seed, FaultCounts, PassKind, PassTimer, Seeds};
 use crate::render::WORKGROUP;
@@ -40,9 +40,12 @@ pub use abi::reservoir;
 pub use diagnostics::{state_names, MergeDiagnostics};
 pub use options::{Confidence, RestirOptions, TARGET_SMOOTHING_INDEPENDENT};
 pub use params::{CandidateParams, MergeParams};
-pub(crate) use params::{CANDIDATES_GROUP, MERGE_GROUP};
+pub(crate) use params::{CANDIDATES_GROUP, CLAIM_GROUP, MERGE_GROUP};
 pub use reservoir_test::selection_trial;
-use setup::{candidate_camera, memory, merge_params, Buffers, Camera, PHASES};
+use setup::{
+    candidate_camera, claim_capacity, claim_header, max_offers, memory, merge_params, Buffers,
+    Camera, CLAIM_LOG_MAX_BYTES, PHASES,
+};
 use reservoir_test::RESERVOIR_TEST_GROUP;
 
 /// Cameras a ReSTIR optimizer can use (the camera index has three bits in a reservoir).
@@ -78,6 +81,7 @@ pub const KIND: Kind = Kind {
     wgsl: &[
         ("restir_candidates", include_str!("restir_candidates.wgsl")),
         ("restir_merge", include_str!("restir_merge.wgsl")),
+        ("restir_claim", include_str!("restir_claim.wgsl")),
         ("reservoir_test", include_str!("reservoir_test.wgsl")),
         ("restir/reservoir", include_str!("reservoir.wgsl")),
         (
@@ -88,12 +92,26 @@ pub const KIND: Kind = Kind {
         ("restir/target", include_str!("target.wgsl")),
     ],
     generated: &[("gen/restir", abi::wgsl)],
-    groups: &[CANDIDATES_GROUP, MERGE_GROUP, RESERVOIR_TEST_GROUP],
-    passes: &["restir_candidates", "restir_merge"],
+    groups: &[CANDIDATES_GROUP, MERGE_GROUP, CLAIM_GROUP, RESERVOIR_TEST_GROUP],
+    passes: &["restir_candidates", "restir_merge", "restir_claim"],
     max_cameras: Some(MAX_CAMERAS),
-    memory: |sizes| {
+    memory: |sizes, options| {
         let words = reservoir::words(sizes.max_depth);
-        memory(sizes.texels, sizes.observed, sizes.pixels, words)
+        let offers = max_offers(
+            sizes.gradient_samples,
+            sizes.max_depth,
+            sizes.slots_per_material,
+            sizes.footprint,
+        );
+        let o: RestirOptions = options.get().unwrap_or_default();
+        let capacity = claim_capacity(
+            sizes.observed,
+            offers,
+            words,
+            CLAIM_LOG_MAX_BYTES,
+            o.claim_entries,
+        );
+        memory(sizes.texels, sizes.observed, sizes.pixels, words, capacity)
     },
     warnings,
     every_texel: abi::reservoir::whole_paths,
@@ -124,11 +142,20 @@ const MERGE_STAT_VERIFY_MAX_ERROR: usize = abi::stat::MERGE_VERIFY_MAX_ERROR as 
 const CANDIDATE_STAT_LOST: usize = abi::stat::CANDIDATE_LOST as usize;
 const CANDIDATE_STAT_DROPPED: usize = abi::stat::CANDIDATE_DROPPED as usize;
 const CANDIDATE_STAT_UNMAPPED: usize = abi::stat::CANDIDATE_UNMAPPED as usize;
+const CANDIDATE_STAT_LOGGED: usize = abi::stat::CANDIDATE_LOGGED as usize;
+const CANDIDATE_STAT_OVERFLOWED: usize = abi::stat::CANDIDATE_OVERFLOWED as usize;
 
 /// The ReSTIR estimator's passes and buffers.
 pub(crate) struct Restir {
     candidate_pipeline: wgpu::ComputePipeline,
     merge_pipeline: wgpu::ComputePipeline,
+    claim_pipeline: wgpu::ComputePipeline,
+    /// The claim log (restir_claim.wgsl) and the claim pass's bind group.
+    claims: wgpu::Buffer,
+    claim_group: wgpu::BindGroup,
+    /// The retracing claim's dispatch, copied from the log's header (the candidate pass
+    /// binds the log for writing, so it cannot also read its dispatch from it).
+    fallback_args: wgpu::Buffer,
     cameras: Vec<Camera>,
     /// Reservoir slot k of every observed texel (`slots[k]`), and the headers that say which
     /// slots hold the kept reservoirs (reservoir_slots.wgsl).
@@ -205,7 +232,9 @@ impl Restir {
             gpu.compute_pipeline("restir_candidates", &[&s.scene.layout, &candidate_layout])?;
         let merge_pipeline =
             gpu.compute_pipeline("restir_merge", &[&s.scene.layout, &merge_layout])?;
-        let b = Buffers::new(s);
+        let claim_layout = gpu.pass_layout("restir_claim", 0)?;
+        let claim_pipeline = gpu.compute_pipeline("restir_claim", &[&claim_layout])?;
+        let b = Buffers::new(s, &o);
         let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
         let merge_grid = grid_2d(b.n_observed, WORKGROUP, max_dim);
         let merge_params = merge_params(s, &o, b.n_observed, merge_grid);
@@ -230,19 +259,40 @@ impl Restir {
                 ],
             )
         });
+        let claim_group = gpu.bind(
+            &CLAIM_GROUP,
+            "restir_claim",
+            &claim_layout,
+            &[
+                ("slots0", &b.slots[0]),
+                ("slots1", &b.slots[1]),
+                ("slots2", &b.slots[2]),
+                ("slots3", &b.slots[3]),
+                ("claims", &b.claims),
+            ],
+        );
         let cameras = (0..s.cameras.len())
             .map(|k| candidate_camera(s, &o, k, &candidate_layout, &b))
             .collect();
         Ok(Restir {
             candidate_pipeline,
             merge_pipeline,
+            claim_pipeline,
+            claims: b.claims.clone(),
+            claim_group,
+            fallback_args: gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("retracing claim dispatch"),
+                size: 16,
+                usage: wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
             cameras,
             merge_uniform,
             merge_params,
             merge_groups,
             merge_grid,
             target_len: b.n_all_pixels,
-            map_bytes: b.observed_list.size() + b.observed_map.size(),
+            map_bytes: b.observed_list.size() + b.observed_map.size() + b.claims.size(),
             slots: b.slots,
             headers: b.headers,
             candidate_stats: b.candidate_stats,
@@ -268,6 +318,8 @@ impl Restir {
             verified: m[MERGE_STAT_VERIFIED] as u64,
             max_relative_error: f32::from_bits(m[MERGE_STAT_VERIFY_MAX_ERROR]),
             unmapped: c[CANDIDATE_STAT_UNMAPPED] as u64,
+            logged: c[CANDIDATE_STAT_LOGGED] as u64,
+            overflowed: c[CANDIDATE_STAT_OVERFLOWED] as u64,
         })
     }
 }
@@ -287,8 +339,33 @@ impl Estimator for Restir {
             enc.clear_buffer(&self.grad, 0, None);
         }
         // Every camera's offers enter the race before any winner writes its path: the same
-        // texel's reservoir takes offers from several cameras.
+        // texel's reservoir takes offers from several cameras. The winners among the logged
+        // leaders claim in one pass; where the log overflowed, every camera's samples are
+        // traced again and their winners claim (the retracing claim's dispatch is empty
+        // otherwise).
+        self.queue.write_buffer(
+            &self.claims,
+            0,
+            bytemuck::cast_slice(&claim_header(self.words)),
+        );
         for phase in 0..PHASES {
+            if phase == 1 {
+                enc.copy_buffer_to_buffer(
+                    &self.claims,
+                    4 * u64::from(abi::claim::FALLBACK_ARGS),
+                    &self.fallback_args,
+                    0,
+                    12,
+                );
+                encode_timed_pass_indirect(
+                    enc,
+                    "restir_claim",
+                    &self.claim_pipeline,
+                    &[&self.claim_group],
+                    (&self.claims, 4 * u64::from(abi::claim::ARGS)),
+                    timer.next(PassKind::Gradient),
+                );
+            }
             for (k, cam) in self.cameras.iter_mut().enumerate() {
                 cam.params.seed = pass_seed(frame.seed, frame.iteration, k as u32, Seeds::GRADIENT);
                 cam.params.prev_targets = reuse as u32;
@@ -298,14 +375,26 @@ impl Estimator for Restir {
                 cam.params.phase = phase as u32;
                 self.queue
                     .write_buffer(&cam.uniforms[phase], 0, bytemuck::bytes_of(&cam.params));
-                encode_timed_pass(
-                    enc,
-                    "restir_candidates",
-                    &self.candidate_pipeline,
-                    &[frame.scene_group, &cam.groups[phase][parity]],
-                    self.grid,
-                    timer.next(PassKind::Gradient),
-                );
+                let groups = [frame.scene_group, &cam.groups[phase][parity]];
+                if phase == 0 {
+                    encode_timed_pass(
+                        enc,
+                        "restir_candidates",
+                        &self.candidate_pipeline,
+                        &groups,
+                        self.grid,
+                        timer.next(PassKind::Gradient),
+                    );
+                } else {
+                    encode_timed_pass_indirect(
+                        enc,
+                        "restir_candidates",
+                        &self.candidate_pipeline,
+                        &groups,
+                        (&self.fallback_args, 0),
+                        timer.next(PassKind::Gradient),
+                    );
+                }
             }
         }
         let o = &self.options;
@@ -463,7 +552,12 @@ impl Estimator for Restir {
     }
 
     fn counters(&self) -> &'static [&'static str] {
-        &[MergeDiagnostics::EVALUATIONS, MergeDiagnostics::UNMAPPED]
+        &[
+            MergeDiagnostics::EVALUATIONS,
+            MergeDiagnostics::UNMAPPED,
+            MergeDiagnostics::LOGGED,
+            MergeDiagnostics::OVERFLOWED,
+        ]
     }
 }
 

@@ -54,6 +54,11 @@ pub struct RestirOptions {
     /// iterations reuse fully and late ones average mostly fresh samples); without a schedule
     /// it changes nothing.
     pub m_cap_follows_schedule: bool,
+    /// Entries of the claim log, which lets the winners of each iteration's races write their
+    /// paths without tracing the samples again (`restir_claim.wgsl`). `None`: sized from the
+    /// task (at most one per reservoir; docs/method.md). An iteration that fills it traces
+    /// its samples a second time instead (counted as claims overflowed); nothing is lost.
+    pub claim_entries: Option<u32>,
 }
 
 impl Default for RestirOptions {
@@ -66,17 +71,21 @@ impl Default for RestirOptions {
             verify_paths: false,
             target_smoothing: None,
             m_cap_follows_schedule: false,
+            claim_entries: None,
         }
     }
 }
 
 impl crate::optim::estimator::Options for RestirOptions {
     const METHOD: crate::optim::Method = crate::optim::Method::RESTIR;
-    const OPTIONAL: &'static [&'static str] = &["target_smoothing"];
+    const OPTIONAL: &'static [&'static str] = &["target_smoothing", "claim_entries"];
 
     fn check(&self) -> std::result::Result<(), (String, String)> {
         if !(self.m_cap.is_finite() && self.m_cap > 0.0) {
             return Err(("m_cap".into(), "must be a positive number".into()));
+        }
+        if self.claim_entries == Some(0) {
+            return Err(("claim_entries".into(), "must be at least 1".into()));
         }
         if self
             .target_smoothing

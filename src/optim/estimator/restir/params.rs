@@ -21,7 +21,14 @@ pub(crate) const CANDIDATES_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl
         "observed_map",
         "grad",
         "env_grad",
+        "claims",
     ],
+};
+/// Group 0 of `restir_claim.wgsl`.
+pub(crate) const CLAIM_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
+    pass: "restir_claim",
+    group: 0,
+    names: &["slots0", "slots1", "slots2", "slots3", "claims"],
 };
 /// Group 1 of `restir_merge.wgsl`.
 pub(crate) const MERGE_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
@@ -61,6 +68,10 @@ pub struct CandidateParams {
     pub target_cur: u32,
     pub target_prev: u32,
     pub phase: u32,
+    pub claim_capacity: u32,
+    pub grid_x: u32,
+    pub grid_y: u32,
+    pub _pad0: u32,
 }
 
 /// `MergeParams` in restir_merge.wgsl (a test checks the layout).
@@ -110,7 +121,10 @@ mod contract_tests {
                 smoothing,
                 target_cur,
                 target_prev,
-                phase
+                phase,
+                claim_capacity,
+                grid_x,
+                grid_y
             ]
         );
         mirror!(

@@ -31,13 +31,18 @@
 // Selection without locks: an exponential race (weighted sampling by keys, Efraimidis and
 // Spirakis). An offer of weight w with uniform u has key -ln(1 - u) / w, an exponential
 // variable of rate w, and the smallest key among a reservoir's offers is offer j's with
-// probability w_j / sum(w): exactly proportional to weight. The candidate pass runs twice over
-// the same samples with the same random numbers (CandidateParams.phase). Phase 0: every offer
-// adds its weight to the fresh reservoir's sum (RES_W) and enters its key into RES_INFO with
-// atomicMax, complemented (the complement of a non-negative float's bits has the top bit,
-// INFO_KEY_BIT, set, which no info word has; a free slot's info word is 0). Phase 1: the offer
-// whose key is the reservoir's swaps it for its info word with a compare-and-exchange (one
-// offer wins even on a tie) and writes its path. No invocation waits for another. The lock
+// probability w_j / sum(w): exactly proportional to weight. Every offer adds its weight to
+// the fresh reservoir's sum (RES_W) and enters its key into RES_INFO with atomicMax,
+// complemented (the complement of a non-negative float's bits has the top bit, INFO_KEY_BIT,
+// set, which no info word has; a free slot's info word is 0). Once every offer has entered,
+// the offer whose key is the reservoir's swaps it for its info word with a compare-and-
+// exchange (one offer wins even on a tie) and writes its path. An offer that found a smaller
+// key in place when it entered can never win; the others (the race's leaders at the moment
+// they entered, a few per reservoir) are appended to the claim log with their paths
+// (restir_candidates.wgsl), and the claim pass (restir_claim.wgsl) lets each swap, without
+// tracing its sample again. Where the log is full, the candidate pass runs a second time over
+// the same samples with the same random numbers (CandidateParams.phase 1), and every offer
+// whose key won claims as above: the same winners. No invocation waits for another. The lock
 // this replaces (tested and set in the header, the critical section inside the loop iteration
 // that took it) worked on lavapipe and starved on an NVIDIA H100, whose SIMD groups need not
 // run the lane that holds a lock while its neighbours spin: 26 s per iteration, most offers
@@ -92,19 +97,20 @@ fn slot_load(k: u32, i: u32) -> u32 {
     }
 }
 
-fn slot_max(k: u32, i: u32, x: u32) {
+// The word before the max.
+fn slot_max(k: u32, i: u32, x: u32) -> u32 {
     switch k {
         case 0u: {
-            atomicMax(&slots0[i], x);
+            return atomicMax(&slots0[i], x);
         }
         case 1u: {
-            atomicMax(&slots1[i], x);
+            return atomicMax(&slots1[i], x);
         }
         case 2u: {
-            atomicMax(&slots2[i], x);
+            return atomicMax(&slots2[i], x);
         }
         default: {
-            atomicMax(&slots3[i], x);
+            return atomicMax(&slots3[i], x);
         }
     }
 }
@@ -134,27 +140,37 @@ fn race_key(w: f32, u: f32) -> u32 {
     return ~bitcast<u32>(abs(log(1.0 - u)) / w);
 }
 
-// Phase 0 of an offer to slot k of observed texel i: w into the weight sum, then the key into
-// the race (only an offer whose weight was added can win). Returns false if the addition ran
-// out of tries (the caller counts it as lost).
-fn reservoir_enter(k: u32, i: u32, w: f32, u: f32) -> bool {
+// What entering a race did.
+const ENTER_LOST: u32 = 0u;
+const ENTER_BEHIND: u32 = 1u;
+const ENTER_LEADING: u32 = 2u;
+
+// An offer to slot k of observed texel i: w into the weight sum, then the key into the race
+// (only an offer whose weight was added can win). ENTER_LEADING if its key was the largest in
+// place when it entered (it may win), ENTER_BEHIND if not (it cannot), ENTER_LOST if the
+// addition ran out of tries (the caller counts it).
+fn reservoir_enter(k: u32, i: u32, w: f32, u: f32) -> u32 {
     let base = i * res_stride;
     var old = slot_load(k, base + RES_W);
     for (var n = 0u; n < RESERVOIR_CAS_BOUND; n++) {
         if slot_exchange(k, base + RES_W, old, bitcast<u32>(bitcast<f32>(old) + w)) {
-            slot_max(k, base + RES_INFO, race_key(w, u));
-            return true;
+            let key = race_key(w, u);
+            return select(ENTER_BEHIND, ENTER_LEADING, slot_max(k, base + RES_INFO, key) < key);
         }
         old = slot_load(k, base + RES_W);
     }
-    return false;
+    return ENTER_LOST;
 }
 
-// Phase 1 of the same offer (same w and u): if its key won, it takes the reservoir (its info
-// word for the key) and writes its path.
+// The same offer (same w and u) once every offer has entered: if its key won, it takes the
+// reservoir (its info word for the key) and writes its path.
 fn reservoir_claim(k: u32, i: u32, w: f32, u: f32, c: Candidate) {
+    reservoir_claim_key(k, i, race_key(w, u), c);
+}
+
+// reservoir_claim by the offer's race key.
+fn reservoir_claim_key(k: u32, i: u32, key: u32, c: Candidate) {
     let base = i * res_stride;
-    let key = race_key(w, u);
     for (var n = 0u; n < RESERVOIR_CAS_BOUND; n++) {
         if slot_load(k, base + RES_INFO) != key {
             return;

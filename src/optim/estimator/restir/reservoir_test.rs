@@ -10,11 +10,12 @@ pub(crate) const RESERVOIR_TEST_GROUP: crate::gpu::GroupDecl = crate::gpu::Group
     pass: "reservoir_test",
     group: 0,
     names: &[
-        "tp", "weights", "slots0", "slots1", "slots2", "slots3", "headers", "failures",
+        "tp", "weights", "slots0", "slots1", "slots2", "slots3", "headers", "failures", "led",
     ],
 };
 
-/// Run the reservoir update of reservoir.wgsl on the GPU for a test, both phases:
+/// Run the reservoir update of reservoir.wgsl on the GPU for a test, both phases (in the
+/// second, as the claim log, only the offers that led the race when they entered claim):
 /// `reservoirs` reservoirs each receive every candidate k (weight `weights[k]`) `copies`
 /// times, from concurrent invocations. Returns the index of the candidate each reservoir
 /// selected (u32::MAX for none) and the number of offers whose weight was not added.
@@ -57,6 +58,7 @@ pub fn selection_trial(
         .collect();
     let headers = gpu.storage_zeroed("reservoir_test headers", reservoirs as u64 * 4);
     let failures = gpu.storage_zeroed("reservoir_test failures", 16);
+    let led = gpu.storage_zeroed("reservoir_test leaders", n_invocations as u64 * 4);
     let groups: Vec<wgpu::BindGroup> = uniforms
         .iter()
         .map(|uniform| {
@@ -73,6 +75,7 @@ pub fn selection_trial(
                     ("slots3", &unused[2]),
                     ("headers", &headers),
                     ("failures", &failures),
+                    ("led", &led),
                 ],
             )
         })

@@ -8,9 +8,12 @@
 // when q < 0 (or to one reservoir without positivization) with the resampling weight |q| x
 // MIS weight / density, and the reservoir keeps the path (compact_path.wgsl; the
 // samples are taken at the rounded hit, directions and radiances that it stores). The pass
-// runs twice per iteration with the same random numbers (cp.phase, reservoir.wgsl): phase 0
-// adds the weights and runs the race for each reservoir, phase 1 writes the winners' paths
-// (and adds, counts and forms nothing else). Only
+// adds the weights and runs the race for each reservoir (cp.phase 0, reservoir.wgsl), and
+// appends every offer that led its reservoir's race when it entered to the claim log, with
+// its path: the claim pass (restir_claim.wgsl) then writes the winners' paths. Where the log
+// is full, the pass runs again over the same samples with the same random numbers (phase 1,
+// dispatched only then) and writes the winners' paths itself (and adds, counts and forms
+// nothing else). Only
 // observed texels have reservoirs (observed_map); a candidate for another texel is dropped
 // and counted (CANDIDATE_STAT_UNMAPPED: the observed-texel pass's strata missed it).
 // When the merge will reuse, each candidate also carries its target under the previous
@@ -60,8 +63,14 @@ struct CandidateParams {
     // Where this iteration's and the last iteration's target adjoints start in `targets`.
     target_cur: u32,
     target_prev: u32,
-    // 0: weights and race keys; 1: the winners' paths (reservoir.wgsl).
+    // 0: weights, race keys and the claim log; 1: the winners' paths (reservoir.wgsl).
     phase: u32,
+    // Entries the claim log holds, and the workgroups of this pass (the retracing claim's
+    // dispatch when the log overflows).
+    claim_capacity: u32,
+    grid_x: u32,
+    grid_y: u32,
+    _pad0: u32,
 }
 
 @group(1) @binding(0) var<uniform> cp: CandidateParams;
@@ -74,7 +83,7 @@ struct CandidateParams {
 @group(1) @binding(5) var<storage, read_write> slots3: array<atomic<u32>>;
 @group(1) @binding(6) var<storage, read> headers: array<u32>;
 // CANDIDATE_STAT_* slots (generated from abi.rs).
-@group(1) @binding(7) var<storage, read_write> cstats: array<atomic<u32>, 4>;
+@group(1) @binding(7) var<storage, read_write> cstats: array<atomic<u32>, CANDIDATE_STAT_SLOTS>;
 // The target adjoints (reservoir.wgsl), both parities: the last iteration's, and this
 // one's, which this pass forms.
 @group(1) @binding(8) var<storage, read_write> targets: array<vec4f>;
@@ -88,6 +97,9 @@ struct CandidateParams {
 // dL/d(environment radiance) and its counters, plain Monte Carlo (shared/env_gradient.wgsl);
 // added in phase 0 only.
 @group(1) @binding(11) var<storage, read_write> env_grad: array<atomic<u32>>;
+// The claim log (abi.rs, claim): its header (count, the claim pass's and the retracing
+// claim's indirect dispatches, the entries' stride), then the leading offers.
+@group(1) @binding(12) var<storage, read_write> claims: array<atomic<u32>>;
 
 // The index of texel t among the observed texels, or UNOBSERVED.
 fn observed_index(t: u32) -> u32 {
@@ -103,6 +115,35 @@ var<private> offered: u32 = 0u;
 var<private> lost: u32 = 0u;
 var<private> dropped: u32 = 0u;
 var<private> unmapped: u32 = 0u;
+var<private> logged: u32 = 0u;
+var<private> overflowed: u32 = 0u;
+
+// Appends an offer that led the race of slot k of observed texel i when it entered (its key
+// and its candidate) to the claim log. A full log asks for the retracing claim (its dispatch
+// arguments: every camera's grid).
+fn log_claim(k: u32, i: u32, key: u32, c: Candidate) {
+    let e = atomicAdd(&claims[CLAIM_COUNT], 1u);
+    if e >= cp.claim_capacity {
+        if e == cp.claim_capacity {
+            atomicStore(&claims[CLAIM_FALLBACK_ARGS], cp.grid_x);
+            atomicStore(&claims[CLAIM_FALLBACK_ARGS + 1u], cp.grid_y);
+            atomicStore(&claims[CLAIM_FALLBACK_ARGS + 2u], 1u);
+        }
+        overflowed += 1u;
+        return;
+    }
+    if e % CLAIM_WORKGROUP == 0u {
+        atomicMax(&claims[CLAIM_ARGS], e / CLAIM_WORKGROUP + 1u);
+    }
+    logged += 1u;
+    let b = CLAIM_HEADER_WORDS + e * (res_stride + 1u);
+    atomicStore(&claims[b + CLAIM_ADDR], (i << 2u) | k);
+    atomicStore(&claims[b + CLAIM_KEY], key);
+    atomicStore(&claims[b + CLAIM_INFO], c.info);
+    for (var j = 0u; j < res_stride - RES_TRI; j++) {
+        atomicStore(&claims[b + CLAIM_PATH + j], c.words[j]);
+    }
+}
 
 // The adjoint (over the spp) of the pixel whose sample is being differentiated.
 var<private> pixel_adj: vec3f;
@@ -181,13 +222,17 @@ fn offer_path(o: Offer, adj: vec3f, adj_t: vec3f, adj_t_prev: vec3f, info: u32) 
             let s = select(0u, 1u, cp.positivize != 0u && q < 0.0);
             let slot = fresh_slot(headers[i], s);
             let u = rand();
+            let c = Candidate(info | select(0u, 1u << INFO_TECH_SHIFT, o.bsdf), with_q_prev(o.words, q_prev));
             if cp.phase == 0u {
                 offered += 1u;
-                if !reservoir_enter(slot, i, w, u) {
+                let entered = reservoir_enter(slot, i, w, u);
+                if entered == ENTER_LOST {
                     lost += 1u;
+                } else if entered == ENTER_LEADING {
+                    log_claim(slot, i, race_key(w, u), c);
                 }
             } else {
-                reservoir_claim(slot, i, w, u, Candidate(info | select(0u, 1u << INFO_TECH_SHIFT, o.bsdf), with_q_prev(o.words, q_prev)));
+                reservoir_claim(slot, i, w, u, c);
             }
         }
     }
@@ -343,5 +388,11 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     }
     if unmapped > 0u {
         atomicAdd(&cstats[CANDIDATE_STAT_UNMAPPED], unmapped);
+    }
+    if logged > 0u {
+        atomicAdd(&cstats[CANDIDATE_STAT_LOGGED], logged);
+    }
+    if overflowed > 0u {
+        atomicAdd(&cstats[CANDIDATE_STAT_OVERFLOWED], overflowed);
     }
 }

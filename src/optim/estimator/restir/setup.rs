@@ -1,11 +1,58 @@
 //! What ReSTIR allocates and binds: its memory plan, the compaction of observed texels, the
 //! buffers both passes share, the merge's first uniform and each camera's candidate groups.
 use super::{
-    reservoir, CandidateParams, Confidence, MergeParams, RestirOptions, Setup, CANDIDATES_GROUP,
-    MAX_CAMERAS, STATE_BYTES_PER_32_TEXELS, STATE_BYTES_PER_PIXEL,
+    abi::claim, reservoir, CandidateParams, Confidence, MergeParams, RestirOptions, Setup,
+    CANDIDATES_GROUP, MAX_CAMERAS, STATE_BYTES_PER_32_TEXELS, STATE_BYTES_PER_PIXEL,
 };
 use crate::optim::Scale;
 use crate::render::WORKGROUP;
+
+/// Entries of the claim log for `n_observed` texels with reservoirs and at most `offers`
+/// offers in an iteration: the offers that lead a race when they enter it. A reservoir that
+/// takes n offers in random order is led by H_n (about ln n + 0.58) of them in expectation,
+/// by the one offer where n is 1 (the sparse regime), so R reservoirs (both signs) that
+/// share N offers are led by at most min(N, R (1 + ln(N / R))) (concavity). The log holds a
+/// quarter more than that, and at most one entry per reservoir, within one indirect dispatch
+/// and `max_binding` bytes: measured, the bench scenes and the default task log 0.2 to 0.75
+/// entries per reservoir and iteration (the most where a reservoir takes most offers, the
+/// default task's 2 gradient spp over 18k texels). A log too small for an iteration costs a
+/// second tracing of its samples (restir_candidates.wgsl, phase 1; counted in the ReSTIR
+/// diagnostics as claims overflowed), never a sample. `asked`: the options' size instead
+/// (within the same limits).
+pub(super) fn claim_capacity(
+    n_observed: u64,
+    offers: u64,
+    words: u32,
+    max_binding: u64,
+    asked: Option<u32>,
+) -> u32 {
+    let r = (2 * n_observed).max(1) as f64;
+    let n = offers as f64;
+    let leaders = if n <= r { n } else { r * (1.0 + (n / r).ln()) };
+    let by_binding = (max_binding / 4).saturating_sub(u64::from(claim::HEADER_WORDS))
+        / u64::from(claim::stride(words));
+    asked
+        .map_or((1.25 * leaders).min(r) as u64 + 1024, u64::from)
+        .min(u64::from(claim::MAX_ENTRIES))
+        .min(by_binding) as u32
+}
+
+/// The claim log's largest size: lavapipe's binding limit, the smallest of the adapters
+/// psrestir runs on (the memory plan is the same on every adapter).
+pub(super) const CLAIM_LOG_MAX_BYTES: u64 = 128 << 20;
+
+/// The most offers the candidate pass makes in an iteration: every camera sample's paths
+/// (its two techniques, or with whole paths up to 6 arrivals of up to
+/// `MAX_PATH_VERTICES` vertices each), each to every optimized texture of a material
+/// (`slots` at most) and every texel of its filter's footprint (`footprint`).
+pub(super) fn max_offers(samples: u64, max_depth: u32, slots: u64, footprint: u64) -> u64 {
+    let paths = if reservoir::whole_paths(max_depth) {
+        6 * u64::from(reservoir::MAX_PATH_VERTICES)
+    } else {
+        2
+    };
+    samples * paths * slots * footprint
+}
 
 /// The buffers ReSTIR allocates for `n_texels` texels of which `n_observed` are observed,
 /// and `n_pixels` pixels (all cameras'), by label, size in bytes and what the size scales
@@ -16,6 +63,7 @@ pub(super) fn memory(
     n_observed: u64,
     n_pixels: u64,
     words: u32,
+    claim_capacity: u32,
 ) -> Vec<(String, u64, Scale)> {
     let slot_bytes = n_observed * words as u64 * 4;
     let mut out: Vec<(String, u64, Scale)> = (0..reservoir::SLOTS)
@@ -48,8 +96,29 @@ pub(super) fn memory(
             STATE_BYTES_PER_PIXEL * n_pixels,
             Scale::Pixel,
         ),
+        (
+            "claim log".to_string(),
+            claim_log_bytes(claim_capacity, words),
+            Scale::ObservedTexel,
+        ),
     ]);
     out
+}
+
+/// Bytes of a claim log of `capacity` entries for reservoirs of `words` words.
+pub(super) fn claim_log_bytes(capacity: u32, words: u32) -> u64 {
+    4 * (u64::from(claim::HEADER_WORDS) + u64::from(capacity) * u64::from(claim::stride(words)))
+}
+
+/// The claim log's header at the start of an iteration: nothing logged, the claim pass's
+/// dispatch of 0 x 1 x 1 workgroups (the candidate pass raises x), no retracing claim, and
+/// the entries' stride.
+pub(super) fn claim_header(words: u32) -> [u32; claim::HEADER_WORDS as usize] {
+    let mut h = [0; claim::HEADER_WORDS as usize];
+    h[claim::ARGS as usize + 1] = 1;
+    h[claim::ARGS as usize + 2] = 1;
+    h[claim::STRIDE as usize] = claim::stride(words);
+    h
 }
 
 /// The compaction map of `observed` (one flag per texel): per 32 texels, which are observed
@@ -71,8 +140,8 @@ pub(super) fn compaction_map(observed: &[bool]) -> (Vec<[u32; 2]>, Vec<u32>) {
     (map, list)
 }
 
-/// The candidate pass's phases (restir_candidates.wgsl, `phase`): the weights and the race,
-/// then the winners' paths.
+/// The candidate pass's phases (restir_candidates.wgsl, `phase`): the weights, the race and
+/// the claim log, then (only where the log overflowed) the winners' paths.
 pub(super) const PHASES: usize = 2;
 
 pub(super) struct Camera {
@@ -93,13 +162,16 @@ pub(super) struct Buffers {
     pub(super) candidate_stats: wgpu::Buffer,
     pub(super) merge_stats: wgpu::Buffer,
     pub(super) targets: wgpu::Buffer,
+    /// The claim log (restir_claim.wgsl): its header, then the entries.
+    pub(super) claims: wgpu::Buffer,
+    pub(super) claim_capacity: u32,
     pub(super) n_observed: u32,
     /// Pixels of all cameras.
     pub(super) n_all_pixels: u32,
 }
 
 impl Buffers {
-    pub(super) fn new(s: &Setup) -> Buffers {
+    pub(super) fn new(s: &Setup, o: &RestirOptions) -> Buffers {
         let gpu = s.gpu;
         // With whole paths, texels reached after a bounce get reservoirs too: every texel.
         let every;
@@ -112,7 +184,22 @@ impl Buffers {
         let n_observed = list.len() as u64;
         let n_all_pixels = s.adjoint[0].size() / 16;
         let words = reservoir::words(s.scene.info.max_depth);
-        let sizes = memory(s.scene.n_texels as u64, n_observed, n_all_pixels, words);
+        let max_binding =
+            u64::from(gpu.device.limits().max_storage_buffer_binding_size).min(CLAIM_LOG_MAX_BYTES);
+        let claim_capacity = claim_capacity(
+            n_observed,
+            offers_of(s, n_all_pixels),
+            words,
+            max_binding,
+            o.claim_entries,
+        );
+        let sizes = memory(
+            s.scene.n_texels as u64,
+            n_observed,
+            n_all_pixels,
+            words,
+            claim_capacity,
+        );
         let size = |label: &str| sizes.iter().find(|b| b.0 == label).map_or(0, |b| b.1);
         // wgpu binds no empty buffer: at least one word each.
         let slots: Vec<wgpu::Buffer> = (0..reservoir::SLOTS)
@@ -145,13 +232,37 @@ impl Buffers {
             headers,
             observed_list,
             observed_map,
-            candidate_stats: gpu.storage_zeroed("candidate stats", 16),
+            candidate_stats: gpu.storage_zeroed(
+                "candidate stats",
+                4 * u64::from(super::abi::stat::CANDIDATE_SLOTS),
+            ),
             merge_stats: gpu.storage_zeroed("merge stats", 16),
             targets: gpu.storage_zeroed("target adjoints", size("target adjoints")),
+            claims: gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("claim log"),
+                size: size("claim log"),
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::INDIRECT
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+            claim_capacity,
             n_observed: n_observed as u32,
             n_all_pixels: n_all_pixels as u32,
         }
     }
+}
+
+/// The most offers the candidate pass of `s` makes in an iteration over `n_pixels` pixels.
+fn offers_of(s: &Setup, n_pixels: u64) -> u64 {
+    let (slots, footprint) = super::super::Sizes::lookups(s.set);
+    max_offers(
+        n_pixels * u64::from(s.settings.gradient_spp),
+        s.scene.info.max_depth,
+        slots,
+        footprint,
+    )
 }
 
 /// The merge's uniform before the first iteration.
@@ -204,6 +315,10 @@ pub(super) fn candidate_camera(
         target_cur: 0,
         target_prev: 0,
         phase: 0,
+        claim_capacity: b.claim_capacity,
+        grid_x: s.grid.0,
+        grid_y: s.grid.1,
+        _pad0: 0,
     };
     let uniforms: [wgpu::Buffer; PHASES] = std::array::from_fn(|phase| {
         s.gpu.uniform(
@@ -230,6 +345,7 @@ pub(super) fn candidate_camera(
                     ("observed_map", &b.observed_map),
                     ("grad", s.grad),
                     ("env_grad", s.env_grad),
+                    ("claims", &b.claims),
                 ],
             )
         })
