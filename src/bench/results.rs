@@ -178,7 +178,7 @@ pub struct AutoResult {
 }
 
 /// The default configuration (the contender `default`: every choice `auto`'s) on one scene,
-/// against its start and the run of the others that ended lowest (observed-texel RMSE).
+/// against its start and, in each error, the run of the others that ended lowest in it.
 #[derive(Clone, Debug, Serialize)]
 pub struct DefaultResult {
     /// Its run's name (what `auto` chose).
@@ -187,10 +187,12 @@ pub struct DefaultResult {
     pub texture_rmse_observed: f64,
     /// That over the start's.
     pub over_start: f64,
-    /// The run of the others that ended lowest.
+    /// The run of the others that ended with the lowest observed-texel RMSE.
     pub best: String,
     /// Its observed-texel RMSE over that run's.
     pub over_best: f64,
+    /// The run of the others that ended with the lowest image relMSE.
+    pub best_image: String,
     /// Its image relMSE over that run's.
     pub image_over_best: f64,
 }

@@ -12,7 +12,7 @@ pub use super::outputs::{
     false_color, gradient_scalars, plot_metrics, save_observed, save_textures, texture_image,
     write_gradient,
 };
-use super::watch::LossWatch;
+use super::watch::{LossWatch, PlateauWatch};
 use super::Problem;
 use crate::gpu::Gpu;
 use crate::optim::checkpoint::{Checkpoint, Header, MetricRow};
@@ -89,6 +89,9 @@ pub struct RunSummary {
     pub pass_times: Option<PassTimes>,
     /// Whether the run stopped early because `RunOptions::interrupt` was set.
     pub interrupted: bool,
+    /// Why the run ended before its budget because it had converged
+    /// (`optimizer.stop_on_plateau`), if it did.
+    pub plateau: Option<String>,
     /// Warnings the run gave (also logged): a loss that did not fall ([`super::watch`]).
     pub warnings: Vec<String>,
     /// Seconds this run spent creating (compiling) GPU pipelines, all before the
@@ -257,6 +260,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         faults,
         pass_times: session.pass_times.mean(),
         interrupted: session.interrupted,
+        plateau: session.plateau,
         warnings: session.warnings,
         pipeline_s,
         set: ParamSet {
@@ -385,6 +389,8 @@ struct Session {
     /// Whether an interrupt stopped the loop early (one during the final writes does not
     /// count).
     interrupted: bool,
+    /// Why it ended on a plateau, if it did.
+    plateau: Option<String>,
     warnings: Vec<String>,
 }
 
@@ -421,6 +427,7 @@ fn iterate(
         iterations: 0,
         pass_times: PassMean::default(),
         interrupted: false,
+        plateau: None,
         warnings: Vec::new(),
     };
     let (ckpt_every, ckpt_every_s) = (
@@ -431,9 +438,17 @@ fn iterate(
     let elapsed_now =
         |excluded: f64| elapsed_before + session_start.elapsed().as_secs_f64() - excluded;
     let mut watch = LossWatch::new(opt.settings().step);
+    let mut plateau = task
+        .optimizer
+        .stop_on_plateau
+        .unwrap_or(budget.is_some() && max_iter.is_none())
+        .then(|| PlateauWatch::new(task.optimizer.eval_every > 0));
     for r in session.rows.iter().skip(1) {
         // A resumed run's earlier iterations (judged from the next one on).
         watch.observe(r.loss.unwrap_or(f64::NAN), 0.0);
+        if let Some(p) = &mut plateau {
+            p.observe(r.iteration, r.loss.unwrap_or(f64::NAN), r.image_relmse, 0.0);
+        }
     }
     loop {
         let elapsed = elapsed_now(excluded);
@@ -469,6 +484,9 @@ fn iterate(
         if let Some(hook) = &opts.on_row {
             (hook.0)(&row);
         }
+        let converged = plateau
+            .as_mut()
+            .and_then(|p| p.observe(row.iteration, stats.loss, row.image_relmse, progress));
         session.rows.push(row);
         if let Some(b) = &bar {
             b.set_position(if max_iter.is_some() {
@@ -483,6 +501,11 @@ fn iterate(
         if by_iterations || by_time {
             saver.save(opt, &session.rows, elapsed)?;
             last_ckpt = Instant::now();
+        }
+        if let Some(why) = converged {
+            log::info!("{why}");
+            session.plateau = Some(why);
+            break;
         }
     }
     if let Some(b) = &bar {

@@ -1,5 +1,7 @@
 //! A run that is going wrong says so: [`LossWatch`] follows the loss of each iteration and
-//! warns once when, after a fair share of the budget, it has not fallen below its start.
+//! warns once when, after a fair share of the budget, it has not fallen below its start. A run
+//! that has converged ends: [`PlateauWatch`] follows the loss and the evaluation image error
+//! and says when both have stayed flat within their noise over a window.
 use crate::optim::StepKind;
 
 /// Iterations whose mean loss is the start, and the mean of which the present is compared.
@@ -80,6 +82,123 @@ impl LossWatch {
     }
 }
 
+/// Iterations of the window over which [`PlateauWatch`] judges a run at the least; from
+/// there, the last third of the run's iterations.
+pub const PLATEAU_WINDOW: usize = 60;
+
+/// The share of the budget before which [`PlateauWatch`] never stops a run.
+pub const PLATEAU_SHARE: f64 = 0.1;
+
+/// Standard errors by which a series' fall over the window must exceed its noise to count
+/// as falling.
+pub const PLATEAU_SIGMAS: f64 = 2.0;
+
+/// Evaluation renders (image error) a window needs before it is judged.
+pub const PLATEAU_EVALUATIONS: usize = 4;
+
+/// Follows a run's loss (every iteration) and evaluation image error (every few) and says
+/// when both have stopped falling. Each is judged over the window (the last third of the
+/// iterations, at least [`PLATEAU_WINDOW`]) by a least-squares line: the series is flat where
+/// its fall along the line over the window is less than [`PLATEAU_SIGMAS`] standard errors
+/// of that fall (the residuals' spread: the noise of a few samples per pixel), or less than
+/// 1% of its level (the rest of the budget would change it by about as much again). A series
+/// that rises counts as flat. The run is judged from [`PLATEAU_SHARE`] of its budget on,
+/// once the window holds [`PLATEAU_EVALUATIONS`] evaluations (without evaluations, on the
+/// loss alone).
+#[derive(Clone, Debug, Default)]
+pub struct PlateauWatch {
+    loss: Vec<(f64, f64)>,
+    image: Vec<(f64, f64)>,
+    evaluations: bool,
+}
+
+/// Whether the points (x, y) fall along their least-squares line by less than their noise
+/// or 1% of their level, with the fall and its standard error.
+fn flat(points: &[(f64, f64)]) -> (bool, f64, f64) {
+    let n = points.len() as f64;
+    let (mx, my) = points
+        .iter()
+        .fold((0.0, 0.0), |(a, b), p| (a + p.0 / n, b + p.1 / n));
+    let sxx: f64 = points.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let sxy: f64 = points.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    if n < 3.0 || sxx <= 0.0 {
+        return (false, 0.0, 0.0);
+    }
+    let slope = sxy / sxx;
+    let resid: f64 = points
+        .iter()
+        .map(|p| (p.1 - my - slope * (p.0 - mx)).powi(2))
+        .sum();
+    let se_slope = (resid / (n - 2.0) / sxx).sqrt();
+    let span = points[points.len() - 1].0 - points[0].0;
+    let (fall, se) = (-slope * span, se_slope * span);
+    (
+        fall < PLATEAU_SIGMAS * se || fall < 0.01 * my.abs(),
+        fall,
+        se,
+    )
+}
+
+impl PlateauWatch {
+    /// A watch; `evaluations`: whether the run renders evaluations (image error) to judge.
+    pub fn new(evaluations: bool) -> PlateauWatch {
+        PlateauWatch {
+            evaluations,
+            ..Default::default()
+        }
+    }
+
+    /// One more iteration's loss (non-finite: ignored) and image error (on the iterations
+    /// that have one), with the share of the budget done; the reason to stop, once both
+    /// series are flat.
+    pub fn observe(
+        &mut self,
+        iteration: u32,
+        loss: f64,
+        image: Option<f64>,
+        progress: f64,
+    ) -> Option<String> {
+        let x = f64::from(iteration);
+        if loss.is_finite() {
+            self.loss.push((x, loss));
+        }
+        if let Some(e) = image.filter(|e| e.is_finite()) {
+            self.image.push((x, e));
+        }
+        let window = PLATEAU_WINDOW.max(self.loss.len() / 3);
+        if progress < PLATEAU_SHARE || self.loss.len() < window {
+            return None;
+        }
+        let from = self.loss[self.loss.len() - window].0;
+        let (loss_flat, fall, se) = flat(&self.loss[self.loss.len() - window..]);
+        if !loss_flat {
+            return None;
+        }
+        let recent: Vec<(f64, f64)> = self.image.iter().copied().filter(|p| p.0 >= from).collect();
+        let image_note = if self.evaluations {
+            if recent.len() < PLATEAU_EVALUATIONS {
+                return None;
+            }
+            let (image_flat, ifall, ise) = flat(&recent);
+            if !image_flat {
+                return None;
+            }
+            format!(
+                " and the image error by {ifall:.3e} (noise {ise:.3e}, {} evaluations)",
+                recent.len()
+            )
+        } else {
+            String::new()
+        };
+        Some(format!(
+            "converged: over its last {window} iterations the loss fell by {fall:.3e} (noise \
+             {se:.3e}){image_note}, within their noise or 1% of their level; stopping at \
+             {:.0}% of the budget (stop_on_plateau = false runs it all)",
+            progress * 100.0
+        ))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -136,5 +255,55 @@ mod tests {
         assert!(run(StepKind::Adam, 2 * WINDOW - 1, |_| 1.0).is_empty());
         // Losses not measured (NaN) are skipped, not counted as a flat loss.
         assert!(run(StepKind::Adam, 400, |_| f64::NAN).is_empty());
+    }
+
+    /// Feed a plateau watch `n` iterations of `loss(i)`, an evaluation every 10 at
+    /// `image(i)`, spread over the budget; the iteration it stopped at.
+    fn plateau(n: u32, loss: impl Fn(f64) -> f64, image: impl Fn(f64) -> f64) -> Option<u32> {
+        let mut w = PlateauWatch::new(true);
+        (1..=n).find(|&i| {
+            let x = f64::from(i);
+            let e = (i % 10 == 0).then(|| image(x));
+            w.observe(i, loss(x), e, x / f64::from(n)).is_some()
+        })
+    }
+
+    #[test]
+    fn a_falling_run_goes_on_and_a_flat_one_stops() {
+        // Falls by a factor 5 with a time constant of 300 iterations, noise 5% of its end.
+        let fall = |x: f64| 0.2 + 0.8 * (-x / 300.0).exp();
+        let noisy = |x: f64| fall(x) + 0.01 * noise(x as usize);
+        let stop = plateau(4000, noisy, fall).expect("the run flattens");
+        // It stops once its fall over the window (a third of the run) is within 1% of its
+        // level: from iteration 2700 on, 9 time constants (0.19% above the end), not at
+        // 1800, where the window's fall is still 6%.
+        assert!(stop > 1800, "stopped at {stop}, while still falling");
+        assert!(stop < 3200, "went on to {stop}, long after it flattened");
+        // A flat run stops at a tenth of the budget (the window is full by then).
+        let stop = plateau(1000, |x| 1.0 + 0.05 * noise(x as usize), |_| 0.3).unwrap();
+        assert_eq!(stop, 100, "{stop}");
+    }
+
+    #[test]
+    fn a_flat_loss_with_a_falling_image_error_goes_on() {
+        // The loss's noise hides a slow fall that the evaluations (low noise) show.
+        let stop = plateau(
+            1000,
+            |x| 1.0 + 0.5 * noise(x as usize),
+            |x| 0.3 - 0.2 * x / 1000.0,
+        );
+        assert_eq!(stop, None);
+        // Without evaluations the loss alone decides.
+        let mut w = PlateauWatch::new(false);
+        let stop = (1..=1000u32).find(|&i| {
+            w.observe(
+                i,
+                1.0 + 0.5 * noise(i as usize),
+                None,
+                f64::from(i) / 1000.0,
+            )
+            .is_some()
+        });
+        assert_eq!(stop, Some(100));
     }
 }

@@ -12,6 +12,11 @@ pub struct OptimizerSpec {
     pub iterations: Option<u32>,
     /// Wall-clock budget in seconds (at most).
     pub time_budget_s: Option<f64>,
+    /// End the run once the loss and the evaluation image error have stopped falling
+    /// (job::watch::PlateauWatch). None: where the task gives a time budget and no
+    /// iteration count; a task that names its iterations runs them all.
+    #[serde(default)]
+    pub stop_on_plateau: Option<bool>,
     /// Samples per pixel of the primal render (independent of the gradient samples).
     #[serde(default = "default_primal_spp")]
     pub primal_spp: u32,

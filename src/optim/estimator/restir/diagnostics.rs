@@ -16,6 +16,11 @@ pub mod state_names {
     pub const TARGETS: &str = "targets";
     /// Counter: the merges so far.
     pub const HISTORY: &str = "history";
+    /// Array: the moving mean and second moment of the fresh estimates, per gradient entry
+    /// (the variance the merge reports).
+    pub const FRESH_MOMENTS: &str = "fresh moments";
+    /// Counter: the merges that updated them.
+    pub const MOMENT_UPDATES: &str = "moment updates";
     /// Counter: words per reservoir ([`reservoir::WORDS`](super::super::reservoir::WORDS); a state saved with another
     /// reservoir layout is refused).
     pub const WORDS: &str = "reservoir words";

@@ -43,8 +43,8 @@ pub use params::{CandidateParams, MergeParams};
 pub(crate) use params::{CANDIDATES_GROUP, CLAIM_GROUP, MERGE_GROUP};
 pub use reservoir_test::selection_trial;
 use setup::{
-    candidate_camera, claim_capacity, claim_header, max_offers, memory, merge_params, Buffers,
-    Camera, CLAIM_LOG_MAX_BYTES, PHASES,
+    candidate_camera, claim_capacity, claim_header, max_offers, memory, merge_params,
+    variance_factor, Buffers, Camera, CLAIM_LOG_MAX_BYTES, FRESH_MOMENT_DECAY, PHASES,
 };
 use reservoir_test::RESERVOIR_TEST_GROUP;
 
@@ -111,7 +111,13 @@ pub const KIND: Kind = Kind {
             CLAIM_LOG_MAX_BYTES,
             o.claim_entries,
         );
-        memory(sizes.texels, sizes.observed, sizes.pixels, words, capacity)
+        memory(
+            (sizes.params, sizes.texels),
+            sizes.observed,
+            sizes.pixels,
+            words,
+            capacity,
+        )
     },
     warnings,
     every_texel: abi::reservoir::whole_paths,
@@ -188,6 +194,11 @@ pub(crate) struct Restir {
     grad: wgpu::Buffer,
     /// Whether paths have more than one vertex.
     indirect: bool,
+    /// The fresh estimates' moving moments and the merged estimate's variance
+    /// (restir_merge.wgsl, write_entry), and the merges that updated the moments.
+    fresh_moments: wgpu::Buffer,
+    variance: wgpu::Buffer,
+    moment_updates: u32,
 }
 
 impl Restir {
@@ -256,6 +267,8 @@ impl Restir {
                     ("grad", s.grad),
                     ("mstats", &b.merge_stats),
                     ("observed_list", &b.observed_list),
+                    ("fresh_moments", &b.fresh_moments),
+                    ("variance", &b.variance),
                 ],
             )
         });
@@ -306,6 +319,9 @@ impl Restir {
             queue: gpu.queue.clone(),
             grad: s.grad.clone(),
             indirect: s.scene.info.max_depth > 1,
+            fresh_moments: b.fresh_moments,
+            variance: b.variance,
+            moment_updates: 0,
         })
     }
 
@@ -412,6 +428,13 @@ impl Estimator for Restir {
         self.merge_params.m_kept = (self.merge_params.m_fresh * self.history as f32).min(cap);
         self.merge_params.target_cur = target_cur;
         self.merge_params.target_prev = target_prev;
+        self.merge_params.moment_bias =
+            1.0 - FRESH_MOMENT_DECAY.powi(self.moment_updates.saturating_add(1).min(1 << 16) as i32);
+        self.merge_params.variance_factor = if o.own_variance {
+            variance_factor(self.merge_params.m_fresh, self.merge_params.m_kept)
+        } else {
+            0.0
+        };
         self.queue.write_buffer(
             &self.merge_uniform,
             0,
@@ -428,6 +451,7 @@ impl Estimator for Restir {
     }
 
     fn finish_iteration(&mut self) {
+        self.moment_updates = self.moment_updates.saturating_add(1);
         self.history = if self.options.temporal {
             self.history.saturating_add(1)
         } else {
@@ -461,6 +485,7 @@ impl Estimator for Restir {
         state.counters = vec![
             (state_names::HISTORY.into(), self.history),
             (state_names::WORDS.into(), self.words),
+            (state_names::MOMENT_UPDATES.into(), self.moment_updates),
         ];
         state.arrays = vec![
             (
@@ -468,6 +493,10 @@ impl Estimator for Restir {
                 kept_reservoirs(&slots, &headers[..n_observed], self.words),
             ),
             (state_names::TARGETS.into(), gpu.read_pod(&self.targets)?),
+            (
+                state_names::FRESH_MOMENTS.into(),
+                gpu.read_pod(&self.fresh_moments)?,
+            ),
         ];
         Ok(state)
     }
@@ -492,6 +521,20 @@ impl Estimator for Restir {
                 let history = r
                     .counter(state_names::HISTORY)
                     .ok_or_else(|| missing(state_names::HISTORY))?;
+                let moments = r
+                    .array(state_names::FRESH_MOMENTS)
+                    .ok_or_else(|| missing(state_names::FRESH_MOMENTS))?;
+                let moment_updates = r
+                    .counter(state_names::MOMENT_UPDATES)
+                    .ok_or_else(|| missing(state_names::MOMENT_UPDATES))?;
+                if moments.len() as u64 * 4 != self.fresh_moments.size() {
+                    return Err(Error::Invalid(format!(
+                        "the saved ReSTIR state has {} fresh-moment words where this \
+                         optimizer's textures need {}: it was saved for other textures",
+                        moments.len(),
+                        self.fresh_moments.size() / 4
+                    )));
+                }
                 let words = r.counter(state_names::WORDS).unwrap_or(0);
                 if words != self.words {
                     return Err(Error::Invalid(format!(
@@ -520,12 +563,18 @@ impl Estimator for Restir {
                 }
                 gpu.queue
                     .write_buffer(&self.targets, 0, bytemuck::cast_slice(targets));
+                gpu.queue
+                    .write_buffer(&self.fresh_moments, 0, bytemuck::cast_slice(moments));
                 self.history = if self.options.temporal { history } else { 0 };
+                self.moment_updates = moment_updates;
                 reservoirs.to_vec()
             }
             None => {
                 // The first iteration forms the target adjoint from its own adjoint alone.
                 self.history = 0;
+                self.moment_updates = 0;
+                let zeros = vec![0u8; self.fresh_moments.size() as usize];
+                gpu.queue.write_buffer(&self.fresh_moments, 0, &zeros);
                 vec![0; n_observed * 2 * self.words as usize]
             }
         };
@@ -544,7 +593,15 @@ impl Estimator for Restir {
     }
 
     fn state_bytes(&self) -> u64 {
-        self.slots.iter().map(|b| b.size()).sum::<u64>() + self.headers.size() + self.map_bytes
+        self.slots.iter().map(|b| b.size()).sum::<u64>()
+            + self.headers.size()
+            + self.map_bytes
+            + self.fresh_moments.size()
+            + self.variance.size()
+    }
+
+    fn variance(&self) -> Option<&wgpu::Buffer> {
+        self.options.own_variance.then_some(&self.variance)
     }
 
     fn diagnostics(&self, gpu: &Gpu) -> Result<Diagnostics> {

@@ -59,6 +59,11 @@ pub struct RestirOptions {
     /// task (at most one per reservoir; docs/method.md). An iteration that fills it traces
     /// its samples a second time instead (counted as claims overflowed); nothing is lost.
     pub claim_entries: Option<u32>,
+    /// Report the variance of each texel's estimate to the step (`Estimator::variance`): a
+    /// moving variance of the fresh candidates' own estimate, scaled by the share the merge
+    /// gives them (docs/method.md). Without it the variance-scaled step keeps a moving
+    /// variance of the merged estimates, whose kept samples repeat for many iterations.
+    pub own_variance: bool,
 }
 
 impl Default for RestirOptions {
@@ -72,6 +77,7 @@ impl Default for RestirOptions {
             target_smoothing: None,
             m_cap_follows_schedule: false,
             claim_entries: None,
+            own_variance: true,
         }
     }
 }

@@ -46,6 +46,8 @@ pub(crate) const MERGE_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
         "grad",
         "mstats",
         "observed_list",
+        "fresh_moments",
+        "variance",
     ],
 };
 
@@ -91,7 +93,11 @@ pub struct MergeParams {
     pub stride: u32,
     pub target_cur: u32,
     pub target_prev: u32,
-    pub _pad: u32,
+    pub moment_decay: f32,
+    pub moment_bias: f32,
+    pub variance_factor: f32,
+    pub _pad0: u32,
+    pub _pad1: u32,
     pub origins: [[f32; 4]; MAX_CAMERAS],
 }
 
@@ -143,6 +149,9 @@ mod contract_tests {
                 stride,
                 target_cur,
                 target_prev,
+                moment_decay,
+                moment_bias,
+                variance_factor,
                 origins
             ]
         );

@@ -55,7 +55,14 @@ struct MergeParams {
     // Where this iteration's and the last iteration's target adjoints start in `targets`.
     target_cur: u32,
     target_prev: u32,
+    // The moving moments' decay of the fresh estimates and their bias correction (1 -
+    // decay^iterations), and the factor that turns a fresh estimate's variance into the
+    // merged estimate's (variance_factor in mod.rs; 0: no variance reported).
+    moment_decay: f32,
+    moment_bias: f32,
+    variance_factor: f32,
     _pad0: u32,
+    _pad1: u32,
     // The cameras' positions (xyz), by the camera index of a reservoir's info word.
     origins: array<vec4f, MAX_CAMERAS>,
 }
@@ -76,6 +83,11 @@ struct MergeParams {
 @group(1) @binding(9) var<storage, read_write> mstats: array<atomic<u32>, 4>;
 // The texel (index into all optimized texels) of each observed texel.
 @group(1) @binding(10) var<storage, read> observed_list: array<u32>;
+// Per gradient entry: the moving mean and second moment of the fresh candidates' own
+// estimate (the fresh reservoirs alone, without what was kept), and the variance of the
+// merged estimate the step divides by (Estimator::variance).
+@group(1) @binding(11) var<storage, read_write> fresh_moments: array<vec2f>;
+@group(1) @binding(12) var<storage, read_write> variance: array<f32>;
 
 var<private> evaluations: u32 = 0u;
 var<private> dropped: u32 = 0u;
@@ -312,6 +324,27 @@ fn take_later(j: u32) -> f32 {
     return grad[j];
 }
 
+// Gradient entry j of this iteration: the merged estimate g (plus what the candidate pass
+// added there), and the variance the step divides by. A fresh estimate f (the fresh
+// reservoirs' own RIS estimate, 0 where no candidate reached the texel: an unbiased
+// estimate of the gradient from this iteration's samples alone, independent between
+// iterations) updates its entry's moving moments; their variance is a fresh estimate's,
+// rare hits included, and the merged estimate's is that times variance_factor: the merge
+// averages the fresh candidates with the kept ones by confidence, M_c against M_k, as a
+// moving average of weight M_c / (M_c + M_k) per iteration would. The spread of the merged
+// estimates themselves is no measure of their error: a kept path carries a texel's estimate
+// for many iterations.
+fn write_entry(j: u32, g: f32, f: f32) {
+    grad[j] = g + take_later(j);
+    if mp.variance_factor == 0.0 {
+        return;
+    }
+    let m = mp.moment_decay * fresh_moments[j] + (1.0 - mp.moment_decay) * vec2f(f, f * f);
+    fresh_moments[j] = m;
+    let mean = m.x / mp.moment_bias;
+    variance[j] = max(m.y / mp.moment_bias - mean * mean, 0.0) * mp.variance_factor;
+}
+
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {
     res_stride = reservoir_stride();
@@ -351,7 +384,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     // keep their slots until a merge selects something else).
     if !any(fresh_w > vec2f(0.0)) && !any(kept_w > vec2f(0.0)) {
         for (var c = 0u; c < ch; c++) {
-            grad[p.offset + local * ch + c] = take_later(p.offset + local * ch + c);
+            write_entry(p.offset + local * ch + c, 0.0, 0.0);
         }
         if dropped > 0u {
             atomicAdd(&mstats[MERGE_STAT_DROPPED], dropped);
@@ -395,6 +428,8 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     let m_c = mp.m_fresh;
     let m_k = select(0.0, mp.m_kept, reuse);
     var g = vec3f(0.0);
+    // The fresh reservoirs' own estimate (write_entry).
+    var fresh = vec3f(0.0);
     // The slot each sign's merged reservoir ends in.
     var out_slot = fresh_k;
     for (var s = 0u; s < n_signs; s++) {
@@ -416,6 +451,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         // the kept ones (wk).
         var w0 = 0.0;
         if c_ok {
+            fresh += c.v * (fresh_w[s] / tau(c_qcur, s));
             let own = m_c * tau(c_qcur, s);
             var den = own;
             for (var r = 0u; r < n_signs; r++) {
@@ -483,7 +519,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         set_slot_word(k, i * res_stride + RES_INFO, 0u);
     }
     for (var c = 0u; c < ch; c++) {
-        grad[p.offset + local * ch + c] = g[c] + take_later(p.offset + local * ch + c);
+        write_entry(p.offset + local * ch + c, g[c], fresh[c]);
     }
     atomicAdd(&mstats[MERGE_STAT_EVALUATIONS], evaluations);
     if dropped > 0u {

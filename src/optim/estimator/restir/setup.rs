@@ -59,7 +59,7 @@ pub(super) fn max_offers(samples: u64, max_depth: u32, slots: u64, footprint: u6
 /// with. Slot k of every observed texel lies in buffer `reservoir slots<k>`, so that each
 /// binding holds a quarter of the reservoirs; `words` per reservoir.
 pub(super) fn memory(
-    n_texels: u64,
+    (n_params, n_texels): (u64, u64),
     n_observed: u64,
     n_pixels: u64,
     words: u32,
@@ -95,6 +95,16 @@ pub(super) fn memory(
             "target adjoints".to_string(),
             STATE_BYTES_PER_PIXEL * n_pixels,
             Scale::Pixel,
+        ),
+        (
+            "restir fresh moments".to_string(),
+            8 * n_params,
+            Scale::Texel,
+        ),
+        (
+            "restir variance".to_string(),
+            4 * n_params,
+            Scale::Texel,
         ),
         (
             "claim log".to_string(),
@@ -164,6 +174,10 @@ pub(super) struct Buffers {
     pub(super) targets: wgpu::Buffer,
     /// The claim log (restir_claim.wgsl): its header, then the entries.
     pub(super) claims: wgpu::Buffer,
+    /// The fresh estimates' moving moments and the merged estimate's variance, per gradient
+    /// entry (restir_merge.wgsl, write_entry).
+    pub(super) fresh_moments: wgpu::Buffer,
+    pub(super) variance: wgpu::Buffer,
     pub(super) claim_capacity: u32,
     pub(super) n_observed: u32,
     /// Pixels of all cameras.
@@ -194,7 +208,7 @@ impl Buffers {
             o.claim_entries,
         );
         let sizes = memory(
-            s.scene.n_texels as u64,
+            (s.set.values.len() as u64, s.scene.n_texels as u64),
             n_observed,
             n_all_pixels,
             words,
@@ -248,6 +262,11 @@ impl Buffers {
                 mapped_at_creation: false,
             }),
             claim_capacity,
+            fresh_moments: gpu.storage_zeroed(
+                "restir fresh moments",
+                size("restir fresh moments"),
+            ),
+            variance: gpu.storage_zeroed("restir variance", size("restir variance")),
             n_observed: n_observed as u32,
             n_all_pixels: n_all_pixels as u32,
         }
@@ -263,6 +282,20 @@ fn offers_of(s: &Setup, n_pixels: u64) -> u64 {
         slots,
         footprint,
     )
+}
+
+/// Decay of the moving moments of the fresh estimates (restir_merge.wgsl, write_entry): as
+/// the variance-scaled step's own moving variance.
+pub(super) const FRESH_MOMENT_DECAY: f32 = 0.9;
+
+/// The merged estimate's variance over a fresh estimate's, where the merge weighs the fresh
+/// candidates by `m_fresh` against the kept ones' `m_kept`: a moving average that gives each
+/// iteration's independent estimate the share a = m_fresh / (m_fresh + m_kept) has variance
+/// a / (2 - a) times theirs (1 without reuse; 1/17 at the default M cap of 8 with one sample
+/// per pixel).
+pub(super) fn variance_factor(m_fresh: f32, m_kept: f32) -> f32 {
+    let a = m_fresh / (m_fresh + m_kept).max(1e-30);
+    a / (2.0 - a)
 }
 
 /// The merge's uniform before the first iteration.
@@ -287,7 +320,11 @@ pub(super) fn merge_params(s: &Setup, o: &RestirOptions, n_observed: u32, grid: 
         stride: grid.0 * WORKGROUP,
         target_cur: 0,
         target_prev: 0,
-        _pad: 0,
+        moment_decay: FRESH_MOMENT_DECAY,
+        moment_bias: 1.0,
+        variance_factor: 0.0,
+        _pad0: 0,
+        _pad1: 0,
         origins,
     }
 }
