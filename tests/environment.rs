@@ -298,3 +298,77 @@ fn an_environment_fitted_from_gray_finds_the_sun() {
     assert!(angle <= 20.0, "the recovered sun is {angle:.1} degrees off");
     assert!(last < 0.2 * first, "loss {first} -> {last}");
 }
+
+/// One environment texel behind every pixel: a camera that looks up into a 1x1 sky, away
+/// from every surface, so that each of its samples adds to the same three words of the
+/// environment's gradient (a workgroup's in workgroup memory, then one addition per
+/// workgroup), 32k samples in all. Under a given adjoint the gradient is the sum of the
+/// pixels' adjoints (each sample adds its pixel's over the spp): every estimator gets it to
+/// float rounding, and loses nothing.
+#[test]
+fn one_environment_texel_seen_by_every_pixel_loses_nothing() {
+    let Some(gpu) = gpu() else { return };
+    let side = 64u32;
+    let sky = EnvMap {
+        width: 1,
+        height: 1,
+        rgb: vec![[0.5, 0.6, 0.7]],
+        scale: 1.0,
+    };
+    let mut scene = with_env(shadow_scene(), sky.clone());
+    scene.cameras[0] = look_at(
+        glam::Vec3::new(0.0, 1.0, 0.0),
+        glam::Vec3::new(0.0, 10.0, 0.5),
+        glam::Vec3::Z,
+        0.5,
+    );
+    let set = ParamSet::from_specs(
+        &scene,
+        &[TextureSpec {
+            material: "plane".into(),
+            slot: Slot::BaseColor,
+            resolution: [2, 2],
+            init: Init::Vector(vec![0.5; 3]),
+            learning_rate: Some(0.0),
+        }],
+        Filter::Nearest,
+        std::path::Path::new("test"),
+    )
+    .unwrap();
+    // Each pixel's adjoint differs (so that a lost or doubled addition shows).
+    let n = (side * side) as usize;
+    let adjoint: Vec<f32> = (0..n)
+        .flat_map(|p| {
+            let a = 1e-3 * (1.0 + (p % 7) as f32);
+            [a, 0.5 * a, -0.25 * a, 0.0]
+        })
+        .collect();
+    let mut want = [0f64; 3];
+    for p in adjoint.chunks(4) {
+        for c in 0..3 {
+            want[c] += p[c] as f64;
+        }
+    }
+    for method in Method::all() {
+        let settings = Settings {
+            gradient_spp: 8,
+            method,
+            ..Settings::new(side, side, vec![0])
+        };
+        let target = Image::new(side, side);
+        let mut opt = Optimizer::new(&gpu, &scene, set.clone(), settings, &[target]).unwrap();
+        opt.optimize_environment(&sky, EnvFitOptions::default())
+            .unwrap();
+        opt.estimate_gradient_with_adjoint(0, &adjoint).unwrap();
+        let (g, faults) = opt.read_environment_gradient().unwrap();
+        assert_eq!(faults, 0, "{method}: updates lost or dropped");
+        for c in 0..3 {
+            let got = g[c] as f64;
+            assert!(
+                (got - want[c]).abs() <= 1e-4 * want[c].abs(),
+                "{method}: channel {c}: {got} where the adjoints sum to {}",
+                want[c]
+            );
+        }
+    }
+}

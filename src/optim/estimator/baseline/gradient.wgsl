@@ -47,7 +47,14 @@ fn differentiate_later_vertex(mi: u32, uv: vec2f, wo: vec3f, wi: vec3f, mat: Sur
 }
 
 @compute @workgroup_size(64)
-fn main(@builtin(global_invocation_id) id: vec3u) {
+fn main(@builtin(global_invocation_id) id: vec3u, @builtin(local_invocation_index) lid: u32) {
+    env_local_begin(lid, true);
+    differentiate_pixel(id);
+    env_local_flush(lid, true);
+}
+
+// The gradient samples of invocation id's pixel.
+fn differentiate_pixel(id: vec3u) {
     let a = adjoint_pixel(id.x + id.y * gp.stride, gp.camera, gp.adjoint_offset, gp.inv_spp);
     if a.pixel == NONE {
         return;

@@ -131,7 +131,14 @@ fn differentiate_later_vertex(mi: u32, uv: vec2f, wo: vec3f, wi: vec3f, mat: Sur
 }
 
 @compute @workgroup_size(64)
-fn main(@builtin(global_invocation_id) id: vec3u) {
+fn main(@builtin(global_invocation_id) id: vec3u, @builtin(local_invocation_index) lid: u32) {
+    env_local_begin(lid, true);
+    differentiate_pixel(id);
+    env_local_flush(lid, true);
+}
+
+// The gradient samples of invocation id's pixel, under both states.
+fn differentiate_pixel(id: vec3u) {
     let xy = tile_pixel(id.x + id.y * rp.stride, rp.camera.width, rp.camera.height);
     if xy.x == NONE {
         return;

@@ -307,7 +307,15 @@ fn arrival_offer(a: u32, k: u32) -> Offer {
 }
 
 @compute @workgroup_size(64)
-fn main(@builtin(global_invocation_id) id: vec3u) {
+fn main(@builtin(global_invocation_id) id: vec3u, @builtin(local_invocation_index) lid: u32) {
+    // The environment's derivative is added in phase 0 only.
+    env_local_begin(lid, cp.phase == 0u);
+    offer_pixel(id);
+    env_local_flush(lid, cp.phase == 0u);
+}
+
+// Invocation id's pixel: its target adjoint, and its samples offered to the reservoirs.
+fn offer_pixel(id: vec3u) {
     res_stride = reservoir_stride();
     let linear = id.x + id.y * cp.stride;
     // This iteration's target adjoint of the pixel, for every pixel (the merge reads it for
