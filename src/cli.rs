@@ -297,7 +297,7 @@ pub(crate) struct BenchArgs {
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "restir,recursive:adam,recursive:variance,default"
+        default_value = "restir,recursive:adam,recursive:variance,baseline:variance,baseline:variance+filtered,default"
     )]
     pub(crate) contenders: Vec<String>,
     /// Switch off the tasks' priors (multiscale gradient, smoothness prior).

@@ -378,16 +378,13 @@ fn task_with_flags(args: &OptimizeArgs) -> Result<(PathBuf, Task)> {
             bail!("--lr-scale must be a positive number");
         }
         // A texture without a rate scales the one `auto` gives it under the task's step.
-        let step = psrestir::task::task_configuration(
+        let config = psrestir::task::task_configuration(
             &task,
             task.optimizer.method,
             psrestir::task::named_cameras(&task),
-        )
-        .step;
+        );
         for t in &mut task.textures {
-            let rate = t
-                .learning_rate
-                .unwrap_or_else(|| psrestir::optim::auto::learning_rate(step, t.slot));
+            let rate = t.learning_rate.unwrap_or_else(|| config.rate(t.slot));
             t.learning_rate = Some(rate * f);
         }
     }

@@ -54,8 +54,11 @@ iterations = {iterations}
 primal_spp = 2
 gradient_spp = 2
 checkpoint_every = 5
-# Adam: the step whose restored moments make a resumed run follow the uninterrupted one to
-# 1e-5 (with the variance-scaled step this task's resumed runs differed by up to 3e-5).
+# Adam: with it a resumed run follows the uninterrupted one to 1e-5. This task is not
+# deterministic (16 texels under 4096 pixels: their float additions meet from many
+# workgroups in the order the driver's threads run them), and the variance-scaled step
+# amplifies that rounding more: two uninterrupted runs differed by 1.4e-5 at iteration 72.
+# Both steps resume bit-exactly on a deterministic task (every_configuration_resumes_bit_exactly).
 step = "adam"
 [[textures]]
 material = "plane"
@@ -561,4 +564,385 @@ fn a_checkpoint_is_not_resumed_at_another_path_depth() {
         "unclear error: {err}"
     );
     assert_eq!(std::fs::read(out.join("checkpoint.bin")).unwrap(), before);
+}
+
+/// A task on the bundled default scene (two 64² views, the sphere's 256×128 base color) in
+/// `dir`: `iterations` iterations, a checkpoint every `every`, `optimizer` added to its
+/// `[optimizer]` table and `extra` after it. Its runs are deterministic on lavapipe (two
+/// uninterrupted runs write the same metrics.csv): each texel is seen by few pixels, so the
+/// order of the float additions into one texel does not depend on which of the driver's
+/// threads runs which workgroup. (The plane task above is not: 16 texels under 4096 pixels,
+/// whose additions meet from many workgroups at once; two of its uninterrupted runs with the
+/// variance-scaled step differed by 1e-7 from iteration 11 and 1.4e-5 by iteration 72.)
+fn write_default_scene_task(
+    dir: &Path,
+    iterations: u32,
+    every: u32,
+    optimizer: &str,
+    extra: &str,
+) -> std::path::PathBuf {
+    let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/default");
+    let scene = scenes.join("scene.gltf");
+    let sky = scenes.join("sky.exr");
+    let text = format!(
+        r#"
+scene = "{scene}"
+cameras = ["main", "top"]
+width = 64
+height = 64
+seed = 1
+env = "{sky}"
+[target]
+scene = "{scene}"
+spp = 64
+[optimizer]
+iterations = {iterations}
+checkpoint_every = {every}
+checkpoint_every_s = 0
+primal_spp = 4
+gradient_spp = 2
+primal = "control_variate"
+eval_every = 5
+{optimizer}
+[[textures]]
+material = "sphere"
+slot = "base_color"
+resolution = [256, 128]
+init = [0.5, 0.5, 0.5]
+{extra}
+"#,
+        scene = scene.display(),
+        sky = sky.display(),
+    );
+    std::fs::write(dir.join("task.toml"), text).unwrap();
+    dir.join("task.toml")
+}
+
+/// metrics.csv without its elapsed-time column: what a resumed run must reproduce.
+fn metrics_text(dir: &Path) -> Vec<String> {
+    std::fs::read_to_string(dir.join("metrics.csv"))
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let mut f: Vec<&str> = l.split(',').collect();
+            f.remove(1);
+            f.join(",")
+        })
+        .collect()
+}
+
+/// Run `task` into `out` and SIGKILL it once its checkpoint file exists (the first
+/// checkpoint, written whole by its rename); then `--resume` it to the end.
+fn kill_after_first_checkpoint_and_resume(task: &Path, out: &Path) {
+    let bin = env!("CARGO_BIN_EXE_psrestir");
+    let mut child = Command::new(bin)
+        .arg("optimize")
+        .arg(task)
+        .arg("--out")
+        .arg(out)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let ckpt = out.join("checkpoint.bin");
+    let t = Instant::now();
+    while !ckpt.exists() {
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the run ended before its first checkpoint"
+        );
+        assert!(t.elapsed() < Duration::from_secs(300), "no checkpoint");
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let resumed = psrestir::optim::checkpoint::Checkpoint::load(&ckpt)
+        .unwrap()
+        .state
+        .iteration;
+    let st = Command::new(bin)
+        .arg("optimize")
+        .arg(task)
+        .arg("--out")
+        .arg(out)
+        .arg("--resume")
+        .stderr(std::process::Stdio::null())
+        .status()
+        .unwrap();
+    assert!(st.success());
+    assert!(resumed > 0, "resumed from the start");
+}
+
+/// Every estimator with either step, filtered moments, the environment and the cameras'
+/// exposures and white balances, killed after its first checkpoint and resumed: the resumed
+/// run writes the uninterrupted run's metrics.csv bit for bit (loss, texture and image
+/// errors, learning rate at every iteration). The checkpoint holds everything a step reads:
+/// a missing moment, counter or seed stream would change the iterations after it. (Before
+/// this test, the variance-scaled step's resume was checked only on the plane task, whose
+/// uninterrupted runs already differ from each other at rounding level, which its step
+/// amplified past the test's bound.) With the environment recovered a run is not
+/// deterministic: the workgroups' sums of the environment's derivative meet in its buffer in
+/// the order the driver's threads run them, and the light's Adam turns a rounding difference
+/// of a texel the images hardly see into a step; measured, two uninterrupted runs differed
+/// by up to 4e-4 (relative, at iteration 3) and 8e-6 at the end. There every value is
+/// compared within 5e-3: starting the light again from its gray at the checkpoint, or the
+/// gains from 1, would miss by far more.
+#[test]
+fn every_configuration_resumes_bit_exactly() {
+    if no_gpu() {
+        return;
+    }
+    let variance = "step = \"variance\"\nmoment_filter = { levels = 5 }";
+    let configurations = [
+        (
+            "baseline, variance-scaled step, filtered moments",
+            format!("method = \"baseline\"\n{variance}"),
+            "",
+        ),
+        (
+            "baseline, Adam",
+            "method = \"baseline\"\nstep = \"adam\"".to_string(),
+            "",
+        ),
+        (
+            "restir, variance-scaled step",
+            "method = \"restir\"\nstep = \"variance\"".to_string(),
+            "",
+        ),
+        (
+            "recursive, variance-scaled step",
+            "method = \"recursive\"\nstep = \"variance\"".to_string(),
+            "",
+        ),
+        (
+            "baseline, the environment, exposures and white balances",
+            format!(
+                "method = \"baseline\"\n{variance}\noptimize_exposure = true\n\
+                 optimize_white_balance = true"
+            ),
+            "[environment]\nresolution = [16, 8]\ninit = 0.5\n",
+        ),
+    ];
+    for (name, optimizer, extra) in configurations {
+        let exact = extra.is_empty();
+        let dir = tempfile::tempdir().unwrap();
+        let task = write_default_scene_task(dir.path(), 30, 10, &optimizer, extra);
+        let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+        let st = Command::new(env!("CARGO_BIN_EXE_psrestir"))
+            .arg("optimize")
+            .arg(&task)
+            .arg("--out")
+            .arg(&a)
+            .stderr(std::process::Stdio::null())
+            .status()
+            .unwrap();
+        assert!(st.success(), "{name}");
+        kill_after_first_checkpoint_and_resume(&task, &b);
+        let (want, got) = (metrics_text(&a), metrics_text(&b));
+        assert_eq!(want.len(), 32, "{name}: {want:?}");
+        assert_eq!(got.len(), 32, "{name}: {got:?}");
+        for (w, g) in want.iter().zip(&got) {
+            if exact {
+                assert_eq!(
+                    w, g,
+                    "{name}: the resumed run differs from the uninterrupted one"
+                );
+                continue;
+            }
+            for (x, y) in w.split(',').zip(g.split(',')) {
+                let close = match (x.parse::<f64>(), y.parse::<f64>()) {
+                    (Ok(x), Ok(y)) => (x - y).abs() <= 5e-3 * x.abs().max(y.abs()),
+                    _ => x == y,
+                };
+                assert!(close, "{name}: resumed {g}, uninterrupted {w}");
+            }
+        }
+        no_temporaries(&b);
+    }
+}
+
+/// Whether `dir` holds a checkpoint's temporary file (its write under way, or cut short).
+fn has_checkpoint_temporary(dir: &Path) -> bool {
+    std::fs::read_dir(dir).is_ok_and(|mut d| {
+        d.any(|e| {
+            e.is_ok_and(|e| {
+                let name = e.file_name().to_string_lossy().into_owned();
+                name.starts_with(".checkpoint.bin.") && name.ends_with(".tmp")
+            })
+        })
+    })
+}
+
+/// A run that writes a large checkpoint after every iteration, killed (SIGKILL) three times
+/// while it writes a checkpoint (the moment its temporary file appears, after a random wait)
+/// and once while it writes its final outputs, and resumed after each: every output is
+/// whole after every kill, and the run ends with the uninterrupted run's metrics.csv, bit
+/// for bit.
+#[test]
+fn kills_while_writing_resume_to_the_same_end() {
+    if no_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let iterations = 24;
+    // A 1024x512 texture: checkpoints of about 30 MB, whose writes take much of each
+    // iteration.
+    let task = write_default_scene_task(
+        dir.path(),
+        iterations,
+        1,
+        "method = \"baseline\"\nstep = \"variance\"",
+        "",
+    );
+    let text = std::fs::read_to_string(&task)
+        .unwrap()
+        .replace("resolution = [256, 128]", "resolution = [1024, 512]");
+    std::fs::write(&task, text).unwrap();
+    let bin = env!("CARGO_BIN_EXE_psrestir");
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    let t0 = Instant::now();
+    let st = Command::new(bin)
+        .arg("optimize")
+        .arg(&task)
+        .arg("--out")
+        .arg(&a)
+        .stderr(std::process::Stdio::null())
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let full = t0.elapsed().as_secs_f64();
+    let rows = iterations as usize + 2;
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut uniform = move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    // metrics.csv's rows so far (none before the first checkpoint).
+    let rows_of = |dir: &Path| {
+        std::fs::read_to_string(dir.join("metrics.csv")).map_or(0, |t| t.lines().count())
+    };
+    let (mut mid_write, mut in_outputs) = (0, false);
+    for run in 0.. {
+        assert!(run < 40, "the kills never landed where they should");
+        let mut child = Command::new(bin)
+            .arg("optimize")
+            .arg(&task)
+            .arg("--out")
+            .arg(&b)
+            .arg("--resume")
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        let t = Instant::now();
+        let running = |c: &mut std::process::Child| c.try_wait().unwrap().is_none();
+        if mid_write < 3 {
+            // The moment a checkpoint's temporary file appears (after a random wait): the
+            // write is under way.
+            let (t, at) = (
+                Instant::now(),
+                Duration::from_secs_f64(0.2 * full * uniform()),
+            );
+            while t.elapsed() < at && running(&mut child) {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            while !has_checkpoint_temporary(&b) && running(&mut child) {
+                assert!(
+                    t.elapsed() < Duration::from_secs(300),
+                    "no checkpoint write"
+                );
+                std::thread::sleep(Duration::from_micros(200));
+            }
+        } else if !in_outputs {
+            // Right after the last iteration's metrics are on disk: the final outputs are
+            // being written.
+            while rows_of(&b) < rows && running(&mut child) {
+                assert!(t.elapsed() < Duration::from_secs(300), "no end");
+                std::thread::sleep(Duration::from_millis(1));
+            }
+        } else {
+            assert!(child.wait().unwrap().success());
+            outputs_whole(&b);
+            break;
+        }
+        if running(&mut child) {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            if mid_write < 3 {
+                mid_write += has_checkpoint_temporary(&b) as u32;
+            } else {
+                in_outputs = true;
+            }
+            outputs_whole(&b);
+        } else {
+            // It ended before its kill: start again from nothing.
+            assert!(child.wait().unwrap().success());
+            std::fs::remove_dir_all(&b).unwrap();
+        }
+    }
+    assert_eq!(metrics_text(&a), metrics_text(&b));
+    no_temporaries(&b);
+    for f in [
+        "optimized.glb",
+        "plot.png",
+        "sphere_base_color.exr",
+        "texture_errors.csv",
+    ] {
+        assert!(b.join(f).exists(), "{f} missing");
+    }
+}
+
+/// On a disk that fills up the run stops with an error that says so, and keeps its last
+/// checkpoint whole: a 40 MiB file system (tmpfs) holds one checkpoint of the 1024x512
+/// texture's run but not a second beside it. Runs where a tmpfs can be mounted (as root, as
+/// on CI); elsewhere it says why it did not run.
+#[test]
+fn a_full_disk_stops_the_run_and_keeps_its_last_checkpoint() {
+    if no_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let task = write_default_scene_task(
+        dir.path(),
+        24,
+        1,
+        "method = \"baseline\"\nstep = \"variance\"",
+        "",
+    );
+    let text = std::fs::read_to_string(&task)
+        .unwrap()
+        .replace("resolution = [256, 128]", "resolution = [1024, 512]");
+    std::fs::write(&task, text).unwrap();
+    let disk = dir.path().join("disk");
+    std::fs::create_dir(&disk).unwrap();
+    let mounted = Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=40m", "tmpfs"])
+        .arg(&disk)
+        .stderr(std::process::Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !mounted {
+        eprintln!("skipped: no tmpfs could be mounted here (needs root)");
+        return;
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_psrestir"))
+        .arg("optimize")
+        .arg(&task)
+        .arg("--out")
+        .arg(disk.join("out"))
+        .output()
+        .unwrap();
+    let ckpt = psrestir::optim::checkpoint::Checkpoint::load(&disk.join("out/checkpoint.bin"));
+    let _ = Command::new("umount").arg(&disk).status();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success(),
+        "the run ended normally on a full disk"
+    );
+    assert!(
+        stderr.contains("disk is full") && stderr.contains("unchanged"),
+        "{stderr}"
+    );
+    let ckpt = ckpt.expect("the last checkpoint is whole");
+    assert!(ckpt.state.iteration >= 1, "{}", ckpt.state.iteration);
 }

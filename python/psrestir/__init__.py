@@ -93,6 +93,9 @@ class Result:
     #: What the run warned of (also raised as ``RuntimeWarning``): a loss that had not fallen
     #: below its start after a quarter of the budget, with what to try.
     warnings: list = _field(default_factory=list)
+    #: Why the run ended before its budget because it had converged (the task's
+    #: ``stop_on_plateau``), or None.
+    plateau: str | None = None
 
 
 class _Bar:

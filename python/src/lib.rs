@@ -273,6 +273,7 @@ fn optimize<'py>(
     d.set_item("out", summary.out.display().to_string())?;
     d.set_item("interrupted", summary.interrupted)?;
     d.set_item("warnings", summary.warnings.clone())?;
+    d.set_item("plateau", summary.plateau.clone())?;
     let textures = PyDict::new(py);
     for (i, t) in summary.set.textures.iter().enumerate() {
         let v = summary.set.values_of(i).to_vec();

@@ -63,8 +63,10 @@ impl Contender {
     };
 
     /// The bench's default contenders: ReSTIR with Adam, the recursive estimator with Adam
-    /// and with the variance-scaled step, and the default configuration.
-    pub const DEFAULT: [Contender; 4] = [
+    /// and with the variance-scaled step, the baseline with the variance-scaled step without
+    /// and with filtered moments, and the default configuration (which the report compares
+    /// with the lowest of the others).
+    pub const DEFAULT: [Contender; 6] = [
         Contender {
             method: Method::RESTIR,
             step: StepKind::Adam,
@@ -81,6 +83,18 @@ impl Contender {
             method: Method::RECURSIVE,
             step: StepKind::Variance,
             filtered: false,
+            auto: false,
+        },
+        Contender {
+            method: Method::BASELINE,
+            step: StepKind::Variance,
+            filtered: false,
+            auto: false,
+        },
+        Contender {
+            method: Method::BASELINE,
+            step: StepKind::Variance,
+            filtered: true,
             auto: false,
         },
         Contender::AUTO,

@@ -506,7 +506,7 @@ fn describe_run(
         .set
         .textures
         .iter()
-        .map(|t| format!("{}", crate::optim::auto::learning_rate(s.step, t.slot)))
+        .map(|t| format!("{}", crate::optim::auto::texture_rate(t, s.step)))
         .collect();
     format!(
         "{d}; auto's rates {}, {}, smoothness {}",

@@ -80,9 +80,51 @@ pub fn write_atomic_with(
     let result = write(&tmp).and_then(|_| std::fs::rename(&tmp, path));
     if let Err(e) = result {
         let _ = std::fs::remove_file(&tmp);
-        return Err(Error::file(path, e.to_string()));
+        return Err(Error::file(path, write_error(&e, path.exists())));
     }
     Ok(())
+}
+
+/// What a failed atomic write says: a full disk by name (the run stops there), and that the
+/// file it would have replaced (`existed`) is as it was.
+fn write_error(e: &std::io::Error, existed: bool) -> String {
+    let kept = if existed {
+        "; the file it would have replaced is unchanged"
+    } else {
+        ""
+    };
+    if e.kind() == std::io::ErrorKind::StorageFull {
+        format!("the disk is full ({e}): nothing was written{kept}; free space and resume")
+    } else {
+        format!("{e}{kept}")
+    }
+}
+
+#[cfg(test)]
+mod write_tests {
+    use super::*;
+
+    /// A write that runs out of space leaves the file it would have replaced as it was, no
+    /// temporary file, and an error that names the file and says the disk is full.
+    #[test]
+    fn a_full_disk_keeps_the_old_file_and_says_so() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("checkpoint.bin");
+        write_atomic(&path, b"the last checkpoint").unwrap();
+        let e = write_atomic_with(&path, |tmp| {
+            std::fs::write(tmp, b"half a checkp")?;
+            Err(std::io::Error::from(std::io::ErrorKind::StorageFull))
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("checkpoint.bin") && e.contains("disk is full") && e.contains("unchanged"),
+            "{e}"
+        );
+        assert_eq!(std::fs::read(&path).unwrap(), b"the last checkpoint");
+        let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().flatten().collect();
+        assert_eq!(names.len(), 1, "a temporary file was left");
+    }
 }
 
 impl Image {

@@ -30,7 +30,13 @@ impl Problem {
                 (0..scene.cameras.len()).collect()
             }
         };
-        let set = ParamSet::from_specs(&scene, &task.textures, task.optimizer.filter, &task.path)?;
+        let mut set =
+            ParamSet::from_specs(&scene, &task.textures, task.optimizer.filter, &task.path)?;
+        // A texture that names no learning rate takes `auto`'s for the task's step and regime.
+        let config = crate::task::task_configuration(task, task.optimizer.method, cameras.len());
+        for t in &mut set.textures {
+            t.learning_rate.get_or_insert_with(|| config.rate(t.slot));
+        }
         let exposure = cameras
             .iter()
             .map(|&c| {

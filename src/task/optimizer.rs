@@ -192,6 +192,7 @@ pub fn task_regime(task: &Task, cameras: usize) -> Regime {
             .map(|t| t.resolution[0] as u64 * t.resolution[1] as u64)
             .sum(),
         max_depth: task.max_depth,
+        recovers_light: task.environment.as_ref().is_some_and(|e| e.optimize),
     }
 }
 
