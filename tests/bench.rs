@@ -173,21 +173,26 @@ fn bench_json_has_every_field_finite_and_in_range() {
     assert!(number(s, "image_relmse_initial") > 0.0);
     // Every run: the baseline with Adam first (the reference of the ratios), then the
     // default contenders: ReSTIR with Adam, the recursive estimator with Adam and with the
-    // variance-scaled step, and the default configuration (auto's: at 0.125 gradient samples
-    // per texel over 2 x 64² texels, ReSTIR, with the variance-scaled step, unfiltered over
-    // a roughness texture).
+    // variance-scaled step, the baseline with the variance-scaled step unfiltered and
+    // filtered, and the default configuration (auto's: at 0.25 gradient samples per texel
+    // at depth 1, ReSTIR with Adam).
     let runs = s["runs"].as_array().unwrap();
     let names: Vec<&str> = runs.iter().map(|r| r["method"].as_str().unwrap()).collect();
     assert_eq!(
         names,
-        ["baseline", "restir", "recursive", "recursive", "restir"]
+        [
+            "baseline",
+            "restir",
+            "recursive",
+            "recursive",
+            "baseline",
+            "baseline",
+            "restir"
+        ]
     );
-    let d = &runs[4];
+    let d = &runs[6];
     assert_eq!(d["key"].as_str(), Some("default"));
-    assert_eq!(
-        d["name"].as_str(),
-        Some("default (auto: restir, variance-scaled step)")
-    );
+    assert_eq!(d["name"].as_str(), Some("default (auto: restir, Adam)"));
     let dr = &s["auto"]["default_run"];
     let want = number(d, "texture_rmse_observed") / number(s, "texture_rmse_observed_initial");
     assert!(
@@ -255,13 +260,17 @@ fn bench_json_has_every_field_finite_and_in_range() {
         .unwrap()
         .is_empty());
     // ReSTIR's extra state per texel is exactly the reservoirs and headers of the observed
-    // texels and the compaction map (buffers that scale with the image, its target adjoints
-    // among them, are not counted per texel).
+    // texels, the compaction map, and the fresh estimates' moving moments and the variance
+    // (12 bytes per value: a base color and a roughness texture of 64², 4 values per texel
+    // of both, 2 per texel of the two); buffers that scale with the image, its target
+    // adjoints and claim log among them, are not counted per texel.
     let extra = number(restir, "state_bytes_per_texel") - number(base, "state_bytes_per_texel");
     let texels = number(s, "texels");
     let observed = number(s, "observed_texels");
+    let values = 2.0 * texels;
     let expected = (observed * STATE_BYTES_PER_OBSERVED_TEXEL as f64
-        + (texels / 32.0).ceil() * STATE_BYTES_PER_32_TEXELS as f64)
+        + (texels / 32.0).ceil() * STATE_BYTES_PER_32_TEXELS as f64
+        + 12.0 * values)
         / texels;
     assert!(
         (extra - expected).abs() < 1e-9 * expected,

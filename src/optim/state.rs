@@ -277,8 +277,9 @@ impl Optimizer {
     }
 
     /// Bytes of GPU memory the optimizer keeps per optimized texel: the textures (current and
-    /// previous), gradient and Adam moments, plus the reservoirs and locks of ReSTIR. Buffers
-    /// that scale with the image (targets, adjoints) are not counted.
+    /// previous), gradient and Adam moments, plus ReSTIR's reservoirs, headers, compaction
+    /// map and moving moments. Buffers that scale with the image (targets, adjoints, ReSTIR's
+    /// claim log) are not counted.
     pub fn state_bytes_per_texel(&self) -> f64 {
         let bytes = self.params.values.size()
             + self.params.previous.size()

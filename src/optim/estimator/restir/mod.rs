@@ -305,7 +305,7 @@ impl Restir {
             merge_groups,
             merge_grid,
             target_len: b.n_all_pixels,
-            map_bytes: b.observed_list.size() + b.observed_map.size() + b.claims.size(),
+            map_bytes: b.observed_list.size() + b.observed_map.size(),
             slots: b.slots,
             headers: b.headers,
             candidate_stats: b.candidate_stats,

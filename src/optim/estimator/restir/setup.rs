@@ -109,7 +109,13 @@ pub(super) fn memory(
         (
             "claim log".to_string(),
             claim_log_bytes(claim_capacity, words),
-            Scale::ObservedTexel,
+            // Sized by the offers an iteration makes where they are fewer than the
+            // reservoirs (claim_capacity), by the reservoirs otherwise.
+            if u64::from(claim_capacity) < 2 * n_observed {
+                Scale::Pixel
+            } else {
+                Scale::ObservedTexel
+            },
         ),
     ]);
     out
