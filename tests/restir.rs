@@ -1230,3 +1230,114 @@ fn the_target_adjoint_is_a_moving_average_of_the_adjoints() {
         }
     }
 }
+
+/// ReSTIR's own variance (`own_variance`) rests on moving moments of its *fresh* estimate:
+/// what this iteration's candidates alone estimate, without what the reservoirs kept. With the
+/// target adjoint equal to the adjoint (β = 0) a fresh reservoir of a scalar texture estimates
+/// the sum of its candidates' values over their densities, the baseline's estimate from the
+/// same samples (`restir_without_reuse_equals_the_baseline`), whichever it selects. So, with
+/// reuse on and the textures held, the moving mean and second moment ReSTIR keeps per value
+/// (decay 0.9, from 0) are those of the baseline's estimates at the same seeds, within the
+/// rounding of the stored radiance summed over the moving average.
+#[test]
+fn restirs_fresh_moments_are_those_of_independent_estimates() {
+    let Some(gpu) = gpu() else { return };
+    let scene = shadow_scene();
+    let specs = [
+        TextureSpec {
+            material: "plane".into(),
+            slot: Slot::Roughness,
+            resolution: [2, 2],
+            init: Init::Scalar(0.5),
+            learning_rate: Some(0.0),
+        },
+        TextureSpec {
+            material: "plane".into(),
+            slot: Slot::Metallic,
+            resolution: [3, 1],
+            init: Init::Scalar(0.5),
+            learning_rate: Some(0.0),
+        },
+    ];
+    let values = [0.3, 0.5, 0.7, 0.4, 0.2, 0.6, 0.9];
+    let truth = [0.8, 0.2, 0.4, 0.9, 0.7, 0.1, 0.3];
+    let set = ParamSet::from_specs(
+        &scene,
+        &specs,
+        Filter::Bilinear,
+        std::path::Path::new("test"),
+    )
+    .unwrap();
+    let opts = RestirOptions {
+        target_smoothing: Some(0.0),
+        own_variance: true,
+        ..Default::default()
+    };
+    let settings = Settings {
+        gradient_spp: 2,
+        estimator_options: EstimatorOptions::with(&opts),
+        ..Settings::new(W, W, vec![0])
+    };
+    let make = |method, target: &[Image]| {
+        let s = Settings {
+            method,
+            ..settings.clone()
+        };
+        Optimizer::new(&gpu, &scene, set.clone(), s, target).unwrap()
+    };
+    let t = make(Method::BASELINE, &[Image::new(W, W)]);
+    t.write_params(&truth).unwrap();
+    let target = [t.render(0, 1024, 99).unwrap()];
+    let (mut base, mut re) = (
+        make(Method::BASELINE, &target),
+        make(Method::RESTIR, &target),
+    );
+    base.write_params(&values).unwrap();
+    re.write_params(&values).unwrap();
+    let decay = 0.9f64;
+    let n = values.len();
+    // The baseline's moving moments, and the bound of each: the moving average of each
+    // estimate's rounding bound (as in restir_without_reuse_equals_the_baseline).
+    let (mut m1, mut m2) = (vec![0f64; n], vec![0f64; n]);
+    let (mut b1, mut b2) = (vec![0f64; n], vec![0f64; n]);
+    for it in 0..40 {
+        let (g, _) = base.estimate_gradient(it).unwrap();
+        re.estimate_gradient(it).unwrap();
+        let scale = g.iter().fold(0f64, |m, x| m.max(x.abs() as f64));
+        for i in 0..n {
+            let g = g[i] as f64;
+            let tol = RADIANCE_ERROR as f64 * (g.abs() + 0.5 * scale);
+            m1[i] = decay * m1[i] + (1.0 - decay) * g;
+            m2[i] = decay * m2[i] + (1.0 - decay) * g * g;
+            b1[i] = decay * b1[i] + (1.0 - decay) * tol;
+            b2[i] = decay * b2[i] + (1.0 - decay) * tol * (2.0 * g.abs() + tol);
+        }
+    }
+    let state = re.state().unwrap();
+    let names = psrestir::optim::estimator::restir::state_names::FRESH_MOMENTS;
+    let moments: Vec<f64> = state
+        .estimator
+        .array(names)
+        .expect("no fresh moments")
+        .iter()
+        .map(|&w| f32::from_bits(w) as f64)
+        .collect();
+    assert_eq!(moments.len(), 2 * n);
+    assert!(m2.iter().all(|&s| s > 0.0), "every value has samples");
+    for i in 0..n {
+        let (r1, r2) = (moments[2 * i], moments[2 * i + 1]);
+        // 1e-6 of the largest second moment for the f32 sums.
+        let slack = 1e-6 * m2.iter().fold(0f64, |a, &b| a.max(b));
+        assert!(
+            (r1 - m1[i]).abs() <= b1[i] + slack.sqrt() * 1e-3
+                && (r2 - m2[i]).abs() <= b2[i] + slack,
+            "value {i}: ReSTIR's fresh moments ({r1:.4e}, {r2:.4e}), the baseline's \
+             ({:.4e}, {:.4e}), bounds ({:.1e}, {:.1e})",
+            m1[i],
+            m2[i],
+            b1[i],
+            b2[i]
+        );
+    }
+    assert_eq!(re.faults().unwrap(), Default::default());
+}
