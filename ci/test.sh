@@ -12,17 +12,35 @@ if cargo fmt --version >/dev/null 2>&1; then
 else
     echo "ci/test.sh: rustfmt not installed, format check skipped"
 fi
-cargo test --all-targets
+# Every test target compiled once, then run one by one with its time, so that growth is
+# seen (the slowest last). The same tests as `cargo test --all-targets`.
+cargo test --all-targets --no-run
+times=()
+timed() {
+    local label="$1" t0 t1
+    shift
+    t0=$(date +%s)
+    "$@"
+    t1=$(date +%s)
+    times+=("$((t1 - t0)) s  $label")
+}
+timed "unit tests (src/)" cargo test --lib --bins --examples
+for f in tests/*.rs; do
+    name="$(basename "$f" .rs)"
+    timed "tests/$name.rs" cargo test --test "$name"
+done
 # Doc examples (not part of --all-targets).
-cargo test --doc
+timed "doc examples" cargo test --doc
 # The API documentation builds without warnings (broken or private intra-doc links).
-RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --quiet
+RUSTDOCFLAGS="-D warnings" timed "API documentation" cargo doc --no-deps --quiet
 # The Python package (pyproject.toml, python/) and its tests. CI builds it with the dev profile,
 # which reuses the library the Rust tests just compiled (a release build, `pip install .`, is
 # what users run; the tests check behaviour, not speed). pytest exits non-zero when it
 # collects no test.
 PYTHON="${PYTHON:-python3}"
 "$PYTHON" -m pip install --quiet --disable-pip-version-check "maturin>=1.9,<2" numpy pytest
-MATURIN_PEP517_ARGS="--profile dev" "$PYTHON" -m pip install --quiet --disable-pip-version-check \
-    --no-build-isolation --force-reinstall --no-deps .
-"$PYTHON" -m pytest -q tests/python
+MATURIN_PEP517_ARGS="--profile dev" timed "Python package build" "$PYTHON" -m pip install \
+    --quiet --disable-pip-version-check --no-build-isolation --force-reinstall --no-deps .
+timed "tests/python (pytest)" "$PYTHON" -m pytest -q tests/python
+echo "ci/test.sh: time per test file and step:"
+printf '  %s\n' "${times[@]}" | sort -n -k1
