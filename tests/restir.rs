@@ -177,30 +177,29 @@ fn without_reuse_restir_equals_the_baseline_for_scalar_textures() {
     }
 }
 
+/// Two scalar textures at once on the plane's material (roughness 2x2, metallic 3x1, learning
+/// rate 0), their values and their true values.
+fn scalar_textures() -> ([TextureSpec; 2], [f32; 7], [f32; 7]) {
+    let spec = |slot, resolution| TextureSpec {
+        material: "plane".into(),
+        slot,
+        resolution,
+        init: Init::Scalar(0.5),
+        learning_rate: Some(0.0),
+    };
+    (
+        [spec(Slot::Roughness, [2, 2]), spec(Slot::Metallic, [3, 1])],
+        [0.3, 0.5, 0.7, 0.4, 0.2, 0.6, 0.9],
+        [0.8, 0.2, 0.4, 0.9, 0.7, 0.1, 0.3],
+    )
+}
+
 fn restir_without_reuse_equals_the_baseline(
     gpu: &psrestir::gpu::Gpu,
     scene: &psrestir::scene::Scene,
 ) {
-    // Two scalar textures at once (roughness 2x2, metallic 3x1) on the same material.
     let scene = scene.clone();
-    let specs = [
-        TextureSpec {
-            material: "plane".into(),
-            slot: Slot::Roughness,
-            resolution: [2, 2],
-            init: Init::Scalar(0.5),
-            learning_rate: Some(0.0),
-        },
-        TextureSpec {
-            material: "plane".into(),
-            slot: Slot::Metallic,
-            resolution: [3, 1],
-            init: Init::Scalar(0.5),
-            learning_rate: Some(0.0),
-        },
-    ];
-    let values = [0.3, 0.5, 0.7, 0.4, 0.2, 0.6, 0.9];
-    let truth = [0.8, 0.2, 0.4, 0.9, 0.7, 0.1, 0.3];
+    let (specs, values, truth) = scalar_textures();
     for filter in [Filter::Nearest, Filter::Bilinear] {
         let set =
             ParamSet::from_specs(&scene, &specs, filter, std::path::Path::new("test")).unwrap();
@@ -1243,24 +1242,7 @@ fn the_target_adjoint_is_a_moving_average_of_the_adjoints() {
 fn restirs_fresh_moments_are_those_of_independent_estimates() {
     let Some(gpu) = gpu() else { return };
     let scene = shadow_scene();
-    let specs = [
-        TextureSpec {
-            material: "plane".into(),
-            slot: Slot::Roughness,
-            resolution: [2, 2],
-            init: Init::Scalar(0.5),
-            learning_rate: Some(0.0),
-        },
-        TextureSpec {
-            material: "plane".into(),
-            slot: Slot::Metallic,
-            resolution: [3, 1],
-            init: Init::Scalar(0.5),
-            learning_rate: Some(0.0),
-        },
-    ];
-    let values = [0.3, 0.5, 0.7, 0.4, 0.2, 0.6, 0.9];
-    let truth = [0.8, 0.2, 0.4, 0.9, 0.7, 0.1, 0.3];
+    let (specs, values, truth) = scalar_textures();
     let set = ParamSet::from_specs(
         &scene,
         &specs,

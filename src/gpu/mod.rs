@@ -583,6 +583,17 @@ pub fn encode_timed_pass(
     grid: (u32, u32),
     timing: Option<(&wgpu::QuerySet, u32)>,
 ) {
+    begin_timed_pass(enc, label, pipeline, groups, timing).dispatch_workgroups(grid.0, grid.1, 1);
+}
+
+/// A compute pass of `pipeline` with `groups` bound, timed as [`encode_timed_pass`] says.
+fn begin_timed_pass<'e>(
+    enc: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    groups: &[&wgpu::BindGroup],
+    timing: Option<(&wgpu::QuerySet, u32)>,
+) -> wgpu::ComputePass<'e> {
     let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
         label: Some(label),
         timestamp_writes: timing.map(|(q, k)| wgpu::ComputePassTimestampWrites {
@@ -595,7 +606,7 @@ pub fn encode_timed_pass(
     for (k, g) in groups.iter().enumerate() {
         pass.set_bind_group(k as u32, *g, &[]);
     }
-    pass.dispatch_workgroups(grid.0, grid.1, 1);
+    pass
 }
 
 /// [`encode_timed_pass`] with its workgroup counts read from `args` at byte `offset` (x, y, z
@@ -608,19 +619,8 @@ pub fn encode_timed_pass_indirect(
     args: (&wgpu::Buffer, u64),
     timing: Option<(&wgpu::QuerySet, u32)>,
 ) {
-    let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-        label: Some(label),
-        timestamp_writes: timing.map(|(q, k)| wgpu::ComputePassTimestampWrites {
-            query_set: q,
-            beginning_of_pass_write_index: Some(2 * k),
-            end_of_pass_write_index: Some(2 * k + 1),
-        }),
-    });
-    pass.set_pipeline(pipeline);
-    for (k, g) in groups.iter().enumerate() {
-        pass.set_bind_group(k as u32, *g, &[]);
-    }
-    pass.dispatch_workgroups_indirect(args.0, args.1);
+    begin_timed_pass(enc, label, pipeline, groups, timing)
+        .dispatch_workgroups_indirect(args.0, args.1);
 }
 
 #[cfg(test)]

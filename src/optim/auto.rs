@@ -283,19 +283,18 @@ mod tests {
         }
     }
 
+    /// `auto`'s whole configuration for a base color texture of a task in `r` that sets
+    /// nothing.
+    fn unset(r: &Regime) -> Configuration {
+        let base_color = &[(Slot::BaseColor, false)];
+        Configuration::choose(r, MethodChoice::Auto, None, None, None, None, base_color)
+    }
+
     #[test]
     fn an_unset_task_gets_the_variance_step_filtered_and_a_cosine_decay() {
         // The indirect-lit bench scene's regime: two 128² views, a 256² texture, depth 3.
         let r = regime(1, 2 * 128 * 128, 256 * 256, 3);
-        let c = Configuration::choose(
-            &r,
-            MethodChoice::Auto,
-            None,
-            None,
-            None,
-            None,
-            &[(Slot::BaseColor, false)],
-        );
+        let c = unset(&r);
         assert_eq!(c.estimator.method, Method::BASELINE);
         assert_eq!(c.step, StepKind::Variance);
         assert_eq!(c.moment_filter.levels, SUGGESTED_LEVELS);
@@ -356,15 +355,7 @@ mod tests {
     fn direct_light_with_sparse_samples_gets_adam_unfiltered() {
         // The direct-lit bench scenes' regime: one 128² view, a 256² texture, depth 1.
         let sparse = regime(1, 128 * 128, 256 * 256, 1);
-        let c = Configuration::choose(
-            &sparse,
-            MethodChoice::Auto,
-            None,
-            None,
-            None,
-            None,
-            &[(Slot::BaseColor, false)],
-        );
+        let c = unset(&sparse);
         assert_eq!(c.estimator.method, Method::RESTIR);
         assert_eq!(c.step, StepKind::Adam);
         assert!(!c.moment_filter.enabled());
