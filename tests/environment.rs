@@ -35,8 +35,9 @@ fn with_env(mut s: Scene, e: EnvMap) -> Scene {
     s
 }
 
-fn optimizer(gpu: &psrestir::gpu::Gpu, scene: &Scene, method: Method, target: &Image) -> Optimizer {
-    let set = ParamSet::from_specs(
+/// A 2x2 base color texture of the plane, gray, held still (learning rate 0), nearest.
+fn plane_base_color(scene: &Scene) -> ParamSet {
+    ParamSet::from_specs(
         scene,
         &[TextureSpec {
             material: "plane".into(),
@@ -48,7 +49,11 @@ fn optimizer(gpu: &psrestir::gpu::Gpu, scene: &Scene, method: Method, target: &I
         Filter::Nearest,
         std::path::Path::new("test"),
     )
-    .unwrap();
+    .unwrap()
+}
+
+fn optimizer(gpu: &psrestir::gpu::Gpu, scene: &Scene, method: Method, target: &Image) -> Optimizer {
+    let set = plane_base_color(scene);
     let settings = Settings {
         primal_spp: 16,
         gradient_spp: 16,
@@ -322,19 +327,7 @@ fn one_environment_texel_seen_by_every_pixel_loses_nothing() {
         glam::Vec3::Z,
         0.5,
     );
-    let set = ParamSet::from_specs(
-        &scene,
-        &[TextureSpec {
-            material: "plane".into(),
-            slot: Slot::BaseColor,
-            resolution: [2, 2],
-            init: Init::Vector(vec![0.5; 3]),
-            learning_rate: Some(0.0),
-        }],
-        Filter::Nearest,
-        std::path::Path::new("test"),
-    )
-    .unwrap();
+    let set = plane_base_color(&scene);
     // Each pixel's adjoint differs (so that a lost or doubled addition shows).
     let n = (side * side) as usize;
     let adjoint: Vec<f32> = (0..n)

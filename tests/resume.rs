@@ -631,18 +631,22 @@ fn metrics_text(dir: &Path) -> Vec<String> {
         .collect()
 }
 
-/// Run `task` into `out` and SIGKILL it once its checkpoint file exists (the first
-/// checkpoint, written whole by its rename); then `--resume` it to the end.
-fn kill_after_first_checkpoint_and_resume(task: &Path, out: &Path) {
-    let bin = env!("CARGO_BIN_EXE_psrestir");
-    let mut child = Command::new(bin)
-        .arg("optimize")
+/// `psrestir optimize TASK --out OUT ARGS...`, its log discarded.
+fn optimize_command(task: &Path, out: &Path, args: &[&str]) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_psrestir"));
+    c.arg("optimize")
         .arg(task)
         .arg("--out")
         .arg(out)
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
+        .args(args)
+        .stderr(std::process::Stdio::null());
+    c
+}
+
+/// Run `task` into `out` and SIGKILL it once its checkpoint file exists (the first
+/// checkpoint, written whole by its rename); then `--resume` it to the end.
+fn kill_after_first_checkpoint_and_resume(task: &Path, out: &Path) {
+    let mut child = optimize_command(task, out, &[]).spawn().unwrap();
     let ckpt = out.join("checkpoint.bin");
     let t = Instant::now();
     while !ckpt.exists() {
@@ -659,15 +663,7 @@ fn kill_after_first_checkpoint_and_resume(task: &Path, out: &Path) {
         .unwrap()
         .state
         .iteration;
-    let st = Command::new(bin)
-        .arg("optimize")
-        .arg(task)
-        .arg("--out")
-        .arg(out)
-        .arg("--resume")
-        .stderr(std::process::Stdio::null())
-        .status()
-        .unwrap();
+    let st = optimize_command(task, out, &["--resume"]).status().unwrap();
     assert!(st.success());
     assert!(resumed > 0, "resumed from the start");
 }
@@ -727,14 +723,7 @@ fn every_configuration_resumes_bit_exactly() {
         let dir = tempfile::tempdir().unwrap();
         let task = write_default_scene_task(dir.path(), 30, 10, &optimizer, extra);
         let (a, b) = (dir.path().join("a"), dir.path().join("b"));
-        let st = Command::new(env!("CARGO_BIN_EXE_psrestir"))
-            .arg("optimize")
-            .arg(&task)
-            .arg("--out")
-            .arg(&a)
-            .stderr(std::process::Stdio::null())
-            .status()
-            .unwrap();
+        let st = optimize_command(&task, &a, &[]).status().unwrap();
         assert!(st.success(), "{name}");
         kill_after_first_checkpoint_and_resume(&task, &b);
         let (want, got) = (metrics_text(&a), metrics_text(&b));
@@ -797,17 +786,9 @@ fn kills_while_writing_resume_to_the_same_end() {
         .unwrap()
         .replace("resolution = [256, 128]", "resolution = [1024, 512]");
     std::fs::write(&task, text).unwrap();
-    let bin = env!("CARGO_BIN_EXE_psrestir");
     let (a, b) = (dir.path().join("a"), dir.path().join("b"));
     let t0 = Instant::now();
-    let st = Command::new(bin)
-        .arg("optimize")
-        .arg(&task)
-        .arg("--out")
-        .arg(&a)
-        .stderr(std::process::Stdio::null())
-        .status()
-        .unwrap();
+    let st = optimize_command(&task, &a, &[]).status().unwrap();
     assert!(st.success());
     let full = t0.elapsed().as_secs_f64();
     let rows = iterations as usize + 2;
@@ -825,15 +806,7 @@ fn kills_while_writing_resume_to_the_same_end() {
     let (mut mid_write, mut in_outputs) = (0, false);
     for run in 0.. {
         assert!(run < 40, "the kills never landed where they should");
-        let mut child = Command::new(bin)
-            .arg("optimize")
-            .arg(&task)
-            .arg("--out")
-            .arg(&b)
-            .arg("--resume")
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .unwrap();
+        let mut child = optimize_command(&task, &b, &["--resume"]).spawn().unwrap();
         let t = Instant::now();
         let running = |c: &mut std::process::Child| c.try_wait().unwrap().is_none();
         if mid_write < 3 {

@@ -32,8 +32,9 @@ var<workgroup> env_local: array<atomic<u32>, ENV_LOCAL_WORDS>;
 // env_local_begin; the same in every invocation).
 var<private> env_local_on: bool = false;
 
-// Add v to word i of an f32 array of atomics, in workgroup or storage memory; false when the
-// bound ran out.
+// Add v to word i of the workgroup's sums (f32 bits in atomics); false when the bound ran
+// out. env_cas_add_global is the same on env_grad: WGSL takes no pointer to workgroup or
+// storage memory as an argument, so each array has its own.
 fn env_cas_add_local(i: u32, v: f32) -> bool {
     var old = atomicLoad(&env_local[i]);
     for (var k = 0u; k < ENV_CAS_BOUND; k++) {

@@ -100,33 +100,6 @@ fn write_error(e: &std::io::Error, existed: bool) -> String {
     }
 }
 
-#[cfg(test)]
-mod write_tests {
-    use super::*;
-
-    /// A write that runs out of space leaves the file it would have replaced as it was, no
-    /// temporary file, and an error that names the file and says the disk is full.
-    #[test]
-    fn a_full_disk_keeps_the_old_file_and_says_so() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("checkpoint.bin");
-        write_atomic(&path, b"the last checkpoint").unwrap();
-        let e = write_atomic_with(&path, |tmp| {
-            std::fs::write(tmp, b"half a checkp")?;
-            Err(std::io::Error::from(std::io::ErrorKind::StorageFull))
-        })
-        .unwrap_err()
-        .to_string();
-        assert!(
-            e.contains("checkpoint.bin") && e.contains("disk is full") && e.contains("unchanged"),
-            "{e}"
-        );
-        assert_eq!(std::fs::read(&path).unwrap(), b"the last checkpoint");
-        let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().flatten().collect();
-        assert_eq!(names.len(), 1, "a temporary file was left");
-    }
-}
-
 impl Image {
     /// A black image.
     pub fn new(width: u32, height: u32) -> Image {
@@ -287,4 +260,31 @@ pub fn side_by_side(a: &Image, b: &Image) -> Image {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod write_tests {
+    use super::*;
+
+    /// A write that runs out of space leaves the file it would have replaced as it was, no
+    /// temporary file, and an error that names the file and says the disk is full.
+    #[test]
+    fn a_full_disk_keeps_the_old_file_and_says_so() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("checkpoint.bin");
+        write_atomic(&path, b"the last checkpoint").unwrap();
+        let e = write_atomic_with(&path, |tmp| {
+            std::fs::write(tmp, b"half a checkp")?;
+            Err(std::io::Error::from(std::io::ErrorKind::StorageFull))
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("checkpoint.bin") && e.contains("disk is full") && e.contains("unchanged"),
+            "{e}"
+        );
+        assert_eq!(std::fs::read(&path).unwrap(), b"the last checkpoint");
+        let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().flatten().collect();
+        assert_eq!(names.len(), 1, "a temporary file was left");
+    }
 }

@@ -394,6 +394,32 @@ struct Session {
     warnings: Vec<String>,
 }
 
+/// What watches a run's rows: the loss that does not fall (a warning) and, where asked, the
+/// plateau that ends the run.
+struct Watches {
+    loss: LossWatch,
+    plateau: Option<PlateauWatch>,
+}
+
+impl Watches {
+    /// The watches of `opt`'s run of `task`, primed with a resumed run's `earlier` rows (its
+    /// iterations before this session, judged from the next one on).
+    fn new(opt: &Optimizer, task: &Task, stop_on_plateau: bool, earlier: &[MetricRow]) -> Self {
+        let mut w = Watches {
+            loss: LossWatch::new(opt.settings().step),
+            plateau: stop_on_plateau.then(|| PlateauWatch::new(task.optimizer.eval_every > 0)),
+        };
+        for r in earlier {
+            let loss = r.loss.unwrap_or(f64::NAN);
+            w.loss.observe(loss, 0.0);
+            if let Some(p) = &mut w.plateau {
+                p.observe(r.iteration, loss, r.image_relmse, 0.0);
+            }
+        }
+        w
+    }
+}
+
 /// Step `opt` until the task's (or the options') budget is spent or an interrupt comes,
 /// with a metrics row per iteration, the progress bar, the loss watch and checkpoints.
 fn iterate(
@@ -437,19 +463,12 @@ fn iterate(
     let mut last_ckpt = Instant::now();
     let elapsed_now =
         |excluded: f64| elapsed_before + session_start.elapsed().as_secs_f64() - excluded;
-    let mut watch = LossWatch::new(opt.settings().step);
-    let mut plateau = task
+    let stop_on_plateau = task
         .optimizer
         .stop_on_plateau
-        .unwrap_or(budget.is_some() && max_iter.is_none())
-        .then(|| PlateauWatch::new(task.optimizer.eval_every > 0));
-    for r in session.rows.iter().skip(1) {
-        // A resumed run's earlier iterations (judged from the next one on).
-        watch.observe(r.loss.unwrap_or(f64::NAN), 0.0);
-        if let Some(p) = &mut plateau {
-            p.observe(r.iteration, r.loss.unwrap_or(f64::NAN), r.image_relmse, 0.0);
-        }
-    }
+        .unwrap_or(budget.is_some() && max_iter.is_none());
+    let earlier = session.rows.get(1..).unwrap_or_default();
+    let mut watches = Watches::new(opt, task, stop_on_plateau, earlier);
     loop {
         let elapsed = elapsed_now(excluded);
         if max_iter.is_some_and(|n| opt.iteration >= n) || budget.is_some_and(|b| elapsed >= b) {
@@ -468,7 +487,7 @@ fn iterate(
         opt.set_progress(progress);
         let stats = opt.step()?;
         session.last_loss = stats.loss;
-        if let Some(w) = watch.observe(stats.loss, progress) {
+        if let Some(w) = watches.loss.observe(stats.loss, progress) {
             log::warn!("{w}");
             session.warnings.push(w);
         }
@@ -484,7 +503,8 @@ fn iterate(
         if let Some(hook) = &opts.on_row {
             (hook.0)(&row);
         }
-        let converged = plateau
+        let converged = watches
+            .plateau
             .as_mut()
             .and_then(|p| p.observe(row.iteration, stats.loss, row.image_relmse, progress));
         session.rows.push(row);

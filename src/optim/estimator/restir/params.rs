@@ -101,8 +101,7 @@ pub struct MergeParams {
     pub origins: [[f32; 4]; MAX_CAMERAS],
 }
 
-/// Its bind groups, for the contract test (`crate::contract_tests`).
-
+/// Its uniforms and bind groups, for the contract test (`crate::contract_tests`).
 #[cfg(test)]
 mod contract_tests {
     use crate::contract_tests::mirror;
