@@ -4,7 +4,7 @@
 //! asserts that one estimator is faster or better.
 mod common;
 
-use psrestir::bench::{bench, resolve_scene, BenchOptions};
+use psrestir::bench::{bench, resolve_scene, BenchOptions, Contender};
 use psrestir::optim::estimator::restir::{
     STATE_BYTES_PER_32_TEXELS, STATE_BYTES_PER_OBSERVED_TEXEL,
 };
@@ -369,6 +369,9 @@ fn bench_tunes_each_estimator_and_reports_the_reconstruction_first() {
         tune: true,
         tune_budget_s: Some(0.2),
         end_to_end_only: true,
+        // The baseline and ReSTIR, whose searches the test reads (each other contender but
+        // the default configuration is searched the same way, `tune_contenders`).
+        contenders: vec![Contender::parse("restir").unwrap()],
         ..Default::default()
     };
     bench(&gpu, std::slice::from_ref(&task), &opts).unwrap();

@@ -6,7 +6,9 @@ use crate::Result;
 
 impl Gpu {
     /// The layout of bind group `group` of `pass`, reflected from its WGSL in `library`
-    /// ([`Library::bindings`]): the only way the passes build their layouts.
+    /// ([`Library::bindings`]): the only way the passes build their layouts. A layout this
+    /// device already made for the same pass and bindings is returned again, so that the
+    /// pipelines made with it are found again ([`Gpu::compute_pipeline_in`]).
     pub fn pass_layout_in(
         &self,
         library: &Library,
@@ -18,7 +20,17 @@ impl Gpu {
             .into_iter()
             .map(|(_, k)| k)
             .collect();
-        Ok(self.layout(&format!("{pass} group {group}"), &kinds))
+        let label = format!("{pass} group {group}");
+        let made =
+            |m: &mut super::prepare::Made| m.layouts.get(&(label.clone(), kinds.clone())).cloned();
+        if let Some(layout) = self.made.lock().ok().as_deref_mut().and_then(made) {
+            return Ok(layout);
+        }
+        let layout = self.layout(&label, &kinds);
+        if let Ok(mut m) = self.made.lock() {
+            m.layouts.insert((label, kinds), layout.clone());
+        }
+        Ok(layout)
     }
 
     /// A bind group layout of buffers (and an acceleration structure), bindings numbered in
@@ -162,7 +174,7 @@ pub struct GroupDecl {
 }
 
 /// Kind of a binding in a pass layout (`Gpu::layout`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Binding {
     /// `var<uniform>`.
     Uniform,

@@ -47,6 +47,9 @@ pub struct Gpu {
     pipelines: Arc<Mutex<Vec<PipelineTime>>>,
     /// Whether this is a second device compiling ahead for another ([`Gpu::compile_elsewhere_in`]).
     compiles_ahead: bool,
+    /// The layouts and pipelines this device has made, which later passes of the same WGSL
+    /// and layouts reuse ([`Gpu::compute_pipeline_in`]).
+    made: Arc<Mutex<prepare::Made>>,
 }
 
 /// A recorded device error, by kind.
@@ -305,6 +308,7 @@ impl Gpu {
             lost,
             pipelines: Arc::default(),
             compiles_ahead: false,
+            made: Arc::default(),
         }
     }
 
@@ -449,7 +453,10 @@ impl Gpu {
     /// Compile a compute pass from its WGSL file in `library` (composed with its imports),
     /// with the given bind group layouts, catching validation errors as [`Error::Shader`].
     /// The driver compiles it here, not at its first dispatch (`prepare.rs`), and the time it
-    /// took is recorded ([`Gpu::pipeline_times`]).
+    /// took is recorded ([`Gpu::pipeline_times`]). A pipeline this device already made from
+    /// the same WGSL and layouts is returned again: a second optimizer on one device, or the
+    /// bench's next run, creates no pipeline (on lavapipe each cost 0.1-0.8 s even when
+    /// Mesa's shader cache held it).
     pub fn compute_pipeline_in(
         &self,
         library: &shaders::Library,
@@ -458,6 +465,11 @@ impl Gpu {
     ) -> Result<wgpu::ComputePipeline> {
         let start = std::time::Instant::now();
         let source = library.compose_for(pass, self.tracer)?;
+        if let Some(pipeline) = self.made_pipeline(&source, layouts) {
+            self.record_pipeline(pass, start);
+            return Ok(pipeline);
+        }
+        let key = source.clone();
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = self
             .device
@@ -499,6 +511,7 @@ impl Gpu {
             });
         }
         self.compile_now(library, pass, &pipeline, layouts)?;
+        self.remember_pipeline(key, layouts, &pipeline);
         self.record_pipeline(pass, start);
         Ok(pipeline)
     }

@@ -11,12 +11,21 @@
 //! driver compiles at creation, this costs one empty submission per pipeline.
 use super::{shaders::Library, Binding, Gpu};
 use crate::Result;
+use std::collections::HashMap;
 use std::time::Instant;
 
 /// Placeholder buffer size: enough for any uniform block and the fixed part of any storage
 /// binding of the passes (wgpu checks a binding's size against the shader's even when no
 /// workgroup runs).
 const PLACEHOLDER_BYTES: u64 = 1 << 16;
+
+/// What a device has made, to be reused: bind group layouts by label and bindings, and
+/// pipelines by composed WGSL and layouts.
+#[derive(Default)]
+pub(super) struct Made {
+    pub(super) layouts: HashMap<(String, Vec<Binding>), wgpu::BindGroupLayout>,
+    pipelines: HashMap<String, Vec<(Vec<wgpu::BindGroupLayout>, wgpu::ComputePipeline)>>,
+}
 
 /// Seconds spent creating (and compiling) one pass's pipeline.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -31,7 +40,8 @@ pub struct PipelineTime {
 }
 
 impl Gpu {
-    /// Every pipeline this device has created so far, with the seconds each took, in order.
+    /// Every pipeline this device has been asked for so far, with the seconds each took, in
+    /// order (one it had made before is reused: its seconds are those of the lookup).
     pub fn pipeline_times(&self) -> Vec<PipelineTime> {
         self.pipelines.lock().map(|v| v.clone()).unwrap_or_default()
     }
@@ -48,6 +58,44 @@ impl Gpu {
             .filter(|p| !p.ahead)
             .collect();
         (new.len(), new.iter().map(|p| p.seconds).sum())
+    }
+
+    /// The pipeline this device made from `source` with `layouts`, if any.
+    pub(super) fn made_pipeline(
+        &self,
+        source: &str,
+        layouts: &[&wgpu::BindGroupLayout],
+    ) -> Option<wgpu::ComputePipeline> {
+        let made = self.made.lock().ok()?;
+        made.pipelines.get(source)?.iter().find_map(|(l, p)| {
+            (l.len() == layouts.len() && l.iter().zip(layouts).all(|(a, b)| a == *b))
+                .then(|| p.clone())
+        })
+    }
+
+    pub(super) fn remember_pipeline(
+        &self,
+        source: String,
+        layouts: &[&wgpu::BindGroupLayout],
+        pipeline: &wgpu::ComputePipeline,
+    ) {
+        if let Ok(mut made) = self.made.lock() {
+            let layouts = layouts.iter().map(|l| (*l).clone()).collect();
+            made.pipelines
+                .entry(source)
+                .or_default()
+                .push((layouts, pipeline.clone()));
+        }
+    }
+
+    /// Whether this device has made a pipeline of `pass` (with any layouts).
+    fn has_made(&self, library: &Library, pass: &str) -> bool {
+        let Ok(source) = library.compose_for(pass, self.tracer) else {
+            return false;
+        };
+        self.made
+            .lock()
+            .is_ok_and(|m| m.pipelines.contains_key(&source))
     }
 
     pub(super) fn record_pipeline(&self, pass: &str, start: Instant) {
@@ -183,10 +231,15 @@ impl Gpu {
     ) -> Option<std::thread::JoinHandle<()>> {
         let cache_off = std::env::var("MESA_SHADER_CACHE_DISABLE")
             .is_ok_and(|v| matches!(v.as_str(), "1" | "true" | "TRUE" | "yes"));
+        // Passes this device has made already need no compiling.
+        let passes: Vec<String> = passes
+            .iter()
+            .filter(|p| !self.has_made(library, p))
+            .map(|p| p.to_string())
+            .collect();
         if self.info.device_type != wgpu::DeviceType::Cpu || cache_off || passes.is_empty() {
             return None;
         }
-        let passes: Vec<String> = passes.iter().map(|p| p.to_string()).collect();
         let (tracer, name) = (self.tracer, self.info.name.clone());
         let record = self.pipelines.clone();
         let spawned = std::thread::Builder::new()

@@ -9,11 +9,47 @@ use psrestir::render::{RenderSettings, Renderer, Techniques};
 use psrestir::scene::{Camera, Material, PunctualKind, PunctualLight, Scene, Triangle};
 use std::f32::consts::PI;
 
-/// A device on the machine's Vulkan driver. Outside CI, a machine without one skips the test
-/// with a message; in CI (CI=true) a missing driver fails the test.
-pub fn gpu() -> Option<Gpu> {
-    match Gpu::new() {
-        Ok(g) => Some(g),
+/// The devices that the tests of one test binary share. A test takes one (or makes one when
+/// none is free) and gives it back when it ends, so that each pass's pipeline is made once per
+/// device, not once per test: an optimizer's passes take 0.6-1.6 s to create on lavapipe even
+/// when Mesa's shader cache holds them, and a device reuses the pipelines it made
+/// (`Gpu::compute_pipeline_in`). The test harness runs two tests at a time on two cores, so
+/// there are about two devices, each with its own queue. A device that recorded an error or
+/// was lost, or whose test panicked, is not given back. Tests that count pipelines, provoke
+/// device errors or need a device of their own call `Gpu::new` instead.
+static FREE_DEVICES: std::sync::Mutex<Vec<Gpu>> = std::sync::Mutex::new(Vec::new());
+
+/// A device taken from [`FREE_DEVICES`], given back when dropped.
+pub struct SharedGpu(Option<Gpu>);
+
+impl std::ops::Deref for SharedGpu {
+    type Target = Gpu;
+    fn deref(&self) -> &Gpu {
+        self.0
+            .as_ref()
+            .expect("a shared device is held until dropped")
+    }
+}
+
+impl Drop for SharedGpu {
+    fn drop(&mut self) {
+        let Some(g) = self.0.take() else { return };
+        if std::thread::panicking() || g.check("a test's end").is_err() {
+            return;
+        }
+        if let Ok(mut free) = FREE_DEVICES.lock() {
+            free.push(g);
+        }
+    }
+}
+
+/// A device on the machine's Vulkan driver, shared with the tests before and after this one
+/// ([`FREE_DEVICES`]). Outside CI, a machine without one skips the test with a message; in CI
+/// (CI=true) a missing driver fails the test.
+pub fn gpu() -> Option<SharedGpu> {
+    let free = FREE_DEVICES.lock().ok().and_then(|mut f| f.pop());
+    match free.map(Ok).unwrap_or_else(Gpu::new) {
+        Ok(g) => Some(SharedGpu(Some(g))),
         Err(e) if std::env::var_os("CI").is_none() => {
             eprintln!("skipped: no GPU adapter ({e})");
             None
