@@ -36,7 +36,7 @@ RUSTDOCFLAGS="-D warnings" timed "API documentation" cargo doc --no-deps --quiet
 # The Python package (pyproject.toml, python/) and its tests. CI builds it with the dev profile,
 # which reuses every dependency the Rust tests just compiled: the root Cargo.toml's
 # dev-dependencies and python/Cargo.toml give both builds the same features, so only psrestir
-# (without its test hooks), pyo3 and the bindings compile again (54 s from a clean clone on 2
+# (without its test hooks), pyo3 and the bindings compile again (35 s from a clean clone on 2
 # cores, against 259 s when every crate downstream of a procedural macro compiled twice).
 # A release build, `pip install .`, is what users run; the tests check behaviour, not speed.
 # pytest exits non-zero when it collects no test.

@@ -476,10 +476,15 @@ fn cmd_optimize(args: OptimizeArgs) -> Result<()> {
 /// What `psrestir optimize` prints at the end (and the exit after an interrupt).
 fn print_summary(summary: &job::run::RunSummary, path: &std::path::Path) {
     println!(
-        "{} iterations in {:.1} s ({:.1} ms/iteration), final loss {:.4e}{}; outputs in {}",
+        "{} iterations in {:.1} s ({}), final loss {:.4e}{}; outputs in {}",
         summary.iterations,
         summary.elapsed_s,
-        summary.ms_per_iteration,
+        // NaN where a resumed run found every iteration done and ran none.
+        if summary.ms_per_iteration.is_finite() {
+            format!("{:.1} ms/iteration", summary.ms_per_iteration)
+        } else {
+            "none run in this session".to_string()
+        },
         summary.final_loss,
         match (summary.initial_rmse, summary.final_rmse) {
             (Some(a), Some(b)) => format!(", texture RMSE {a:.4} -> {b:.4}"),

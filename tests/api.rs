@@ -159,6 +159,34 @@ fn two_optimizers_on_one_device_interleaved_end_as_alone() {
     }
 }
 
+/// A device returns the layout and the pipeline it made before for the same pass (a second
+/// optimizer on one device creates none), and another pass gets its own.
+#[test]
+fn a_device_reuses_the_layouts_and_pipelines_it_made() {
+    if no_gpu() {
+        return;
+    }
+    let gpu = Gpu::new().unwrap();
+    let layout = gpu.pass_layout("adam", 0).unwrap();
+    assert_eq!(gpu.pass_layout("adam", 0).unwrap(), layout);
+    let first = gpu.compute_pipeline("adam", &[&layout]).unwrap();
+    let again = gpu.pass_layout("adam", 0).unwrap();
+    assert_eq!(gpu.compute_pipeline("adam", &[&again]).unwrap(), first);
+    let other = gpu.pass_layout("variance_step", 0).unwrap();
+    assert_ne!(other, layout);
+    assert_ne!(
+        gpu.compute_pipeline("variance_step", &[&other]).unwrap(),
+        first
+    );
+    // Both requests of `adam` are listed (the second a lookup).
+    let adam = gpu
+        .pipeline_times()
+        .iter()
+        .filter(|t| t.pass == "adam")
+        .count();
+    assert_eq!(adam, 2);
+}
+
 /// lavapipe compiles a shader at its first dispatch unless psrestir makes it compile at
 /// creation; either way each pass's compilation must fall before the clock, and
 /// `Optimizer::passes` (what a second device compiles ahead) must name what is created. A pipeline

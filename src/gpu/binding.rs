@@ -20,15 +20,14 @@ impl Gpu {
             .into_iter()
             .map(|(_, k)| k)
             .collect();
-        let label = format!("{pass} group {group}");
-        let made =
-            |m: &mut super::prepare::Made| m.layouts.get(&(label.clone(), kinds.clone())).cloned();
-        if let Some(layout) = self.made.lock().ok().as_deref_mut().and_then(made) {
+        let key = (format!("{pass} group {group}"), kinds);
+        let made = self.made.lock().ok();
+        if let Some(layout) = made.and_then(|m| m.layouts.get(&key).cloned()) {
             return Ok(layout);
         }
-        let layout = self.layout(&label, &kinds);
+        let layout = self.layout(&key.0, &key.1);
         if let Ok(mut m) = self.made.lock() {
-            m.layouts.insert((label, kinds), layout.clone());
+            m.layouts.insert(key, layout.clone());
         }
         Ok(layout)
     }
