@@ -312,10 +312,10 @@ fn a_task_too_large_for_the_device_is_refused_before_allocating() {
     }))
     .unwrap();
     let gpu = Gpu::from_device(device, queue, adapter.get_info()).unwrap();
-    // 360x360 roughness texels: 0.5 MB of values and 1.04 MB of ReSTIR's moving moments (8
-    // bytes per value), which fit, but ReSTIR keeps each of its four reservoir slots of every
-    // observed texel in its own buffer (28 bytes per observed texel each), which does not once
-    // more than 37449 texels are observed.
+    // 360x360 roughness texels: 0.5 MB of values, which fit (as would the 1.04 MB of
+    // ReSTIR's moving moments with its own variance on), but ReSTIR keeps each of its four
+    // reservoir slots of every observed texel in its own buffer (28 bytes per observed texel
+    // each), which does not once more than 37449 texels are observed.
     let spec = psrestir::TextureSpec {
         material: "plane".into(),
         slot: psrestir::Slot::Roughness,

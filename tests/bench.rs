@@ -260,17 +260,14 @@ fn bench_json_has_every_field_finite_and_in_range() {
         .unwrap()
         .is_empty());
     // ReSTIR's extra state per texel is exactly the reservoirs and headers of the observed
-    // texels, the compaction map, and the fresh estimates' moving moments and the variance
-    // (12 bytes per value: a base color and a roughness texture of 64², 4 values per texel
-    // of both, 2 per texel of the two); buffers that scale with the image, its target
-    // adjoints and claim log among them, are not counted per texel.
+    // texels and the compaction map (its own variance, 12 bytes per value, is off by
+    // default); buffers that scale with the image, its target adjoints and claim log among
+    // them, are not counted per texel.
     let extra = number(restir, "state_bytes_per_texel") - number(base, "state_bytes_per_texel");
     let texels = number(s, "texels");
     let observed = number(s, "observed_texels");
-    let values = 2.0 * texels;
     let expected = (observed * STATE_BYTES_PER_OBSERVED_TEXEL as f64
-        + (texels / 32.0).ceil() * STATE_BYTES_PER_32_TEXELS as f64
-        + 12.0 * values)
+        + (texels / 32.0).ceil() * STATE_BYTES_PER_32_TEXELS as f64)
         / texels;
     assert!(
         (extra - expected).abs() < 1e-9 * expected,

@@ -117,6 +117,7 @@ pub const KIND: Kind = Kind {
             sizes.pixels,
             words,
             capacity,
+            o.own_variance,
         )
     },
     warnings,
@@ -493,9 +494,14 @@ impl Estimator for Restir {
                 kept_reservoirs(&slots, &headers[..n_observed], self.words),
             ),
             (state_names::TARGETS.into(), gpu.read_pod(&self.targets)?),
+            // Empty where they are not tracked (`own_variance` off).
             (
                 state_names::FRESH_MOMENTS.into(),
-                gpu.read_pod(&self.fresh_moments)?,
+                if self.options.own_variance {
+                    gpu.read_pod(&self.fresh_moments)?
+                } else {
+                    Vec::new()
+                },
             ),
         ];
         Ok(state)
@@ -508,6 +514,7 @@ impl Estimator for Restir {
         _iteration: u32,
     ) -> Result<()> {
         let n_observed = self.merge_params.n_observed as usize;
+        let zeros = vec![0u32; self.fresh_moments.size() as usize / 4];
         let kept = match state.filter(|r| !r.arrays.is_empty()) {
             Some(r) => {
                 let missing =
@@ -527,6 +534,15 @@ impl Estimator for Restir {
                 let moment_updates = r
                     .counter(state_names::MOMENT_UPDATES)
                     .ok_or_else(|| missing(state_names::MOMENT_UPDATES))?;
+                // Not tracked now: nothing to restore. Saved without them (`own_variance`
+                // off then): they start afresh, as in a new run.
+                let (moments, moment_updates) = if !self.options.own_variance {
+                    (&zeros[..], moment_updates)
+                } else if moments.is_empty() {
+                    (&zeros[..], 0)
+                } else {
+                    (moments, moment_updates)
+                };
                 if moments.len() as u64 * 4 != self.fresh_moments.size() {
                     return Err(Error::Invalid(format!(
                         "the saved ReSTIR state has {} fresh-moment words where this \
@@ -573,8 +589,8 @@ impl Estimator for Restir {
                 // The first iteration forms the target adjoint from its own adjoint alone.
                 self.history = 0;
                 self.moment_updates = 0;
-                let zeros = vec![0u8; self.fresh_moments.size() as usize];
-                gpu.queue.write_buffer(&self.fresh_moments, 0, &zeros);
+                gpu.queue
+                    .write_buffer(&self.fresh_moments, 0, bytemuck::cast_slice(&zeros));
                 vec![0; n_observed * 2 * self.words as usize]
             }
         };
@@ -596,8 +612,11 @@ impl Estimator for Restir {
         self.slots.iter().map(|b| b.size()).sum::<u64>()
             + self.headers.size()
             + self.map_bytes
-            + self.fresh_moments.size()
-            + self.variance.size()
+            + if self.options.own_variance {
+                self.fresh_moments.size() + self.variance.size()
+            } else {
+                0
+            }
     }
 
     fn variance(&self) -> Option<&wgpu::Buffer> {

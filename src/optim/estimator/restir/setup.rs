@@ -57,13 +57,15 @@ pub(super) fn max_offers(samples: u64, max_depth: u32, slots: u64, footprint: u6
 /// The buffers ReSTIR allocates for `n_texels` texels of which `n_observed` are observed,
 /// and `n_pixels` pixels (all cameras'), by label, size in bytes and what the size scales
 /// with. Slot k of every observed texel lies in buffer `reservoir slots<k>`, so that each
-/// binding holds a quarter of the reservoirs; `words` per reservoir.
+/// binding holds a quarter of the reservoirs; `words` per reservoir. The fresh estimates'
+/// moments and the variance only with `own_variance` (elsewhere a placeholder word each).
 pub(super) fn memory(
     (n_params, n_texels): (u64, u64),
     n_observed: u64,
     n_pixels: u64,
     words: u32,
     claim_capacity: u32,
+    own_variance: bool,
 ) -> Vec<(String, u64, Scale)> {
     let slot_bytes = n_observed * words as u64 * 4;
     let mut out: Vec<(String, u64, Scale)> = (0..reservoir::SLOTS)
@@ -97,16 +99,6 @@ pub(super) fn memory(
             Scale::Pixel,
         ),
         (
-            "restir fresh moments".to_string(),
-            8 * n_params,
-            Scale::Texel,
-        ),
-        (
-            "restir variance".to_string(),
-            4 * n_params,
-            Scale::Texel,
-        ),
-        (
             "claim log".to_string(),
             claim_log_bytes(claim_capacity, words),
             // Sized by the offers an iteration makes where they are fewer than the
@@ -118,6 +110,16 @@ pub(super) fn memory(
             },
         ),
     ]);
+    if own_variance {
+        out.extend([
+            (
+                "restir fresh moments".to_string(),
+                8 * n_params,
+                Scale::Texel,
+            ),
+            ("restir variance".to_string(), 4 * n_params, Scale::Texel),
+        ]);
+    }
     out
 }
 
@@ -219,6 +221,7 @@ impl Buffers {
             n_all_pixels,
             words,
             claim_capacity,
+            o.own_variance,
         );
         let size = |label: &str| sizes.iter().find(|b| b.0 == label).map_or(0, |b| b.1);
         // wgpu binds no empty buffer: at least one word each.
@@ -270,9 +273,9 @@ impl Buffers {
             claim_capacity,
             fresh_moments: gpu.storage_zeroed(
                 "restir fresh moments",
-                size("restir fresh moments"),
+                size("restir fresh moments").max(8),
             ),
-            variance: gpu.storage_zeroed("restir variance", size("restir variance")),
+            variance: gpu.storage_zeroed("restir variance", size("restir variance").max(4)),
             n_observed: n_observed as u32,
             n_all_pixels: n_all_pixels as u32,
         }
