@@ -85,7 +85,7 @@ fn run(cli: Cli) -> Result<()> {
 
 /// `psrestir info`: what a scene file holds.
 fn cmd_info(path: &std::path::Path) -> Result<()> {
-    let sc = scene::load(&path)?;
+    let sc = scene::load(path)?;
     println!("{}", path.display());
     println!("  triangles: {}", sc.triangles.len());
     println!("  materials: {}", sc.materials.len());

@@ -62,7 +62,7 @@ fn a_bare_task_takes_autos_configuration_and_ends_below_its_start() {
     assert!((r[0] - 0.01).abs() < 1e-4, "first rate {}", r[0]);
     let last = *r.last().unwrap();
     assert!(
-        last < 0.01 * 0.1 && last >= 0.01 * 0.05 - 1e-6,
+        (0.01 * 0.05 - 1e-6..0.01 * 0.1).contains(&last),
         "last rate {last}"
     );
     let (start, end) = (

@@ -44,7 +44,6 @@ pub mod path_encoding {
 /// vec4s of control-variate state per pixel (`primal_cv.wgsl`).
 pub const CV_VEC4S: u32 = 8;
 
-/// The phases of a step pass (WGSL `STEP_PHASE_*`).
 pub mod step_phase {
     //! What a step pass (`adam.wgsl`, `variance_step.wgsl`) does in one dispatch: the whole
     //! step (no moment filter), or, around the moment filter (`moment_filter.wgsl`), first

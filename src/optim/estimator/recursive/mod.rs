@@ -497,8 +497,6 @@ impl Estimator for Recursive {
     }
 }
 
-/// Its bind groups, for the contract test (`crate::contract_tests`).
-
 #[cfg(test)]
 mod contract_tests {
     use crate::contract_tests::mirror;

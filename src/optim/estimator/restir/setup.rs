@@ -207,7 +207,7 @@ impl Buffers {
         let n_all_pixels = s.adjoint[0].size() / 16;
         let words = reservoir::words(s.scene.info.max_depth);
         let max_binding =
-            u64::from(gpu.device.limits().max_storage_buffer_binding_size).min(CLAIM_LOG_MAX_BYTES);
+            gpu.device.limits().max_storage_buffer_binding_size.min(CLAIM_LOG_MAX_BYTES);
         let claim_capacity = claim_capacity(
             n_observed,
             offers_of(s, n_all_pixels),
