@@ -177,6 +177,16 @@ fn without_reuse_restir_equals_the_baseline_for_scalar_textures() {
     }
 }
 
+/// [`scalar_textures`] on the shadow scene with bilinear filtering: the scene, the textures,
+/// their values and their true values.
+fn shadow_scalar_set() -> (psrestir::scene::Scene, ParamSet, [f32; 7], [f32; 7]) {
+    let scene = shadow_scene();
+    let (specs, values, truth) = scalar_textures();
+    let path = std::path::Path::new("test");
+    let set = ParamSet::from_specs(&scene, &specs, Filter::Bilinear, path).unwrap();
+    (scene, set, values, truth)
+}
+
 /// Two scalar textures at once on the plane's material (roughness 2x2, metallic 3x1, learning
 /// rate 0), their values and their true values.
 fn scalar_textures() -> ([TextureSpec; 2], [f32; 7], [f32; 7]) {
@@ -1245,15 +1255,7 @@ fn the_target_adjoint_is_a_moving_average_of_the_adjoints() {
 #[test]
 fn restirs_fresh_moments_are_those_of_independent_estimates() {
     let Some(gpu) = gpu() else { return };
-    let scene = shadow_scene();
-    let (specs, values, truth) = scalar_textures();
-    let set = ParamSet::from_specs(
-        &scene,
-        &specs,
-        Filter::Bilinear,
-        std::path::Path::new("test"),
-    )
-    .unwrap();
+    let (scene, set, values, truth) = shadow_scalar_set();
     let opts = RestirOptions {
         target_smoothing: Some(0.0),
         own_variance: true,
@@ -1335,15 +1337,7 @@ fn restirs_fresh_moments_are_those_of_independent_estimates() {
 #[test]
 fn restir_without_its_own_variance_keeps_no_moments() {
     let Some(gpu) = gpu() else { return };
-    let scene = shadow_scene();
-    let (specs, values, _) = scalar_textures();
-    let set = ParamSet::from_specs(
-        &scene,
-        &specs,
-        Filter::Bilinear,
-        std::path::Path::new("test"),
-    )
-    .unwrap();
+    let (scene, set, values, _) = shadow_scalar_set();
     let with = |own_variance| Settings {
         method: Method::RESTIR,
         gradient_spp: 2,
