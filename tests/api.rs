@@ -11,6 +11,7 @@ mod gltf_textures;
 #[path = "../examples/in_memory.rs"]
 mod in_memory;
 
+use psrestir::optim::StepKind;
 use psrestir::{Filter, Gpu, Method, Optimizer, Problem, Settings, Stop};
 use std::ops::ControlFlow;
 
@@ -777,6 +778,75 @@ fn invalid_restir_options_are_refused_by_name() {
     }
 }
 
+/// The differentiable render's step after a backward of the optimizer's own adjoint is the
+/// optimizer's own iteration, for both steps with the priors, the filtered moments and a
+/// schedule, over iterations that carry their moments and ReSTIR's reservoirs: what a Python
+/// loop with `psrestir.Step` and an L2 loss runs is `psrestir optimize`'s update.
+#[test]
+fn a_step_after_backward_is_the_optimizers_iteration() {
+    if no_gpu() {
+        return;
+    }
+    let gpu = Gpu::new().unwrap();
+    let p = problem(&gpu, [[230, 60, 40], [40, 90, 220]]);
+    for (method, step) in [
+        (Method::BASELINE, StepKind::Variance),
+        (Method::RESTIR, StepKind::Adam),
+    ] {
+        let s = Settings {
+            primal: psrestir::optim::PrimalMode::Independent,
+            step,
+            smoothness: 0.01,
+            multiscale_levels: 2,
+            moment_filter: psrestir::optim::moment_filter::MomentFilterOptions {
+                levels: 2,
+                ..Default::default()
+            },
+            schedule: psrestir::optim::Schedule {
+                kind: psrestir::optim::ScheduleKind::Cosine,
+                ..Default::default()
+            },
+            ..settings(method)
+        };
+        let mut opt = Optimizer::for_problem(&gpu, &p, s.clone()).unwrap();
+        let mut op = psrestir::optim::DiffRender::new(&gpu, &p.scene, p.set.clone(), s).unwrap();
+        let n = 4;
+        for t in 0..n {
+            let progress = t as f64 / n as f64;
+            opt.set_progress(progress);
+            opt.step().unwrap();
+            let a = opt.read_adjoint(t).unwrap();
+            let adjoint = psrestir::Image {
+                width: 32,
+                height: 32,
+                rgb: a.chunks(4).map(|c| [c[0], c[1], c[2]]).collect(),
+            };
+            op.set_progress(progress);
+            op.render(1, t, None).unwrap();
+            op.backward(&[adjoint], None).unwrap();
+            op.step(None).unwrap();
+            let (want, got) = (opt.texture_values(0).unwrap(), op.texture(0).unwrap());
+            let moved = want.iter().zip(&p.set.values).any(|(a, b)| a != b);
+            assert!(
+                moved,
+                "{method:?}: the optimizer did not move: the test sees nothing"
+            );
+            let worst = want
+                .iter()
+                .zip(&got)
+                .fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+            // The same passes on the same gradient; float atomics may add in another order
+            // (1e-4 of a gradient, far below a step of ~1e-2).
+            assert!(
+                worst <= 1e-5,
+                "{method:?} {step:?} iteration {t}: the textures differ by {worst}"
+            );
+        }
+        let err = op.step(None).unwrap_err().to_string();
+        assert!(err.contains("step needs a gradient"), "{err}");
+    }
+}
+
 /// The differentiable render's backward, given the adjoint the optimizer's own loss pass
 /// wrote, is the optimizer's own gradient, for every estimator and across a texture change
 /// (ReSTIR and the recursive estimator pair each call with the previous one's textures and
@@ -808,15 +878,15 @@ fn backward_from_an_external_adjoint_is_the_optimizers_gradient() {
         let mut op = psrestir::optim::DiffRender::new(&gpu, &p.scene, p.set.clone(), s).unwrap();
         let err = op.backward(&[rgb(&a0)], None).unwrap_err().to_string();
         assert!(err.contains("backward needs a render"), "{err}");
-        op.render(1, 0).unwrap();
-        let h0 = op.backward(&[rgb(&a0)], None).unwrap().remove(0);
+        op.render(1, 0, None).unwrap();
+        let h0 = op.backward(&[rgb(&a0)], None).unwrap().textures.remove(0);
         assert!(
             op.backward(&[rgb(&a0)], None).is_err(),
             "a second backward per render"
         );
         op.set_texture(0, &moved).unwrap();
-        op.render(1, 1).unwrap();
-        let h1 = op.backward(&[rgb(&a1)], None).unwrap().remove(0);
+        op.render(1, 1, None).unwrap();
+        let h1 = op.backward(&[rgb(&a1)], None).unwrap().textures.remove(0);
         for (g, h, it) in [(&g0, &h0, 0), (&g1, &h1, 1)] {
             let scale = g.iter().fold(0f32, |m, v| m.max(v.abs()));
             let worst = g.iter().zip(h).fold(0f32, |m, (a, b)| m.max((a - b).abs()));

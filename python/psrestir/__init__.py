@@ -40,6 +40,7 @@ __all__ = [
     "optimize",
     "Result",
     "DiffRender",
+    "Step",
     "estimators",
     "adapter",
     "errors",
@@ -96,6 +97,15 @@ class Result:
     #: Why the run ended before its budget because it had converged (the task's
     #: ``stop_on_plateau``), or None.
     plateau: str | None = None
+    #: The recovered environment, float32 (height, width, 3) linear radiance, row 0 at the
+    #: zenith, when the task recovers it; else None.
+    environment: object = None
+    #: The relit errors under the task's ``relight`` environments (relight.csv): a list of
+    #: dicts with ``environment``, ``relmse``, ``psnr`` and ``scale``; empty without them.
+    relit: list = _field(default_factory=list)
+    #: Each camera's final exposure, and white balance (three factors).
+    exposure: list = _field(default_factory=list)
+    white_balance: list = _field(default_factory=list)
 
 
 class _Bar:
@@ -197,30 +207,32 @@ def optimize(
 
 
 class DiffRender:
-    """A differentiable render of a task's scene with your own loss and optimizer.
+    """A differentiable render of a task's scene with your own loss.
 
     ``task`` (a task file's path or a dict, as for :func:`optimize`) gives the scene, its
-    lights and environment, the cameras, the image size, the path depth, the textures to
-    recover (at their ``init`` values), the gradient samples per pixel and the seed; its
-    targets are what :meth:`targets` returns. ``method`` picks the gradient estimator:
+    lights and environment, the cameras, the image size, the path depth, the parameters (the
+    textures at their ``init`` values, the environment when its ``[environment]`` table
+    recovers it, each camera's exposure and white balance), the gradient samples per pixel,
+    the seed, and the optimizer that :class:`Step` runs (its step, priors, schedule and
+    primal); its targets are what :meth:`targets` returns. ``method`` picks the gradient
+    estimator: ``"auto"`` (chosen with the whole configuration as :func:`optimize` chooses),
     ``"baseline"`` (plain Monte Carlo), ``"restir"`` (parameter-space ReSTIR, which reuses
-    samples from earlier backward calls), ``"recursive"`` (a recursive control variate), or
-    ``"auto"`` (chosen by the task's sampling, as :func:`optimize` chooses).
+    samples from earlier backward calls) or ``"recursive"`` (a recursive control variate).
 
     One iteration::
 
         images = op.render(spp=4, seed=it)
         adjoints = [dloss_dimage(img, k) for k, img in enumerate(images)]
-        grads = op.backward(adjoints)           # {name: array like the texture}
-        op.set_texture(name, np.clip(op.texture(name) - lr * grads[name], 0, 1))
+        grads = op.backward(adjoints)           # {name: array like the parameter}
+        step()                                  # step = psrestir.Step(op), or your own
 
     Each backward pairs with the render before it: a backward with no render since the last
-    texture change or backward raises :class:`InvalidArgument`. The estimator's state
+    parameter change or backward raises :class:`InvalidArgument`. The estimator's state
     advances once per backward (ReSTIR reuses the previous call's samples under the current
     textures and adjoint).
     """
 
-    def __init__(self, task, *, method="baseline", base_dir=None):
+    def __init__(self, task, *, method="auto", base_dir=None):
         path, text, base = _task_args(task, base_dir)
         self._op = _NativeDiffRender(path, text, base, method)
 
@@ -323,18 +335,63 @@ class DiffRender:
         slot's range (base color and metallic [0, 1], roughness [0.02, 1])."""
         self._op.set_texture(name, values)
 
-    def render(self, spp=4, seed=0):
-        """Render every camera at the current textures: a list of float32 (h, w, 3) linear
-        RGB images. ``seed`` picks the random numbers (use a new one each iteration)."""
-        return self._op.render(spp, seed)
+    def render(self, spp=4, seed=0, primal=None):
+        """Render every camera at the current parameters: a list of float32 (h, w, 3) linear
+        RGB images, each multiplied by its camera's exposure and white balance (what a loss
+        compares with a photo). ``seed`` picks the random numbers (use a new one each
+        iteration). ``primal``: ``"independent"`` (a fresh render), ``"control_variate"``
+        (the render carried over from the previous one through a control variate: the same
+        mean, far less noise once the parameters move slowly) or None, the task's
+        (:attr:`primal`)."""
+        return self._op.render(spp, seed, primal)
+
+    @property
+    def primal(self):
+        """The primal :meth:`render` uses by default: the task's ``primal``."""
+        return self._op.primal
 
     def backward(self, adjoints, seed_grad=None):
-        """Each texture's gradient of a loss whose derivative with respect to the images of
-        the last :meth:`render` is ``adjoints`` (a list of float32 (h, w, 3) arrays, one per
-        camera): {name: float32 array of the texture's shape}. ``seed_grad`` picks the
-        gradient samples' random numbers (mixed with the number of backward calls; None: the
-        task's seed); they are independent of the render's."""
+        """Every parameter's gradient of a loss whose derivative with respect to the images
+        of the last :meth:`render` is ``adjoints`` (a list of float32 (h, w, 3) arrays, one
+        per camera): {name: float32 array of the parameter's shape}, the names of
+        :meth:`parameters`. The textures' and the environment's come from the estimator;
+        the exposures' and white balances' are exact for the rendered images (the sum over
+        pixels of adjoint times render). ``seed_grad`` picks the gradient samples' random
+        numbers (mixed with the number of backward calls; None: the task's seed); they are
+        independent of the render's."""
         return self._op.backward(list(adjoints), seed_grad)
+
+    def gradient_variance(self):
+        """{texture name: the variance of each value of the last gradient estimate}, where
+        the estimator tracks one (``recursive``; ``restir`` with its ``own_variance``
+        option); else None."""
+        return self._op.gradient_variance()
+
+    @property
+    def parameter_names(self):
+        """The parameters' names: the textures', ``environment`` (when the task recovers
+        it), ``exposure`` and ``white_balance``."""
+        return self._op.parameter_names
+
+    def parameters(self):
+        """A copy of every parameter by name: each texture, ``environment`` (float32
+        (h, w, 3) linear radiance, row 0 at the zenith) when the task recovers it,
+        ``exposure`` (n_cameras,) and ``white_balance`` (n_cameras, 3)."""
+        return self._op.parameters()
+
+    def set_parameters(self, values):
+        """Set parameters from a dict like :meth:`parameters`'s (any subset): float32 arrays
+        of the parameters' shapes; textures within their slot's range, the environment,
+        exposures and white balances positive."""
+        for name, value in values.items():
+            self._op.set_parameter(name, value)
+
+    def relit_errors(self, textures=None):
+        """The relit errors of ``textures`` (a dict by name; None: the current ones) under
+        the task's ``relight`` environments, as :func:`optimize` measures them: a list of
+        dicts (``environment``, ``relmse``, ``psnr``, ``scale``); empty without them or
+        without a ground truth."""
+        return self._op.relit_errors(textures)
 
     def observed(self, name):
         """bool (h, w): the texels some camera sample reaches (the others get no gradient)."""
@@ -359,4 +416,90 @@ class DiffRender:
         return (
             f"DiffRender(method={self.method!r}, textures={self.texture_shapes}, "
             f"cameras={self.camera_names}, image={w}x{h})"
+        )
+
+
+class Step:
+    """psrestir's own optimizer step for the gradients your loop computes, with your loss.
+
+    It runs the same GPU passes as :func:`optimize`: the task's step (the variance-scaled
+    step or Adam, with filtered moments), its priors (smoothness, the multiscale gradient),
+    its learning rates and schedule, and where the task recovers them the environment's and
+    the gains' Adam, with ``auto``'s choices where the task leaves them to it. It updates
+    ``op``'s parameters in place::
+
+        step = psrestir.Step(op)                # the task's iterations or time budget
+        for it in range(step.iterations):
+            images = op.render(spp=4, seed=it)  # the task's primal (control variate or not)
+            grads = op.backward(my_adjoints(images))
+            step()                              # or step(grads) with gradients you changed
+
+    ``iterations`` and ``time_budget`` (seconds) set the run the learning-rate schedule
+    decays over (by default the task's); the schedule's progress is the larger of the
+    steps' and the elapsed time's fractions, as in :func:`optimize`.
+    """
+
+    def __init__(self, op, *, iterations=None, time_budget=None):
+        if not isinstance(op, DiffRender):
+            raise InvalidArgument(f"Step: expected a psrestir.DiffRender, got {type(op).__name__}")
+        task_iterations, task_budget = op._op.budget()
+        if iterations is None and time_budget is None:
+            iterations, time_budget = task_iterations, task_budget
+        for name, v in (("iterations", iterations), ("time_budget", time_budget)):
+            if v is not None and not v > 0:
+                raise InvalidArgument(f"Step: {name} must be positive, not {v!r}")
+        self.op = op
+        self.iterations = iterations
+        self.time_budget = time_budget
+        self._start = None
+
+    def _progress(self, steps, elapsed):
+        p = 0.0
+        if self.iterations:
+            p = steps / self.iterations
+        if self.time_budget:
+            p = max(p, elapsed / self.time_budget)
+        return min(p, 1.0)
+
+    @property
+    def steps(self):
+        """Steps taken."""
+        return self.op._op.steps
+
+    @property
+    def elapsed_s(self):
+        """Seconds since the first step."""
+        return 0.0 if self._start is None else _time.monotonic() - self._start
+
+    @property
+    def done(self):
+        """Whether the iterations or the time budget are spent."""
+        return self._progress(self.steps, self.elapsed_s) >= 1.0
+
+    def __call__(self, grads=None):
+        """Update the parameters from the last :meth:`DiffRender.backward`'s gradient
+        (``grads`` None) or from ``grads``, a dict like backward's (every texture's, the
+        environment's where it is a parameter; the gains' zero where absent). A step
+        without a backward since the last one, and no ``grads``, raises
+        :class:`InvalidArgument`."""
+        if self._start is None:
+            self._start = _time.monotonic()
+        self.op._op.set_progress(self._progress(self.steps, self.elapsed_s))
+        self.op._op.step(grads)
+        # The next backward's estimator reads the schedule too.
+        self.op._op.set_progress(self._progress(self.steps, self.elapsed_s))
+
+    def step(self, grads=None):
+        """The same as calling the step."""
+        self(grads)
+
+    @property
+    def learning_rates(self):
+        """Each texture's learning rate in the last step (the schedule's factor applied)."""
+        return self.op._op.learning_rates()
+
+    def __repr__(self):
+        return (
+            f"Step(iterations={self.iterations}, time_budget={self.time_budget}, "
+            f"steps={self.steps})"
         )

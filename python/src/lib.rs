@@ -129,22 +129,40 @@ fn load_task(path: Option<PathBuf>, json: Option<String>, base: PathBuf) -> psre
     }
 }
 
+fn primal_mode(name: &str) -> PyResult<psrestir::optim::PrimalMode> {
+    match name {
+        "independent" => Ok(psrestir::optim::PrimalMode::Independent),
+        "control_variate" => Ok(psrestir::optim::PrimalMode::ControlVariate),
+        _ => Err(to_py(Error::Invalid(format!(
+            "primal: `{name}` is not one of \"independent\", \"control_variate\""
+        )))),
+    }
+}
+
 fn method_choice(name: &str) -> psrestir::Result<MethodChoice> {
     name.parse::<MethodChoice>()
         .map_err(|e| Error::Invalid(format!("method: {e}")))
 }
 
-/// A float32 array of shape `(h, w, c)` copied out of any numpy array of that shape and
-/// dtype float32; anything else is an `InvalidArgument` that says what was expected.
-fn read_array(what: &str, obj: &Bound<'_, PyAny>, shape: [usize; 3]) -> PyResult<Vec<f32>> {
+/// A float32 array of shape `shape` (e.g. `(h, w, c)`) copied out of any numpy array of that
+/// shape and dtype float32; anything else is an `InvalidArgument` that says what was
+/// expected.
+fn read_array(what: &str, obj: &Bound<'_, PyAny>, shape: &[usize]) -> PyResult<Vec<f32>> {
+    let dims_text = shape
+        .iter()
+        .map(|d| d.to_string())
+        .collect::<Vec<_>>()
+        .join(", ");
     let bad = |got: String| {
+        let meaning = if shape.len() == 3 {
+            " (height, width, channels)"
+        } else {
+            ""
+        };
+        let comma = if shape.len() == 1 { "," } else { "" };
         raise(
             "InvalidArgument",
-            format!(
-                "{what}: expected a numpy float32 array of shape ({}, {}, {}) (height, width, \
-                 channels), got {got}",
-                shape[0], shape[1], shape[2]
-            ),
+            format!("{what}: expected a numpy float32 array of shape ({dims_text}{comma}){meaning}, got {got}"),
             None,
         )
     };
@@ -166,20 +184,42 @@ fn read_array(what: &str, obj: &Bound<'_, PyAny>, shape: [usize; 3]) -> PyResult
         return Err(bad(format!("shape {dims:?}")));
     }
     let typed = obj
-        .cast::<numpy::PyArray3<f32>>()
+        .cast::<numpy::PyArrayDyn<f32>>()
         .map_err(|e| bad(e.to_string()))?;
     let ro = typed.readonly();
     let v: Vec<f32> = ro.as_array().iter().copied().collect();
     Ok(v)
 }
 
-fn to_array<'py>(py: Python<'py>, v: Vec<f32>, shape: [usize; 3]) -> PyResult<Bound<'py, PyAny>> {
+fn to_array<'py>(py: Python<'py>, v: Vec<f32>, shape: &[usize]) -> PyResult<Bound<'py, PyAny>> {
     Ok(PyArray1::from_vec(py, v).reshape(shape)?.into_any())
 }
 
 fn image_array<'py>(py: Python<'py>, img: &Image) -> PyResult<Bound<'py, PyAny>> {
     let v: Vec<f32> = img.rgb.iter().flatten().copied().collect();
-    to_array(py, v, [img.height as usize, img.width as usize, 3])
+    to_array(py, v, &[img.height as usize, img.width as usize, 3])
+}
+
+fn env_array<'py>(py: Python<'py>, e: &psrestir::scene::EnvMap) -> PyResult<Bound<'py, PyAny>> {
+    let v: Vec<f32> = e.rgb.iter().flatten().map(|x| x * e.scale).collect();
+    to_array(py, v, &[e.height as usize, e.width as usize, 3])
+}
+
+/// The relit errors as a list of dicts (environment, relmse, psnr, scale).
+fn relit_list<'py>(
+    py: Python<'py>,
+    errors: &[psrestir::job::relight::RelitError],
+) -> PyResult<Bound<'py, PyList>> {
+    let list = PyList::empty(py);
+    for e in errors {
+        let d = PyDict::new(py);
+        d.set_item("environment", &e.environment)?;
+        d.set_item("relmse", e.relmse)?;
+        d.set_item("psnr", e.psnr)?;
+        d.set_item("scale", e.scale.to_vec())?;
+        list.append(d)?;
+    }
+    Ok(list)
 }
 
 fn row_dict<'py>(py: Python<'py>, r: &MetricRow) -> PyResult<Bound<'py, PyDict>> {
@@ -278,9 +318,30 @@ fn optimize<'py>(
     for (i, t) in summary.set.textures.iter().enumerate() {
         let v = summary.set.values_of(i).to_vec();
         let shape = [t.height as usize, t.width as usize, t.channels() as usize];
-        textures.set_item(t.name(), to_array(py, v, shape)?)?;
+        textures.set_item(t.name(), to_array(py, v, &shape)?)?;
     }
     d.set_item("textures", textures)?;
+    d.set_item(
+        "environment",
+        summary
+            .environment
+            .as_ref()
+            .map(|e| env_array(py, e))
+            .transpose()?,
+    )?;
+    d.set_item("relit", relit_list(py, &summary.relit)?)?;
+    d.set_item(
+        "exposure",
+        summary.gains.iter().map(|g| g.0).collect::<Vec<_>>(),
+    )?;
+    d.set_item(
+        "white_balance",
+        summary
+            .gains
+            .iter()
+            .map(|g| g.1.to_vec())
+            .collect::<Vec<_>>(),
+    )?;
     let per = PyDict::new(py);
     for t in &summary.per_texture {
         per.set_item(&t.texture, (t.initial_rmse_observed, t.final_rmse_observed))?;
@@ -302,6 +363,8 @@ struct DiffRender {
     shapes: Vec<[usize; 3]>,
     cameras: Vec<String>,
     method: String,
+    /// (height, width, 3) of the environment when it is a parameter.
+    env_shape: Option<[usize; 3]>,
     /// The task's targets and reference textures, loaded at first use.
     targets: Mutex<Option<psrestir::Problem>>,
 }
@@ -376,6 +439,9 @@ impl DiffRender {
             .map(|&c| problem.scene.cameras[c].name.clone())
             .collect();
         let method = op.optimizer().settings().method.name().to_string();
+        let env_shape = op
+            .environment()
+            .map(|e| [e.height as usize, e.width as usize, 3]);
         Ok(DiffRender {
             inner: Mutex::new(op),
             task,
@@ -383,6 +449,7 @@ impl DiffRender {
             shapes,
             cameras,
             method,
+            env_shape,
             targets: Mutex::new(None),
         })
     }
@@ -435,7 +502,7 @@ impl DiffRender {
     ) -> PyResult<Bound<'py, PyAny>> {
         let i = self.index(texture)?;
         let v = released(py, || self.lock().texture(i))?;
-        to_array(py, v, self.shapes[i])
+        to_array(py, v, &self.shapes[i])
     }
 
     fn set_texture(
@@ -448,19 +515,32 @@ impl DiffRender {
         let v = read_array(
             &format!("texture `{}`", self.names[i]),
             values,
-            self.shapes[i],
+            &self.shapes[i],
         )?;
         released(py, || self.lock().set_texture(i, &v))
     }
 
-    #[pyo3(signature = (spp, seed))]
-    fn render<'py>(&self, py: Python<'py>, spp: u32, seed: u32) -> PyResult<Bound<'py, PyList>> {
-        let images = released(py, || self.lock().render(spp, seed))?;
+    #[pyo3(signature = (spp, seed, primal))]
+    fn render<'py>(
+        &self,
+        py: Python<'py>,
+        spp: u32,
+        seed: u32,
+        primal: Option<&str>,
+    ) -> PyResult<Bound<'py, PyList>> {
+        let primal = primal.map(primal_mode).transpose()?;
+        let images = released(py, || self.lock().render(spp, seed, primal))?;
         let list = PyList::empty(py);
         for img in &images {
             list.append(image_array(py, img)?)?;
         }
         Ok(list)
+    }
+
+    /// The primal a render uses by default (the task's).
+    #[getter]
+    fn primal(&self) -> String {
+        self.lock().primal().name().to_string()
     }
 
     #[pyo3(signature = (adjoints, seed_grad))]
@@ -498,7 +578,7 @@ impl DiffRender {
             let v = read_array(
                 &format!("adjoint image {k} (camera `{}`)", self.cameras[k]),
                 a,
-                [h as usize, w as usize, 3],
+                &[h as usize, w as usize, 3],
             )?;
             images.push(Image {
                 width: w,
@@ -507,13 +587,154 @@ impl DiffRender {
             });
         }
         let grads = released(py, || self.lock().backward(&images, seed_grad))?;
+        self.gradient_dict(py, grads)
+    }
+
+    /// Every parameter's current value by name: the textures, `environment` (when the task
+    /// recovers it), `exposure` (n_cameras,) and `white_balance` (n_cameras, 3).
+    fn parameters<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
-        for ((name, shape), g) in self.names.iter().zip(&self.shapes).zip(grads) {
-            d.set_item(name, to_array(py, g, *shape)?)?;
+        for (i, (name, shape)) in self.names.iter().zip(&self.shapes).enumerate() {
+            let v = released(py, || self.lock().texture(i))?;
+            d.set_item(name, to_array(py, v, shape)?)?;
+        }
+        let op = self.lock();
+        if let Some(e) = op.environment() {
+            d.set_item("environment", env_array(py, &e)?)?;
+        }
+        let n = self.cameras.len();
+        d.set_item("exposure", to_array(py, op.exposure().to_vec(), &[n])?)?;
+        let wb: Vec<f32> = op.white_balance().iter().flatten().copied().collect();
+        d.set_item("white_balance", to_array(py, wb, &[n, 3])?)?;
+        Ok(d)
+    }
+
+    /// Set one parameter by name (see `parameters`); a render must follow before the next
+    /// backward.
+    fn set_parameter(&self, py: Python<'_>, name: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
+        let n = self.cameras.len();
+        if let Some(i) = self.names.iter().position(|t| t == name) {
+            let v = read_array(&format!("texture `{name}`"), value, &self.shapes[i])?;
+            return released(py, || self.lock().set_texture(i, &v));
+        }
+        match name {
+            "environment" => {
+                let Some(shape) = self.env_shape else {
+                    return Err(to_py(Error::Invalid(
+                        "`environment` is not a parameter: the task does not recover its \
+                         environment (its [environment] table with optimize = true)"
+                            .into(),
+                    )));
+                };
+                let v = read_array("environment", value, &shape)?;
+                let rgb: Vec<[f32; 3]> = v.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+                released(py, || self.lock().set_environment(&rgb))
+            }
+            "exposure" => {
+                let v = read_array("exposure", value, &[n])?;
+                released(py, || self.lock().set_exposure(&v))
+            }
+            "white_balance" => {
+                let v = read_array("white_balance", value, &[n, 3])?;
+                let rgb: Vec<[f32; 3]> = v.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+                released(py, || self.lock().set_white_balance(&rgb))
+            }
+            _ => Err(to_py(Error::Invalid(format!(
+                "no parameter `{name}`: the parameters are {:?}",
+                self.parameter_names()
+            )))),
+        }
+    }
+
+    /// The parameters' names, in the order of `parameters()`.
+    #[getter(parameter_names)]
+    fn parameter_names_py(&self) -> Vec<String> {
+        self.parameter_names()
+    }
+
+    /// One step of the task's optimizer from the last backward's gradient (`grads` None) or
+    /// from `grads` (a dict like backward's).
+    #[pyo3(signature = (grads))]
+    fn step(&self, py: Python<'_>, grads: Option<&Bound<'_, PyDict>>) -> PyResult<()> {
+        let given = grads.map(|g| self.read_gradients(g)).transpose()?;
+        released(py, || self.lock().step(given.as_ref()))
+    }
+
+    /// The task's (iterations, time budget in seconds), either None.
+    fn budget(&self) -> (Option<u32>, Option<f64>) {
+        (
+            self.task.optimizer.iterations,
+            self.task.optimizer.time_budget_s,
+        )
+    }
+
+    /// Steps taken.
+    #[getter]
+    fn steps(&self) -> u32 {
+        self.lock().steps()
+    }
+
+    /// The fraction of the run done, for the learning-rate schedule.
+    fn set_progress(&self, fraction: f64) {
+        self.lock().set_progress(fraction);
+    }
+
+    /// Each texture's learning rate in the last step, by name.
+    fn learning_rates<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        let op = self.lock();
+        for (name, lr) in self.names.iter().zip(op.last_learning_rates()) {
+            d.set_item(name, *lr)?;
         }
         Ok(d)
     }
 
+    /// Each texture's variance of its last gradient estimate, where the estimator tracks one.
+    fn gradient_variance<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(v) = released(py, || self.lock().gradient_variance())? else {
+            return Ok(None);
+        };
+        let d = PyDict::new(py);
+        for ((name, shape), t) in self.names.iter().zip(&self.shapes).zip(v) {
+            d.set_item(name, to_array(py, t, shape)?)?;
+        }
+        Ok(Some(d))
+    }
+
+    /// The relit errors of `textures` (a dict by name; None: the current ones) under the
+    /// task's `relight` environments, as `psrestir optimize` measures them.
+    #[pyo3(signature = (textures))]
+    fn relit_errors<'py>(
+        &self,
+        py: Python<'py>,
+        textures: Option<&Bound<'py, PyDict>>,
+    ) -> PyResult<Bound<'py, PyList>> {
+        let p = self.problem(py)?;
+        let mut values = Vec::new();
+        for (i, (name, shape)) in self.names.iter().zip(&self.shapes).enumerate() {
+            let given = match textures {
+                Some(d) => d.get_item(name)?,
+                None => None,
+            };
+            values.extend(match given {
+                Some(a) => read_array(&format!("texture `{name}`"), &a, shape)?,
+                None => released(py, || self.lock().texture(i))?,
+            });
+        }
+        let task = self.task.clone();
+        let errors = released(py, move || {
+            let gpu = gpu()?;
+            let seed = psrestir::optim::pass_seed(
+                task.seed,
+                u32::MAX - 5,
+                0,
+                psrestir::optim::Seeds::EVAL,
+            );
+            let spp = task.target.spp.min(256);
+            psrestir::job::relight::task_errors(&gpu, &task, &p, values, spp, seed)
+        })?;
+        relit_list(py, &errors)
+    }
     /// Which texels some camera sample reaches: bool array (height, width).
     fn observed<'py>(
         &self,
@@ -556,7 +777,7 @@ impl DiffRender {
         };
         let t = &p.set.textures[i];
         let v = r[t.offset as usize..t.offset as usize + t.len()].to_vec();
-        Ok(Some(to_array(py, v, self.shapes[i])?))
+        Ok(Some(to_array(py, v, &self.shapes[i])?))
     }
 
     /// Forget the estimator's state from earlier backward calls.
@@ -566,6 +787,91 @@ impl DiffRender {
 }
 
 impl DiffRender {
+    fn parameter_names(&self) -> Vec<String> {
+        let mut n = self.names.clone();
+        if self.env_shape.is_some() {
+            n.push("environment".into());
+        }
+        n.push("exposure".into());
+        n.push("white_balance".into());
+        n
+    }
+
+    fn gradient_dict<'py>(
+        &self,
+        py: Python<'py>,
+        g: psrestir::optim::Gradients,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        for ((name, shape), t) in self.names.iter().zip(&self.shapes).zip(g.textures) {
+            d.set_item(name, to_array(py, t, shape)?)?;
+        }
+        if let (Some(e), Some(shape)) = (g.environment, self.env_shape) {
+            d.set_item("environment", to_array(py, e, &shape)?)?;
+        }
+        let n = self.cameras.len();
+        d.set_item("exposure", to_array(py, g.exposure, &[n])?)?;
+        let wb: Vec<f32> = g.white_balance.iter().flatten().copied().collect();
+        d.set_item("white_balance", to_array(py, wb, &[n, 3])?)?;
+        Ok(d)
+    }
+
+    /// Gradients from a dict like backward's: every texture's (and the environment's where
+    /// it is a parameter) required, the gains' zero where absent.
+    fn read_gradients(&self, d: &Bound<'_, PyDict>) -> PyResult<psrestir::optim::Gradients> {
+        let known = self.parameter_names();
+        for k in d.keys() {
+            let k: String = k.extract()?;
+            if !known.contains(&k) {
+                return Err(to_py(Error::Invalid(format!(
+                    "step: no parameter `{k}`: the parameters are {known:?}"
+                ))));
+            }
+        }
+        let need = |name: &str| -> PyResult<Bound<'_, PyAny>> {
+            d.get_item(name)?.ok_or_else(|| {
+                to_py(Error::Invalid(format!(
+                    "step: the gradients lack `{name}` (give every texture's, and the \
+                     environment's when it is a parameter)"
+                )))
+            })
+        };
+        let mut textures = Vec::new();
+        for (name, shape) in self.names.iter().zip(&self.shapes) {
+            textures.push(read_array(
+                &format!("the gradient of `{name}`"),
+                &need(name)?,
+                shape,
+            )?);
+        }
+        let environment = match self.env_shape {
+            Some(shape) => Some(read_array(
+                "the gradient of `environment`",
+                &need("environment")?,
+                &shape,
+            )?),
+            None => None,
+        };
+        let n = self.cameras.len();
+        let exposure = match d.get_item("exposure")? {
+            Some(a) => read_array("the gradient of `exposure`", &a, &[n])?,
+            None => vec![0.0; n],
+        };
+        let white_balance = match d.get_item("white_balance")? {
+            Some(a) => read_array("the gradient of `white_balance`", &a, &[n, 3])?
+                .chunks(3)
+                .map(|c| [c[0], c[1], c[2]])
+                .collect(),
+            None => vec![[0.0; 3]; n],
+        };
+        Ok(psrestir::optim::Gradients {
+            textures,
+            environment,
+            exposure,
+            white_balance,
+        })
+    }
+
     fn lock(&self) -> std::sync::MutexGuard<'_, psrestir::optim::DiffRender> {
         self.inner.lock().unwrap_or_else(|p| p.into_inner())
     }

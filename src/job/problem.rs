@@ -291,7 +291,8 @@ fn task_scene(task: &Task, path: &Path) -> Result<(Scene, Vec<usize>, FrameImage
             return Err(Error::file(
                 &task.path,
                 format!(
-                    "two cameras are named `{}` (the scene's, the task's `[[camera]]` tables                      and the camera file's frames share one namespace)",
+                    "two cameras are named `{}` (the scene's, the task's `[[camera]]` tables \
+                     and the camera file's frames share one namespace)",
                     c.name
                 ),
             ));
@@ -309,9 +310,11 @@ pub(crate) fn camera_file_name(scene: &Scene, cam: usize) -> String {
 }
 
 impl crate::optim::DiffRender {
-    /// A differentiable render of `task`'s scene, cameras, image size, depth and textures
-    /// (at their initial values), with the task's gradient samples per pixel and seed and
-    /// the estimator `method` (`auto` resolves as for an optimization of the task) with the
+    /// A differentiable render of `task`'s scene, cameras, image size, depth and parameters
+    /// (the textures at their initial values, the environment when the task recovers it,
+    /// the cameras' exposures and white balances), with the task's gradient samples per
+    /// pixel, seed, primal, step, priors and schedule and the estimator `method` (`auto`
+    /// resolves the whole configuration as for an optimization of the task) with the
     /// task's estimator options over `extra`. The task's targets are not loaded: the loss is
     /// the caller's ([`Problem::from_task`] gives them). Returns the problem it was made
     /// from too (its scene, cameras and texture layout).
@@ -331,7 +334,20 @@ impl crate::optim::DiffRender {
             );
         }
         let settings = crate::task::task_settings(task, &problem.cameras, choice.method, extra);
-        let op = crate::optim::DiffRender::new(gpu, &problem.scene, problem.set.clone(), settings)?;
+        let mut op =
+            crate::optim::DiffRender::new(gpu, &problem.scene, problem.set.clone(), settings)?;
+        // What `Optimizer::for_problem` sets besides the targets and their masks, which
+        // belong to the caller's loss.
+        let opt = op.optimizer_mut();
+        if problem.exposure.iter().any(|&e| e != 1.0) {
+            opt.set_exposure(&problem.exposure)?;
+        }
+        if let Some(e) = &problem.environment {
+            opt.optimize_environment(&e.start, e.options.clone())?;
+        }
+        if let Some(lr) = problem.white_balance_learning_rate {
+            opt.optimize_white_balance(lr)?;
+        }
         Ok((op, problem))
     }
 }

@@ -104,6 +104,10 @@ pub struct RunSummary {
     /// With the environment recovered and a ground truth's environment known: the angle in
     /// degrees between their directions of strongest emission.
     pub light_direction_error_deg: Option<f64>,
+    /// The recovered environment, when the task recovers it.
+    pub environment: Option<crate::scene::EnvMap>,
+    /// Each camera's final exposure and white balance.
+    pub gains: Vec<(f32, [f32; 3])>,
 }
 
 /// Log the configuration a run takes, then each choice `auto` made with its reason.
@@ -214,7 +218,8 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     }
     write_outputs(&out, task, &prep, &opt, &values, &session.rows)?;
     let mut light_direction_error_deg = None;
-    if let Some(env) = opt.environment() {
+    let environment = opt.environment();
+    if let Some(env) = &environment {
         // The recovered environment, lat-long with row 0 at the zenith like the inputs.
         let img = crate::image_io::Image {
             width: env.width,
@@ -223,7 +228,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         };
         img.save(&out.join("environment.exr"))?;
         if let Some(truth) = prep.truth.as_ref().and_then(|t| t.env.as_ref()) {
-            let e = super::relight::direction_error_deg(&env, truth);
+            let e = super::relight::direction_error_deg(env, truth);
             log::info!(
                 "the recovered environment's strongest emission is {e:.1} degrees from the \
                  truth's"
@@ -269,6 +274,13 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         },
         relit,
         light_direction_error_deg,
+        environment,
+        gains: opt
+            .exposure()
+            .iter()
+            .copied()
+            .zip(opt.white_balance().iter().copied())
+            .collect(),
     })
 }
 

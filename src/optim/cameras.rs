@@ -16,19 +16,21 @@ pub(super) struct CameraPasses {
 
 impl CameraPasses {
     /// Point this camera's primal render at `spp` samples from sample `offset` of `seed`'s
-    /// stream, under the current textures only (no control-variate state), and upload its
-    /// uniform: a chunk of a render outside the iteration. Returns `spp`.
+    /// stream, under the current textures (and with `two_states` the previous ones too, for
+    /// the control variate), and upload its uniform: a chunk of a render outside the
+    /// iteration. Returns `spp`.
     pub(super) fn set_samples(
         &mut self,
         queue: &wgpu::Queue,
         seed: u32,
         offset: u32,
         spp: u32,
+        two_states: bool,
     ) -> u32 {
         self.render_params.seed = seed;
         self.render_params.sample_offset = offset;
         self.render_params.spp = spp;
-        self.render_params.two_states = 0;
+        self.render_params.two_states = two_states as u32;
         queue.write_buffer(
             &self.render_uniform,
             0,

@@ -5,7 +5,7 @@
 //! [`DiffRender`] wraps the two with the checks an application needs (one backward per
 //! render, textures in range); the Python package is built on it.
 
-use super::{pass_seed, Optimizer, PrimalMode, Seeds, Settings, StepKind};
+use super::{pass_seed, Optimizer, PrimalMode, Seeds, Settings};
 use crate::gpu::Gpu;
 use crate::image_io::Image;
 use crate::render::params::{ParamSet, ParamTexture};
@@ -13,16 +13,32 @@ use crate::scene::Scene;
 use crate::{Error, Result};
 
 impl Optimizer {
-    /// Render every camera of the optimizer at the current textures, `spp` samples per pixel
-    /// from `seed`'s streams (camera `k` draws from `pass_seed(seed, 0, k, Seeds::PRIMAL)`),
-    /// in one submission unless the samples need chunks (2^20 per dispatch), and read the
-    /// images back: the forward half of a differentiable render. No loss, adjoint or
-    /// estimator state changes.
-    pub fn render_cameras(&mut self, spp: u32, seed: u32) -> Result<Vec<Image>> {
+    /// Render every camera at the current textures, `spp` samples per pixel from `seed`'s
+    /// streams (camera `k` draws from `pass_seed(seed, 0, k, Seeds::PRIMAL)`), in one
+    /// submission unless the samples need chunks (2^20 per dispatch), and read the images
+    /// back: the forward half of a differentiable render. With `primal` the control variate
+    /// (which the optimizer must have), each sample is also evaluated under the previous
+    /// textures and the images are the control variate's `I_t` (src/optim/primal.rs), whose
+    /// state advances once; otherwise no state changes. No loss, adjoint or estimator state
+    /// changes either way.
+    pub fn render_cameras(
+        &mut self,
+        spp: u32,
+        seed: u32,
+        primal: PrimalMode,
+    ) -> Result<Vec<Image>> {
         if spp == 0 || spp > 1 << 16 {
             return Err(Error::Invalid(format!(
                 "spp must be between 1 and 65536, not {spp}"
             )));
+        }
+        let two_states = primal == PrimalMode::ControlVariate;
+        if two_states && self.control_variate.is_none() {
+            return Err(Error::Invalid(
+                "this render has no control-variate primal (the optimizer was made with the \
+                 independent one)"
+                    .into(),
+            ));
         }
         let (w, h) = (self.settings.width, self.settings.height);
         let n_pixels = w * h;
@@ -40,6 +56,7 @@ impl Optimizer {
                     label: Some("render_cameras"),
                 })
         };
+        self.timer.begin();
         let mut enc = new_encoder(&self.gpu);
         for k in 0..self.cams.len() {
             let mut done = 0;
@@ -50,9 +67,13 @@ impl Optimizer {
                     pass_seed(seed, 0, k as u32, Seeds::PRIMAL),
                     done,
                     chunk.min(spp - done),
+                    two_states,
                 );
                 if done == 0 {
                     enc.clear_buffer(&self.accum, 0, None);
+                    if two_states {
+                        enc.clear_buffer(&self.accum_prev, 0, None);
+                    }
                 }
                 self.renderer
                     .encode_render(&mut enc, "primal", &cam.render_group, self.grid, None);
@@ -63,9 +84,18 @@ impl Optimizer {
                     enc = new_encoder(&self.gpu);
                 }
             }
+            if let Some(cv) = self.control_variate.as_mut().filter(|_| two_states) {
+                // I_t replaces the render in accum.
+                cv.encode(&mut enc, k, &mut self.timer);
+            }
             enc.copy_buffer_to_buffer(&self.accum, 0, &images, k as u64 * bytes, bytes);
         }
         self.gpu.queue.submit([enc.finish()]);
+        if two_states {
+            if let Some(cv) = &mut self.control_variate {
+                cv.finish_iteration();
+            }
+        }
         let sums: Vec<[f32; 4]> = self.gpu.read_pod(&images)?;
         Ok(sums
             .chunks(n_pixels as usize)
@@ -126,16 +156,42 @@ impl Optimizer {
     }
 }
 
-/// A differentiable render whose loss and optimizer belong to the caller: set the textures,
+/// A differentiable render whose loss belongs to the caller: set the parameters (the
+/// textures, the environment when it is recovered, each camera's exposure and white balance),
 /// [`render`](DiffRender::render) the cameras, compute dL/dI of any loss, and
-/// [`backward`](DiffRender::backward) gives each texel's gradient with the chosen estimator.
-/// Each backward pairs with the render before it (a second backward, or one after the
-/// textures changed, is refused): that is what keeps ReSTIR's reuse, which pairs each
-/// gradient with the previous call's textures and adjoint, and every estimate, honest.
+/// [`backward`](DiffRender::backward) gives each parameter's gradient, the textures' and the
+/// environment's with the chosen estimator. [`step`](DiffRender::step) then updates the
+/// parameters with the built-in optimizer's step, priors and schedule, from that gradient or
+/// one the caller gives. Each backward pairs with the render before it (a second backward, or
+/// one after the parameters changed, is refused): that is what keeps ReSTIR's reuse, which
+/// pairs each gradient with the previous call's textures and adjoint, and every estimate,
+/// honest.
 pub struct DiffRender {
     opt: Optimizer,
-    /// Whether a render at the current textures has not been used by a backward yet.
-    rendered: bool,
+    /// The primal a render uses unless told otherwise (the settings').
+    primal: PrimalMode,
+    /// The images of the last render (before the cameras' gains), while no backward has
+    /// used them and the parameters have not changed.
+    rendered: Option<Vec<Image>>,
+    /// dL/d(gain) per camera and channel of the last backward, while no step has used it.
+    gain_gradient: Option<Vec<[f64; 3]>>,
+    /// Steps taken.
+    steps: u32,
+}
+
+/// The gradient of every parameter of a [`DiffRender`]: each texture's (laid out as
+/// [`DiffRender::texture`]), the environment's dL/d(radiance) (3 per texel, row 0 at the
+/// zenith) when it is recovered, and each camera's exposure's and white balance's.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Gradients {
+    /// Per texture.
+    pub textures: Vec<Vec<f32>>,
+    /// Per environment texel and channel, when the environment is a parameter.
+    pub environment: Option<Vec<f32>>,
+    /// Per camera.
+    pub exposure: Vec<f32>,
+    /// Per camera and channel.
+    pub white_balance: Vec<[f32; 3]>,
 }
 
 // The Python package holds a DiffRender across calls that release the interpreter.
@@ -146,17 +202,12 @@ const _: fn() = || {
 
 impl DiffRender {
     /// A differentiable render of `scene` seen by `settings.cameras`, with the textures of
-    /// `set` (at their initial values) as its parameters.
+    /// `set` (at their initial values) as its parameters, and the step, priors and schedule
+    /// of `settings` for [`DiffRender::step`]. The control-variate primal is always there
+    /// ([`DiffRender::render`] picks); `settings.primal` is the one a render uses by default
+    /// (and the one the estimator's options assume).
     pub fn new(gpu: &Gpu, scene: &Scene, set: ParamSet, settings: Settings) -> Result<DiffRender> {
-        let settings = Settings {
-            primal: PrimalMode::Independent,
-            step: StepKind::Adam,
-            multiscale_levels: 0,
-            smoothness: 0.0,
-            exposure_learning_rate: None,
-            moment_filter: Default::default(),
-            ..settings
-        };
+        let primal = settings.primal;
         // The loss pass is built but never run: placeholders of the images' size.
         let blank = Image {
             width: settings.width,
@@ -164,10 +215,26 @@ impl DiffRender {
             rgb: vec![[0.0; 3]; (settings.width * settings.height) as usize],
         };
         let targets = vec![blank; settings.cameras.len()];
-        let opt = Optimizer::new(gpu, scene, set, settings, &targets)?;
+        let mut opt = Optimizer::new(gpu, scene, set, settings, &targets)?;
+        // The settings' primal also picks estimator options (ReSTIR's target smoothing): it
+        // stays, and the control variate is added beside it.
+        if opt.control_variate.is_none() {
+            let (w, h) = (opt.settings.width, opt.settings.height);
+            opt.control_variate = Some(super::primal::ControlVariate::new(
+                gpu,
+                (w, h),
+                opt.cams.len(),
+                &opt.accum,
+                &opt.accum_prev,
+                opt.settings.cv_max_weight,
+            )?);
+        }
         Ok(DiffRender {
             opt,
-            rendered: false,
+            primal,
+            rendered: None,
+            gain_gradient: None,
+            steps: 0,
         })
     }
 
@@ -191,9 +258,26 @@ impl DiffRender {
         &self.opt
     }
 
+    /// The optimizer underneath, to set what [`Optimizer::for_problem`] sets (exposures,
+    /// the environment's fit, the white balances' rate) before the first render.
+    pub fn optimizer_mut(&mut self) -> &mut Optimizer {
+        self.rendered = None;
+        &mut self.opt
+    }
+
+    /// The primal a render uses by default.
+    pub fn primal(&self) -> PrimalMode {
+        self.primal
+    }
+
     /// Backward calls so far.
     pub fn iteration(&self) -> u32 {
         self.opt.iteration
+    }
+
+    /// Steps taken so far.
+    pub fn steps(&self) -> u32 {
+        self.steps
     }
 
     /// Current values of texture `i` (row-major, `channels()` floats per texel).
@@ -240,31 +324,92 @@ impl DiffRender {
             offset,
             bytemuck::cast_slice(values),
         );
-        self.rendered = false;
+        self.rendered = None;
         self.opt.gpu.check("set_texture")
     }
 
-    /// Render every camera at the current textures (`spp` samples per pixel from `seed`'s
-    /// streams, independent of any backward's).
-    pub fn render(&mut self, spp: u32, seed: u32) -> Result<Vec<Image>> {
-        let images = self.opt.render_cameras(spp, seed)?;
-        self.rendered = true;
+    /// The environment, when it is recovered (a parameter); None otherwise.
+    pub fn environment(&self) -> Option<crate::scene::EnvMap> {
+        self.opt.environment()
+    }
+
+    /// Replace the recovered environment's radiance (`width * height` RGB texels, each
+    /// finite and positive, row 0 at the zenith); its sampling tables are rebuilt.
+    pub fn set_environment(&mut self, rgb: &[[f32; 3]]) -> Result<()> {
+        self.opt.set_environment(rgb)?;
+        self.rendered = None;
+        Ok(())
+    }
+
+    /// Each camera's exposure (the factor its render is multiplied by).
+    pub fn exposure(&self) -> &[f32] {
+        self.opt.exposure()
+    }
+
+    /// Each camera's white balance (per-channel factors over its exposure).
+    pub fn white_balance(&self) -> &[[f32; 3]] {
+        self.opt.white_balance()
+    }
+
+    /// Set each camera's exposure (positive).
+    pub fn set_exposure(&mut self, values: &[f32]) -> Result<()> {
+        self.opt.set_exposure(values)?;
+        self.rendered = None;
+        Ok(())
+    }
+
+    /// Set each camera's white balance (positive per channel).
+    pub fn set_white_balance(&mut self, values: &[[f32; 3]]) -> Result<()> {
+        self.opt.set_white_balance(values)?;
+        self.rendered = None;
+        Ok(())
+    }
+
+    /// Render every camera at the current parameters (`spp` samples per pixel from `seed`'s
+    /// streams, independent of any backward's) with `primal` (None: the settings'), each
+    /// image multiplied by its camera's exposure and white balance: what a loss compares
+    /// with a photo.
+    pub fn render(
+        &mut self,
+        spp: u32,
+        seed: u32,
+        primal: Option<PrimalMode>,
+    ) -> Result<Vec<Image>> {
+        let raw = self
+            .opt
+            .render_cameras(spp, seed, primal.unwrap_or(self.primal))?;
+        let gains = self.opt.gains();
+        let images = raw
+            .iter()
+            .zip(&gains)
+            .map(|(img, g)| Image {
+                width: img.width,
+                height: img.height,
+                rgb: img
+                    .rgb
+                    .iter()
+                    .map(|p| std::array::from_fn(|c| p[c] * g[c]))
+                    .collect(),
+            })
+            .collect();
+        self.rendered = Some(raw);
         Ok(images)
     }
 
-    /// Each texture's gradient (laid out as [`DiffRender::texture`]) of the loss whose dL/dI
-    /// is `adjoint`, one image per camera, for the images of the last [`DiffRender::render`].
-    /// `seed` picks the gradient samples' streams (None: the settings' seed); they are mixed
-    /// with the number of backward calls, so one seed serves a whole run.
-    pub fn backward(&mut self, adjoint: &[Image], seed: Option<u32>) -> Result<Vec<Vec<f32>>> {
-        if !self.rendered {
+    /// Every parameter's gradient of the loss whose dL/dI is `adjoint`, one image per camera,
+    /// for the images of the last [`DiffRender::render`] (as it returned them, the gains
+    /// applied). `seed` picks the gradient samples' streams (None: the settings' seed); they
+    /// are mixed with the number of backward calls, so one seed serves a whole run. The
+    /// gains' derivatives are exact for the rendered images: sum over pixels of the adjoint
+    /// times the render.
+    pub fn backward(&mut self, adjoint: &[Image], seed: Option<u32>) -> Result<Gradients> {
+        let Some(raw) = self.rendered.as_ref() else {
             return Err(Error::Invalid(
-                "backward needs a render at the current textures first: call render() after \
-                 setting the textures and before each backward (each backward pairs with one \
-                 render)"
+                "backward needs a render at the current parameters first: call render() after \
+                 setting them and before each backward (each backward pairs with one render)"
                     .into(),
             ));
-        }
+        };
         let (w, h) = self.image_size();
         if adjoint.len() != self.opt.cams.len() {
             return Err(Error::Invalid(format!(
@@ -282,17 +427,203 @@ impl DiffRender {
                 adjoint[k].width, adjoint[k].height
             )));
         }
-        let flat: Vec<[f32; 3]> = adjoint.iter().flat_map(|a| a.rgb.iter().copied()).collect();
+        let gains = self.opt.gains();
+        // dL/d(gain) = sum of the adjoint times the render; the render's own adjoint is the
+        // gain times the image's.
+        let d_gain: Vec<[f64; 3]> = adjoint
+            .iter()
+            .zip(raw)
+            .map(|(a, r)| {
+                let mut d = [0f64; 3];
+                for (p, q) in a.rgb.iter().zip(&r.rgb) {
+                    for c in 0..3 {
+                        d[c] += p[c] as f64 * q[c] as f64;
+                    }
+                }
+                d
+            })
+            .collect();
+        let flat: Vec<[f32; 3]> = adjoint
+            .iter()
+            .zip(&gains)
+            .flat_map(|(a, g)| {
+                a.rgb
+                    .iter()
+                    .map(move |p| std::array::from_fn(|c| p[c] * g[c]))
+            })
+            .collect();
         let seed = seed.unwrap_or(self.opt.settings.seed);
         let g = self.opt.backward(&flat, seed)?;
-        self.rendered = false;
-        Ok(self
-            .opt
-            .set
-            .textures
+        self.rendered = None;
+        let environment = if self.opt.env_fit.is_some() {
+            let (e, faults) = self.opt.read_environment_gradient()?;
+            self.opt.env_faults += faults;
+            Some(e)
+        } else {
+            None
+        };
+        let (exposure, white_balance) = self.gain_parts(&d_gain);
+        self.gain_gradient = Some(d_gain);
+        Ok(Gradients {
+            textures: self
+                .opt
+                .set
+                .textures
+                .iter()
+                .map(|t| g[t.offset as usize..t.offset as usize + t.len()].to_vec())
+                .collect(),
+            environment,
+            exposure,
+            white_balance,
+        })
+    }
+
+    /// dL/d(exposure) and dL/d(white balance) per camera from dL/d(gain).
+    fn gain_parts(&self, d_gain: &[[f64; 3]]) -> (Vec<f32>, Vec<[f32; 3]>) {
+        let (e, wb) = (self.opt.exposure(), self.opt.white_balance());
+        d_gain
             .iter()
-            .map(|t| g[t.offset as usize..t.offset as usize + t.len()].to_vec())
-            .collect())
+            .enumerate()
+            .map(|(k, d)| {
+                let de: f64 = (0..3).map(|c| d[c] * wb[k][c] as f64).sum();
+                (
+                    de as f32,
+                    std::array::from_fn(|c| (d[c] * e[k] as f64) as f32),
+                )
+            })
+            .unzip()
+    }
+
+    /// The variance of each texel's last gradient estimate, where the estimator tracks one
+    /// (the recursive estimator; ReSTIR with `own_variance`); None otherwise.
+    pub fn gradient_variance(&self) -> Result<Option<Vec<Vec<f32>>>> {
+        let Some(buf) = self.opt.estimator.variance() else {
+            return Ok(None);
+        };
+        let v: Vec<f32> = self.opt.gpu.read_pod(buf)?;
+        Ok(Some(
+            self.opt
+                .set
+                .textures
+                .iter()
+                .map(|t| v[t.offset as usize..t.offset as usize + t.len()].to_vec())
+                .collect(),
+        ))
+    }
+
+    /// Tell the learning-rate schedule which fraction of the run is done (see
+    /// [`Optimizer::set_progress`]).
+    pub fn set_progress(&mut self, fraction: f64) {
+        self.opt.set_progress(fraction);
+    }
+
+    /// The learning rate of each texture in the last step.
+    pub fn last_learning_rates(&self) -> &[f32] {
+        self.opt.last_learning_rates()
+    }
+
+    /// One step of the built-in optimizer (its step, Adam or the variance-scaled one with
+    /// its filtered moments, the priors and the schedule; the environment's and the gains'
+    /// Adam where they are optimized) from the last backward's gradient, or from `given`
+    /// (every texture's, and the environment's and gains' where they are optimized; a
+    /// gradient the caller computed or changed). The parameters change: render again
+    /// before the next backward.
+    pub fn step(&mut self, given: Option<&Gradients>) -> Result<()> {
+        let d_log_gains = match given {
+            Some(g) => self.upload_gradients(g)?,
+            None => {
+                let Some(d) = self.gain_gradient.as_ref() else {
+                    return Err(Error::Invalid(
+                        "step needs a gradient: call backward() first (each step uses the \
+                         last backward's gradient once), or give the gradients"
+                            .into(),
+                    ));
+                };
+                let gains = self.opt.gains();
+                log_gain_gradients(d, &gains)
+            }
+        };
+        self.gain_gradient = None;
+        self.opt.prepare()?;
+        let mut enc = self
+            .opt
+            .gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("step"),
+            });
+        self.opt.timer.begin();
+        let iteration = self.steps;
+        let factor = self.opt.encode_update(&mut enc, iteration, iteration + 1);
+        self.opt.gpu.queue.submit([enc.finish()]);
+        self.steps += 1;
+        if self.opt.gains_optimized() {
+            self.opt.step_log_gains(factor, &d_log_gains);
+        }
+        self.opt.step_environment(factor)?;
+        self.rendered = None;
+        self.opt.gpu.check("step")
+    }
+
+    /// Write `g` where the step reads its gradients; returns d/d(log exposure) and
+    /// d/d(log white balance).
+    fn upload_gradients(&mut self, g: &Gradients) -> Result<(Vec<f32>, Vec<[f32; 3]>)> {
+        let ts = &self.opt.set.textures;
+        if g.textures.len() != ts.len() {
+            return Err(Error::Invalid(format!(
+                "{} texture gradients for {} textures",
+                g.textures.len(),
+                ts.len()
+            )));
+        }
+        let mut all = vec![0f32; self.opt.set.values.len()];
+        for (t, v) in ts.iter().zip(&g.textures) {
+            check_gradient(&format!("texture `{}`", t.name()), v, t.len())?;
+            all[t.offset as usize..t.offset as usize + t.len()].copy_from_slice(v);
+        }
+        self.opt
+            .gpu
+            .queue
+            .write_buffer(&self.opt.grad, 0, bytemuck::cast_slice(&all));
+        match (&self.opt.env_fit, &g.environment) {
+            (Some(f), Some(e)) => {
+                check_gradient("the environment", e, f.state.log.len())?;
+                let mut words: Vec<u32> = e.iter().map(|v| v.to_bits()).collect();
+                words.extend([0, 0]);
+                self.opt.gpu.queue.write_buffer(
+                    &self.opt.env_grad,
+                    0,
+                    bytemuck::cast_slice(&words),
+                );
+            }
+            (Some(_), None) => {
+                return Err(Error::Invalid(
+                    "the environment is optimized: give its gradient too".into(),
+                ))
+            }
+            (None, Some(_)) => {
+                return Err(Error::Invalid(
+                    "an environment gradient, but the environment is not a parameter (the \
+                     task's [environment] does not optimize it)"
+                        .into(),
+                ))
+            }
+            (None, None) => {}
+        }
+        let n = self.opt.cams.len();
+        if !self.opt.gains_optimized() {
+            return Ok((vec![0.0; n], vec![[0.0; 3]; n]));
+        }
+        let flat: Vec<f32> = g.white_balance.iter().flatten().copied().collect();
+        check_gradient("the exposures", &g.exposure, n)?;
+        check_gradient("the white balances", &flat, 3 * n)?;
+        let (e, wb) = (self.opt.exposure(), self.opt.white_balance());
+        Ok((
+            (0..n).map(|k| g.exposure[k] * e[k]).collect(),
+            (0..n)
+                .map(|k| std::array::from_fn(|c| g.white_balance[k][c] * wb[k][c]))
+                .collect(),
+        ))
     }
 
     /// Forget what the estimator carries over from earlier backward calls (ReSTIR's
@@ -300,4 +631,33 @@ impl DiffRender {
     pub fn reset_estimator(&mut self) -> Result<()> {
         self.opt.reset_estimator()
     }
+}
+
+/// d/d(log exposure) and d/d(log white balance) per camera from dL/d(gain) `d` at `gains`
+/// (exposure times white balance): gain times dL/d(gain), summed over the channels for the
+/// exposure.
+pub(super) fn log_gain_gradients(d: &[[f64; 3]], gains: &[[f32; 3]]) -> (Vec<f32>, Vec<[f32; 3]>) {
+    d.iter()
+        .zip(gains)
+        .map(|(d, g)| {
+            let per: [f32; 3] = std::array::from_fn(|c| (d[c] * g[c] as f64) as f32);
+            (per.iter().sum::<f32>(), per)
+        })
+        .unzip()
+}
+
+/// `n` finite values, or an error naming `what`.
+fn check_gradient(what: &str, v: &[f32], n: usize) -> Result<()> {
+    if v.len() != n {
+        return Err(Error::Invalid(format!(
+            "the gradient of {what} has {} values, {n} expected",
+            v.len()
+        )));
+    }
+    if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+        return Err(Error::Invalid(format!(
+            "the gradient of {what} is not finite at index {i}"
+        )));
+    }
+    Ok(())
 }

@@ -299,6 +299,47 @@ impl Optimizer {
         self.env_fit.as_ref().map(|f| f.state.env())
     }
 
+    /// Replace the recovered environment's radiance (`width * height` RGB texels, each
+    /// finite and positive, row 0 at the zenith), keeping Adam's moments; the `mean` gauge
+    /// then holds this environment's mean luminance. The sampling tables are rebuilt.
+    pub fn set_environment(&mut self, rgb: &[[f32; 3]]) -> Result<()> {
+        let Some(fit) = &mut self.env_fit else {
+            return Err(Error::Invalid(
+                "the environment is not a parameter (the task's [environment] does not \
+                 optimize it)"
+                    .into(),
+            ));
+        };
+        let [w, h] = fit.state.size;
+        if rgb.len() != (w * h) as usize {
+            return Err(Error::Invalid(format!(
+                "the environment is {h}x{w}x3, {} texels given",
+                rgb.len()
+            )));
+        }
+        if let Some(i) = rgb
+            .iter()
+            .flatten()
+            .position(|v| !(v.is_finite() && *v > 0.0))
+        {
+            return Err(Error::Invalid(format!(
+                "the environment's radiance must be finite and positive (value {} at index {i})",
+                rgb[i / 3][i % 3]
+            )));
+        }
+        fit.state.log = rgb
+            .iter()
+            .flatten()
+            .map(|v| v.ln().clamp(-20.0, 20.0))
+            .collect();
+        fit.state.mean_luminance = luminance(channel_means(&fit.state.env()));
+        let env = fit.state.env();
+        self.renderer
+            .scene
+            .update_environment(&self.gpu, &env, true, true)?;
+        self.gpu.check("set environment")
+    }
+
     /// The environment's optimizer state, for checkpoints.
     pub fn environment_state(&self) -> Option<&EnvFitState> {
         self.env_fit.as_ref().map(|f| &f.state)

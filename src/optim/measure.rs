@@ -101,6 +101,7 @@ impl Optimizer {
                     pass_seed(seed, u32::MAX - 3, k as u32, Seeds::PRIMAL),
                     done,
                     chunk.min(spp - done),
+                    false,
                 );
                 let mut enc =
                     self.gpu

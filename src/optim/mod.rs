@@ -25,7 +25,7 @@ mod settings;
 mod state;
 mod targets;
 mod timing;
-pub use diff_render::DiffRender;
+pub use diff_render::{DiffRender, Gradients};
 pub use memory::*;
 pub use seeds::*;
 pub use settings::*;
@@ -440,25 +440,7 @@ impl Optimizer {
             });
         self.encode_gradient(&mut enc, self.iteration, true);
         let t = self.iteration + 1;
-        for p in self.priors.iter_mut().flatten() {
-            let (seed, it) = (self.settings.seed, self.iteration);
-            p.encode(&self.gpu, &mut enc, seed, it, &mut self.timer);
-        }
-        let factor = self.settings.schedule.factor(self.iteration, self.progress);
-        // While the environment warms up the textures hold (light.rs).
-        let texture_factor = if self.environment_warming_up() {
-            0.0
-        } else {
-            factor
-        };
-        self.last_learning_rates = self.step.encode(
-            &self.gpu,
-            &mut enc,
-            &self.set,
-            texture_factor,
-            t,
-            &mut self.timer,
-        );
+        let factor = self.encode_update(&mut enc, self.iteration, t);
         self.timer.resolve(&mut enc);
         self.gpu.queue.submit([enc.finish()]);
         self.finish_iteration(true);
@@ -467,6 +449,43 @@ impl Optimizer {
         self.step_gains(factor)?;
         self.step_environment(factor)?;
         Ok(StepStats { loss })
+    }
+
+    /// Record the update of the textures from the gradient in `grad`: the priors (drawn
+    /// with iteration `iteration`'s seeds), then the step, its `t`-th (Adam's bias
+    /// correction). Returns the schedule's factor, with which the gains and the
+    /// environment step once the work is submitted.
+    pub(crate) fn encode_update(
+        &mut self,
+        enc: &mut wgpu::CommandEncoder,
+        iteration: u32,
+        t: u32,
+    ) -> f32 {
+        for p in self.priors.iter_mut().flatten() {
+            p.encode(
+                &self.gpu,
+                enc,
+                self.settings.seed,
+                iteration,
+                &mut self.timer,
+            );
+        }
+        let factor = self.settings.schedule.factor(iteration, self.progress);
+        // While the environment warms up the textures hold (light.rs).
+        let texture_factor = if self.environment_warming_up() {
+            0.0
+        } else {
+            factor
+        };
+        self.last_learning_rates = self.step.encode(
+            &self.gpu,
+            enc,
+            &self.set,
+            texture_factor,
+            t,
+            &mut self.timer,
+        );
+        factor
     }
 
     /// Tell the learning-rate schedule which fraction of the run is done (in [0, 1]; for a

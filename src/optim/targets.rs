@@ -79,6 +79,27 @@ impl Optimizer {
         &self.exposure.white_balance
     }
 
+    /// Set each camera's white balance (per-channel factors over its exposure, positive).
+    /// With the white balances optimized the optimizer goes on from these values.
+    pub fn set_white_balance(&mut self, values: &[[f32; 3]]) -> Result<()> {
+        if values.len() != self.cams.len()
+            || values
+                .iter()
+                .flatten()
+                .any(|v| !(v.is_finite() && *v > 0.0))
+        {
+            return Err(Error::Invalid(format!(
+                "{} white balances for {} cameras (each three positive factors)",
+                values.len(),
+                self.cams.len()
+            )));
+        }
+        self.exposure.white_balance = values.to_vec();
+        self.gain_prev = self.exposure.gains();
+        self.upload_exposure();
+        self.gpu.check("set white balance")
+    }
+
     /// Each camera's per-channel gain, exposure times white balance: what its render is
     /// multiplied by before the comparison.
     pub fn gains(&self) -> Vec<[f32; 3]> {
@@ -108,27 +129,41 @@ impl Optimizer {
     /// One Adam step of the exposures' and the white balances' logarithms (those optimized)
     /// from this iteration's dL/d(gain), at schedule factor `factor`.
     pub(super) fn step_gains(&mut self, factor: f32) -> Result<()> {
-        let (lr_e, lr_wb) = (self.settings.exposure_learning_rate, self.white_balance_lr);
-        if lr_e.is_none() && lr_wb.is_none() {
+        if !self.gains_optimized() {
             return Ok(());
         }
         let d = self.loss.read_gain_gradients(&self.gpu)?;
+        let g = super::diff_render::log_gain_gradients(&d, &self.exposure.gains());
+        self.step_log_gains(factor, &g);
+        Ok(())
+    }
+
+    /// Whether the exposures or the white balances are optimized.
+    pub(super) fn gains_optimized(&self) -> bool {
+        self.settings.exposure_learning_rate.is_some() || self.white_balance_lr.is_some()
+    }
+
+    /// One Adam step of the optimized gains' logarithms from `(d_exposure, d_white_balance)`,
+    /// the derivatives with respect to the logarithms of each camera's exposure and white
+    /// balance, at schedule factor `factor`, and their upload.
+    pub(super) fn step_log_gains(&mut self, factor: f32, (d_e, d_wb): &(Vec<f32>, Vec<[f32; 3]>)) {
+        let (lr_e, lr_wb) = (self.settings.exposure_learning_rate, self.white_balance_lr);
         let gains = self.exposure.gains();
         // The reference camera keeps its response while the light is recovered.
         let first = usize::from(self.env_fit.is_some());
-        // d/d(log gain_c) = gain_c dL/d(gain_c).
-        let g: Vec<[f32; 3]> = (0..d.len())
-            .map(|k| std::array::from_fn(|c| (d[k][c] * gains[k][c] as f64) as f32))
-            .collect();
         let e = &mut self.exposure;
         if let Some(lr) = lr_e {
             e.steps += 1;
             let t = e.steps as i32;
-            for k in first..g.len() {
-                let gk: f32 = g[k].iter().sum();
-                if let Some(v) =
-                    adam_log_step(&mut e.m1[k], &mut e.m2[k], gk, t, lr * factor, e.values[k])
-                {
+            for k in first..d_e.len() {
+                if let Some(v) = adam_log_step(
+                    &mut e.m1[k],
+                    &mut e.m2[k],
+                    d_e[k],
+                    t,
+                    lr * factor,
+                    e.values[k],
+                ) {
                     e.values[k] = v;
                 }
             }
@@ -136,11 +171,11 @@ impl Optimizer {
         if let Some(lr) = lr_wb {
             e.wb_steps += 1;
             let t = e.wb_steps as i32;
-            for k in first..g.len() {
+            for k in first..d_wb.len() {
                 for c in 0..3 {
                     let (m1, m2) = (&mut e.wb_m1[k][c], &mut e.wb_m2[k][c]);
                     if let Some(v) =
-                        adam_log_step(m1, m2, g[k][c], t, lr * factor, e.white_balance[k][c])
+                        adam_log_step(m1, m2, d_wb[k][c], t, lr * factor, e.white_balance[k][c])
                     {
                         e.white_balance[k][c] = v;
                     }
@@ -151,7 +186,6 @@ impl Optimizer {
         // the gains before this step.
         self.gain_prev = gains;
         self.upload_exposure();
-        Ok(())
     }
 }
 
