@@ -455,10 +455,9 @@ impl DiffRender {
         let seed = seed.unwrap_or(self.opt.settings.seed);
         let g = self.opt.backward(&flat, seed)?;
         self.rendered = None;
+        // The updates the pass lost or dropped are counted when a step reads the gradient.
         let environment = if self.opt.env_fit.is_some() {
-            let (e, faults) = self.opt.read_environment_gradient()?;
-            self.opt.env_faults += faults;
-            Some(e)
+            Some(self.opt.read_environment_gradient()?.0)
         } else {
             None
         };

@@ -245,3 +245,16 @@ def test_the_environment_is_recovered_from_python(out_dir):
     assert loss(10_001) < 0.5 * start
     env = op.parameters()["environment"]
     assert np.ptp(env) > 0.05, "the environment did not move"
+
+
+def test_the_gradient_variance_where_the_estimator_tracks_one(out_dir):
+    base = psrestir.DiffRender(small_task(out_dir / "var_b", resolution=(4, 2)), method="baseline")
+    assert base.gradient_variance() is None
+    op = psrestir.DiffRender(small_task(out_dir / "var_r", resolution=(4, 2)), method="recursive")
+    target = op.targets()[0]
+    for it in range(3):
+        img = op.render(spp=2, seed=it)[0]
+        op.backward([(2.0 / img.size) * (img - target)])
+    v = op.gradient_variance()["sphere_base_color"]
+    assert v.shape == (2, 4, 3) and v.dtype == np.float32
+    assert np.isfinite(v).all() and (v >= 0).all() and v[op.observed(0)].max() > 0
