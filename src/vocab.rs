@@ -64,6 +64,11 @@ pub enum Loss {
     L2,
     /// Mean of (I - G)^2 / (G^2 + 0.01).
     Relmse,
+    /// Mean of (s(I) - s(G))^2 in the photo's space, s the sRGB curve (continued above 1);
+    /// a channel the photo clipped (G at 1) counts only where the render is below it.
+    Srgb,
+    /// Mean of (ln(1 + I) - ln(1 + G))^2.
+    Log,
 }
 
 /// Initial value: RGB for base color, one number for scalar textures.

@@ -799,3 +799,129 @@ fn filtered_variance_steps_equal_the_rust_reference() {
         [m, v] = opt.read_moments().unwrap();
     }
 }
+
+/// The loss pass equals its CPU twin for every loss, on images with clipped photo channels
+/// (the sRGB loss's case) and values in each curve's ranges; the adjoint at 1e-5 of its
+/// largest entry (float against double arithmetic), the loss at 1e-5 relative.
+#[test]
+fn the_loss_pass_equals_the_cpu_loss_for_every_loss() {
+    use psrestir::optim::loss;
+    let Some(gpu) = gpu() else { return };
+    let (scene, set, _) = partly_observed_plane();
+    let (w, h) = (48u32, 48u32);
+    let n = (w * h) as usize;
+    let px = |i: usize, c: usize, k: usize| ((i * (7 + 3 * c) + 11 * k) % 97) as f32 / 80.0;
+    // Renders in [0, 1.2]; targets in [0, 1.2] with every value above 1 clipped to 1, as a
+    // photo's 8-bit 255 decodes.
+    let image = Image {
+        width: w,
+        height: h,
+        rgb: (0..n)
+            .map(|i| std::array::from_fn(|c| px(i, c, 0)))
+            .collect(),
+    };
+    let target = Image {
+        width: w,
+        height: h,
+        rgb: (0..n)
+            .map(|i| std::array::from_fn(|c| px(i, c, 5).min(1.0)))
+            .collect(),
+    };
+    assert!(target.rgb.iter().flatten().any(|&v| v == 1.0));
+    for kind in [Loss::L2, Loss::Relmse, Loss::Srgb, Loss::Log] {
+        let mut settings = Settings::new(w, h, vec![0]);
+        settings.loss = kind;
+        let mut opt =
+            Optimizer::new(&gpu, &scene, set.clone(), settings, &[target.clone()]).unwrap();
+        let (l, a) = opt.apply_loss(&[image.clone()]).unwrap();
+        let want_l = loss::loss(kind, &image.rgb, &target.rgb);
+        let want_a = loss::adjoint(kind, &image.rgb, &target.rgb);
+        assert!(
+            (l - want_l).abs() <= 1e-5 * want_l,
+            "{kind:?}: loss {l} vs {want_l}"
+        );
+        let scale = want_a.iter().flatten().fold(0f32, |m, v| m.max(v.abs()));
+        assert!(scale > 0.0);
+        for (i, (g, c)) in a.iter().zip(&want_a).enumerate() {
+            for ch in 0..3 {
+                assert!(
+                    (g[ch] - c[ch]).abs() <= 1e-5 * scale,
+                    "{kind:?} pixel {i} channel {ch}: {} vs {}",
+                    g[ch],
+                    c[ch]
+                );
+            }
+        }
+    }
+}
+
+/// The uncertainty map ranks the texels the images hardly determine above the well-lit ones:
+/// a 64² view of a plane lit by a point light just above one edge (the far texels get about
+/// 1/200 of the near ones' irradiance, at grazing angles), after a short optimization; the
+/// texels no camera sees are marked.
+#[test]
+fn the_uncertainty_map_ranks_dim_texels_above_well_lit_ones() {
+    use psrestir::optim::uncertainty::UNOBSERVED;
+    let Some(gpu) = gpu() else { return };
+    let mut scene = plane();
+    scene.env = None;
+    scene.lights[0].position = Vec3::new(-1.2, 0.3, 0.0);
+    // The camera sees x in about [-1.17, 0.87]: the last texel column is unobserved.
+    scene.cameras[0] = look_at(
+        Vec3::new(-0.15, 2.6, 0.01),
+        Vec3::new(-0.15, 0.0, 0.0),
+        Vec3::NEG_Z,
+        0.75,
+    );
+    let mut truth = scene.clone();
+    truth.materials[0].base_color = glam::Vec4::new(0.7, 0.4, 0.3, 1.0);
+    let spec = TextureSpec {
+        material: "plane".into(),
+        slot: Slot::BaseColor,
+        resolution: [16, 16],
+        init: Init::Scalar(0.5),
+        learning_rate: Some(0.02),
+    };
+    let mut p = psrestir::Problem::new(scene, vec![0], &[spec], Filter::Nearest).unwrap();
+    p.render_targets(&gpu, truth, 64, 64, 64, 3).unwrap();
+    let settings = Settings {
+        primal_spp: 2,
+        gradient_spp: 2,
+        ..Settings::new(64, 64, vec![0])
+    };
+    let mut opt = Optimizer::for_problem(&gpu, &p, settings).unwrap();
+    let mut loss = 0.0;
+    for _ in 0..60 {
+        loss = opt.step().unwrap().loss;
+    }
+    let sigma = opt.uncertainty(loss).unwrap();
+    let observed = opt.observed_texels().unwrap().to_vec();
+    // Texel (row, column) at u = column: x = -1 + 2 u, the light at x = -1.2.
+    let column_mean = |cols: std::ops::Range<usize>| {
+        let mut v = Vec::new();
+        for r in 0..16 {
+            for c in cols.clone() {
+                let t = r * 16 + c;
+                if observed[t] {
+                    v.extend((0..3).map(|ch| sigma[3 * t + ch] as f64));
+                }
+            }
+        }
+        assert!(!v.is_empty() && v.iter().all(|x| x.is_finite() && *x > 0.0));
+        v.iter().sum::<f64>() / v.len() as f64
+    };
+    let (near, far) = (column_mean(0..4), column_mean(10..14));
+    eprintln!("uncertainty: far texels {far:.3e}, near ones {near:.3e}");
+    assert!(
+        far > 4.0 * near,
+        "far texels {far:.3e}, near ones {near:.3e}"
+    );
+    let unseen: Vec<usize> = (0..256).filter(|&t| !observed[t]).collect();
+    assert!(
+        !unseen.is_empty(),
+        "every texel observed: the test sees no marking"
+    );
+    for t in unseen {
+        assert_eq!(sigma[3 * t], UNOBSERVED);
+    }
+}

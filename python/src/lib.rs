@@ -330,6 +330,19 @@ fn optimize<'py>(
             .transpose()?,
     )?;
     d.set_item("relit", relit_list(py, &summary.relit)?)?;
+    let uncertainty = match &summary.uncertainty {
+        Some(sigma) => {
+            let u = PyDict::new(py);
+            for t in &summary.set.textures {
+                let v = sigma[t.offset as usize..t.offset as usize + t.len()].to_vec();
+                let shape = [t.height as usize, t.width as usize, t.channels() as usize];
+                u.set_item(t.name(), to_array(py, v, &shape)?)?;
+            }
+            Some(u)
+        }
+        None => None,
+    };
+    d.set_item("uncertainty", uncertainty)?;
     d.set_item(
         "exposure",
         summary.gains.iter().map(|g| g.0).collect::<Vec<_>>(),

@@ -54,6 +54,52 @@ pub fn save_textures(dir: &Path, set: &ParamSet, values: &[f32]) -> Result<()> {
     Ok(())
 }
 
+/// `uncertainty_<texture>.exr` and `.png`: each texel's standard deviation from
+/// [`Optimizer::uncertainty`] (laid out like the values), -1 where no camera observes it. The
+/// PNG is a gray scale up to the observed texels' 99th percentile (white: at or above it, or
+/// never given a gradient), magenta where nothing is observed.
+pub fn save_uncertainty(dir: &Path, set: &ParamSet, sigma: &[f32]) -> Result<()> {
+    use crate::optim::uncertainty::UNOBSERVED;
+    for i in 0..set.textures.len() {
+        let t = &set.textures[i];
+        let img = texture_image(set, sigma, i);
+        img.save(&dir.join(format!("uncertainty_{}.exr", t.name())))?;
+        let per_texel: Vec<Option<f32>> = img
+            .rgb
+            .iter()
+            .map(|p| (p[0] != UNOBSERVED).then(|| (p[0] + p[1] + p[2]) / 3.0))
+            .collect();
+        let mut finite: Vec<f32> = per_texel
+            .iter()
+            .flatten()
+            .copied()
+            .filter(|v| v.is_finite())
+            .collect();
+        finite.sort_by(f32::total_cmp);
+        let top = finite
+            .get((finite.len() as f64 * 0.99) as usize)
+            .or(finite.last())
+            .copied()
+            .filter(|v| *v > 0.0)
+            .unwrap_or(1.0);
+        let bytes: Vec<u8> = per_texel
+            .iter()
+            .flat_map(|v| match v {
+                None => [255, 0, 255],
+                Some(v) => [((v / top).min(1.0) * 255.0 + 0.5) as u8; 3],
+            })
+            .collect();
+        let png = image::RgbImage::from_raw(img.width, img.height, bytes)
+            .ok_or_else(|| Error::Invalid("texture size mismatch".into()))?;
+        let path = dir.join(format!("uncertainty_{}.png", t.name()));
+        image_io::write_atomic_with(&path, |tmp| {
+            png.save_with_format(tmp, image::ImageFormat::Png)
+                .map_err(std::io::Error::other)
+        })?;
+    }
+    Ok(())
+}
+
 pub(super) fn write_outputs(
     out: &Path,
     task: &Task,

@@ -108,6 +108,9 @@ pub struct RunSummary {
     pub environment: Option<crate::scene::EnvMap>,
     /// Each camera's final exposure and white balance.
     pub gains: Vec<(f32, [f32; 3])>,
+    /// Each texel's standard deviation, laid out like `set.values`
+    /// ([`crate::optim::Optimizer::uncertainty`]; -1: unobserved), as `uncertainty_*.exr`.
+    pub uncertainty: Option<Vec<f32>>,
 }
 
 /// Log the configuration a run takes, then each choice `auto` made with its reason.
@@ -217,6 +220,14 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         write_texture_errors(&out.join("texture_errors.csv"), &per_texture)?;
     }
     write_outputs(&out, task, &prep, &opt, &values, &session.rows)?;
+    // What the images could not tell, from the last loss (none before any iteration).
+    let uncertainty = if session.last_loss.is_finite() && session.last_loss > 0.0 {
+        let sigma = opt.uncertainty(session.last_loss)?;
+        super::outputs::save_uncertainty(&out, &prep.set, &sigma)?;
+        Some(sigma)
+    } else {
+        None
+    };
     let mut light_direction_error_deg = None;
     let environment = opt.environment();
     if let Some(env) = &environment {
@@ -275,6 +286,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         relit,
         light_direction_error_deg,
         environment,
+        uncertainty,
         gains: opt
             .exposure()
             .iter()

@@ -5,6 +5,41 @@ use super::Optimizer;
 use crate::{Error, Result};
 
 impl Optimizer {
+    /// The loss pass on the GPU applied to `images` (one per camera, as renders before the
+    /// gains): each written where the primal render leaves its image, the pass run for
+    /// iteration 0, and the loss and the adjoint images read back (RGB per pixel, the cameras
+    /// one after another). For tests against [`super::loss::loss`] and
+    /// [`super::loss::adjoint`].
+    pub fn apply_loss(
+        &mut self,
+        images: &[crate::image_io::Image],
+    ) -> Result<(f64, Vec<[f32; 3]>)> {
+        if images.len() != self.cams.len() {
+            return Err(Error::Invalid(format!(
+                "apply_loss: {} images for {} cameras",
+                images.len(),
+                self.cams.len()
+            )));
+        }
+        for (k, img) in images.iter().enumerate() {
+            let rgba: Vec<[f32; 4]> = img.rgb.iter().map(|p| [p[0], p[1], p[2], 1.0]).collect();
+            self.gpu
+                .queue
+                .write_buffer(&self.accum, 0, bytemuck::cast_slice(&rgba));
+            let mut enc = self
+                .gpu
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("apply_loss"),
+                });
+            self.loss.encode(&mut enc, k, 0, None);
+            self.gpu.queue.submit([enc.finish()]);
+        }
+        let loss = self.read_loss()?;
+        let a = self.read_adjoint(0)?;
+        Ok((loss, a.chunks(4).map(|c| [c[0], c[1], c[2]]).collect()))
+    }
+
     /// `grad` (laid out like the parameters) written to the gradient buffer, transformed on
     /// the GPU by the passes `encode` records, and read back: how the tests check a pass that
     /// acts on the gradient before Adam against its CPU twin. `what` names the caller in

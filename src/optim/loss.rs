@@ -9,6 +9,46 @@ use crate::Result;
 /// Epsilon of relMSE: (I - G)^2 / (G^2 + REL_EPS).
 pub const REL_EPS: f32 = 0.01;
 
+/// A photo's channel at or above this linear value was clipped (`CLIPPED` in loss.wgsl).
+pub const CLIPPED: f32 = 0.999;
+
+/// The sRGB transfer curve of a linear value, continued above 1.
+pub fn srgb_encode(x: f64) -> f64 {
+    let v = x.max(0.0);
+    if v <= 0.0031308 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// One channel's term of `kind` before the mean: (weight, f(i) - f(g), f'(i)), the loss
+/// being weight x (f(i) - f(g))^2.
+fn channel(kind: Loss, i: f64, g: f64) -> (f64, f64, f64) {
+    match kind {
+        Loss::L2 => (1.0, i - g, 1.0),
+        Loss::Relmse => (1.0 / (g * g + REL_EPS as f64), i - g, 1.0),
+        Loss::Srgb => {
+            let clipped = g >= CLIPPED as f64 && i >= g;
+            let slope = if i <= 0.0031308 {
+                12.92
+            } else {
+                1.055 / 2.4 * i.powf(1.0 / 2.4 - 1.0)
+            };
+            let w = if clipped { 0.0 } else { 1.0 };
+            (w, srgb_encode(i) - srgb_encode(g), slope)
+        }
+        Loss::Log => {
+            let r = i.max(0.0);
+            (
+                1.0,
+                (1.0 + r).ln() - (1.0 + g.max(0.0)).ln(),
+                1.0 / (1.0 + r),
+            )
+        }
+    }
+}
+
 /// Loss of one image against its target: the mean over pixels and channels.
 pub fn loss(kind: Loss, image: &[[f32; 3]], target: &[[f32; 3]]) -> f64 {
     let n = (image.len() * 3) as f64;
@@ -17,11 +57,8 @@ pub fn loss(kind: Loss, image: &[[f32; 3]], target: &[[f32; 3]]) -> f64 {
         .zip(target)
         .flat_map(|(i, g)| (0..3).map(move |c| (i[c] as f64, g[c] as f64)))
         .map(|(i, g)| {
-            let d = i - g;
-            match kind {
-                Loss::L2 => d * d,
-                Loss::Relmse => d * d / (g * g + REL_EPS as f64),
-            }
+            let (w, d, _) = channel(kind, i, g);
+            w * d * d
         })
         .sum::<f64>()
         / n
@@ -29,20 +66,15 @@ pub fn loss(kind: Loss, image: &[[f32; 3]], target: &[[f32; 3]]) -> f64 {
 
 /// dL/dI per pixel and channel, for [`loss`].
 pub fn adjoint(kind: Loss, image: &[[f32; 3]], target: &[[f32; 3]]) -> Vec<[f32; 3]> {
-    let n = (image.len() * 3) as f32;
+    let n = (image.len() * 3) as f64;
     image
         .iter()
         .zip(target)
         .map(|(i, g)| {
-            let mut a = [0.0; 3];
-            for c in 0..3 {
-                let w = match kind {
-                    Loss::L2 => 1.0,
-                    Loss::Relmse => 1.0 / (g[c] * g[c] + REL_EPS),
-                };
-                a[c] = 2.0 * (i[c] - g[c]) * w / n;
-            }
-            a
+            std::array::from_fn(|c| {
+                let (w, d, slope) = channel(kind, i[c] as f64, g[c] as f64);
+                (2.0 * w * d * slope / n) as f32
+            })
         })
         .collect()
 }
@@ -53,11 +85,15 @@ mod tests {
 
     #[test]
     fn adjoints_equal_central_finite_differences() {
-        let image: Vec<[f32; 3]> = (0..7)
-            .map(|k| [0.1 * k as f32, 0.5, 1.0 - 0.1 * k as f32])
+        let mut image: Vec<[f32; 3]> = (0..7)
+            .map(|k| [0.05 + 0.1 * k as f32, 0.5, 1.0 - 0.1 * k as f32])
             .collect();
-        let target: Vec<[f32; 3]> = (0..7).map(|k| [0.3, 0.05 * k as f32, 0.2]).collect();
-        for kind in [Loss::L2, Loss::Relmse] {
+        // Above a clipped target (no term), and below it (a term).
+        image[0][2] = 1.2;
+        let target: Vec<[f32; 3]> = (0..7)
+            .map(|k| [0.3, 0.05 * k as f32, if k < 3 { 1.0 } else { 0.2 }])
+            .collect();
+        for kind in [Loss::L2, Loss::Relmse, Loss::Srgb, Loss::Log] {
             let a = adjoint(kind, &image, &target);
             for p in 0..image.len() {
                 for c in 0..3 {
@@ -68,14 +104,24 @@ mod tests {
                     minus[p][c] -= h;
                     let fd = (loss(kind, &plus, &target) - loss(kind, &minus, &target))
                         / (2.0 * h as f64);
-                    // Both losses are quadratic in I, so the central difference is exact up to
-                    // rounding: 1e-4 relative is float noise.
+                    // L2 and relMSE are quadratic in I, so the central difference is exact up
+                    // to rounding (1e-4 relative is float noise); the sRGB and log curves
+                    // leave an O(h^2) truncation, under 1e-3 relative at h = 1e-3 away from
+                    // the curves' kinks, which the values avoid.
+                    let tol = match kind {
+                        Loss::L2 | Loss::Relmse => 1e-4,
+                        Loss::Srgb | Loss::Log => 1e-3,
+                    };
                     assert!(
-                        (fd - a[p][c] as f64).abs() <= 1e-4 * fd.abs().max(1e-3),
+                        (fd - a[p][c] as f64).abs() <= tol * fd.abs().max(1e-3),
                         "{kind:?} pixel {p} channel {c}: {fd} vs {}",
                         a[p][c]
                     );
                 }
+            }
+            if kind == Loss::Srgb {
+                assert_eq!(a[0][2], 0.0, "a render above a clipped photo has no term");
+                assert!(a[1][2] < 0.0, "a render below a clipped photo is pulled up");
             }
         }
     }
@@ -174,6 +220,8 @@ impl LossPass {
                     kind: match kind {
                         Loss::L2 => 0,
                         Loss::Relmse => 1,
+                        Loss::Srgb => 2,
+                        Loss::Log => 3,
                     },
                     norm,
                     partial_offset: k as u32 * n_groups,
@@ -267,6 +315,11 @@ impl LossPass {
         let target = &self.cams[k].target;
         gpu.queue
             .write_buffer(target, 0, bytemuck::cast_slice(data));
+    }
+
+    /// The normalization: 1 / the sum of the weights of all cameras' channels.
+    pub(crate) fn norm(&self) -> f32 {
+        self.cams[0].params.norm
     }
 
     /// Set every camera's normalization (1 / the sum of the weights of all channels).

@@ -17,7 +17,7 @@
 // Mirrored by LossParams in src/optim/loss.rs.
 struct LossParams {
     n_pixels: u32,
-    // 0: L2, 1: relMSE.
+    // 0: L2, 1: relMSE, 2: sRGB, 3: log.
     kind: u32,
     // 1 / (3 x the mask's sum over all cameras' pixels).
     norm: f32,
@@ -34,6 +34,20 @@ struct LossParams {
 }
 
 const REL_EPS: f32 = 0.01;
+// A photo's channel at or above this linear value was clipped (8-bit 255 decodes to 1).
+const CLIPPED: f32 = 0.999;
+
+// The sRGB transfer curve of a linear value, continued above 1 (1.055 x^(1/2.4) - 0.055),
+// and its slope.
+fn srgb_encode(x: vec3f) -> vec3f {
+    let v = max(x, vec3f(0.0));
+    return select(1.055 * pow(v, vec3f(1.0 / 2.4)) - 0.055, 12.92 * v, v <= vec3f(0.0031308));
+}
+
+fn srgb_slope(x: vec3f) -> vec3f {
+    let v = max(x, vec3f(0.0031308));
+    return select(1.055 / 2.4 * pow(v, vec3f(1.0 / 2.4 - 1.0)), vec3f(12.92), x <= vec3f(0.0031308));
+}
 
 @group(0) @binding(0) var<uniform> lp: LossParams;
 @group(0) @binding(1) var<storage, read> accum: array<vec4f>;
@@ -63,14 +77,26 @@ fn main(@builtin(local_invocation_index) li: u32, @builtin(workgroup_id) wg: vec
         let t = target_image[i];
         let g = t.xyz;
         let mask = t.w;
-        let diff = img - g;
+        // Each loss is a weighted square of diff = f(img) - f(g), f the space it compares
+        // in; d_f = f'(img) (src/optim/loss.rs holds the CPU twin).
+        var diff = img - g;
         var w = vec3f(1.0);
+        var d_f = vec3f(1.0);
         if lp.kind == 1u {
             w = 1.0 / (g * g + vec3f(REL_EPS));
+        } else if lp.kind == 2u {
+            diff = srgb_encode(img) - srgb_encode(g);
+            d_f = srgb_slope(img);
+            // A channel the photo clipped counts only where the render is below it.
+            w = select(vec3f(1.0), vec3f(0.0), g >= vec3f(CLIPPED) & img >= g);
+        } else if lp.kind == 3u {
+            let r = max(img, vec3f(0.0));
+            diff = log(vec3f(1.0) + r) - log(vec3f(1.0) + max(g, vec3f(0.0)));
+            d_f = 1.0 / (vec3f(1.0) + r);
         }
         // dL / d(gain x render), then by the chain rule the adjoint of the render and the
         // derivative with respect to the gain.
-        let d_img = 2.0 * diff * w * lp.norm * mask;
+        let d_img = 2.0 * diff * w * d_f * lp.norm * mask;
         var adj = d_img * lp.gain;
         var term = dot(diff * diff, w) * lp.norm * mask;
         let prev = adjoint_prev[lp.adjoint_offset + i];

@@ -17,6 +17,7 @@ mod problem;
 pub mod schedule;
 pub mod step;
 pub mod texture_export;
+pub mod uncertainty;
 
 mod measure;
 mod memory;

@@ -29,8 +29,17 @@ def test_optimize_a_dict_task_returns_errors_textures_and_outputs(tmp_path):
     tex = r.textures["sphere_base_color"]
     assert tex.dtype == np.float32 and tex.shape == (8, 16, 3)
     assert os.path.samefile(r.out, tmp_path / "run")
-    for f in ["metrics.csv", "checkpoint.bin", "sphere_base_color.exr", "optimized.glb"]:
+    for f in ["metrics.csv", "checkpoint.bin", "sphere_base_color.exr", "optimized.glb",
+              "uncertainty_sphere_base_color.exr", "uncertainty_sphere_base_color.png"]:
         assert (tmp_path / "run" / f).exists(), f
+    # What the images could not tell: a standard deviation per observed texel, -1 elsewhere.
+    u = r.uncertainty["sphere_base_color"]
+    assert u.shape == (8, 16, 3) and u.dtype == np.float32
+    seen = psrestir.DiffRender(task, method="baseline").observed(0)
+    assert (u[~seen] == -1).all() and (u[seen] > 0).all()
+    # No environment is recovered and no relighting asked for; the gains stay at 1.
+    assert r.environment is None and r.relit == []
+    assert r.exposure == [1.0] and r.white_balance == [[1.0, 1.0, 1.0]]
     # Resuming continues from the checkpoint: two more iterations, not eight; with the
     # default progress display (the task's own budget, then an iteration count).
     r2 = psrestir.optimize(task, resume=True)

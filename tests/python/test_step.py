@@ -258,3 +258,13 @@ def test_the_gradient_variance_where_the_estimator_tracks_one(out_dir):
     v = op.gradient_variance()["sphere_base_color"]
     assert v.shape == (2, 4, 3) and v.dtype == np.float32
     assert np.isfinite(v).all() and (v >= 0).all() and v[op.observed(0)].max() > 0
+
+
+def test_optimize_returns_the_recovered_environment(out_dir):
+    r = psrestir.optimize(env_task(out_dir / "env_opt", iterations=3), method="baseline",
+                          progress=False)
+    assert r.environment.shape == (2, 4, 3) and r.environment.dtype == np.float32
+    assert np.isfinite(r.environment).all() and (r.environment > 0).all()
+    # It moved from its gray start, and is the one written to environment.exr.
+    assert np.abs(r.environment - 0.5).max() > 1e-4
+    assert (out_dir / "env_opt" / "environment.exr").exists()
