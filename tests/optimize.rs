@@ -831,9 +831,15 @@ fn the_loss_pass_equals_the_cpu_loss_for_every_loss() {
     for kind in [Loss::L2, Loss::Relmse, Loss::Srgb, Loss::Log] {
         let mut settings = Settings::new(w, h, vec![0]);
         settings.loss = kind;
-        let mut opt =
-            Optimizer::new(&gpu, &scene, set.clone(), settings, &[target.clone()]).unwrap();
-        let (l, a) = opt.apply_loss(&[image.clone()]).unwrap();
+        let mut opt = Optimizer::new(
+            &gpu,
+            &scene,
+            set.clone(),
+            settings,
+            std::slice::from_ref(&target),
+        )
+        .unwrap();
+        let (l, a) = opt.apply_loss(std::slice::from_ref(&image)).unwrap();
         let want_l = loss::loss(kind, &image.rgb, &target.rgb);
         let want_a = loss::adjoint(kind, &image.rgb, &target.rgb);
         assert!(
