@@ -329,6 +329,10 @@ pub(crate) struct BenchArgs {
     /// and the headline table in README.md (between its `bench:headline` markers).
     #[arg(long)]
     pub(crate) report: bool,
+    /// Measure nothing: write docs/results.md and README.md's headline (as --report does)
+    /// from the bench.json of an earlier run.
+    #[arg(long, value_name = "BENCH_JSON")]
+    pub(crate) report_from: Option<std::path::PathBuf>,
     /// An estimator's option for every run of that estimator, as METHOD.KEY=VALUE
     /// (`restir.m_cap=16`); repeat for more.
     #[arg(long = "estimator-option", value_name = "METHOD.KEY=VALUE")]

@@ -565,6 +565,7 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         primal,
         eval_spp,
         report: to_docs,
+        report_from,
         options,
         gradient_method,
     } = args;
@@ -582,6 +583,21 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         if !(b.is_finite() && b > 0.0) {
             bail!("--tune-budget must be a positive number of seconds");
         }
+    }
+    if let Some(path) = report_from {
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("--report-from: reading {}", path.display()))?;
+        let report: psrestir::bench::BenchReport = serde_json::from_str(&text)
+            .with_context(|| format!("--report-from: {} is not a bench.json", path.display()))?;
+        let command = report.command.clone().unwrap_or_else(|| {
+            "psrestir bench (an older bench.json: its command is not recorded)".into()
+        });
+        psrestir::bench::report::write_docs(std::path::Path::new("."), &report, &command)?;
+        println!(
+            "wrote docs/results.md and the headline table in README.md from {}",
+            path.display()
+        );
+        return Ok(());
     }
     if throughput {
         let name = scenes.first().map_or(DEFAULT_TASK, |s| s.as_str());
@@ -643,6 +659,10 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         estimator_options,
         gradient_method,
         out: out.clone(),
+        command: Some(format!(
+            "psrestir {}",
+            std::env::args().skip(1).collect::<Vec<_>>().join(" ")
+        )),
         progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
         ..Default::default()
     };

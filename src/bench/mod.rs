@@ -50,7 +50,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Which sampling settings the benchmark runs the scenes with.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Protocol {
     /// Each task's own settings (primal and gradient spp, texture filter).
@@ -115,6 +115,8 @@ pub struct BenchOptions {
     pub curve_points: u32,
     /// The estimators' options over the tasks' (`--estimator-option`).
     pub estimator_options: EstimatorOptions,
+    /// The command line that runs it, recorded in `bench.json`.
+    pub command: Option<String>,
     /// Output folder.
     pub out: PathBuf,
     /// Show a progress bar.
@@ -151,6 +153,7 @@ impl Default for BenchOptions {
             eval_spp: 64,
             curve_points: 11,
             estimator_options: EstimatorOptions::default(),
+            command: None,
             out: PathBuf::from("out/bench"),
             progress: true,
             no_priors: false,
@@ -302,6 +305,8 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         tuned: o.tune,
         scenes: Vec::new(),
         pipelines: Vec::new(),
+        command: o.command.clone(),
+        source: Some(report::source_state(std::path::Path::new("."))),
     };
     let pipelines_before = gpu.pipeline_times().len();
     // Every optimizer pass the bench may create compiles on a second device while the first

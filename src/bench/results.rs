@@ -2,16 +2,22 @@
 use super::Protocol;
 use crate::image_io::Image;
 use crate::optim::PassTimes;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
+
+/// A number that `bench.json` may hold as null (serde_json writes NaN so): NaN.
+fn f64_or_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
 
 /// One point of an optimization curve.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct CurvePoint {
     /// Iterations done.
     pub iteration: u32,
     /// Seconds of optimization (step time).
     pub seconds: f64,
-    /// Loss of the iteration's primal render.
+    /// Loss of the iteration's primal render (NaN at the start, written as null).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub loss: f64,
     /// Texture RMSE against the ground truth.
     pub texture_rmse: f64,
@@ -24,7 +30,7 @@ pub struct CurvePoint {
 }
 
 /// The measurements of one scene.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct SceneResult {
     /// Scene name.
     pub name: String,
@@ -110,7 +116,7 @@ pub struct SceneResult {
 
 /// One optimized texture's parts of a scene's gradient errors at equal iterations (mean over
 /// seeds).
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct TextureGradientErrors {
     /// `material_slot`.
     pub texture: String,
@@ -129,7 +135,7 @@ pub struct TextureGradientErrors {
 }
 
 /// The equal-time optimization of one scene.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct OptimizationResult {
     /// Image relMSE at the initial textures.
     pub image_relmse_initial: f64,
@@ -159,7 +165,7 @@ pub struct OptimizationResult {
 /// `method = "auto"` on one scene: its pick among the baseline and ReSTIR (both with Adam,
 /// unfiltered), and its run's errors over the lower of the two runs' (1: it picked the
 /// better one; 1.05: it ends 5% above it). The ratios are absent unless both ran.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct AutoResult {
     /// The estimator it picks.
     pub method: String,
@@ -179,7 +185,7 @@ pub struct AutoResult {
 
 /// The default configuration (the contender `default`: every choice `auto`'s) on one scene,
 /// against its start and, in each error, the run of the others that ended lowest in it.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct DefaultResult {
     /// Its run's name (what `auto` chose).
     pub name: String,
@@ -205,7 +211,7 @@ impl OptimizationResult {
 }
 
 /// The equal-time optimization of one estimator with its step.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct RunResult {
     /// The estimator and step, e.g. `recursive, variance-scaled step`.
     pub name: String,
@@ -261,7 +267,7 @@ pub struct RunResult {
 }
 
 /// The whole benchmark (`bench.json`).
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct BenchReport {
     /// psrestir version.
     pub version: String,
@@ -298,6 +304,14 @@ pub struct BenchReport {
     /// Each pass's pipeline the first time this run created it: seconds of creation and
     /// compilation (or a load from the driver's shader cache), outside every clock.
     pub pipelines: Vec<crate::gpu::PipelineTime>,
+    /// The command that ran it (`psrestir bench ...`), and the checkout's state it measured
+    /// (`commit <hash>`, with whether `src/` or `shaders/` differed): what the docs written
+    /// from it name (absent in a `bench.json` of an older psrestir).
+    #[serde(default)]
+    pub command: Option<String>,
+    /// See `command`.
+    #[serde(default)]
+    pub source: Option<String>,
 }
 
 impl BenchReport {
@@ -322,6 +336,8 @@ impl BenchReport {
             tuned: false,
             scenes: Vec::new(),
             pipelines: Vec::new(),
+            command: None,
+            source: None,
         }
     }
 }

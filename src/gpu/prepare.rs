@@ -28,7 +28,7 @@ pub(super) struct Made {
 }
 
 /// Seconds spent creating (and compiling) one pass's pipeline.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PipelineTime {
     /// The pass (its WGSL file).
     pub pass: String,

@@ -16,7 +16,7 @@ pub(crate) enum PassKind {
 }
 
 /// GPU milliseconds of each kind of pass in the last iteration (from timestamp queries).
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PassTimes {
     /// Primal renders of all cameras.
     pub primal_ms: f64,

@@ -72,7 +72,7 @@ impl OptionsKind {
 /// METHOD.KEY=VALUE` on top. The optimizer, the job and the bench only pass the tables on;
 /// each estimator reads its own ([`Options`]) and [`EstimatorOptions::check`] asks each to
 /// check its table.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(transparent)]
 pub struct EstimatorOptions {
     pub(super) tables: std::collections::BTreeMap<String, toml::Table>,
