@@ -323,6 +323,24 @@ fn bench_json_has_every_field_finite_and_in_range() {
         );
     }
     assert!(md.contains("### Per texture"), "{md}");
+    // bench.json holds everything the report is written from (`--report-from`): read back,
+    // it writes the same report, and the headline has one row for the scene.
+    let back: psrestir::bench::BenchReport =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("bench.json")).unwrap())
+            .unwrap();
+    assert_eq!(psrestir::bench::report::report_markdown(&back), md);
+    let headline = psrestir::bench::report::headline_table(&back);
+    assert_eq!(
+        headline
+            .lines()
+            .filter(|l| l.starts_with("| sphere |"))
+            .count(),
+        1
+    );
+    assert!(
+        back.source.is_some(),
+        "bench.json names the commit it measured"
+    );
     // Every run has its rows.
     for r in runs {
         assert!(md.contains(&format!("| sphere | {} |", r["name"].as_str().unwrap())));
