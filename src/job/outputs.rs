@@ -29,6 +29,16 @@ pub fn texture_image(set: &ParamSet, values: &[f32], i: usize) -> Image {
     }
 }
 
+/// `bytes` (RGB8, `img`'s size) as a PNG at `path`, atomically.
+fn save_png(path: &Path, img: &Image, bytes: Vec<u8>) -> Result<()> {
+    let png = image::RgbImage::from_raw(img.width, img.height, bytes)
+        .ok_or_else(|| Error::Invalid("texture size mismatch".into()))?;
+    image_io::write_atomic_with(path, |tmp| {
+        png.save_with_format(tmp, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })
+}
+
 /// Save each texture as EXR (linear) and PNG (sRGB for base color, linear gray for scalars).
 pub fn save_textures(dir: &Path, set: &ParamSet, values: &[f32]) -> Result<()> {
     for i in 0..set.textures.len() {
@@ -43,13 +53,7 @@ pub fn save_textures(dir: &Path, set: &ParamSet, values: &[f32]) -> Result<()> {
                 .flat_map(|p| p.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8))
                 .collect(),
         };
-        let png = image::RgbImage::from_raw(img.width, img.height, bytes)
-            .ok_or_else(|| Error::Invalid("texture size mismatch".into()))?;
-        let path = dir.join(format!("{}.png", t.name()));
-        image_io::write_atomic_with(&path, |tmp| {
-            png.save_with_format(tmp, image::ImageFormat::Png)
-                .map_err(std::io::Error::other)
-        })?;
+        save_png(&dir.join(format!("{}.png", t.name())), &img, bytes)?;
     }
     Ok(())
 }
@@ -89,13 +93,11 @@ pub fn save_uncertainty(dir: &Path, set: &ParamSet, sigma: &[f32]) -> Result<()>
                 Some(v) => [((v / top).min(1.0) * 255.0 + 0.5) as u8; 3],
             })
             .collect();
-        let png = image::RgbImage::from_raw(img.width, img.height, bytes)
-            .ok_or_else(|| Error::Invalid("texture size mismatch".into()))?;
-        let path = dir.join(format!("uncertainty_{}.png", t.name()));
-        image_io::write_atomic_with(&path, |tmp| {
-            png.save_with_format(tmp, image::ImageFormat::Png)
-                .map_err(std::io::Error::other)
-        })?;
+        save_png(
+            &dir.join(format!("uncertainty_{}.png", t.name())),
+            &img,
+            bytes,
+        )?;
     }
     Ok(())
 }

@@ -336,18 +336,8 @@ impl crate::optim::DiffRender {
         let settings = crate::task::task_settings(task, &problem.cameras, choice.method, extra);
         let mut op =
             crate::optim::DiffRender::new(gpu, &problem.scene, problem.set.clone(), settings)?;
-        // What `Optimizer::for_problem` sets besides the targets and their masks, which
-        // belong to the caller's loss.
-        let opt = op.optimizer_mut();
-        if problem.exposure.iter().any(|&e| e != 1.0) {
-            opt.set_exposure(&problem.exposure)?;
-        }
-        if let Some(e) = &problem.environment {
-            opt.optimize_environment(&e.start, e.options.clone())?;
-        }
-        if let Some(lr) = problem.white_balance_learning_rate {
-            opt.optimize_white_balance(lr)?;
-        }
+        // The targets and their masks belong to the caller's loss.
+        problem.set_camera_and_light(op.optimizer_mut())?;
         Ok((op, problem))
     }
 }

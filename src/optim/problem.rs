@@ -214,15 +214,25 @@ impl Optimizer {
         if problem.masks.iter().any(Option::is_some) {
             opt.set_masks(&problem.masks)?;
         }
-        if problem.exposure.iter().any(|&e| e != 1.0) {
-            opt.set_exposure(&problem.exposure)?;
+        problem.set_camera_and_light(&mut opt)?;
+        Ok(opt)
+    }
+}
+
+impl Problem {
+    /// Give `opt` the problem's cameras' exposures, the environment's fit and the white
+    /// balances' rate: what an optimizer (or a differentiable render, whose loss is the
+    /// caller's) takes from the problem besides its targets and masks.
+    pub fn set_camera_and_light(&self, opt: &mut Optimizer) -> Result<()> {
+        if self.exposure.iter().any(|&e| e != 1.0) {
+            opt.set_exposure(&self.exposure)?;
         }
-        if let Some(e) = &problem.environment {
+        if let Some(e) = &self.environment {
             opt.optimize_environment(&e.start, e.options.clone())?;
         }
-        if let Some(lr) = problem.white_balance_learning_rate {
+        if let Some(lr) = self.white_balance_learning_rate {
             opt.optimize_white_balance(lr)?;
         }
-        Ok(opt)
+        Ok(())
     }
 }
