@@ -103,9 +103,10 @@ class Result:
     #: The relit errors under the task's ``relight`` environments (relight.csv): a list of
     #: dicts with ``environment``, ``relmse``, ``psnr`` and ``scale``; empty without them.
     relit: list = _field(default_factory=list)
-    #: Each texel's standard deviation by texture name, float32 like the texture, -1 where no
-    #: camera observes it (``uncertainty_*.exr``; docs/guide.md, "What the photos could not
-    #: tell"); None when no iteration ran.
+    #: Each texel's standard deviation by texture name, float32 like the texture, -1 where the
+    #: images tell nothing of it (unobserved, or never given a gradient); the
+    #: ``uncertainty_*.exr`` outputs (docs/guide.md, the outputs of ``optimize``). None when no
+    #: iteration ran.
     uncertainty: dict | None = None
     #: Each camera's final exposure, and white balance (three factors).
     exposure: list = _field(default_factory=list)

@@ -59,9 +59,9 @@ pub fn save_textures(dir: &Path, set: &ParamSet, values: &[f32]) -> Result<()> {
 }
 
 /// `uncertainty_<texture>.exr` and `.png`: each texel's standard deviation from
-/// [`Optimizer::uncertainty`] (laid out like the values), -1 where no camera observes it. The
-/// PNG is a gray scale up to the observed texels' 99th percentile (white: at or above it, or
-/// never given a gradient), magenta where nothing is observed.
+/// [`Optimizer::uncertainty`] (laid out like the values), -1 where the images tell nothing (no
+/// camera observes the texel, or it never received a gradient). The PNG is a gray scale up to
+/// the other texels' 99th percentile (white: at or above it), magenta where it is -1.
 pub fn save_uncertainty(dir: &Path, set: &ParamSet, sigma: &[f32]) -> Result<()> {
     use crate::optim::uncertainty::UNOBSERVED;
     for i in 0..set.textures.len() {

@@ -109,7 +109,8 @@ pub struct RunSummary {
     /// Each camera's final exposure and white balance.
     pub gains: Vec<(f32, [f32; 3])>,
     /// Each texel's standard deviation, laid out like `set.values`
-    /// ([`crate::optim::Optimizer::uncertainty`]; -1: unobserved), as `uncertainty_*.exr`.
+    /// ([`crate::optim::Optimizer::uncertainty`]; -1: the images tell nothing), as
+    /// `uncertainty_*.exr`.
     pub uncertainty: Option<Vec<f32>>,
 }
 

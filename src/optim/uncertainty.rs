@@ -19,14 +19,15 @@
 use super::{Optimizer, StepKind};
 use crate::Result;
 
-/// The value [`Optimizer::uncertainty`] gives a texel no camera observes.
+/// The value [`Optimizer::uncertainty`] gives a texel the images tell nothing of: one no
+/// camera observes, or one that never received a gradient.
 pub const UNOBSERVED: f32 = -1.0;
 
 impl Optimizer {
     /// Each parameter scalar's standard deviation (laid out like the values) under the
     /// Laplace approximation above, for a run whose last loss was `loss`:
-    /// [`UNOBSERVED`] for the texels no camera sample reaches, infinity for observed ones
-    /// whose gradient was always 0.
+    /// [`UNOBSERVED`] for the texels no camera sample reaches and for those whose gradient
+    /// was always 0 (the output files stay finite, as every image psrestir reads must be).
     pub fn uncertainty(&self, loss: f64) -> Result<Vec<f32>> {
         let n_values = self.set.values.len();
         let own = self
@@ -62,10 +63,12 @@ impl Optimizer {
                 if observed[texel + k] {
                     for c in 0..ch {
                         let i = t.offset as usize + k * ch + c;
-                        out[i] = if v[i] > 0.0 {
-                            (2.0 * loss / (pixel_channels * (v[i] as f64).sqrt())) as f32
+                        let sigma = 2.0 * loss / (pixel_channels * (v[i] as f64).sqrt());
+                        out[i] = if v[i] > 0.0 && sigma.is_finite() {
+                            sigma as f32
                         } else {
-                            f32::INFINITY
+                            // Never a gradient: nothing to tell from, as if unobserved.
+                            UNOBSERVED
                         };
                     }
                 }
