@@ -4,7 +4,7 @@
 //! The loss is the mean over n pixel channels of squared residuals r_p = I_p - T_p, so a
 //! texel's gradient is g = (2/n) sum_p r_p J_p with J_p = dI_p/dθ. Near convergence the
 //! residuals are the images' noise and misfit, of variance σ² ≈ L (the loss), and the mean
-//! gradient is near 0: the second moment v ≈ Var[g] = (4/n²) σ² sum_p J_p². The likelihood
+//! gradient is near 0: the second moment v ≈ Var\[g\] = (4/n²) σ² sum_p J_p². The likelihood
 //! of Gaussian residuals, exp(-sum r_p² / 2σ²), has the (Gauss-Newton) curvature
 //! sum_p J_p² / σ² = n² v / (4 σ⁴) in θ, so the Laplace approximation gives θ the standard
 //! deviation
