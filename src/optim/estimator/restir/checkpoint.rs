@@ -41,82 +41,26 @@ impl Restir {
             ),
         ];
         Ok(state)
-        }
+    }
 
     /// Write `state` (or, for `None` or an empty one, a fresh start) into the GPU buffers
     /// ([`Estimator::restore`](crate::optim::estimator::Estimator::restore)).
     pub(super) fn load(&mut self, gpu: &Gpu, state: Option<&EstimatorState>) -> Result<()> {
-        let n_observed = self.merge_params.n_observed as usize;
         let zeros = vec![0u32; self.fresh_moments.size() as usize / 4];
         let kept = match state.filter(|r| !r.arrays.is_empty()) {
             Some(r) => {
-                let missing =
-                    |name: &str| Error::Invalid(format!("the saved ReSTIR state has no {name}"));
-                let reservoirs = r
-                    .array(state_names::RESERVOIRS)
-                    .ok_or_else(|| missing(state_names::RESERVOIRS))?;
-                let targets = r
-                    .array(state_names::TARGETS)
-                    .ok_or_else(|| missing(state_names::TARGETS))?;
-                let history = r
-                    .counter(state_names::HISTORY)
-                    .ok_or_else(|| missing(state_names::HISTORY))?;
-                let moments = r
-                    .array(state_names::FRESH_MOMENTS)
-                    .ok_or_else(|| missing(state_names::FRESH_MOMENTS))?;
-                let moment_updates = r
-                    .counter(state_names::MOMENT_UPDATES)
-                    .ok_or_else(|| missing(state_names::MOMENT_UPDATES))?;
-                // Not tracked now: nothing to restore. Saved without them (`own_variance`
-                // off then): they start afresh, as in a new run.
-                let (moments, moment_updates) = if !self.options.own_variance {
-                    (&zeros[..], moment_updates)
-                } else if moments.is_empty() {
-                    (&zeros[..], 0)
+                let saved = self.checked(r, &zeros)?;
+                gpu.queue
+                    .write_buffer(&self.targets, 0, bytemuck::cast_slice(saved.targets));
+                gpu.queue
+                    .write_buffer(&self.fresh_moments, 0, bytemuck::cast_slice(saved.moments));
+                self.history = if self.options.temporal {
+                    saved.history
                 } else {
-                    (moments, moment_updates)
+                    0
                 };
-                if moments.len() as u64 * 4 != self.fresh_moments.size() {
-                    return Err(Error::Invalid(format!(
-                        "the saved ReSTIR state has {} fresh-moment words where this \
-                         optimizer's textures need {}: it was saved for other textures",
-                        moments.len(),
-                        self.fresh_moments.size() / 4
-                    )));
-                }
-                let words = r.counter(state_names::WORDS).unwrap_or(0);
-                if words != self.words {
-                    return Err(Error::Invalid(format!(
-                        "the saved ReSTIR state has reservoirs of {words} words, this version of \
-                         psrestir keeps {} at this path depth: start afresh (without --resume)",
-                        self.words
-                    )));
-                }
-                let expected = n_observed * 2 * self.words as usize;
-                if reservoirs.len() != expected {
-                    return Err(Error::Invalid(format!(
-                        "the saved ReSTIR state has {} words where this optimizer keeps {expected} \
-                         ({n_observed} observed texels x 2 reservoirs x {} words): it was saved \
-                         for other textures or cameras",
-                        reservoirs.len(),
-                        self.words
-                    )));
-                }
-                if targets.len() as u64 * 4 != self.targets.size() {
-                    return Err(Error::Invalid(format!(
-                        "the saved ReSTIR state has {} target-adjoint floats where this \
-                         optimizer's images need {}",
-                        targets.len(),
-                        self.targets.size() / 4
-                    )));
-                }
-                gpu.queue
-                    .write_buffer(&self.targets, 0, bytemuck::cast_slice(targets));
-                gpu.queue
-                    .write_buffer(&self.fresh_moments, 0, bytemuck::cast_slice(moments));
-                self.history = if self.options.temporal { history } else { 0 };
-                self.moment_updates = moment_updates;
-                reservoirs.to_vec()
+                self.moment_updates = saved.moment_updates;
+                saved.reservoirs.to_vec()
             }
             None => {
                 // The first iteration forms the target adjoint from its own adjoint alone.
@@ -124,7 +68,7 @@ impl Restir {
                 self.moment_updates = 0;
                 gpu.queue
                     .write_buffer(&self.fresh_moments, 0, bytemuck::cast_slice(&zeros));
-                vec![0; n_observed * 2 * self.words as usize]
+                vec![0; self.merge_params.n_observed as usize * 2 * self.words as usize]
             }
         };
         let (slots, headers) = slots_holding(&kept, self.words);
@@ -139,7 +83,84 @@ impl Restir {
                 .write_buffer(&self.headers, 0, bytemuck::cast_slice(&headers));
         }
         Ok(())
+    }
+
+    /// The parts of a saved state `r`, checked against this optimizer's sizes; the fresh
+    /// moments are `zeros` where they are not tracked now, or were not then.
+    fn checked<'a>(&self, r: &'a EstimatorState, zeros: &'a [u32]) -> Result<Saved<'a>> {
+        let missing = |name: &str| Error::Invalid(format!("the saved ReSTIR state has no {name}"));
+        let array = |name: &str| r.array(name).ok_or_else(|| missing(name));
+        let counter = |name: &str| r.counter(name).ok_or_else(|| missing(name));
+        let (reservoirs, targets) = (
+            array(state_names::RESERVOIRS)?,
+            array(state_names::TARGETS)?,
+        );
+        let (moments, history) = (
+            array(state_names::FRESH_MOMENTS)?,
+            counter(state_names::HISTORY)?,
+        );
+        let moment_updates = counter(state_names::MOMENT_UPDATES)?;
+        // Not tracked now: nothing to restore. Saved without them (`own_variance` off then):
+        // they start afresh, as in a new run.
+        let (moments, moment_updates) = if !self.options.own_variance {
+            (zeros, moment_updates)
+        } else if moments.is_empty() {
+            (zeros, 0)
+        } else {
+            (moments, moment_updates)
+        };
+        if moments.len() as u64 * 4 != self.fresh_moments.size() {
+            return Err(Error::Invalid(format!(
+                "the saved ReSTIR state has {} fresh-moment words where this optimizer's \
+                 textures need {}: it was saved for other textures",
+                moments.len(),
+                self.fresh_moments.size() / 4
+            )));
         }
+        let words = r.counter(state_names::WORDS).unwrap_or(0);
+        if words != self.words {
+            return Err(Error::Invalid(format!(
+                "the saved ReSTIR state has reservoirs of {words} words, this version of \
+                 psrestir keeps {} at this path depth: start afresh (without --resume)",
+                self.words
+            )));
+        }
+        let n_observed = self.merge_params.n_observed as usize;
+        let expected = n_observed * 2 * self.words as usize;
+        if reservoirs.len() != expected {
+            return Err(Error::Invalid(format!(
+                "the saved ReSTIR state has {} words where this optimizer keeps {expected} \
+                 ({n_observed} observed texels x 2 reservoirs x {} words): it was saved for \
+                 other textures or cameras",
+                reservoirs.len(),
+                self.words
+            )));
+        }
+        if targets.len() as u64 * 4 != self.targets.size() {
+            return Err(Error::Invalid(format!(
+                "the saved ReSTIR state has {} target-adjoint floats where this optimizer's \
+                 images need {}",
+                targets.len(),
+                self.targets.size() / 4
+            )));
+        }
+        Ok(Saved {
+            reservoirs,
+            targets,
+            moments,
+            history,
+            moment_updates,
+        })
+    }
+}
+
+/// A saved ReSTIR state's parts, checked against the optimizer that restores it.
+struct Saved<'a> {
+    reservoirs: &'a [u32],
+    targets: &'a [u32],
+    moments: &'a [u32],
+    history: u32,
+    moment_updates: u32,
 }
 
 /// The kept reservoirs (two per observed texel, sign 0 then sign 1) that `headers` point at
