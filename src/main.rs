@@ -585,35 +585,11 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         }
     }
     if let Some(path) = report_from {
-        let text = std::fs::read_to_string(&path)
-            .with_context(|| format!("--report-from: reading {}", path.display()))?;
-        let report: psrestir::bench::BenchReport = serde_json::from_str(&text)
-            .with_context(|| format!("--report-from: {} is not a bench.json", path.display()))?;
-        let command = report.command.clone().unwrap_or_else(|| {
-            "psrestir bench (an older bench.json: its command is not recorded)".into()
-        });
-        psrestir::bench::report::write_docs(std::path::Path::new("."), &report, &command)?;
-        println!(
-            "wrote docs/results.md and the headline table in README.md from {}",
-            path.display()
-        );
-        return Ok(());
+        return bench_report_from(&path);
     }
     if throughput {
         let name = scenes.first().map_or(DEFAULT_TASK, |s| s.as_str());
-        let path = psrestir::bench::resolve_scene(name)?;
-        let mut task = Task::load(&path)?;
-        task.max_depth = max_depth.unwrap_or(task.max_depth);
-        std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-        let gpu = Gpu::new()?;
-        let r = psrestir::bench::throughput::throughput(&gpu, &task, &path, &out)?;
-        let md = psrestir::bench::throughput::markdown(&r);
-        println!("{md}");
-        let json = serde_json::to_string_pretty(&r).context("throughput.json")?;
-        psrestir::image_io::write_atomic(&out.join("throughput.json"), json.as_bytes())?;
-        psrestir::image_io::write_atomic(&out.join("throughput.md"), md.as_bytes())?;
-        println!("wrote {}", out.join("throughput.md").display());
-        return Ok(());
+        return bench_throughput(name, max_depth, &out);
     }
     if to_docs {
         // Before the hours of measuring: the checkout must be where the report goes.
@@ -679,5 +655,40 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         )?;
         println!("wrote docs/results.md and the headline table in README.md");
     }
+    Ok(())
+}
+
+/// `bench --report-from`: docs/results.md and README.md's headline written from an earlier
+/// run's bench.json, without measuring.
+fn bench_report_from(path: &std::path::Path) -> Result<()> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("--report-from: reading {}", path.display()))?;
+    let report: psrestir::bench::BenchReport = serde_json::from_str(&text)
+        .with_context(|| format!("--report-from: {} is not a bench.json", path.display()))?;
+    let command = report.command.clone().unwrap_or_else(|| {
+        "psrestir bench (an older bench.json: its command is not recorded)".into()
+    });
+    psrestir::bench::report::write_docs(std::path::Path::new("."), &report, &command)?;
+    println!(
+        "wrote docs/results.md and the headline table in README.md from {}",
+        path.display()
+    );
+    Ok(())
+}
+
+/// `bench --throughput`: rays per second and pipeline creation on one scene.
+fn bench_throughput(name: &str, max_depth: Option<u32>, out: &std::path::Path) -> Result<()> {
+    let path = psrestir::bench::resolve_scene(name)?;
+    let mut task = Task::load(&path)?;
+    task.max_depth = max_depth.unwrap_or(task.max_depth);
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let gpu = Gpu::new()?;
+    let r = psrestir::bench::throughput::throughput(&gpu, &task, &path, out)?;
+    let md = psrestir::bench::throughput::markdown(&r);
+    println!("{md}");
+    let json = serde_json::to_string_pretty(&r).context("throughput.json")?;
+    psrestir::image_io::write_atomic(&out.join("throughput.json"), json.as_bytes())?;
+    psrestir::image_io::write_atomic(&out.join("throughput.md"), md.as_bytes())?;
+    println!("wrote {}", out.join("throughput.md").display());
     Ok(())
 }
