@@ -539,7 +539,7 @@ impl DiffRender {
                     ));
                 };
                 let gains = self.opt.gains();
-                log_gain_gradients(d, &gains)
+                super::targets::log_gain_gradients(d, &gains)
             }
         };
         self.gain_gradient = None;
@@ -630,19 +630,6 @@ impl DiffRender {
     pub fn reset_estimator(&mut self) -> Result<()> {
         self.opt.reset_estimator()
     }
-}
-
-/// d/d(log exposure) and d/d(log white balance) per camera from dL/d(gain) `d` at `gains`
-/// (exposure times white balance): gain times dL/d(gain), summed over the channels for the
-/// exposure.
-pub(super) fn log_gain_gradients(d: &[[f64; 3]], gains: &[[f32; 3]]) -> (Vec<f32>, Vec<[f32; 3]>) {
-    d.iter()
-        .zip(gains)
-        .map(|(d, g)| {
-            let per: [f32; 3] = std::array::from_fn(|c| (d[c] * g[c] as f64) as f32);
-            (per.iter().sum::<f32>(), per)
-        })
-        .unzip()
 }
 
 /// `n` finite values, or an error naming `what`.

@@ -133,7 +133,7 @@ impl Optimizer {
             return Ok(());
         }
         let d = self.loss.read_gain_gradients(&self.gpu)?;
-        let g = super::diff_render::log_gain_gradients(&d, &self.exposure.gains());
+        let g = log_gain_gradients(&d, &self.exposure.gains());
         self.step_log_gains(factor, &g);
         Ok(())
     }
@@ -187,6 +187,19 @@ impl Optimizer {
         self.gain_prev = gains;
         self.upload_exposure();
     }
+}
+
+/// d/d(log exposure) and d/d(log white balance) per camera from dL/d(gain) `d` at `gains`
+/// (exposure times white balance): gain times dL/d(gain), summed over the channels for the
+/// exposure.
+pub(super) fn log_gain_gradients(d: &[[f64; 3]], gains: &[[f32; 3]]) -> (Vec<f32>, Vec<[f32; 3]>) {
+    d.iter()
+        .zip(gains)
+        .map(|(d, g)| {
+            let per: [f32; 3] = std::array::from_fn(|c| (d[c] * g[c] as f64) as f32);
+            (per.iter().sum::<f32>(), per)
+        })
+        .unzip()
 }
 
 /// One Adam step of log(value) with gradient `g` (step `t`, rate `lr`); the new value, or None
