@@ -138,6 +138,7 @@ fn scene_mirrors_match_wgsl_field_by_field() {
             param_metallic,
             param_roughness,
             normal_scale,
+            param_normal,
             base_color_tex,
             mr_tex,
             emissive_tex,

@@ -14,13 +14,17 @@ pub enum Slot {
     Roughness,
     /// Metalness (replaces metallicFactor x metallicRoughness.B).
     Metallic,
+    /// Tangent-space normal map, RGB in [0, 1] as glTF stores it (replaces normalTexture):
+    /// the normal is normalize(2 x RGB - 1) in the frame of the interpolated normal and its
+    /// MikkTSpace tangent, its Z floored at [`NORMAL_Z_FLOOR`] (upper hemisphere).
+    Normal,
 }
 
 impl Slot {
     /// Floats per texel.
     pub fn channels(self) -> u32 {
         match self {
-            Slot::BaseColor => 3,
+            Slot::BaseColor | Slot::Normal => 3,
             _ => 1,
         }
     }
@@ -37,12 +41,32 @@ impl Slot {
             Slot::BaseColor => "base_color",
             Slot::Roughness => "roughness",
             Slot::Metallic => "metallic",
+            Slot::Normal => "normal",
         }
     }
 }
 
 /// Smallest roughness the optimizer allows (alpha = 4e-4, the renderer's floor).
 pub const ROUGHNESS_FLOOR: f32 = 0.02;
+
+/// Smallest Z of an optimized normal map's 2 x RGB - 1 before it is normalized (blue 0.55):
+/// the renderer reads any lower Z as this one (no derivative below it), so the normal stays
+/// in the upper hemisphere, at most 84 degrees from the surface's. Mirrored in WGSL
+/// (shared/surface.wgsl).
+pub const NORMAL_Z_FLOOR: f32 = 0.1;
+
+/// The unit normal (tangent space) that an optimized normal map's texel `rgb` stands for, as
+/// the renderer reads it: normalize(2 rgb - 1) with Z floored at [`NORMAL_Z_FLOOR`]. The
+/// exported map stores (n + 1) / 2 of it, which a glTF viewer reads as the same normal.
+pub fn decode_normal(rgb: [f32; 3]) -> [f32; 3] {
+    let v = [
+        2.0 * rgb[0] - 1.0,
+        2.0 * rgb[1] - 1.0,
+        (2.0 * rgb[2] - 1.0).max(NORMAL_Z_FLOOR),
+    ];
+    let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    [v[0] / len, v[1] / len, v[2] / len]
+}
 
 /// Texture filter for optimized textures.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Deserialize)]
@@ -117,6 +141,12 @@ pub fn check_texture(
     let [w, h] = tex.resolution;
     if !(1..=4096).contains(&w) || !(1..=4096).contains(&h) {
         return Err(("resolution", "each side must be between 1 and 4096".into()));
+    }
+    if tex.slot == Slot::Normal && matches!(tex.init, Init::Scalar(_)) {
+        return Err((
+            "init",
+            "a normal map starts from one RGB value, e.g. [0.5, 0.5, 1.0] for flat".into(),
+        ));
     }
     let init = tex.init_values();
     if init.len() != tex.slot.channels() as usize {

@@ -4,7 +4,8 @@
 //!   weight a = 1 it is the baseline, with direct light and at depth 3;
 //! - run along one fixed sequence of states (textures and adjoints) with independent seeds,
 //!   the mean of its running estimate matches the baseline's mean at every state within the
-//!   standard error, for base color (bilinear) and roughness (nearest), and its spread at the
+//!   standard error, for base color (bilinear), a normal map (bilinear) and roughness
+//!   (nearest), and its spread at the
 //!   last state is well below the baseline's;
 //! - the variance-scaled step on the GPU equals its CPU reference;
 //! - an optimization with it, with either step, recovers a texture.
@@ -39,10 +40,14 @@ fn settings(method: Method, spp: u32, seed: u32) -> Settings {
     }
 }
 
-/// The textures of state k of the fixed sequence: the start moved a little further each step.
-fn state(n: usize, k: usize, lo: f32) -> Vec<f32> {
+/// The textures of state k of the fixed sequence: the start moved a little further each step
+/// (a normal map's Z channel around 0.9, above its floor).
+fn state(slot: Slot, n: usize, k: usize, lo: f32) -> Vec<f32> {
     (0..n)
-        .map(|i| (0.5 + 0.04 * k as f32 * ((i * 7 % 5) as f32 - 2.0) / 2.0).max(lo))
+        .map(|i| {
+            let start = if slot == Slot::Normal && i % 3 == 2 { 0.9 } else { 0.5 };
+            (start + 0.04 * k as f32 * ((i * 7 % 5) as f32 - 2.0) / 2.0).max(lo)
+        })
         .collect()
 }
 
@@ -82,7 +87,7 @@ fn fresh_term_is_the_baseline_gradient(gpu: &psrestir::gpu::Gpu, scene: &psresti
     let mut rec = Optimizer::new(gpu, &scene, set, rec_settings, &target).unwrap();
     let (adjoint, _) = base.converged_adjoint(64, 5).unwrap();
     for it in 0..3 {
-        let values = state(48, it as usize, 0.0);
+        let values = state(Slot::BaseColor, 48, it as usize, 0.0);
         base.write_params(&values).unwrap();
         rec.write_params(&values).unwrap();
         let b = base.estimate_gradient_with_adjoint(it, &adjoint).unwrap();
@@ -143,7 +148,11 @@ fn check_unbiased_along_states(slot: Slot, filter: Filter, options: RecursiveOpt
         &blank,
     )
     .unwrap();
-    probe.write_params(&vec![0.3f32.max(lo); n]).unwrap();
+    let dark: Vec<f32> = match slot {
+        Slot::Normal => [0.4, 0.6, 0.9].repeat(n / 3),
+        _ => vec![0.3f32.max(lo); n],
+    };
+    probe.write_params(&dark).unwrap();
     let target = vec![probe.render(0, 1024, 99).unwrap()];
     drop(probe);
 
@@ -159,7 +168,7 @@ fn check_unbiased_along_states(slot: Slot, filter: Filter, options: RecursiveOpt
     .unwrap();
     let mut states = Vec::new();
     for k in 0..k_states {
-        let values = state(n, k, lo);
+        let values = state(slot, n, k, lo);
         base.write_params(&values).unwrap();
         let (adjoint, _) = base.converged_adjoint(256, 40 + k as u32).unwrap();
         states.push((values, adjoint));
@@ -251,6 +260,19 @@ fn check_unbiased_along_states(slot: Slot, filter: Filter, options: RecursiveOpt
 fn recursive_estimate_is_unbiased_along_fixed_states_base_color_bilinear() {
     check_unbiased_along_states(
         Slot::BaseColor,
+        Filter::Bilinear,
+        RecursiveOptions {
+            weight: Some(0.25),
+            ..Default::default()
+        },
+    );
+}
+
+/// A normal map: the previous state's terms are evaluated in the previous normal's frame.
+#[test]
+fn recursive_estimate_is_unbiased_along_fixed_states_normal_map_bilinear() {
+    check_unbiased_along_states(
+        Slot::Normal,
         Filter::Bilinear,
         RecursiveOptions {
             weight: Some(0.25),

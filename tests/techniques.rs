@@ -479,8 +479,8 @@ fn the_bundled_scenes_area_light_agrees_across_techniques() {
 
 /// Light-sampled and BSDF-sampled baseline gradients agree in expectation: under one fixed
 /// adjoint, the means of K estimates of each differ per texel by less than five standard
-/// errors, for base color and roughness, on a plane lit by an area light and a blocker's
-/// soft shadow.
+/// errors, for base color, roughness and a normal map (tilted against a flat start), on a
+/// plane lit by an area light and a blocker's soft shadow.
 #[test]
 fn light_and_bsdf_sampled_gradients_agree() {
     use psrestir::optim::{Method, Optimizer, Settings};
@@ -497,7 +497,7 @@ fn light_and_bsdf_sampled_gradients_agree() {
         }
     }
     let w = 16;
-    for slot in [Slot::BaseColor, Slot::Roughness] {
+    for slot in [Slot::BaseColor, Slot::Roughness, Slot::Normal] {
         let spec = TextureSpec {
             material: "plane".into(),
             slot,
@@ -517,10 +517,17 @@ fn light_and_bsdf_sampled_gradients_agree() {
         let blank = psrestir::Image::new(w, w);
         let opt = Optimizer::new(&gpu, &scene, set.clone(), settings.clone(), &[blank]).unwrap();
         let n = set.values.len();
-        opt.write_params(&vec![0.2; n]).unwrap();
+        // (A normal map: tilted towards +X and +Y, against the flat one below.)
+        let (dark, start) = match slot {
+            Slot::Normal => ([0.65, 0.6, 0.9], vec![0.5, 0.5, 1.0]),
+            _ => ([0.2; 3], vec![0.5; slot.channels() as usize]),
+        };
+        opt.write_params(&dark[..slot.channels() as usize].repeat(n / slot.channels() as usize))
+            .unwrap();
         let target = opt.render(0, 1024, 5).unwrap();
         let mut opt =
             Optimizer::new(&gpu, &scene, set, settings, std::slice::from_ref(&target)).unwrap();
+        opt.write_params(&start.repeat(n / start.len())).unwrap();
         let (adjoint, _) = opt.converged_adjoint(256, 9).unwrap();
         let k = 96;
         let mut stats = Vec::new();

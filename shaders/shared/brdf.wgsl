@@ -39,17 +39,20 @@ fn schlick(f0: vec3f, vh: f32) -> vec3f {
 
 // f(wo, wi) cos(theta_i) and its derivatives with respect to the material inputs: d_base is
 // per channel (channel c of the value depends only on channel c of the base color).
+// d_normal: with respect to the RGB of an optimized normal map at the point (column c for
+// image channel c), which only surface_brdf_grad (shared/surface.wgsl) fills in.
 struct BrdfGrad {
     value: vec3f,
     d_base: vec3f,
     d_metallic: vec3f,
     d_roughness: vec3f,
+    d_normal: mat3x3f,
 }
 
 // Value and analytic derivatives in one code path; passes that need only the value call
 // brdf_eval_cos and the compiler drops the derivative terms.
 fn brdf_eval_cos_grad(m: SurfaceMaterial, wo: vec3f, wi: vec3f) -> BrdfGrad {
-    var out = BrdfGrad(vec3f(0.0), vec3f(0.0), vec3f(0.0), vec3f(0.0));
+    var out = BrdfGrad(vec3f(0.0), vec3f(0.0), vec3f(0.0), vec3f(0.0), mat3x3f());
     if wo.z <= 0.0 || wi.z <= 0.0 {
         return out;
     }
@@ -88,6 +91,42 @@ fn brdf_eval_cos_grad(m: SurfaceMaterial, wo: vec3f, wi: vec3f) -> BrdfGrad {
     out.d_metallic = (-dfm * kd * b - (vec3f(1.0) - fresnel) * INV_PI * b + dfm * dv) * nl;
     out.d_roughness = fresnel * (dd * vis + d * dvis) * da2 * nl;
     return out;
+}
+
+// The gradient of brdf_eval_cos's value with respect to the shading normal (local z), the
+// directions held fixed, in the shading frame: column c for image channel c. The value
+// depends on the normal only through nl = n.wi, nv = n.wo and nh = n.h (the Fresnel term
+// reads wo.h, the rest are fixed), so its gradient is d/dnl wi + d/dnv wo + d/dnh h.
+fn brdf_normal_grad(m: SurfaceMaterial, wo: vec3f, wi: vec3f) -> mat3x3f {
+    if wo.z <= 0.0 || wi.z <= 0.0 {
+        return mat3x3f();
+    }
+    let h = normalize(wo + wi);
+    let a = material_alpha(m);
+    let a2 = a * a;
+    let b = m.base_color;
+    let met = m.metallic;
+    let fresnel = schlick(mix(vec3f(0.04), b, met), dot(wo, h));
+    let diffuse = (vec3f(1.0) - fresnel) * (1.0 - met) * INV_PI * b;
+    let nh = h.z;
+    let nl = wi.z;
+    let nv = wo.z;
+    // D = a2 / (pi t^2), t = ggx_t: dt/dnh = 2 nh (a2 - 1) below nh = 1.
+    let t = ggx_t(nh, a2);
+    let d = a2 / (PI * t * t);
+    let dt = select(2.0 * nh * a2, 2.0 * nh * (a2 - 1.0), nh * nh < 1.0);
+    let dd = -2.0 * a2 * dt / (PI * t * t * t);
+    // Vis = 1 / (2 g), g = nl sv + nv sl.
+    let sv = sqrt(nv * nv * (1.0 - a2) + a2);
+    let sl = sqrt(nl * nl * (1.0 - a2) + a2);
+    let g = max(nl * sv + nv * sl, 1e-20);
+    let vis = 0.5 / g;
+    let dvis_nl = -0.5 * (sv + nv * nl * (1.0 - a2) / sl) / (g * g);
+    let dvis_nv = -0.5 * (nl * nv * (1.0 - a2) / sv + sl) / (g * g);
+    let d_nl = diffuse + fresnel * d * (vis + nl * dvis_nl);
+    let d_nv = fresnel * d * nl * dvis_nv;
+    let d_nh = fresnel * nl * vis * dd;
+    return mat3x3f(d_nl.x * wi + d_nv.x * wo + d_nh.x * h, d_nl.y * wi + d_nv.y * wo + d_nh.y * h, d_nl.z * wi + d_nv.z * wo + d_nh.z * h);
 }
 
 fn brdf_eval_cos(m: SurfaceMaterial, wo: vec3f, wi: vec3f) -> vec3f {

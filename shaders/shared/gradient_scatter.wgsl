@@ -35,7 +35,7 @@ fn scatter(m: Material, uv: vec2f, bg: BrdfGrad, weight: vec3f, adj: vec3f) {
     if all(weight == vec3f(0.0)) {
         return;
     }
-    for (var slot = 0u; slot < 3u; slot++) {
+    for (var slot = 0u; slot < SLOTS; slot++) {
         let pi = material_param(m, slot);
         if pi == NONE {
             continue;

@@ -138,7 +138,7 @@ struct CameraPath {
 // Whether material mi has an optimized texture (fields read one by one: a CPU device loads
 // every word of a struct read at a per-invocation index).
 fn has_optimized(mi: u32) -> bool {
-    return materials[mi].param_base_color != NONE || materials[mi].param_metallic != NONE || materials[mi].param_roughness != NONE;
+    return materials[mi].param_base_color != NONE || materials[mi].param_metallic != NONE || materials[mi].param_roughness != NONE || materials[mi].param_normal != NONE;
 }
 
 fn max_component(v: vec3f) -> f32 {
@@ -154,8 +154,8 @@ fn max_component(v: vec3f) -> f32 {
 // With `replay`, the derivatives at the vertices after the first (path replay
 // backpropagation): once the path is traced and everything it brings back is known, it is
 // traced again from the same random numbers, and at every later vertex with an optimized
-// material the pass's differentiate_later_vertex receives the BRDF's inputs and directions
-// and the factor that its derivative multiplies: for a light sample, the throughput up to the
+// material the pass's differentiate_later_vertex receives the surface, the incident direction
+// (world space), the BRDF's inputs under each state and the factor that its derivative multiplies: for a light sample, the throughput up to the
 // vertex times the sample's weight; for the BSDF sample, what the rest of the path brings
 // back (everything less what the vertices before it brought) over the BRDF's value there.
 // Both include the first vertex's BRDF x cos / density along its BSDF sample. The memory is
@@ -412,11 +412,19 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
             for (var state = 0u; state < select(1u, 2u, both); state++) {
                 var m = vmat;
                 var b = beta;
+                var wo_s = wo;
+                var wi_s = wi;
                 if state == 1u {
                     m = vmat_prev;
                     b = beta_prev;
+                    if materials[vsf.material].param_normal != NONE {
+                        // (The previous normal map's frame; the directions are the same.)
+                        let frame_prev = frame_of(vsf, true);
+                        wo_s = to_local(frame_prev, vsf.wo);
+                        wi_s = to_local(frame_prev, eval_wi);
+                    }
                 }
-                var f = brdf_eval_cos(m, wo, wi);
+                var f = brdf_eval_cos(m, wo_s, wi_s);
                 if state == 0u {
                     fc = f;
                 } else {
@@ -463,7 +471,7 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
                     w = first_weight * select(vec3f(0.0), rest / fc, fc > vec3f(0.0));
                     w_prev = first_weight_prev * select(vec3f(0.0), rest_prev / fc_prev, fc_prev > vec3f(0.0));
                 }
-                differentiate_later_vertex(vsf.material, vsf.uv, wo, wi, vmat, vmat_prev, w, w_prev);
+                differentiate_later_vertex(vsf, eval_wi, vmat, vmat_prev, w, w_prev);
             }
         }
         if shade {
@@ -560,12 +568,15 @@ fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: boo
     return out;
 }
 
-fn contribution(mat: SurfaceMaterial, sf: Surface, s: DirectSample) -> vec3f {
+// Sample s's contribution at sf with inputs mat, in sf's frame under the current or (prev)
+// the previous textures.
+fn contribution(mat: SurfaceMaterial, sf: Surface, s: DirectSample, prev: bool) -> vec3f {
     if s.scale == 0.0 {
         return vec3f(0.0);
     }
-    let wo = to_local(sf.frame, sf.wo);
-    return brdf_eval_cos(mat, wo, to_local(sf.frame, s.wi)) * s.radiance * s.scale;
+    let frame = frame_of(sf, prev);
+    let wo = to_local(frame, sf.wo);
+    return brdf_eval_cos(mat, wo, to_local(frame, s.wi)) * s.radiance * s.scale;
 }
 
 // Radiance along a camera ray (origin o, unit direction d), paths of scene.max_depth vertices:
@@ -592,7 +603,7 @@ fn radiance_states(o: vec3f, d: vec3f, both: bool) -> array<vec3f, 2> {
         if j == 3u {
             s.radiance = p.bsdf_prev;
         }
-        l[j / 2u] += contribution(mat, p.sf, s);
+        l[j / 2u] += contribution(mat, p.sf, s, j >= 2u);
     }
     if !both {
         l[1] = l[0];
@@ -706,7 +717,11 @@ fn gradient_sample(o: vec3f, d: vec3f, both: bool, replay: bool) -> GradientSamp
         let wi = rounded_direction(out.sf, ts.ds.wi);
         ts.ko = wi.ko;
         ts.vertex = path_vertex(out.sf, p.gltf, wi.oct);
-        ts.grad = brdf_eval_cos_grad(p.mat, wo_l, oct_decode(wi.oct));
+        let wi_l = oct_decode(wi.oct);
+        ts.grad = brdf_eval_cos_grad(p.mat, wo_l, wi_l);
+        if out.m.param_normal != NONE {
+            ts.grad.d_normal = normal_rgb_grad(out.sf, false, p.mat, wo_l, wi_l);
+        }
         if t == SAMPLE_BSDF {
             out.bsdf = ts;
         } else {

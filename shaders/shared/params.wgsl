@@ -57,7 +57,13 @@ fn footprint_merged(fp: Footprint) -> Footprint {
     return out;
 }
 
-// Index of the optimized texture replacing slot (0 base color, 1 metallic, 2 roughness) of m.
+// Slots of a material that a texture can replace: base color, metallic, roughness, and the
+// normal map (SLOT_NORMAL).
+const SLOTS: u32 = 4u;
+const SLOT_NORMAL: u32 = 3u;
+
+// Index of the optimized texture replacing slot (0 base color, 1 metallic, 2 roughness,
+// SLOT_NORMAL) of m.
 fn material_param(m: Material, slot: u32) -> u32 {
     switch slot {
         case 0u: {
@@ -66,15 +72,22 @@ fn material_param(m: Material, slot: u32) -> u32 {
         case 1u: {
             return m.param_metallic;
         }
-        default: {
+        case 2u: {
             return m.param_roughness;
+        }
+        default: {
+            return m.param_normal;
         }
     }
 }
 
 // Derivative of adjoint . contribution with respect to one input of the slot, where the
-// contribution is brdf x weight: per channel for base color (xyz), a scalar (x) otherwise.
+// contribution is brdf x weight: per channel for base color (xyz), the map's RGB for the
+// normal map (xyz, every image channel depending on each), a scalar (x) otherwise.
 fn slot_derivative(slot: u32, bg: BrdfGrad, weight: vec3f, adj: vec3f) -> vec3f {
+    if slot == SLOT_NORMAL {
+        return bg.d_normal * (weight * adj);
+    }
     return with_adjoint(slot_factor(slot, bg, weight), adj, select(1u, 3u, slot == 0u));
 }
 

@@ -14,7 +14,15 @@ struct Surface {
     material: u32,
     front: bool,
     valid: bool,
+    // With an optimized normal map (the material's param_normal): the frame it is read in,
+    // columns tangent, bitangent and the interpolated normal of the front face (tangent and
+    // bitangent zero where the triangle has no tangents). Zero otherwise.
+    tbn: mat3x3f,
 }
+
+// Smallest Z of an optimized normal map's 2 x RGB - 1 before it is normalized (mirrors
+// NORMAL_Z_FLOOR in src/vocab.rs): a lower Z reads as this one.
+const NORMAL_Z_FLOOR: f32 = 0.1;
 
 // Geometry at the point (hit.b1, hit.b2) of triangle hit.tri seen from o, normals turned
 // towards the viewer for double-sided materials. The point is interpolated from the
@@ -40,7 +48,11 @@ fn surface_at(o: vec3f, hit: Hit) -> Surface {
     out.p = p;
     out.uv = b0 * s.uv01.xy + hit.b1 * s.uv01.zw + hit.b2 * s.uv2;
     out.material = s.material;
-    if m.normal_tex.offset != NONE && s.t0 != 0u && s.t1 != 0u && s.t2 != 0u {
+    let tangents = s.t0 != 0u && s.t1 != 0u && s.t2 != 0u;
+    out.tbn = mat3x3f();
+    if m.param_normal != NONE {
+        out.tbn = tangent_frame(ns, vec3f(b0, hit.b1, hit.b2), s, tangents);
+    } else if m.normal_tex.offset != NONE && tangents {
         ns = normal_mapped(m, out.uv, ns, vec3f(b0, hit.b1, hit.b2), s);
     }
     out.front = front;
@@ -50,15 +62,106 @@ fn surface_at(o: vec3f, hit: Hit) -> Surface {
         ng = -ng;
         ns = -ns;
     }
+    out.ng = ng;
+    if m.param_normal != NONE {
+        out.frame = onb(optimized_normal(out, false).n);
+        return out;
+    }
     let len = length(ns);
     if len <= 0.0 || dot(ns / len, out.wo) <= 1e-6 {
         ns = ng;
     } else {
         ns = ns / len;
     }
-    out.ng = ng;
     out.frame = onb(ns);
     return out;
+}
+
+// The tangent frame of triangle s at barycentrics b around the interpolated normal n (of the
+// front face): the tangent made orthogonal to the normal, the bitangent cross(n, t) x w, the
+// unit normal; tangent and bitangent zero without tangents.
+fn tangent_frame(n: vec3f, b: vec3f, s: TriShading, tangents: bool) -> mat3x3f {
+    let nn = normalize(n);
+    if !tangents || !all(nn == nn) {
+        return mat3x3f(vec3f(0.0), vec3f(0.0), nn);
+    }
+    let t0 = tangent_at(s.t0);
+    var t = b.x * t0.xyz + b.y * tangent_at(s.t1).xyz + b.z * tangent_at(s.t2).xyz;
+    t -= nn * dot(nn, t);
+    if !(length(t) > 0.0) {
+        return mat3x3f(vec3f(0.0), vec3f(0.0), nn);
+    }
+    t = normalize(t);
+    return mat3x3f(t, cross(nn, t) * t0.w, nn);
+}
+
+// The shading normal that sf's optimized normal map gives under the current or (prev) the
+// previous iteration's textures, and its derivative with respect to the map's filtered RGB
+// (columns: d n / d R, G, B): n = normalize(tbn (2 RGB - 1)), Z floored at NORMAL_Z_FLOOR,
+// turned with the face (the back of a double-sided surface). Where the normal is degenerate
+// or faces away from the viewer it is the geometric normal, derivative zero (the same
+// fallback as an interpolated normal's). The directions are held fixed: the derivative of a
+// value that depends on the normal is its gradient in n through this matrix.
+struct MappedNormal {
+    n: vec3f,
+    d: mat3x3f,
+}
+
+fn optimized_normal(sf: Surface, prev: bool) -> MappedNormal {
+    var out = MappedNormal(sf.ng, mat3x3f());
+    let p = param_textures[materials[sf.material].param_normal];
+    let saved = use_prev_params;
+    use_prev_params = prev;
+    let rgb = param_value(p, param_footprint(p, sf.uv));
+    use_prev_params = saved;
+    let z = 2.0 * rgb.z - 1.0;
+    let m = sf.tbn * vec3f(2.0 * rgb.xy - 1.0, max(z, NORMAL_Z_FLOOR));
+    let len = length(m);
+    if !(len > 0.0) {
+        return out;
+    }
+    let s = select(-1.0, 1.0, sf.front);
+    let n = m * (s / len);
+    if !(dot(n, sf.wo) > 1e-6) {
+        return out;
+    }
+    out.n = n;
+    // d(s m / |m|)/dm = s (I - n n^T) / |m|; dm/dRGB = 2 tbn (Z's column 0 below the floor).
+    let proj = (mat3x3f(vec3f(1.0, 0.0, 0.0), vec3f(0.0, 1.0, 0.0), vec3f(0.0, 0.0, 1.0)) - mat3x3f(n * n.x, n * n.y, n * n.z)) * (s / len);
+    out.d = proj * mat3x3f(2.0 * sf.tbn[0], 2.0 * sf.tbn[1], select(0.0, 2.0, z > NORMAL_Z_FLOOR) * sf.tbn[2]);
+    return out;
+}
+
+// sf's shading frame under the current or (prev) the previous iteration's textures: they
+// differ only where an optimized normal map changed.
+fn frame_of(sf: Surface, prev: bool) -> mat3x3f {
+    if !prev || materials[sf.material].param_normal == NONE {
+        return sf.frame;
+    }
+    return onb(optimized_normal(sf, true).n);
+}
+
+// BRDF x cos of sf towards wi (world space) with inputs mat and its derivatives, in sf's
+// frame under the current or (prev) the previous textures; with an optimized normal map,
+// d_normal too (the derivative with respect to the map's RGB at the point).
+fn surface_brdf_grad(sf: Surface, mat: SurfaceMaterial, wi: vec3f, prev: bool) -> BrdfGrad {
+    let frame = frame_of(sf, prev);
+    let wo_l = to_local(frame, sf.wo);
+    let wi_l = to_local(frame, wi);
+    var bg = brdf_eval_cos_grad(mat, wo_l, wi_l);
+    if materials[sf.material].param_normal != NONE {
+        bg.d_normal = normal_rgb_grad(sf, prev, mat, wo_l, wi_l);
+    }
+    return bg;
+}
+
+// The derivative of BRDF x cos (directions wo, wi in sf's frame under the state prev
+// selects) with respect to the RGB of sf's optimized normal map at the point: column c is
+// image channel c's gradient (R, G, B of the map): the BRDF's gradient in the normal
+// (brdf_normal_grad), taken to world space by the frame and back through the map's d n/d RGB.
+fn normal_rgb_grad(sf: Surface, prev: bool, mat: SurfaceMaterial, wo: vec3f, wi: vec3f) -> mat3x3f {
+    let mn = optimized_normal(sf, prev);
+    return transpose(mn.d) * onb(mn.n) * brdf_normal_grad(mat, wo, wi);
 }
 
 // A vertex tangent packed by pack_tangent (src/render/layout.rs): direction and handedness w.
@@ -108,6 +211,16 @@ fn gltf_inputs(mi: u32, uv: vec2f) -> SurfaceMaterial {
         mr = sample_texture(m.mr_tex, transform_uv(m, 1u, uv));
     }
     return SurfaceMaterial(materials[mi].base_color.rgb * bc.rgb, clamp(materials[mi].metallic * mr.b, 0.0, 1.0), clamp(materials[mi].roughness * mr.g, 0.0, 1.0));
+}
+
+// The BRDF inputs at sf under the current or (prev) the previous iteration's textures.
+fn material_at(sf: Surface, prev: bool) -> SurfaceMaterial {
+    let gltf = gltf_inputs(sf.material, sf.uv);
+    let saved = use_prev_params;
+    use_prev_params = prev;
+    let m = with_optimized(sf.material, sf.uv, gltf);
+    use_prev_params = saved;
+    return m;
 }
 
 // m with the inputs of the slots that optimized textures replace read from them (UV0, repeat

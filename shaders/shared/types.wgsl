@@ -45,14 +45,15 @@ struct Material {
     roughness: f32,
     double_sided: u32,
     // Optimized textures replacing base color, metallic, roughness: indices into
-    // param_textures[], NONE when the slot is not optimized.
+    // param_textures[], NONE when the slot is not optimized (param_normal below).
     param_base_color: u32,
     param_metallic: u32,
     param_roughness: u32,
     // normalTexture's scale of the tangent-space normal's X and Y.
     normal_scale: f32,
+    // The optimized tangent-space normal map replacing normal_tex (NONE when not optimized).
+    param_normal: u32,
     _pad1: u32,
-    _pad2: u32,
     base_color_tex: TexRef,
     mr_tex: TexRef,
     emissive_tex: TexRef,

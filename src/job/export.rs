@@ -138,6 +138,24 @@ pub fn write_glb(
                 pbr["baseColorFactor"] = json!([1.0, 1.0, 1.0, alpha]);
                 pbr["baseColorTexture"] = json!({"index": tex});
             }
+            Slot::Normal => {
+                let v = &values[t.offset as usize..t.offset as usize + t.len()];
+                let px: Vec<[u8; 4]> = v
+                    .chunks_exact(3)
+                    .map(|c| {
+                        let n = crate::vocab::decode_normal([c[0], c[1], c[2]]);
+                        let e = |x: f32| ((x * 0.5 + 0.5).clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
+                        [e(n[0]), e(n[1]), e(n[2]), 255]
+                    })
+                    .collect();
+                let img = b.add_image_embedded(
+                    &format!("{} optimized", t.name()),
+                    &png_bytes(t.width, t.height, &px)?,
+                    "image/png",
+                );
+                let tex = b.add_texture(img, Some(sampler));
+                b.json["materials"][m]["normalTexture"] = json!({"index": tex});
+            }
             Slot::Roughness | Slot::Metallic => {
                 if done_mr.contains(&m) {
                     continue;

@@ -14,12 +14,13 @@ use crate::vocab::Slot;
 use crate::{Error, Result};
 use std::path::{Path, PathBuf};
 
-/// Texture `i` of `values` as an image: RGB for base color, gray for scalars.
+/// Texture `i` of `values` as an image: RGB for base color and normal maps, gray for
+/// scalars.
 pub fn texture_image(set: &ParamSet, values: &[f32], i: usize) -> Image {
     let t = &set.textures[i];
     let v = &values[t.offset as usize..t.offset as usize + t.len()];
-    let rgb = match t.slot {
-        Slot::BaseColor => v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+    let rgb = match t.channels() {
+        3 => v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
         _ => v.iter().map(|&x| [x; 3]).collect(),
     };
     Image {
@@ -39,7 +40,8 @@ fn save_png(path: &Path, img: &Image, bytes: Vec<u8>) -> Result<()> {
     })
 }
 
-/// Save each texture as EXR (linear) and PNG (sRGB for base color, linear gray for scalars).
+/// Save each texture as EXR (linear) and PNG (sRGB for base color, linear otherwise: a
+/// normal map's RGB as glTF stores it, gray for scalars).
 pub fn save_textures(dir: &Path, set: &ParamSet, values: &[f32]) -> Result<()> {
     for i in 0..set.textures.len() {
         let t = &set.textures[i];
@@ -248,7 +250,7 @@ pub fn write_gradient(
 }
 
 /// One signed number per texel of texture `i` of a gradient: the luminance-weighted sum of
-/// the channels for base color, the value for scalar textures.
+/// the channels for base color, their sum for a normal map, the value for scalar textures.
 pub fn gradient_scalars(set: &ParamSet, g: &[f32], i: usize) -> Vec<f32> {
     let img = texture_image(set, g, i);
     let slot = set.textures[i].slot;
@@ -256,6 +258,7 @@ pub fn gradient_scalars(set: &ParamSet, g: &[f32], i: usize) -> Vec<f32> {
         .iter()
         .map(|p| match slot {
             Slot::BaseColor => p[0] * 0.2126 + p[1] * 0.7152 + p[2] * 0.0722,
+            Slot::Normal => p[0] + p[1] + p[2],
             _ => p[0],
         })
         .collect()

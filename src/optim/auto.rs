@@ -280,6 +280,7 @@ mod tests {
             texels,
             max_depth,
             recovers_light: false,
+            normal_maps: false,
         }
     }
 

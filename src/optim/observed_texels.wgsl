@@ -39,7 +39,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
             continue;
         }
         let m = materials[sf.material];
-        for (var slot = 0u; slot < 3u; slot++) {
+        for (var slot = 0u; slot < SLOTS; slot++) {
             let pi = material_param(m, slot);
             if pi == NONE {
                 continue;

@@ -252,7 +252,8 @@ fn gpu_materials(scene: &Scene, image_offsets: &[u32]) -> Vec<GpuMaterial> {
                 param_metallic: u32::MAX,
                 param_roughness: u32::MAX,
                 normal_scale: m.normal_scale,
-                _pad: [0; 2],
+                param_normal: u32::MAX,
+                _pad: 0,
                 base_color_tex: tex_ref(&m.base_color_texture, true),
                 mr_tex: tex_ref(&m.metallic_roughness_texture, false),
                 emissive_tex: tex_ref(&m.emissive_texture, true),
@@ -284,6 +285,7 @@ fn bind_optimized(
             crate::vocab::Slot::BaseColor => &mut m.param_base_color,
             crate::vocab::Slot::Metallic => &mut m.param_metallic,
             crate::vocab::Slot::Roughness => &mut m.param_roughness,
+            crate::vocab::Slot::Normal => &mut m.param_normal,
         };
         *slot = i as u32;
         param_textures.push(GpuParamTex {
@@ -424,6 +426,7 @@ fn bvh_triangles(
     scene: &Scene,
     bvh: &bvh::Bvh,
     tri_light: &[u32],
+    materials: &[GpuMaterial],
 ) -> (Vec<[f32; 4]>, Vec<GpuTriShading>) {
     let n_tris = scene.triangles.len();
     let mut positions: Vec<[f32; 4]> = Vec::with_capacity(n_tris * 3);
@@ -433,12 +436,16 @@ fn bvh_triangles(
         for p in t.p {
             positions.push([p.x, p.y, p.z, 0.0]);
         }
-        // A normal-mapped triangle built in code without tangents takes its face's.
+        // A normal-mapped triangle (a glTF normal map or an optimized one) built in code
+        // without tangents takes its face's.
         let mut tangents = t.t;
         let mapped = scene
             .materials
             .get(t.material as usize)
-            .is_some_and(|m| m.normal_texture.is_some());
+            .is_some_and(|m| m.normal_texture.is_some())
+            || materials
+                .get(t.material as usize)
+                .is_some_and(|m| m.param_normal != u32::MAX);
         if mapped && tangents.iter().all(|v| *v == glam::Vec4::ZERO) {
             let n = (t.p[1] - t.p[0]).cross(t.p[2] - t.p[0]).normalize_or_zero();
             tangents = [crate::scene::tangents::face_tangent(t.p, t.uv, n); 3];
@@ -507,7 +514,7 @@ impl GpuScene {
         let (lights, light_power, tri_light, env_table, info) = gpu_lights(scene, &bvh, &gpu_index);
         check("the environment map", env_table.len() * 4)?;
 
-        let (positions, shading) = bvh_triangles(scene, &bvh, &tri_light);
+        let (positions, shading) = bvh_triangles(scene, &bvh, &tri_light, &materials);
         check("the triangle positions", positions.len() * 16)?;
         check("the triangle attributes", shading.len() * 80)?;
         check("the BVH", bvh.nodes.len() * 32)?;

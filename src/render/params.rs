@@ -189,6 +189,11 @@ pub fn slot_values(scene: &Scene, m: &Material, slot: Slot, width: u32, height: 
                 Slot::Metallic => out.push(
                     (m.metallic * sample(&m.metallic_roughness_texture, false)[2]).clamp(0.0, 1.0),
                 ),
+                // The map's RGB as stored (its scale not applied); flat without one.
+                Slot::Normal => match &m.normal_texture {
+                    None => out.extend_from_slice(&[0.5, 0.5, 1.0]),
+                    Some(_) => out.extend_from_slice(&sample(&m.normal_texture, false)[..3]),
+                },
             }
         }
     }

@@ -30,7 +30,7 @@ struct RenderParams {
 
 // The hook camera_path names for the derivatives at a path's later vertices: a render never
 // replays a path, so it is never called here.
-fn differentiate_later_vertex(mi: u32, uv: vec2f, wo: vec3f, wi: vec3f, mat: SurfaceMaterial, mat_prev: SurfaceMaterial, weight: vec3f, weight_prev: vec3f) {}
+fn differentiate_later_vertex(sf: Surface, wi: vec3f, mat: SurfaceMaterial, mat_prev: SurfaceMaterial, weight: vec3f, weight_prev: vec3f) {}
 // The hook for the environment's derivative: a render leaves env_gradients off.
 fn differentiate_env(d: vec3f, weight: vec3f) {}
 

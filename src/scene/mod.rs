@@ -35,9 +35,10 @@ pub struct Triangle {
     /// Vertex UV0 (zero when the mesh has none).
     pub uv: [Vec2; 3],
     /// Vertex tangents for normal maps (xyz, and w = ±1: the bitangent is
-    /// cross(normal, tangent) x w, glTF's TANGENT); zero where the file gives none and the
-    /// material has no normal map. A normal-mapped triangle without them gets MikkTSpace
-    /// tangents when loaded, or (built in code) its face's tangent from its UVs on upload.
+    /// cross(normal, tangent) x w, glTF's TANGENT): the file's, or MikkTSpace's when loaded
+    /// from UVs; zero for a primitive without UVs. A normal-mapped triangle (a glTF or an
+    /// optimized normal map) built in code without them gets its face's tangent from its UVs
+    /// on upload.
     pub t: [Vec4; 3],
     /// Index into [`Scene::materials`].
     pub material: u32,

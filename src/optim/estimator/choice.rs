@@ -32,7 +32,7 @@ pub const RESTIR_MAX_TEXELS_CHEAP_PRIMAL: u64 = 1 << 20;
 /// The rule in one sentence, with its thresholds (for `psrestir estimators` and reports).
 pub fn rule() -> String {
     format!(
-        "the baseline where the environment is recovered (the light's fit is plain Monte Carlo \
+        "the baseline where a normal map is optimized (ReSTIR does not optimize one), where the environment is recovered (the light's fit is plain Monte Carlo \
          in every estimator and needs iterations) and with indirect light (max_depth above 1: \
          with whole paths reused, ReSTIR with its best step ended at 0.93x the baseline's \
          texture error on gallery and 1.09x on atelier, measured at 60 s on lavapipe: no gain \
@@ -58,6 +58,8 @@ pub struct Regime {
     pub max_depth: u32,
     /// Whether the environment is recovered with the textures.
     pub recovers_light: bool,
+    /// Whether a normal map is optimized (ReSTIR does not optimize one).
+    pub normal_maps: bool,
 }
 
 impl Regime {
@@ -135,7 +137,14 @@ impl MethodChoice {
 /// merge leaves the budget many iterations; else the baseline.
 fn auto(r: &Regime) -> Choice {
     let (d, q) = (r.samples_per_texel(), r.primal_ratio());
-    let (method, why) = if r.recovers_light {
+    let (method, why) = if r.normal_maps {
+        (
+            Method::BASELINE,
+            "a normal map optimized: ReSTIR's stored paths keep their directions in the \
+             shading frame, which a normal map being optimized moves"
+                .to_string(),
+        )
+    } else if r.recovers_light {
         (
             Method::BASELINE,
             "the environment recovered: every estimator fits the light by plain Monte Carlo, \
@@ -247,6 +256,7 @@ mod tests {
             texels,
             max_depth: 1,
             recovers_light: false,
+            normal_maps: false,
         }
     }
 
@@ -294,6 +304,12 @@ mod tests {
         let c = MethodChoice::Auto.resolve(&light);
         assert_eq!(c.method, Method::BASELINE);
         assert!(c.reason.contains("environment recovered"), "{c:?}");
+        // With a normal map optimized, the baseline whatever the sampling.
+        let normals = Regime {
+            normal_maps: true,
+            ..regime(2, 1, 128 * 128, 256 * 256)
+        };
+        assert_eq!(MethodChoice::Auto.resolve(&normals).method, Method::BASELINE);
     }
 
     #[test]

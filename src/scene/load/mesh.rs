@@ -85,9 +85,8 @@ impl Loader<'_> {
         }))
     }
 
-    /// Tangents of each face's vertices, for a normal-mapped material: the file's, or
-    /// MikkTSpace's from the positions, normals and UV0; and the warnings of a textured
-    /// material without UVs.
+    /// Tangents of each face's vertices: the file's, or MikkTSpace's from the positions,
+    /// normals and UV0; and the warnings of a textured material without UVs.
     fn face_tangents(&mut self, a: &Attributes, material: u32, what: &str) -> Option<Vec<Vec4>> {
         let m = &self.scene.materials[material as usize];
         if a.uvs.is_none() {
@@ -103,11 +102,14 @@ impl Loader<'_> {
                 ));
             }
         }
+        // Every primitive with UVs gets tangents (the file's, or MikkTSpace's), so that a
+        // normal map optimized on a material without one has the frame a glTF viewer will
+        // use for the exported map; a face of a primitive without UVs has none.
         let m = &self.scene.materials[material as usize];
         let normal_mapped = m.normal_texture.is_some();
         match (&a.tangents, &a.uvs) {
-            _ if !normal_mapped => None,
             (Some(t), _) => Some(a.indices.iter().map(|&i| t[i as usize]).collect()),
+            (None, None) if !normal_mapped => None,
             (None, Some(uv)) => crate::scene::tangents::mikktspace(
                 &a.positions,
                 a.normals.as_deref(),

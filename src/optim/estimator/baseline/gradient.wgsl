@@ -42,8 +42,8 @@ struct GradientParams {
 var<private> pixel_adj: vec3f;
 
 // A later vertex of the path (shared/integrator.wgsl, camera_path with replay).
-fn differentiate_later_vertex(mi: u32, uv: vec2f, wo: vec3f, wi: vec3f, mat: SurfaceMaterial, mat_prev: SurfaceMaterial, weight: vec3f, weight_prev: vec3f) {
-    scatter(materials[mi], uv, brdf_eval_cos_grad(mat, wo, wi), weight, pixel_adj);
+fn differentiate_later_vertex(sf: Surface, wi: vec3f, mat: SurfaceMaterial, mat_prev: SurfaceMaterial, weight: vec3f, weight_prev: vec3f) {
+    scatter(materials[sf.material], sf.uv, surface_brdf_grad(sf, mat, wi, false), weight, pixel_adj);
 }
 
 @compute @workgroup_size(64)

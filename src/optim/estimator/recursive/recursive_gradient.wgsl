@@ -92,7 +92,7 @@ fn scatter2(m: Material, uv: vec2f, bg: BrdfGrad, bg_prev: BrdfGrad, weight: vec
     if all(weight == vec3f(0.0)) && all(weight_prev == vec3f(0.0)) {
         return;
     }
-    for (var slot = 0u; slot < 3u; slot++) {
+    for (var slot = 0u; slot < SLOTS; slot++) {
         let pi = material_param(m, slot);
         if pi == NONE {
             continue;
@@ -121,13 +121,13 @@ var<private> pixel_adj_prev: vec3f;
 
 // A later vertex of the path (shared/integrator.wgsl, camera_path with replay), under both
 // states.
-fn differentiate_later_vertex(mi: u32, uv: vec2f, wo: vec3f, wi: vec3f, mat: SurfaceMaterial, mat_prev: SurfaceMaterial, weight: vec3f, weight_prev: vec3f) {
-    let bg = brdf_eval_cos_grad(mat, wo, wi);
+fn differentiate_later_vertex(sf: Surface, wi: vec3f, mat: SurfaceMaterial, mat_prev: SurfaceMaterial, weight: vec3f, weight_prev: vec3f) {
+    let bg = surface_brdf_grad(sf, mat, wi, false);
     var bg_prev = bg;
     if rp.have_prev != 0u {
-        bg_prev = brdf_eval_cos_grad(mat_prev, wo, wi);
+        bg_prev = surface_brdf_grad(sf, mat_prev, wi, true);
     }
-    scatter2(materials[mi], uv, bg, bg_prev, weight, weight_prev, pixel_adj, pixel_adj_prev);
+    scatter2(materials[sf.material], sf.uv, bg, bg_prev, weight, weight_prev, pixel_adj, pixel_adj_prev);
 }
 
 @compute @workgroup_size(64)
@@ -169,8 +169,12 @@ fn differentiate_pixel(id: vec3u) {
             let ts = technique_sample(g, t);
             var grad_prev = ts.grad;
             if rp.have_prev != 0u {
-                // The same path under the previous textures, with the glTF inputs it kept.
+                // The same path under the previous textures, with the glTF inputs it kept
+                // (and, with an optimized normal map, the previous normal's frame).
                 grad_prev = vertex_grad_prev(ts.vertex);
+                if g.m.param_normal != NONE {
+                    grad_prev = surface_brdf_grad(g.sf, material_at(g.sf, true), ts.ds.wi, true);
+                }
             }
             scatter2(g.m, g.sf.uv, ts.grad, grad_prev, ts.ds.radiance * ts.ds.scale, ts.radiance_prev * ts.ds.scale, adj, adj_prev);
         }

@@ -34,6 +34,7 @@ use crate::gpu::{encode_timed_pass, encode_timed_pass_indirect};
 use crate::gpu::{grid_2d, Gpu};
 use crate::optim::{pass_seed, FaultCounts, PassKind, PassTimer, Seeds};
 use crate::render::WORKGROUP;
+use crate::vocab::Slot;
 use crate::{Error, Result};
 
 pub mod abi;
@@ -217,6 +218,14 @@ impl Restir {
             return Err(Error::Invalid(format!(
                 "ReSTIR handles images of at most 2^{} pixels, the task has {n_pixels}",
                 reservoir::CAMERA_SHIFT
+            )));
+        }
+        if let Some(t) = s.set.textures.iter().find(|t| t.slot == Slot::Normal) {
+            return Err(Error::Invalid(format!(
+                "ReSTIR does not optimize normal maps (texture `{}`): its stored paths keep \
+                 their directions in the shading frame, which the normal map moves; use \
+                 --method baseline or recursive",
+                t.name()
             )));
         }
         let n_tris = s.scene.info.n_tris;

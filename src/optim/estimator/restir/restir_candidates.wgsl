@@ -150,11 +150,11 @@ var<private> pixel_adj: vec3f;
 
 // A later vertex of the path (shared/integrator.wgsl, camera_path with replay): its
 // derivative added into `grad`, plain Monte Carlo, as the baseline adds it.
-fn differentiate_later_vertex(mi: u32, uv: vec2f, wo: vec3f, wi: vec3f, mat: SurfaceMaterial, mat_prev: SurfaceMaterial, weight: vec3f, weight_prev: vec3f) {
+fn differentiate_later_vertex(sf: Surface, wi: vec3f, mat: SurfaceMaterial, mat_prev: SurfaceMaterial, weight: vec3f, weight_prev: vec3f) {
     if cp.phase != 0u {
         return;
     }
-    scatter(materials[mi], uv, brdf_eval_cos_grad(mat, wo, wi), weight, pixel_adj);
+    scatter(materials[sf.material], sf.uv, surface_brdf_grad(sf, mat, wi, false), weight, pixel_adj);
 }
 
 // A path offered to the texels of one vertex's optimized textures: that vertex's material
@@ -182,7 +182,8 @@ fn offer_path(o: Offer, adj: vec3f, adj_t: vec3f, adj_t_prev: vec3f, info: u32) 
         return;
     }
     let m = materials[o.mi];
-    for (var slot = 0u; slot < 3u; slot++) {
+    // (ReSTIR does not optimize normal maps: src/optim/estimator/restir refuses the slot.)
+    for (var slot = 0u; slot < SLOT_NORMAL; slot++) {
         let pi = material_param(m, slot);
         if pi == NONE {
             continue;
