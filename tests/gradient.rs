@@ -326,8 +326,12 @@ fn roughness_and_metallic_gradients_at_depth_3_match_finite_differences() {
 
 /// A normal map's values and the target's for the 2x2 tests: tilted normals (Z well above
 /// the floor), different per texel.
-const NORMAL_VALUES: [f32; 12] = [0.6, 0.45, 0.9, 0.4, 0.55, 0.95, 0.5, 0.35, 0.85, 0.65, 0.6, 0.9];
-const NORMAL_TARGET: [f32; 12] = [0.4, 0.55, 0.9, 0.55, 0.4, 0.9, 0.62, 0.5, 0.95, 0.45, 0.45, 0.85];
+const NORMAL_VALUES: [f32; 12] = [
+    0.6, 0.45, 0.9, 0.4, 0.55, 0.95, 0.5, 0.35, 0.85, 0.65, 0.6, 0.9,
+];
+const NORMAL_TARGET: [f32; 12] = [
+    0.4, 0.55, 0.9, 0.55, 0.4, 0.9, 0.62, 0.5, 0.95, 0.45, 0.45, 0.85,
+];
 
 /// An optimized normal map: its texels move the shading frame of every BRDF evaluation (light
 /// and BSDF samples, the directions held fixed), which the derivative follows through the
@@ -342,7 +346,10 @@ fn normal_map_gradient_matches_finite_differences() {
     point_only.triangles.retain(|t| t.material != 2);
     let mut lamp_only = shadow_scene();
     lamp_only.lights.clear();
-    for (scene, filter) in [(point_only, Filter::Nearest), (lamp_only.clone(), Filter::Bilinear)] {
+    for (scene, filter) in [
+        (point_only, Filter::Nearest),
+        (lamp_only.clone(), Filter::Bilinear),
+    ] {
         check_gradient_on(
             scene,
             Slot::Normal,

@@ -975,8 +975,8 @@ fn optimization_recovers_a_known_normal_map() {
         init: Init::Vector(vec![0.5, 0.5, 1.0]),
         learning_rate: Some(0.02),
     };
-    let set = ParamSet::from_specs(&scene, &[spec], Filter::Bilinear, std::path::Path::new("t"))
-        .unwrap();
+    let set =
+        ParamSet::from_specs(&scene, &[spec], Filter::Bilinear, std::path::Path::new("t")).unwrap();
     let settings = Settings {
         seed: 3,
         primal_spp: 4,
@@ -986,8 +986,14 @@ fn optimization_recovers_a_known_normal_map() {
         ..Settings::new(48, 48, vec![0])
     };
     let flat = set.values.clone();
-    let probe = Optimizer::new(&gpu, &scene, set.clone(), settings.clone(), &[Image::new(48, 48)])
-        .unwrap();
+    let probe = Optimizer::new(
+        &gpu,
+        &scene,
+        set.clone(),
+        settings.clone(),
+        &[Image::new(48, 48)],
+    )
+    .unwrap();
     probe.write_params(&truth).unwrap();
     let target = probe.render(0, 1024, 77).unwrap();
     drop(probe);
@@ -995,11 +1001,20 @@ fn optimization_recovers_a_known_normal_map() {
         method: psrestir::optim::Method::RESTIR,
         ..settings.clone()
     };
-    let err = Optimizer::new(&gpu, &scene, set.clone(), restir, std::slice::from_ref(&target))
-        .err()
-        .expect("ReSTIR accepted a normal map")
-        .to_string();
-    assert!(err.contains("normal maps") && err.contains("plane"), "{err}");
+    let err = Optimizer::new(
+        &gpu,
+        &scene,
+        set.clone(),
+        restir,
+        std::slice::from_ref(&target),
+    )
+    .err()
+    .expect("ReSTIR accepted a normal map")
+    .to_string();
+    assert!(
+        err.contains("normal maps") && err.contains("plane"),
+        "{err}"
+    );
     let mut opt = Optimizer::new(&gpu, &scene, set, settings, &[target]).unwrap();
     let before = mean_angle(&flat, &truth);
     for _ in 0..150 {

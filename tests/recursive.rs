@@ -45,7 +45,11 @@ fn settings(method: Method, spp: u32, seed: u32) -> Settings {
 fn state(slot: Slot, n: usize, k: usize, lo: f32) -> Vec<f32> {
     (0..n)
         .map(|i| {
-            let start = if slot == Slot::Normal && i % 3 == 2 { 0.9 } else { 0.5 };
+            let start = if slot == Slot::Normal && i % 3 == 2 {
+                0.9
+            } else {
+                0.5
+            };
             (start + 0.04 * k as f32 * ((i * 7 % 5) as f32 - 2.0) / 2.0).max(lo)
         })
         .collect()

@@ -309,7 +309,10 @@ mod tests {
             normal_maps: true,
             ..regime(2, 1, 128 * 128, 256 * 256)
         };
-        assert_eq!(MethodChoice::Auto.resolve(&normals).method, Method::BASELINE);
+        assert_eq!(
+            MethodChoice::Auto.resolve(&normals).method,
+            Method::BASELINE
+        );
     }
 
     #[test]
