@@ -24,6 +24,10 @@ struct Surface {
 // NORMAL_Z_FLOOR in src/vocab.rs): a lower Z reads as this one.
 const NORMAL_Z_FLOOR: f32 = 0.1;
 
+// An optimized normal map's normal that the viewer sees at a smaller cosine than this is bent
+// towards the viewer to it (optimized_normal).
+const NORMAL_BEND: f32 = 0.01;
+
 // Geometry at the point (hit.b1, hit.b2) of triangle hit.tri seen from o, normals turned
 // towards the viewer for double-sided materials. The point is interpolated from the
 // triangle's vertices (not o + t d), so that the same (o, triangle, barycentrics) always give
@@ -121,14 +125,26 @@ fn optimized_normal(sf: Surface, prev: bool) -> MappedNormal {
         return out;
     }
     let s = select(-1.0, 1.0, sf.front);
-    let n = m * (s / len);
-    if !(dot(n, sf.wo) > 1e-6) {
-        return out;
+    var n = m * (s / len);
+    let eye = mat3x3f(vec3f(1.0, 0.0, 0.0), vec3f(0.0, 1.0, 0.0), vec3f(0.0, 0.0, 1.0));
+    // d(s m / |m|)/dm = s (I - n n^T) / |m|; dm/dRGB = 2 tbn (Z's column 0 below the floor).
+    var d = (eye - mat3x3f(n * n.x, n * n.y, n * n.z)) * (s / len);
+    d = d * mat3x3f(2.0 * sf.tbn[0], 2.0 * sf.tbn[1], select(0.0, 2.0, z > NORMAL_Z_FLOOR) * sf.tbn[2]);
+    let c = dot(n, sf.wo);
+    if c < NORMAL_BEND {
+        // Bent towards the viewer until n.wo = NORMAL_BEND (before normalizing): continuous
+        // where a falling back to the geometric normal would jump, and so differentiable.
+        let nb = n + (NORMAL_BEND - c) * sf.wo;
+        let lb = length(nb);
+        if !(lb > 0.0) {
+            return out;
+        }
+        n = nb / lb;
+        let wo = sf.wo;
+        d = (eye - mat3x3f(n * n.x, n * n.y, n * n.z)) * (1.0 / lb) * (eye - mat3x3f(wo * wo.x, wo * wo.y, wo * wo.z)) * d;
     }
     out.n = n;
-    // d(s m / |m|)/dm = s (I - n n^T) / |m|; dm/dRGB = 2 tbn (Z's column 0 below the floor).
-    let proj = (mat3x3f(vec3f(1.0, 0.0, 0.0), vec3f(0.0, 1.0, 0.0), vec3f(0.0, 0.0, 1.0)) - mat3x3f(n * n.x, n * n.y, n * n.z)) * (s / len);
-    out.d = proj * mat3x3f(2.0 * sf.tbn[0], 2.0 * sf.tbn[1], select(0.0, 2.0, z > NORMAL_Z_FLOOR) * sf.tbn[2]);
+    out.d = d;
     return out;
 }
 
