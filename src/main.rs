@@ -500,8 +500,12 @@ fn print_summary(summary: &job::run::RunSummary, path: &std::path::Path) {
             .per_texture
             .iter()
             .map(|t| {
+                let angle = t
+                    .angle_deg_observed
+                    .map(|(a, b)| format!(" (mean angle {a:.2} -> {b:.2} degrees)"))
+                    .unwrap_or_default();
                 format!(
-                    "{} {:.4} -> {:.4}",
+                    "{} {:.4} -> {:.4}{angle}",
                     t.texture, t.initial_rmse_observed, t.final_rmse_observed
                 )
             })

@@ -68,6 +68,13 @@ pub fn decode_normal(rgb: [f32; 3]) -> [f32; 3] {
     [v[0] / len, v[1] / len, v[2] / len]
 }
 
+/// The angle in degrees between the normals that two normal-map texels stand for.
+pub fn normal_angle_deg(a: [f32; 3], b: [f32; 3]) -> f64 {
+    let (p, q) = (decode_normal(a), decode_normal(b));
+    let d = p[0] as f64 * q[0] as f64 + p[1] as f64 * q[1] as f64 + p[2] as f64 * q[2] as f64;
+    d.clamp(-1.0, 1.0).acos().to_degrees()
+}
+
 /// Texture filter for optimized textures.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -183,4 +190,37 @@ pub fn check_texture(
         ));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A texel stands for the normal glTF stores (2 RGB - 1, normalized), its Z floored; the
+    /// angle between two is that of their normals; a normal map's init is an RGB triple.
+    #[test]
+    fn normal_texels_decode_as_gltf_stores_them() {
+        let tilt = 30f32.to_radians();
+        let texel = [0.5 + 0.5 * tilt.sin(), 0.5, 0.5 + 0.5 * tilt.cos()];
+        let n = decode_normal(texel);
+        assert!((n[0] - tilt.sin()).abs() < 1e-6 && (n[2] - tilt.cos()).abs() < 1e-6);
+        assert!((normal_angle_deg(texel, [0.5, 0.5, 1.0]) - 30.0).abs() < 1e-4);
+        // Below the floor: Z reads as NORMAL_Z_FLOOR, the normal stays above the surface.
+        let low = decode_normal([1.0, 0.5, 0.2]);
+        assert!((low[2] - NORMAL_Z_FLOOR / (1.0 + NORMAL_Z_FLOOR.powi(2)).sqrt()).abs() < 1e-6);
+        // The renderer's floor is this one.
+        let wgsl = include_str!("../shaders/shared/surface.wgsl");
+        assert!(wgsl.contains(&format!("const NORMAL_Z_FLOOR: f32 = {NORMAL_Z_FLOOR};")));
+        let spec = |init| TextureSpec {
+            material: "m".into(),
+            slot: Slot::Normal,
+            resolution: [4, 4],
+            init,
+            learning_rate: None,
+        };
+        let e = check_texture(&spec(Init::Scalar(0.5)), &[]).unwrap_err();
+        assert_eq!(e.0, "init");
+        assert!(e.1.contains("[0.5, 0.5, 1.0]"), "{}", e.1);
+        assert!(check_texture(&spec(Init::Vector(vec![0.5, 0.5, 1.0])), &[]).is_ok());
+    }
 }

@@ -538,7 +538,11 @@ fn committed_bench_scenes_are_what_the_generator_writes() {
     let dir = tempfile::tempdir().unwrap();
     psrestir::assets::bench_scenes::write_bench_scenes(dir.path()).unwrap();
     let committed = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/bench");
-    for name in psrestir::assets::bench_scenes::BENCH_SCENES {
+    let bench = psrestir::assets::bench_scenes::BENCH_SCENES;
+    for name in bench
+        .iter()
+        .chain(&psrestir::assets::bench_scenes::STUDY_SCENES)
+    {
         let fresh_dir = dir.path().join(name);
         let mut files: Vec<_> = std::fs::read_dir(&fresh_dir)
             .unwrap()
@@ -555,8 +559,13 @@ fn committed_bench_scenes_are_what_the_generator_writes() {
                 "scenes/bench/{name}/{f:?} differs from the generator: run `psrestir make-scenes`"
             );
         }
-        // Every bundled scene loads as a task.
-        psrestir::task::Task::load(&committed.join(name).join("task.toml")).unwrap();
+        // Every bundled task file loads.
+        for e in std::fs::read_dir(committed.join(name)).unwrap() {
+            let f = e.unwrap().file_name().to_string_lossy().to_string();
+            if f.starts_with("task") && f.ends_with(".toml") {
+                psrestir::task::Task::load(&committed.join(name).join(f)).unwrap();
+            }
+        }
     }
 }
 

@@ -3,7 +3,8 @@
 //! whose painting is lit only by bounced light, an atelier whose floor and wall are both
 //! recovered, the wall lit only by the floor's bounce, and an object under a sky the fit is not
 //! given (`outdoor`), each a glTF scene holding the ground-truth texture and a task file that
-//! starts the optimized texture from a constant.
+//! starts the optimized texture from a constant; and beside them a brick wall whose normal
+//! map is recovered (`wall`, [`STUDY_SCENES`]).
 use super::authoring::{box_triangles, lathe, png_bytes, quad_facing, uv_sphere, GltfBuilder};
 use super::bundled::{look_at, srgb8, write_sky};
 use crate::image_io::write_atomic;
@@ -14,11 +15,17 @@ use std::path::Path;
 
 mod outdoor;
 mod room;
+mod wall;
 
 /// Names of the benchmark scenes, in the order `psrestir bench` runs them.
 pub const BENCH_SCENES: [&str; 8] = [
     "vase", "lattice", "dish", "sphere", "room", "gallery", "atelier", "outdoor",
 ];
+
+/// Scenes that `psrestir make-scenes` writes beside the benchmark scenes but `psrestir bench`
+/// does not run: `wall`, whose three tasks compare fits with and without its normal map
+/// (docs/guide.md, "Normal maps").
+pub const STUDY_SCENES: [&str; 1] = ["wall"];
 
 /// Texture resolution of the ground truth and of the optimized textures.
 const TEX: u32 = 256;
@@ -32,7 +39,8 @@ pub fn write_bench_scenes(dir: &Path) -> Result<()> {
     room::write_room(&dir.join("room"))?;
     room::write_gallery(&dir.join("gallery"))?;
     room::write_atelier(&dir.join("atelier"))?;
-    outdoor::write_outdoor(&dir.join("outdoor"))
+    outdoor::write_outdoor(&dir.join("outdoor"))?;
+    wall::write_wall(&dir.join("wall"))
 }
 
 pub(super) fn create(dir: &Path) -> Result<()> {
@@ -94,8 +102,13 @@ smoothness = 0.03
 
 /// `task.toml`: the scene-specific head, the shared settings, then the textures.
 pub(super) fn write_task(dir: &Path, head: &str, textures: &str) -> Result<()> {
+    write_task_named(dir, "task.toml", head, textures)
+}
+
+/// [`write_task`] into the file `name`.
+pub(super) fn write_task_named(dir: &Path, name: &str, head: &str, textures: &str) -> Result<()> {
     let text = format!("{head}{TASK_COMMON}{textures}");
-    write_atomic(&dir.join("task.toml"), text.as_bytes())
+    write_atomic(&dir.join(name), text.as_bytes())
 }
 
 /// An emissive square of side `size` at `at`, facing `toward`, with `color` x `strength`.

@@ -141,14 +141,20 @@ impl Metrics<'_> {
         let per = |v: &[f32]| {
             crate::optim::observed::rmse_observed_per_texture(&p.set, v, r, self.observed)
         };
+        let angles = |v: &[f32]| {
+            crate::optim::observed::mean_angle_observed_per_texture(&p.set, v, r, self.observed)
+        };
+        let (a0, a1) = (angles(&p.set.values), angles(values));
         p.set
             .textures
             .iter()
             .zip(per(&p.set.values).into_iter().zip(per(values)))
-            .map(|(t, (a, b))| TextureErrors {
+            .enumerate()
+            .map(|(i, (t, (a, b)))| TextureErrors {
                 texture: t.name(),
                 initial_rmse_observed: a,
                 final_rmse_observed: b,
+                angle_deg_observed: a0[i].zip(a1[i]),
             })
             .collect()
     }
@@ -232,6 +238,9 @@ pub struct TextureErrors {
     pub initial_rmse_observed: f64,
     /// At the end.
     pub final_rmse_observed: f64,
+    /// A normal map's mean angle error (degrees) over its observed texels, at the start and
+    /// at the end.
+    pub angle_deg_observed: Option<(f64, f64)>,
 }
 
 /// A render as it is compared with its target: times the camera's gain per channel.
@@ -279,14 +288,28 @@ pub const METRICS_HEADER: &str =
     "iteration,elapsed_s,loss,texture_rmse,texture_rmse_observed,image_relmse,learning_rate";
 
 /// Write `texture_errors.csv` atomically: per optimized texture, its observed-texel RMSE at
-/// the start and at the end of the run.
+/// the start and at the end of the run; where a normal map is optimized, two more columns
+/// with its mean angle error in degrees (empty for the other textures).
 pub fn write_texture_errors(path: &Path, errors: &[TextureErrors]) -> Result<()> {
-    let mut s = String::from("texture,initial_rmse_observed,final_rmse_observed\n");
+    let angles = errors.iter().any(|t| t.angle_deg_observed.is_some());
+    let mut s = String::from("texture,initial_rmse_observed,final_rmse_observed");
+    s.push_str(if angles {
+        ",initial_angle_deg_observed,final_angle_deg_observed\n"
+    } else {
+        "\n"
+    });
     for t in errors {
         s.push_str(&format!(
-            "{},{:.6e},{:.6e}\n",
+            "{},{:.6e},{:.6e}",
             t.texture, t.initial_rmse_observed, t.final_rmse_observed
         ));
+        if angles {
+            match t.angle_deg_observed {
+                Some((a, b)) => s.push_str(&format!(",{a:.4},{b:.4}")),
+                None => s.push(','),
+            }
+        }
+        s.push('\n');
     }
     image_io::write_atomic(path, s.as_bytes())
 }

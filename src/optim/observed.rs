@@ -6,6 +6,7 @@ use super::Optimizer;
 use crate::render::layout::GpuCameraInfo;
 use crate::render::params::ParamSet;
 use crate::render::WORKGROUP;
+use crate::vocab::Slot;
 use crate::Result;
 use bytemuck::{Pod, Zeroable};
 
@@ -122,6 +123,35 @@ pub fn rmse_observed_per_texture(
             }
         })
         .collect()
+}
+
+/// Per texture, for a normal map ([`Slot::Normal`]) the mean angle in degrees between the
+/// normals that its observed texels and the truth's stand for
+/// ([`crate::vocab::decode_normal`]); None for other slots or without an observed texel.
+pub fn mean_angle_observed_per_texture(
+    set: &ParamSet,
+    values: &[f32],
+    truth: &[f32],
+    observed: &[bool],
+) -> Vec<Option<f64>> {
+    let mut texel = 0usize;
+    let mut out = Vec::with_capacity(set.textures.len());
+    for t in &set.textures {
+        let n_texels = (t.width * t.height) as usize;
+        let angles: Vec<f64> = (0..n_texels)
+            .filter(|&local| {
+                t.slot == Slot::Normal && observed.get(texel + local).copied().unwrap_or(false)
+            })
+            .map(|local| {
+                let b = t.offset as usize + local * 3;
+                let rgb = |v: &[f32]| [v[b], v[b + 1], v[b + 2]];
+                crate::vocab::normal_angle_deg(rgb(values), rgb(truth))
+            })
+            .collect();
+        texel += n_texels;
+        out.push((!angles.is_empty()).then(|| angles.iter().sum::<f64>() / angles.len() as f64));
+    }
+    out
 }
 
 /// Per texture, the sum of squared errors over its observed texels' channels and their count.
