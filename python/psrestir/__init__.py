@@ -261,12 +261,17 @@ class DiffRender:
 
         ``textures`` lists what to recover, each ``(material, slot, (width, height))`` or
         ``(material, slot, (width, height), init)`` with ``slot`` one of ``"base_color"``,
-        ``"roughness"``, ``"metallic"`` (``init``: a value or an RGB triple; by default 0.5
-        gray, roughness 0.5, metallic 0). ``cameras`` names the file's cameras (None: all);
+        ``"roughness"``, ``"metallic"``, ``"normal"`` (``init``: a value or an RGB triple; by
+        default 0.5 gray, roughness 0.5, metallic 0, a flat normal map [0.5, 0.5, 1]). ``cameras`` names the file's cameras (None: all);
         ``env`` an environment map (lat-long EXR or HDR); ``max_depth`` the path depth
         (1: direct light). :meth:`targets` renders the file's own materials.
         """
-        defaults = {"base_color": [0.5, 0.5, 0.5], "roughness": 0.5, "metallic": 0.0}
+        defaults = {
+            "base_color": [0.5, 0.5, 0.5],
+            "roughness": 0.5,
+            "metallic": 0.0,
+            "normal": [0.5, 0.5, 1.0],
+        }
         specs = []
         for t in textures:
             if len(t) not in (3, 4):
@@ -337,7 +342,7 @@ class DiffRender:
 
     def set_texture(self, name, values):
         """Replace a texture's values: a float32 array of its shape, finite, within its
-        slot's range (base color and metallic [0, 1], roughness [0.02, 1])."""
+        slot's range (base color, metallic and normal maps [0, 1], roughness [0.02, 1])."""
         self._op.set_texture(name, values)
 
     def render(self, spp=4, seed=0, primal=None):

@@ -301,6 +301,19 @@ fn optimize<'py>(
             },
         )
     })?;
+    let d = summary_dict(py, &summary)?;
+    if let Some(e) = pending.lock().unwrap_or_else(|p| p.into_inner()).take() {
+        d.set_item("error", e.into_value(py))?;
+    }
+    Ok(d)
+}
+
+/// `optimize`'s result as a dict: figures, final textures, environment, relit errors,
+/// uncertainty, the cameras' gains and each texture's observed-texel errors.
+fn summary_dict<'py>(
+    py: Python<'py>,
+    summary: &psrestir::job::run::RunSummary,
+) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("iterations", summary.iterations)?;
     d.set_item("elapsed_s", summary.elapsed_s)?;
@@ -360,9 +373,6 @@ fn optimize<'py>(
         per.set_item(&t.texture, (t.initial_rmse_observed, t.final_rmse_observed))?;
     }
     d.set_item("rmse_observed_per_texture", per)?;
-    if let Some(e) = pending.lock().unwrap_or_else(|p| p.into_inner()).take() {
-        d.set_item("error", e.into_value(py))?;
-    }
     Ok(d)
 }
 

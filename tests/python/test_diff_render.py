@@ -209,3 +209,22 @@ def test_from_scene_needs_no_task_file(tmp_path, monkeypatch):
     assert op.observed("sphere_roughness").shape == (4, 4)
     with pytest.raises(psrestir.InvalidArgument, match="expected \\(material, slot"):
         psrestir.DiffRender.from_scene(SCENE, [("sphere", "roughness")])
+
+
+def test_a_normal_map_is_a_texture_like_the_others(tmp_path, monkeypatch):
+    from conftest import SCENE, SKY
+
+    monkeypatch.chdir(tmp_path)
+    kw = dict(cameras=["main"], width=32, height=32, env=SKY)
+    op = psrestir.DiffRender.from_scene(SCENE, [("sphere", "normal", (8, 4))], **kw)
+    assert op.texture_shapes == {"sphere_normal": (4, 8, 3)}
+    # Flat by default: glTF's (0.5, 0.5, 1).
+    np.testing.assert_allclose(op.texture("sphere_normal"), np.tile([0.5, 0.5, 1.0], (4, 8, 1)))
+    img = op.render(spp=4, seed=0)[0]
+    grads = op.backward([(2.0 / img.size) * (img - op.targets()[0] * 0.5)])
+    assert grads["sphere_normal"].shape == (4, 8, 3)
+    assert np.abs(grads["sphere_normal"][..., :2]).sum() > 0
+    with pytest.raises(psrestir.InvalidArgument, match="normal maps"):
+        psrestir.DiffRender.from_scene(
+            SCENE, [("sphere", "normal", (8, 4))], method="restir", **kw
+        )

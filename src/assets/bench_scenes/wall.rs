@@ -59,10 +59,18 @@ fn normal_at(u: f32, v: f32) -> Vec3 {
     .normalize()
 }
 
-/// A 2 m x 2 m brick wall facing +Z under a grazing sun from the left and the sky, its base
+/// A 2 m x 2 m brick wall facing +Z under a grazing sun from the upper left and the sky, its base
 /// color and normal map 256², two cameras; and the same wall without its normal map.
 pub fn write_wall(dir: &Path) -> Result<()> {
     create(dir)?;
+    write_textures(dir)?;
+    write_scenes(dir)?;
+    write_sky(&dir.join("sky.exr"))?;
+    write_tasks(dir)
+}
+
+/// The base color (bricks of varied reds in a light mortar) and the normal map.
+fn write_textures(dir: &Path) -> Result<()> {
     let color = texture(|u, v| {
         let c = match brick(u, v) {
             None => [0.62, 0.6, 0.56],
@@ -94,6 +102,11 @@ pub fn write_wall(dir: &Path) -> Result<()> {
         ]
     });
     write_png(dir, "wall_normal.png", &normals)?;
+    Ok(())
+}
+
+/// `scene.gltf` (with the normal map) and `scene_flat.gltf` (without).
+fn write_scenes(dir: &Path) -> Result<()> {
     for (file, with_normals) in [("scene.gltf", true), ("scene_flat.gltf", false)] {
         let mut b = GltfBuilder::new();
         let ci = b.add_image_uri("wall_color", "wall_color.png");
@@ -138,7 +151,11 @@ pub fn write_wall(dir: &Path) -> Result<()> {
         b.set_scene(&nodes);
         b.write_gltf(&dir.join(file), false)?;
     }
-    write_sky(&dir.join("sky.exr"))?;
+    Ok(())
+}
+
+/// The three tasks on the same targets.
+fn write_tasks(dir: &Path) -> Result<()> {
     let head = |what: &str, scene: &str, out: &str| {
         format!(
             r#"# Normal-map scene "wall": {what}
