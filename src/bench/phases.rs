@@ -272,54 +272,41 @@ pub(super) fn optimization_phase(
     let mut opt = contender_optimizer(gpu, task, prep, o, who, tuned)?;
     let truth = prep.reference.as_deref();
     let observed = opt.observed_texels()?.to_vec();
-    // Every pass compiled before the clock starts.
-    opt.prepare()?;
-    let points = o.curve_points.max(2);
-    let mut next_eval = 1u32;
-    let mut curve = Vec::new();
-    let mut seconds = 0.0;
-    let mut passes: Option<(PassTimes, u32)> = None;
-    let mut counted = Counted::default();
-    let mut last_image = None;
-    let name = who.name();
-    loop {
-        let eval_due = seconds >= o.budget_s * next_eval as f64 / (points - 1) as f64;
-        if seconds >= o.budget_s || eval_due {
-            let (e, img) = evaluate(&opt, prep, task, o.eval_spp)?;
-            last_image = Some(img);
-            if let Some(p) = curve.last_mut() {
-                let p: &mut CurvePoint = p;
-                p.image_relmse = Some(e);
-            }
-            next_eval += 1;
-            progress.message(format!(
-                "{name}: {seconds:.0}/{:.0} s, image relMSE {e:.3e}",
-                o.budget_s
-            ));
-        }
-        if seconds >= o.budget_s {
-            break;
-        }
-        // Both estimators follow the task's schedule over the same budget.
-        opt.set_progress(seconds / o.budget_s);
-        let t0 = Instant::now();
-        let stats = opt.step()?;
-        seconds += t0.elapsed().as_secs_f64();
-        if opt.iteration % 8 == 2 {
-            if let Some(t) = opt.pass_times()? {
-                let (s, n) = passes.get_or_insert((PassTimes::default(), 0));
-                s.add(&t);
-                *n += 1;
-            }
-            counted.sample(&opt)?;
-        }
-        curve.push(curve_point(&opt, prep, &observed, stats.loss, seconds)?);
-    }
+    let mut watch = BenchWatch {
+        prep,
+        task,
+        o,
+        observed: &observed,
+        progress,
+        name: who.name(),
+        points: o.curve_points.max(2),
+        next_eval: 1,
+        curve: Vec::new(),
+        counted: Counted::default(),
+        last_image: None,
+    };
+    let mut sampler = crate::optim::run_loop::PassSampler::default();
+    // Only the iterations count: every evaluation, curve point and sample is set aside.
+    let mut clock = crate::optim::run_loop::Clock::start(0.0);
+    let limits = crate::optim::run_loop::Limits {
+        first: 0,
+        iterations: None,
+        seconds: Some(o.budget_s),
+    };
+    opt.run_observed(limits, &mut clock, &mut [&mut sampler, &mut watch])?;
+    let seconds = clock.seconds();
+    let BenchWatch {
+        curve,
+        counted,
+        last_image,
+        ..
+    } = watch;
     // The loop ends with an evaluation at the end of the budget.
     let final_image = match last_image {
         Some(img) => img,
         None => evaluate(&opt, prep, task, o.eval_spp)?.1,
     };
+    let passes = sampler.mean();
     let iterations = opt.iteration;
     let per_texture_observed = match truth {
         Some(r) => crate::optim::observed::rmse_observed_per_texture(
@@ -336,13 +323,74 @@ pub(super) fn optimization_phase(
         relit,
         ms_per_iteration: 1000.0 * seconds / iterations.max(1) as f64,
         iterations,
-        passes: passes.map(|(s, n)| s.divided(n as f64)),
+        passes,
         counters_per_iteration: counted.per_iteration(),
         state_bytes_per_texel: opt.state_bytes_per_texel(),
         curve,
         final_image,
         per_texture_observed,
     })
+}
+
+/// The bench's observer of a contender's run: evaluations at evenly spaced times and at the
+/// end of the budget, a point of the error curve per iteration, and the estimator's counters
+/// on the iterations the passes are sampled on; all of it set aside on the clock.
+struct BenchWatch<'a> {
+    prep: &'a Problem,
+    task: &'a Task,
+    o: &'a BenchOptions,
+    observed: &'a [bool],
+    progress: &'a Progress,
+    name: String,
+    points: u32,
+    next_eval: u32,
+    curve: Vec<CurvePoint>,
+    counted: Counted,
+    last_image: Option<Image>,
+}
+
+impl crate::optim::run_loop::Observer for BenchWatch<'_> {
+    fn before(
+        &mut self,
+        opt: &mut Optimizer,
+        clock: &mut crate::optim::run_loop::Clock,
+        last: bool,
+    ) -> Result<std::ops::ControlFlow<()>> {
+        let (o, seconds) = (self.o, clock.seconds());
+        let due = seconds >= o.budget_s * self.next_eval as f64 / (self.points - 1) as f64;
+        if last || due {
+            let (e, img) = clock.aside(|| evaluate(opt, self.prep, self.task, o.eval_spp))?;
+            self.last_image = Some(img);
+            if let Some(p) = self.curve.last_mut() {
+                p.image_relmse = Some(e);
+            }
+            self.next_eval += 1;
+            self.progress.message(format!(
+                "{}: {seconds:.0}/{:.0} s, image relMSE {e:.3e}",
+                self.name, o.budget_s
+            ));
+        }
+        Ok(std::ops::ControlFlow::Continue(()))
+    }
+
+    fn after(
+        &mut self,
+        opt: &mut Optimizer,
+        stats: &crate::optim::StepStats,
+        _: f64,
+        clock: &mut crate::optim::run_loop::Clock,
+    ) -> Result<std::ops::ControlFlow<()>> {
+        let seconds = clock.seconds();
+        let point = clock.aside(|| -> Result<CurvePoint> {
+            // (The passes' sampler runs first: its iterations are the counters' too.)
+            if opt.iteration % 8 == 1 {
+                self.counted.sample(opt)?;
+            }
+            curve_point(opt, self.prep, self.observed, stats.loss, seconds)
+        })?;
+        self.curve.push(point);
+        Ok(std::ops::ControlFlow::Continue(()))
+    }
 }
 
 /// The point of the error curve after an iteration that took the run to `seconds`.

@@ -5,31 +5,9 @@
 use super::Problem;
 use crate::image_io::{self, Image};
 use crate::optim::checkpoint::MetricRow;
-use crate::optim::{Optimizer, PassTimes};
+use crate::optim::Optimizer;
 use crate::Result;
 use std::path::Path;
-
-/// The mean of the sampled iterations' pass times.
-#[derive(Default)]
-pub(super) struct PassMean {
-    sum: Option<PassTimes>,
-    n: u32,
-}
-
-impl PassMean {
-    pub(super) fn add(&mut self, t: Option<PassTimes>) {
-        if let Some(t) = t {
-            self.n += 1;
-            self.sum.get_or_insert_with(PassTimes::default).add(&t);
-        }
-    }
-
-    pub(super) fn mean(&self) -> Option<PassTimes> {
-        self.sum
-            .filter(|_| self.n > 0)
-            .map(|s| s.divided(self.n as f64))
-    }
-}
 
 /// What each iteration's row of `metrics.csv` measures, outside the timed optimization.
 pub(super) struct Metrics<'a> {

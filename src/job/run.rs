@@ -4,9 +4,7 @@
 pub use super::metrics::{
     evaluate, rmse, write_metrics, write_texture_errors, TextureErrors, METRICS_HEADER,
 };
-use super::metrics::{
-    log_exposures, log_observed, progress_bar, progress_message, Metrics, PassMean,
-};
+use super::metrics::{log_exposures, log_observed, progress_bar, progress_message, Metrics};
 use super::outputs::write_outputs;
 pub use super::outputs::{
     false_color, gradient_scalars, plot_metrics, save_observed, save_textures, texture_image,
@@ -16,11 +14,13 @@ use super::watch::{LossWatch, PlateauWatch};
 use super::Problem;
 use crate::gpu::Gpu;
 use crate::optim::checkpoint::{Checkpoint, Header, MetricRow};
-use crate::optim::{FaultCounts, Optimizer, PassTimes};
+use crate::optim::run_loop::{Clock, Limits, Observer, PassSampler};
+use crate::optim::{FaultCounts, Optimizer, PassTimes, StepStats};
 use crate::render::params::ParamSet;
 use crate::task::Task;
 use crate::task::{named_cameras, task_configuration, task_method, task_settings};
 use crate::{Error, Result};
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -275,7 +275,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         },
         out,
         faults,
-        pass_times: session.pass_times.mean(),
+        pass_times: session.pass_times,
         interrupted: session.interrupted,
         plateau: session.plateau,
         warnings: session.warnings,
@@ -410,7 +410,7 @@ struct Session {
     /// Iterations in this session.
     iterations: u32,
     last_loss: f64,
-    pass_times: PassMean,
+    pass_times: Option<PassTimes>,
     /// Whether an interrupt stopped the loop early (one during the final writes does not
     /// count).
     interrupted: bool,
@@ -446,7 +446,9 @@ impl Watches {
 }
 
 /// Step `opt` until the task's (or the options') budget is spent or an interrupt comes,
-/// with a metrics row per iteration, the progress bar, the loss watch and checkpoints.
+/// with a metrics row per iteration, the progress bar, the loss watch and checkpoints: the
+/// optimizer's loop ([`Optimizer::run_observed`]) with a [`JobWatch`] and the passes'
+/// sampler.
 fn iterate(
     opt: &mut Optimizer,
     task: &Task,
@@ -456,113 +458,144 @@ fn iterate(
     mut rows: Vec<MetricRow>,
     elapsed_before: f64,
 ) -> Result<Session> {
-    let max_iter = opts.iterations.or(task.optimizer.iterations);
-    let budget = opts.time_budget_s.or(task.optimizer.time_budget_s);
-    let bar = opts
-        .progress
-        .then(|| progress_bar(max_iter, budget, opt.iteration, elapsed_before));
-    let session_start = Instant::now();
-    // Seconds of this session spent on evaluation renders (not counted as optimization).
-    let mut excluded = 0.0;
+    let limits = Limits {
+        first: 0,
+        iterations: opts.iterations.or(task.optimizer.iterations),
+        seconds: opts.time_budget_s.or(task.optimizer.time_budget_s),
+    };
+    let bar = opts.progress.then(|| {
+        progress_bar(
+            limits.iterations,
+            limits.seconds,
+            opt.iteration,
+            elapsed_before,
+        )
+    });
+    let mut clock = Clock::start(elapsed_before);
     let start_iter = opt.iteration;
     if rows.is_empty() {
         // The start: texture and image errors of the initial textures.
-        let t0 = Instant::now();
-        rows.push(metrics.start_row(opt)?);
-        excluded += t0.elapsed().as_secs_f64();
+        rows.push(clock.aside(|| metrics.start_row(opt))?);
     }
-    let mut session = Session {
-        last_loss: rows.last().and_then(|r| r.loss).unwrap_or(f64::NAN),
-        rows,
-        seconds: 0.0,
-        iterations: 0,
-        pass_times: PassMean::default(),
-        interrupted: false,
-        plateau: None,
-        warnings: Vec::new(),
-    };
-    let (ckpt_every, ckpt_every_s) = (
-        task.optimizer.checkpoint_every,
-        task.optimizer.checkpoint_every_s,
-    );
-    let mut last_ckpt = Instant::now();
-    let elapsed_now =
-        |excluded: f64| elapsed_before + session_start.elapsed().as_secs_f64() - excluded;
     let stop_on_plateau = task
         .optimizer
         .stop_on_plateau
-        .unwrap_or(budget.is_some() && max_iter.is_none());
-    let earlier = session.rows.get(1..).unwrap_or_default();
-    let mut watches = Watches::new(opt, task, stop_on_plateau, earlier);
-    loop {
-        let elapsed = elapsed_now(excluded);
-        if max_iter.is_some_and(|n| opt.iteration >= n) || budget.is_some_and(|b| elapsed >= b) {
-            break;
-        }
-        if opts
+        .unwrap_or(limits.seconds.is_some() && limits.iterations.is_none());
+    let earlier = rows.get(1..).unwrap_or_default();
+    let watches = Watches::new(opt, task, stop_on_plateau, earlier);
+    let mut watch = JobWatch {
+        session: Session {
+            last_loss: rows.last().and_then(|r| r.loss).unwrap_or(f64::NAN),
+            rows,
+            seconds: 0.0,
+            iterations: 0,
+            pass_times: None,
+            interrupted: false,
+            plateau: None,
+            warnings: Vec::new(),
+        },
+        watches,
+        opts,
+        metrics,
+        saver,
+        bar,
+        limits,
+        checkpoint_every: (
+            task.optimizer.checkpoint_every,
+            task.optimizer.checkpoint_every_s,
+        ),
+        last_checkpoint: Instant::now(),
+    };
+    let mut sampler = PassSampler::default();
+    opt.run_observed(limits, &mut clock, &mut [&mut sampler, &mut watch])?;
+    let mut session = watch.session;
+    if let Some(b) = &watch.bar {
+        b.finish_and_clear();
+    }
+    // The last row's evaluation render, like every evaluation, is not optimization time.
+    clock.aside(|| metrics.complete_last(&mut session.rows, opt))?;
+    session.seconds = clock.session_seconds();
+    session.iterations = opt.iteration - start_iter;
+    session.pass_times = sampler.mean();
+    Ok(session)
+}
+
+/// The job's observer of its loop: the interrupt, a metrics row per iteration (its
+/// measurements set aside on the clock), the loss and plateau watches, the progress bar, the
+/// row hook and the checkpoints.
+struct JobWatch<'a> {
+    session: Session,
+    watches: Watches,
+    opts: &'a RunOptions,
+    metrics: &'a Metrics<'a>,
+    saver: &'a Saver,
+    bar: Option<indicatif::ProgressBar>,
+    limits: Limits,
+    /// Iterations and seconds between checkpoints (0: never by that measure).
+    checkpoint_every: (u32, f64),
+    last_checkpoint: Instant,
+}
+
+impl Observer for JobWatch<'_> {
+    fn before(&mut self, _: &mut Optimizer, _: &mut Clock, last: bool) -> Result<ControlFlow<()>> {
+        let interrupted = self
+            .opts
             .interrupt
             .as_ref()
-            .is_some_and(|f| f.load(std::sync::atomic::Ordering::SeqCst))
-        {
-            session.interrupted = true;
-            break;
+            .is_some_and(|f| f.load(std::sync::atomic::Ordering::SeqCst));
+        if interrupted && !last {
+            self.session.interrupted = true;
+            return Ok(ControlFlow::Break(()));
         }
-        let by_iterations = max_iter.map_or(0.0, |n| opt.iteration as f64 / n.max(1) as f64);
-        let progress = by_iterations.max(budget.map_or(0.0, |b| elapsed / b));
-        opt.set_progress(progress);
-        let stats = opt.step()?;
+        Ok(ControlFlow::Continue(()))
+    }
+
+    fn after(
+        &mut self,
+        opt: &mut Optimizer,
+        stats: &StepStats,
+        progress: f64,
+        clock: &mut Clock,
+    ) -> Result<ControlFlow<()>> {
+        let session = &mut self.session;
         session.last_loss = stats.loss;
-        if let Some(w) = watches.loss.observe(stats.loss, progress) {
+        if let Some(w) = self.watches.loss.observe(stats.loss, progress) {
             log::warn!("{w}");
             session.warnings.push(w);
         }
-        // Timestamps are read back on every 8th iteration only: one readback less per
-        // iteration, and the mean is as good.
-        if (opt.iteration - start_iter) % 8 == 1 {
-            session.pass_times.add(opt.pass_times()?);
-        }
-        let elapsed = elapsed_now(excluded);
-        let t0 = Instant::now();
-        let row = metrics.row(opt, stats.loss, elapsed)?;
-        excluded += t0.elapsed().as_secs_f64();
-        if let Some(hook) = &opts.on_row {
+        let elapsed = clock.seconds();
+        let row = clock.aside(|| self.metrics.row(opt, stats.loss, elapsed))?;
+        if let Some(hook) = &self.opts.on_row {
             (hook.0)(&row);
         }
-        let converged = watches
+        let converged = self
+            .watches
             .plateau
             .as_mut()
             .and_then(|p| p.observe(row.iteration, stats.loss, row.image_relmse, progress));
         session.rows.push(row);
-        if let Some(b) = &bar {
-            b.set_position(if max_iter.is_some() {
+        if let Some(b) = &self.bar {
+            b.set_position(if self.limits.iterations.is_some() {
                 opt.iteration as u64
             } else {
                 elapsed as u64
             });
             b.set_message(progress_message(&session.rows));
         }
-        let by_iterations = ckpt_every > 0 && opt.iteration % ckpt_every == 0;
-        let by_time = ckpt_every_s > 0.0 && last_ckpt.elapsed().as_secs_f64() >= ckpt_every_s;
+        let (every, every_s) = self.checkpoint_every;
+        let by_iterations = every > 0 && opt.iteration % every == 0;
+        let by_time = every_s > 0.0 && self.last_checkpoint.elapsed().as_secs_f64() >= every_s;
         if by_iterations || by_time {
-            saver.save(opt, &session.rows, elapsed)?;
-            last_ckpt = Instant::now();
+            self.saver.save(opt, &session.rows, elapsed)?;
+            self.last_checkpoint = Instant::now();
         }
         if let Some(why) = converged {
             log::info!("{why}");
             session.plateau = Some(why);
-            break;
+            return Ok(ControlFlow::Break(()));
         }
+        Ok(ControlFlow::Continue(()))
     }
-    if let Some(b) = &bar {
-        b.finish_and_clear();
-    }
-    // The last row's evaluation render, like every evaluation, is not optimization time.
-    let t0 = Instant::now();
-    metrics.complete_last(&mut session.rows, opt)?;
-    excluded += t0.elapsed().as_secs_f64();
-    session.seconds = session_start.elapsed().as_secs_f64() - excluded;
-    session.iterations = opt.iteration - start_iter;
-    Ok(session)
 }
 
 /// The checkpoint to resume from: with `resume` and one in the output folder. `--resume`

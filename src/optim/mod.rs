@@ -14,6 +14,7 @@ pub mod observed;
 pub mod primal;
 pub mod prior;
 mod problem;
+pub mod run_loop;
 pub mod schedule;
 pub mod step;
 pub mod texture_export;
@@ -521,42 +522,54 @@ impl Optimizer {
     pub fn run(
         &mut self,
         stop: Stop,
-        mut on_iteration: impl FnMut(&Progress) -> std::ops::ControlFlow<()>,
+        on_iteration: impl FnMut(&Progress) -> std::ops::ControlFlow<()>,
     ) -> Result<Option<Progress>> {
         if stop.iterations.is_none() && stop.time_budget.is_none() {
             return Err(Error::Invalid(
                 "Optimizer::run needs a number of iterations, a time budget or both".into(),
             ));
         }
-        self.prepare()?;
-        let start = std::time::Instant::now();
-        let mut last = None;
-        let mut done = 0;
-        loop {
-            if stop.iterations.is_some_and(|n| done >= n)
-                || stop.time_budget.is_some_and(|b| start.elapsed() >= b)
-            {
-                break;
-            }
-            let by_iterations = stop.iterations.map_or(0.0, |n| done as f64 / n as f64);
-            let by_time = stop.time_budget.map_or(0.0, |b| {
-                start.elapsed().as_secs_f64() / b.as_secs_f64().max(1e-9)
-            });
-            self.set_progress(by_iterations.max(by_time));
-            let stats = self.step()?;
-            done += 1;
-            let p = Progress {
-                iteration: self.iteration,
-                in_this_run: done,
-                loss: stats.loss,
-                elapsed: start.elapsed(),
-            };
-            last = Some(p);
-            if on_iteration(&p).is_break() {
-                break;
+        /// The caller's callback as an observer, with the last iteration's progress.
+        struct Callback<F> {
+            first: u32,
+            last: Option<Progress>,
+            on_iteration: F,
+        }
+        impl<F: FnMut(&Progress) -> std::ops::ControlFlow<()>> run_loop::Observer for Callback<F> {
+            fn after(
+                &mut self,
+                opt: &mut Optimizer,
+                stats: &StepStats,
+                _: f64,
+                clock: &mut run_loop::Clock,
+            ) -> Result<std::ops::ControlFlow<()>> {
+                let p = Progress {
+                    iteration: opt.iteration,
+                    in_this_run: opt.iteration - self.first,
+                    loss: stats.loss,
+                    elapsed: std::time::Duration::from_secs_f64(clock.seconds().max(0.0)),
+                };
+                self.last = Some(p);
+                Ok((self.on_iteration)(&p))
             }
         }
-        Ok(last)
+        let first = self.iteration;
+        let limits = run_loop::Limits {
+            first,
+            iterations: stop.iterations.map(|n| first.saturating_add(n)),
+            seconds: stop.time_budget.map(|d| d.as_secs_f64()),
+        };
+        let mut callback = Callback {
+            first,
+            last: None,
+            on_iteration,
+        };
+        self.run_observed(
+            limits,
+            &mut run_loop::Clock::start(0.0),
+            &mut [&mut callback],
+        )?;
+        Ok(callback.last)
     }
 
     /// The GPU buffer that holds the current values of all optimized textures (`f32`s, laid

@@ -1,0 +1,194 @@
+//! The one iteration loop: [`Optimizer::run_observed`] steps until a limit (iterations,
+//! seconds of optimization) or an observer ends it, and hands each iteration to its
+//! [`Observer`]s: the job's metrics, checkpoints, progress bar and loss watches
+//! (`crate::job::run`), the bench's evaluations and samples (`crate::bench`), a caller's
+//! callback ([`Optimizer::run`]), and [`PassSampler`], the passes' mean times. The time an
+//! observer sets aside ([`Clock::aside`]: evaluation renders, metrics) is not optimization
+//! time: budgets, progress and the schedule read [`Clock::seconds`].
+use super::{Optimizer, PassTimes, StepStats};
+use crate::Result;
+use std::ops::ControlFlow;
+use std::time::Instant;
+
+/// A run's clock: the seconds of optimization, those of a resumed run's earlier sessions
+/// (`offset`) plus the wall time since the clock started, less what observers set aside.
+#[derive(Debug)]
+pub struct Clock {
+    start: Instant,
+    offset: f64,
+    aside: f64,
+}
+
+impl Clock {
+    /// A clock started now at `offset` seconds.
+    pub fn start(offset: f64) -> Clock {
+        Clock {
+            start: Instant::now(),
+            offset,
+            aside: 0.0,
+        }
+    }
+
+    /// Seconds of optimization so far.
+    pub fn seconds(&self) -> f64 {
+        self.offset + self.session_seconds()
+    }
+
+    /// Seconds of optimization since the clock started (the offset left out).
+    pub fn session_seconds(&self) -> f64 {
+        self.start.elapsed().as_secs_f64() - self.aside
+    }
+
+    /// Run `f` and set its time aside: not optimization time.
+    pub fn aside<T>(&mut self, f: impl FnOnce() -> T) -> T {
+        let t0 = Instant::now();
+        let out = f();
+        self.aside += t0.elapsed().as_secs_f64();
+        out
+    }
+}
+
+/// Where a run stops by itself: at an iteration count (of the optimizer's
+/// [`Optimizer::iteration`], a resumed run's included) and after seconds of optimization
+/// ([`Clock::seconds`]), whichever comes first. Without either, only an observer ends it.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Limits {
+    /// The iteration count the run's share of iterations counts from (0 for a job, whose
+    /// schedule spans its resumed sessions; the optimizer's count for a call of
+    /// [`Optimizer::run`]).
+    pub first: u32,
+    /// The iteration count at which the run stops.
+    pub iterations: Option<u32>,
+    /// The seconds of optimization after which it stops.
+    pub seconds: Option<f64>,
+}
+
+impl Limits {
+    /// How far the run is, in [0, 1]: the larger of the iterations' and the seconds' shares
+    /// (0 without limits). The schedule follows it.
+    pub fn progress(&self, iteration: u32, seconds: f64) -> f64 {
+        let by_iterations = self.iterations.map_or(0.0, |n| {
+            iteration.saturating_sub(self.first) as f64 / n.saturating_sub(self.first).max(1) as f64
+        });
+        let by_time = self.seconds.map_or(0.0, |b| seconds / b.max(1e-9));
+        by_iterations.max(by_time)
+    }
+
+    fn reached(&self, iteration: u32, seconds: f64) -> bool {
+        self.iterations.is_some_and(|n| iteration >= n)
+            || self.seconds.is_some_and(|b| seconds >= b)
+    }
+}
+
+/// Something that watches a run. Both calls may end it (`Break`); time they set aside on the
+/// clock does not count as optimization.
+pub trait Observer {
+    /// Before each iteration, and once more when a limit is reached (with `last` set): an
+    /// evaluation due at this time, an interrupt.
+    fn before(
+        &mut self,
+        _opt: &mut Optimizer,
+        _clock: &mut Clock,
+        _last: bool,
+    ) -> Result<ControlFlow<()>> {
+        Ok(ControlFlow::Continue(()))
+    }
+
+    /// After each iteration, with its statistics and the run's progress (as the schedule
+    /// read it).
+    fn after(
+        &mut self,
+        opt: &mut Optimizer,
+        stats: &StepStats,
+        progress: f64,
+        clock: &mut Clock,
+    ) -> Result<ControlFlow<()>>;
+}
+
+/// How a run ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Ended {
+    /// At a limit.
+    Limit,
+    /// An observer ended it.
+    Observer,
+}
+
+/// The passes' mean times, read back on every 8th iteration of a run (one readback less per
+/// iteration, and the mean is as good); the readback is set aside on the clock.
+#[derive(Debug, Default)]
+pub struct PassSampler {
+    sum: Option<(PassTimes, u32)>,
+    seen: u32,
+}
+
+impl PassSampler {
+    /// The mean of the samples so far.
+    pub fn mean(&self) -> Option<PassTimes> {
+        self.sum.as_ref().map(|(s, n)| s.divided(*n as f64))
+    }
+
+    /// Whether this iteration is one it samples (the run's 1st, 9th, 17th, ...): other
+    /// observers sample their own counters on the same iterations.
+    pub fn due(&self) -> bool {
+        self.seen % 8 == 1
+    }
+}
+
+impl Observer for PassSampler {
+    fn after(
+        &mut self,
+        opt: &mut Optimizer,
+        _: &StepStats,
+        _: f64,
+        clock: &mut Clock,
+    ) -> Result<ControlFlow<()>> {
+        self.seen += 1;
+        if self.due() {
+            if let Some(t) = clock.aside(|| opt.pass_times())? {
+                let (s, n) = self.sum.get_or_insert((PassTimes::default(), 0));
+                s.add(&t);
+                *n += 1;
+            }
+        }
+        Ok(ControlFlow::Continue(()))
+    }
+}
+
+impl Optimizer {
+    /// Step until `limits` or an observer ends the run, every pass compiled first. Before each
+    /// iteration every observer's `before` is called, then the limits are checked (at a limit
+    /// the observers' `before` is called once more with `last`); the schedule's progress is
+    /// set from the limits and the clock; after the step every observer's `after` is called
+    /// (all of them, even when one ends the run).
+    pub fn run_observed(
+        &mut self,
+        limits: Limits,
+        clock: &mut Clock,
+        observers: &mut [&mut dyn Observer],
+    ) -> Result<Ended> {
+        self.prepare()?;
+        loop {
+            let last = limits.reached(self.iteration, clock.seconds());
+            let mut stop = false;
+            for o in observers.iter_mut() {
+                stop |= o.before(self, clock, last)?.is_break();
+            }
+            if last {
+                return Ok(Ended::Limit);
+            }
+            if stop {
+                return Ok(Ended::Observer);
+            }
+            let progress = limits.progress(self.iteration, clock.seconds());
+            self.set_progress(progress);
+            let stats = self.step()?;
+            for o in observers.iter_mut() {
+                stop |= o.after(self, &stats, progress, clock)?.is_break();
+            }
+            if stop {
+                return Ok(Ended::Observer);
+            }
+        }
+    }
+}
