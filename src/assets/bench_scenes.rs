@@ -22,9 +22,9 @@ pub const BENCH_SCENES: [&str; 8] = [
     "vase", "lattice", "dish", "sphere", "room", "gallery", "atelier", "outdoor",
 ];
 
-/// Scenes that `psrestir make-scenes` writes beside the benchmark scenes but `psrestir bench`
-/// does not run: `wall`, whose three tasks compare fits with and without its normal map
-/// (docs/guide.md, "Normal maps").
+/// Scenes that `psrestir make-scenes` writes beside the benchmark scenes and `psrestir bench`
+/// runs only when named: `wall`, whose three tasks compare fits with and without its normal
+/// map (docs/guide.md, "Normal maps").
 pub const STUDY_SCENES: [&str; 1] = ["wall"];
 
 /// Texture resolution of the ground truth and of the optimized textures.

@@ -34,7 +34,6 @@ use crate::gpu::{encode_timed_pass, encode_timed_pass_indirect};
 use crate::gpu::{grid_2d, Gpu};
 use crate::optim::{pass_seed, FaultCounts, PassKind, PassTimer, Seeds};
 use crate::render::WORKGROUP;
-use crate::vocab::Slot;
 use crate::{Error, Result};
 
 pub mod abi;
@@ -124,6 +123,7 @@ pub const KIND: Kind = Kind {
     },
     warnings,
     every_texel: abi::reservoir::whole_paths,
+    refuses: refused_slot,
     build: |setup| Ok(Box::new(Restir::new(setup)?)),
 };
 
@@ -204,6 +204,14 @@ pub(crate) struct Restir {
     moment_updates: u32,
 }
 
+/// The slots ReSTIR does not optimize: normal maps, whose texels move the shading frame that
+/// its stored paths keep their last direction in (and that its stored paths' factors are
+/// evaluated without).
+fn refused_slot(slot: crate::vocab::Slot) -> Option<&'static str> {
+    (slot == crate::vocab::Slot::Normal)
+        .then_some("its stored paths keep their directions in the shading frame, which normal maps move")
+}
+
 impl Restir {
     /// An error naming what this estimator cannot handle in `s`.
     fn check_setup(s: &Setup) -> Result<()> {
@@ -220,13 +228,13 @@ impl Restir {
                 reservoir::CAMERA_SHIFT
             )));
         }
-        if let Some(t) = s.set.textures.iter().find(|t| t.slot == Slot::Normal) {
-            return Err(Error::Invalid(format!(
-                "ReSTIR does not optimize normal maps (texture `{}`): its stored paths keep \
-                 their directions in the shading frame, which the normal map moves; use \
-                 --method baseline or recursive",
-                t.name()
-            )));
+        if let Some(why) = s
+            .set
+            .textures
+            .iter()
+            .find_map(|t| super::refusal(super::Method::RESTIR, &t.name(), t.slot))
+        {
+            return Err(Error::Invalid(why));
         }
         let n_tris = s.scene.info.n_tris;
         if u64::from(n_tris) > 1 << reservoir::TRI_BITS {
