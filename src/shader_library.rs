@@ -66,6 +66,14 @@ pub const SHARED: &[(&str, &str)] = &[
         include_str!("../shaders/shared/surface.wgsl"),
     ),
     (
+        "shared/normal_map",
+        include_str!("../shaders/shared/normal_map.wgsl"),
+    ),
+    (
+        "shared/normal_map_off",
+        include_str!("../shaders/shared/normal_map_off.wgsl"),
+    ),
+    (
         "shared/path_encoding",
         include_str!("../shaders/shared/path_encoding.wgsl"),
     ),
@@ -138,14 +146,30 @@ impl Gpu {
         self.compute_pipeline_in(library(), pass, layouts)
     }
 
+    /// [`Gpu::compute_pipeline`] with the modules `off` names in their `_off` form.
+    pub fn compute_pipeline_without(
+        &self,
+        pass: &str,
+        layouts: &[&wgpu::BindGroupLayout],
+        off: &[&str],
+    ) -> Result<wgpu::ComputePipeline> {
+        self.compute_pipeline_in_without(library(), pass, layouts, off)
+    }
+
     /// The layout of bind group `group` of the crate's pass `pass` ([`Gpu::pass_layout_in`]).
     pub fn pass_layout(&self, pass: &str, group: u32) -> Result<wgpu::BindGroupLayout> {
         self.pass_layout_in(library(), pass, group)
     }
 
-    /// Compile the crate's `passes` on a second device ([`Gpu::compile_elsewhere_in`]).
-    pub fn compile_elsewhere(&self, passes: &[&str]) -> Option<std::thread::JoinHandle<()>> {
-        self.compile_elsewhere_in(library(), passes)
+    /// Compile the crate's `passes` on a second device ([`Gpu::compile_elsewhere_in`]) in the
+    /// form a task that does or does not optimize a normal map needs
+    /// ([`crate::render::off_modules`]).
+    pub fn compile_elsewhere(
+        &self,
+        passes: &[&str],
+        normal_maps: bool,
+    ) -> Option<std::thread::JoinHandle<()>> {
+        self.compile_elsewhere_in(library(), passes, crate::render::off_modules(normal_maps))
     }
 }
 
@@ -161,6 +185,11 @@ mod tests {
                 if let Err(e) = library().validate_for(pass, tracer) {
                     panic!("{tracer:?}: {e}");
                 }
+            }
+            // And without the normal-map code (GpuScene::off_modules).
+            let off = ["shared/normal_map"];
+            if let Err(e) = library().validate_without(pass, Tracer::Software, &off) {
+                panic!("without shared/normal_map: {e}");
             }
             n += 1;
         }

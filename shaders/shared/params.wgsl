@@ -57,9 +57,8 @@ fn footprint_merged(fp: Footprint) -> Footprint {
     return out;
 }
 
-// Slots of a material that a texture can replace: base color, metallic, roughness, and the
-// normal map (SLOT_NORMAL).
-const SLOTS: u32 = 4u;
+// The slot of the normal map among those a texture can replace (base color, metallic,
+// roughness; SLOTS of them, shared/normal_map.wgsl).
 const SLOT_NORMAL: u32 = 3u;
 
 // Index of the optimized texture replacing slot (0 base color, 1 metallic, 2 roughness,

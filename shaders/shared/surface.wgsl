@@ -4,6 +4,7 @@
 #import shared/lights
 #import shared/brdf
 #import shared/params
+#import shared/normal_map
 
 struct Surface {
     p: vec3f,
@@ -24,9 +25,6 @@ struct Surface {
 // NORMAL_Z_FLOOR in src/vocab.rs): a lower Z reads as this one.
 const NORMAL_Z_FLOOR: f32 = 0.1;
 
-// An optimized normal map's normal that the viewer sees at a smaller cosine than this is bent
-// towards the viewer to it (optimized_normal).
-const NORMAL_BEND: f32 = 0.01;
 
 // Geometry at the point (hit.b1, hit.b2) of triangle hit.tri seen from o, normals turned
 // towards the viewer for double-sided materials. The point is interpolated from the
@@ -99,64 +97,6 @@ fn tangent_frame(n: vec3f, b: vec3f, s: TriShading, tangents: bool) -> mat3x3f {
     return mat3x3f(t, cross(nn, t) * t0.w, nn);
 }
 
-// The shading normal that sf's optimized normal map gives under the current or (prev) the
-// previous iteration's textures, and its derivative with respect to the map's filtered RGB
-// (columns: d n / d R, G, B): n = normalize(tbn (2 RGB - 1)), Z floored at NORMAL_Z_FLOOR,
-// turned with the face (the back of a double-sided surface). Where the normal is degenerate
-// or faces away from the viewer it is the geometric normal, derivative zero (the same
-// fallback as an interpolated normal's). The directions are held fixed: the derivative of a
-// value that depends on the normal is its gradient in n through this matrix.
-struct MappedNormal {
-    n: vec3f,
-    d: mat3x3f,
-}
-
-fn optimized_normal(sf: Surface, prev: bool) -> MappedNormal {
-    var out = MappedNormal(sf.ng, mat3x3f());
-    let p = param_textures[materials[sf.material].param_normal];
-    let saved = use_prev_params;
-    use_prev_params = prev;
-    let rgb = param_value(p, param_footprint(p, sf.uv));
-    use_prev_params = saved;
-    let z = 2.0 * rgb.z - 1.0;
-    let m = sf.tbn * vec3f(2.0 * rgb.xy - 1.0, max(z, NORMAL_Z_FLOOR));
-    let len = length(m);
-    if !(len > 0.0) {
-        return out;
-    }
-    let s = select(-1.0, 1.0, sf.front);
-    var n = m * (s / len);
-    let eye = mat3x3f(vec3f(1.0, 0.0, 0.0), vec3f(0.0, 1.0, 0.0), vec3f(0.0, 0.0, 1.0));
-    // d(s m / |m|)/dm = s (I - n n^T) / |m|; dm/dRGB = 2 tbn (Z's column 0 below the floor).
-    var d = (eye - mat3x3f(n * n.x, n * n.y, n * n.z)) * (s / len);
-    d = d * mat3x3f(2.0 * sf.tbn[0], 2.0 * sf.tbn[1], select(0.0, 2.0, z > NORMAL_Z_FLOOR) * sf.tbn[2]);
-    let c = dot(n, sf.wo);
-    if c < NORMAL_BEND {
-        // Bent towards the viewer until n.wo = NORMAL_BEND (before normalizing): continuous
-        // where a falling back to the geometric normal would jump, and so differentiable.
-        let nb = n + (NORMAL_BEND - c) * sf.wo;
-        let lb = length(nb);
-        if !(lb > 0.0) {
-            return out;
-        }
-        n = nb / lb;
-        let wo = sf.wo;
-        d = (eye - mat3x3f(n * n.x, n * n.y, n * n.z)) * (1.0 / lb) * (eye - mat3x3f(wo * wo.x, wo * wo.y, wo * wo.z)) * d;
-    }
-    out.n = n;
-    out.d = d;
-    return out;
-}
-
-// sf's shading frame under the current or (prev) the previous iteration's textures: they
-// differ only where an optimized normal map changed.
-fn frame_of(sf: Surface, prev: bool) -> mat3x3f {
-    if !prev || materials[sf.material].param_normal == NONE {
-        return sf.frame;
-    }
-    return onb(optimized_normal(sf, true).n);
-}
-
 // BRDF x cos of sf towards wi (world space) with inputs mat and its derivatives, in sf's
 // frame under the current or (prev) the previous textures; with an optimized normal map,
 // d_normal too (the derivative with respect to the map's RGB at the point).
@@ -171,14 +111,6 @@ fn surface_brdf_grad(sf: Surface, mat: SurfaceMaterial, wi: vec3f, prev: bool) -
     return bg;
 }
 
-// The derivative of BRDF x cos (directions wo, wi in sf's frame under the state prev
-// selects) with respect to the RGB of sf's optimized normal map at the point: column c is
-// image channel c's gradient (R, G, B of the map): the BRDF's gradient in the normal
-// (brdf_normal_grad), taken to world space by the frame and back through the map's d n/d RGB.
-fn normal_rgb_grad(sf: Surface, prev: bool, mat: SurfaceMaterial, wo: vec3f, wi: vec3f) -> mat3x3f {
-    let mn = optimized_normal(sf, prev);
-    return transpose(mn.d) * onb(mn.n) * brdf_normal_grad(mat, wo, wi);
-}
 
 // A vertex tangent packed by pack_tangent (src/render/layout.rs): direction and handedness w.
 fn tangent_at(w: u32) -> vec4f {

@@ -439,7 +439,11 @@ fn compile_ahead(gpu: &Gpu, task: &Task, o: &BenchOptions) -> Option<std::thread
             }
         }
     }
-    gpu.compile_elsewhere(&passes)
+    let normal_maps = task
+        .textures
+        .iter()
+        .any(|t| t.slot == crate::vocab::Slot::Normal);
+    gpu.compile_elsewhere(&passes, normal_maps)
 }
 
 /// With `--tune`, each run's settings searched on another seed (the baseline's first, then

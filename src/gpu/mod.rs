@@ -463,8 +463,20 @@ impl Gpu {
         pass: &str,
         layouts: &[&wgpu::BindGroupLayout],
     ) -> Result<wgpu::ComputePipeline> {
+        self.compute_pipeline_in_without(library, pass, layouts, &[])
+    }
+
+    /// [`Gpu::compute_pipeline_in`] with the modules `off` names in their `_off` form
+    /// ([`shaders::Library::compose_without`]).
+    pub fn compute_pipeline_in_without(
+        &self,
+        library: &shaders::Library,
+        pass: &str,
+        layouts: &[&wgpu::BindGroupLayout],
+        off: &[&str],
+    ) -> Result<wgpu::ComputePipeline> {
         let start = std::time::Instant::now();
-        let source = library.compose_for(pass, self.tracer)?;
+        let source = library.compose_without(pass, self.tracer, off)?;
         if let Some(pipeline) = self.made_pipeline(&source, layouts) {
             self.record_pipeline(pass, start);
             return Ok(pipeline);

@@ -89,8 +89,8 @@ impl Gpu {
     }
 
     /// Whether this device has made a pipeline of `pass` (with any layouts).
-    fn has_made(&self, library: &Library, pass: &str) -> bool {
-        let Ok(source) = library.compose_for(pass, self.tracer) else {
+    fn has_made(&self, library: &Library, pass: &str, off: &[&str]) -> bool {
+        let Ok(source) = library.compose_without(pass, self.tracer, off) else {
             return false;
         };
         self.made
@@ -224,17 +224,20 @@ impl Gpu {
     /// results land in the driver's cache, where this device's own creation of the same
     /// passes finds them. Join the handle before creating them here. `None` where it would
     /// not help: a GPU (creation compiles, in parallel already), or the cache switched off.
+    /// The passes are composed with the modules `off` names in their `_off` form, as the
+    /// passes over the task's scene will be (`crate::render::GpuScene::off_modules`).
     pub fn compile_elsewhere_in(
         &self,
         library: &'static Library,
         passes: &[&str],
+        off: &'static [&'static str],
     ) -> Option<std::thread::JoinHandle<()>> {
         let cache_off = std::env::var("MESA_SHADER_CACHE_DISABLE")
             .is_ok_and(|v| matches!(v.as_str(), "1" | "true" | "TRUE" | "yes"));
         // Passes this device has made already need no compiling.
         let passes: Vec<String> = passes
             .iter()
-            .filter(|p| !self.has_made(library, p))
+            .filter(|p| !self.has_made(library, p, off))
             .map(|p| p.to_string())
             .collect();
         if self.info.device_type != wgpu::DeviceType::Cpu || cache_off || passes.is_empty() {
@@ -265,7 +268,7 @@ impl Gpu {
                         }
                     }
                     let refs: Vec<&wgpu::BindGroupLayout> = layouts.iter().collect();
-                    if let Err(e) = helper.compute_pipeline_in(library, pass, &refs) {
+                    if let Err(e) = helper.compute_pipeline_in_without(library, pass, &refs, off) {
                         log::debug!("compiling `{pass}` on a second device: {e}");
                         return;
                     }

@@ -100,9 +100,16 @@ impl Library {
 
     /// The full WGSL of a pass with its imports pasted in, tracing with `tracer`.
     pub fn compose_for(&self, pass: &str, tracer: Tracer) -> Result<String> {
+        self.compose_without(pass, tracer, &[])
+    }
+
+    /// [`Library::compose_for`] with each module that `off` names pasted in its `_off` form
+    /// (`shared/normal_map` as `shared/normal_map_off`): the same functions doing nothing, for
+    /// a feature the pass's scene does not use.
+    pub fn compose_without(&self, pass: &str, tracer: Tracer, off: &[&str]) -> Result<String> {
         let mut out = String::new();
         let mut seen = Vec::new();
-        self.include(pass, tracer, &mut out, &mut seen, 0)?;
+        self.include(pass, (tracer, off), &mut out, &mut seen, 0)?;
         if tracer == Tracer::RayQuery && seen.iter().any(|s| s == "shared/bvh_ray_query") {
             out.insert_str(0, "enable wgpu_ray_query;\n");
         }
@@ -112,13 +119,18 @@ impl Library {
     fn include(
         &self,
         name: &str,
-        tracer: Tracer,
+        form: (Tracer, &[&str]),
         out: &mut String,
         seen: &mut Vec<String>,
         depth: u32,
     ) -> Result<()> {
-        let name = match (name, tracer) {
+        let off_name;
+        let name = match (name, form.0) {
             ("shared/bvh", Tracer::RayQuery) => "shared/bvh_ray_query",
+            _ if form.1.contains(&name) => {
+                off_name = format!("{name}_off");
+                off_name.as_str()
+            }
             _ => name,
         };
         if seen.iter().any(|s| s == name) {
@@ -138,7 +150,7 @@ impl Library {
         out.push_str(&format!("// ---- {name}.wgsl\n"));
         for line in src.lines() {
             if let Some(dep) = line.trim().strip_prefix("#import ") {
-                self.include(dep.trim(), tracer, out, seen, depth + 1)?;
+                self.include(dep.trim(), form, out, seen, depth + 1)?;
                 out.push_str(&format!("// ---- (back in) {name}.wgsl\n"));
             } else {
                 out.push_str(line);
@@ -155,7 +167,17 @@ impl Library {
 
     /// [`Library::validate`] for the form of the pass that traces with `tracer`.
     pub fn validate_for(&self, pass: &str, tracer: Tracer) -> Result<naga::Module> {
-        let src = self.compose_for(pass, tracer)?;
+        self.validate_without(pass, tracer, &[])
+    }
+
+    /// [`Library::validate_for`] of the form [`Library::compose_without`] composes.
+    pub fn validate_without(
+        &self,
+        pass: &str,
+        tracer: Tracer,
+        off: &[&str],
+    ) -> Result<naga::Module> {
+        let src = self.compose_without(pass, tracer, off)?;
         let module = naga::front::wgsl::parse_str(&src).map_err(|e| Error::Shader {
             name: pass.into(),
             msg: e.emit_to_string(&src),

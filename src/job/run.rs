@@ -348,7 +348,11 @@ fn prepare(
         task_method(task, opts.method, named_cameras(task)).method,
         &opts.estimator_options,
     ));
-    let helper = gpu.compile_elsewhere(&passes);
+    let normal_maps = task
+        .textures
+        .iter()
+        .any(|t| t.slot == crate::vocab::Slot::Normal);
+    let helper = gpu.compile_elsewhere(&passes, normal_maps);
     // On an error the helper is left to finish alone (its work is a cache for later runs).
     let prep = Problem::from_task(gpu, task, out, opts.resume)?;
     if let Some(h) = helper {

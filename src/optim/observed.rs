@@ -52,7 +52,7 @@ pub(crate) fn observed_mask(
     grid: (u32, u32),
 ) -> Result<(Vec<bool>, wgpu::Buffer)> {
     let layout = gpu.pass_layout("observed_texels", 1)?;
-    let pipeline = gpu.compute_pipeline("observed_texels", &[&scene.layout, &layout])?;
+    let pipeline = scene.pipeline(gpu, "observed_texels", &[&scene.layout, &layout])?;
     let n_texels = scene.n_texels as u64;
     let mask = gpu.storage_zeroed("observed texels", n_texels * 4);
     for (k, camera) in cameras.iter().enumerate() {

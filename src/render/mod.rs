@@ -8,7 +8,7 @@ pub(crate) mod gpu_scene;
 pub mod layout;
 pub mod params;
 
-pub use gpu_scene::{wrap_trial, AccelerationStructure, GpuScene};
+pub use gpu_scene::{off_modules, wrap_trial, AccelerationStructure, GpuScene};
 
 use crate::gpu::abi::{stat, technique};
 use crate::gpu::{encode_pass, encode_timed_pass, grid_2d, Gpu};
@@ -189,10 +189,10 @@ impl Renderer {
     ) -> Result<Renderer> {
         let gscene = GpuScene::new(gpu, scene, param_set, params)?;
         let render_layout = gpu.pass_layout("render", 1)?;
-        let render_pipeline = gpu.compute_pipeline("render", &[&gscene.layout, &render_layout])?;
+        let render_pipeline = gscene.pipeline(gpu, "render", &[&gscene.layout, &render_layout])?;
         let trace_layout = gpu.pass_layout("trace_rays", 1)?;
         let trace_pipeline =
-            gpu.compute_pipeline("trace_rays", &[&gscene.layout, &trace_layout])?;
+            gscene.pipeline(gpu, "trace_rays", &[&gscene.layout, &trace_layout])?;
         Ok(Renderer {
             gpu: gpu.clone(),
             scene: gscene,

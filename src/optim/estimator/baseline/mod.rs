@@ -78,7 +78,7 @@ impl Baseline {
     pub(crate) fn new(s: &Setup) -> Result<Baseline> {
         let gpu = s.gpu;
         let layout = gpu.pass_layout("gradient", 1)?;
-        let pipeline = gpu.compute_pipeline("gradient", &[&s.scene.layout, &layout])?;
+        let pipeline = s.scene.pipeline(gpu, "gradient", &[&s.scene.layout, &layout])?;
         let stats = gpu.storage_zeroed("gradient stats", 16);
         let n_pixels = s.settings.width * s.settings.height;
         let cameras = s

@@ -263,7 +263,7 @@ impl Recursive {
             .get()
             .map_err(|(key, msg)| crate::Error::Invalid(format!("{key} {msg}")))?;
         let layout = gpu.pass_layout("recursive_gradient", 1)?;
-        let gradient = gpu.compute_pipeline("recursive_gradient", &[&s.scene.layout, &layout])?;
+        let gradient = s.scene.pipeline(gpu, "recursive_gradient", &[&s.scene.layout, &layout])?;
         let combine_layout = gpu.pass_layout("recursive_combine", 0)?;
         let combine = gpu.compute_pipeline("recursive_combine", &[&combine_layout])?;
         let n_params = s.set.values.len() as u64;

@@ -259,9 +259,9 @@ impl Restir {
         let candidate_layout = gpu.pass_layout("restir_candidates", 1)?;
         let merge_layout = gpu.pass_layout("restir_merge", 1)?;
         let candidate_pipeline =
-            gpu.compute_pipeline("restir_candidates", &[&s.scene.layout, &candidate_layout])?;
+            s.scene.pipeline(gpu, "restir_candidates", &[&s.scene.layout, &candidate_layout])?;
         let merge_pipeline =
-            gpu.compute_pipeline("restir_merge", &[&s.scene.layout, &merge_layout])?;
+            s.scene.pipeline(gpu, "restir_merge", &[&s.scene.layout, &merge_layout])?;
         let claim_layout = gpu.pass_layout("restir_claim", 0)?;
         let claim_pipeline = gpu.compute_pipeline("restir_claim", &[&claim_layout])?;
         let b = Buffers::new(s, &o);

@@ -96,7 +96,7 @@ impl Toy {
             .get()
             .map_err(|(k, m)| crate::Error::Invalid(format!("{k} {m}")))?;
         let layout = gpu.pass_layout("toy_gradient", 1)?;
-        let pipeline = gpu.compute_pipeline("toy_gradient", &[&s.scene.layout, &layout])?;
+        let pipeline = s.scene.pipeline(gpu, "toy_gradient", &[&s.scene.layout, &layout])?;
         let n = s.set.values.len() as u32;
         let grid = grid_2d(n, 64, 65535);
         let params = ToyParams {
