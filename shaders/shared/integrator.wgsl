@@ -155,9 +155,10 @@ fn max_component(v: vec3f) -> f32 {
 // backpropagation): once the path is traced and everything it brings back is known, it is
 // traced again from the same random numbers, and at every later vertex with an optimized
 // material the pass's differentiate_later_vertex receives the surface, the incident direction
-// (world space), the BRDF's inputs under each state and the factor that its derivative multiplies: for a light sample, the throughput up to the
-// vertex times the sample's weight; for the BSDF sample, what the rest of the path brings
-// back (everything less what the vertices before it brought) over the BRDF's value there.
+// (world space), the BRDF's inputs under each state and the factor that its derivative
+// multiplies: for a light sample, the throughput up to the vertex times the sample's weight;
+// for the BSDF sample, what the rest of the path brings back (everything less what the
+// vertices before it brought) over the BRDF's value there.
 // Both include the first vertex's BRDF x cos / density along its BSDF sample. The memory is
 // the same at every depth; the cost is a second tracing of the paths that reach an optimized
 // material after the first vertex.

@@ -25,7 +25,6 @@ struct Surface {
 // NORMAL_Z_FLOOR in src/vocab.rs): a lower Z reads as this one.
 const NORMAL_Z_FLOOR: f32 = 0.1;
 
-
 // Geometry at the point (hit.b1, hit.b2) of triangle hit.tri seen from o, normals turned
 // towards the viewer for double-sided materials. The point is interpolated from the
 // triangle's vertices (not o + t d), so that the same (o, triangle, barycentrics) always give
@@ -110,7 +109,6 @@ fn surface_brdf_grad(sf: Surface, mat: SurfaceMaterial, wi: vec3f, prev: bool) -
     }
     return bg;
 }
-
 
 // A vertex tangent packed by pack_tangent (src/render/layout.rs): direction and handedness w.
 fn tangent_at(w: u32) -> vec4f {
