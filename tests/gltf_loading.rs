@@ -223,3 +223,43 @@ fn the_bundled_scene_has_every_light_type_textures_and_cameras() {
     let sky = psrestir::scene::EnvMap::load(&path.with_file_name("sky.exr")).unwrap();
     assert_eq!((sky.width, sky.height), (64, 32));
 }
+
+/// An optimized normal map is exported as the material's normalTexture: loaded back, its
+/// texels are the normals that the optimized values stand for, stored as glTF stores them.
+#[test]
+fn an_optimized_normal_map_is_exported_as_the_materials_normal_texture() {
+    use psrestir::render::params::ParamSet;
+    use psrestir::task::{Filter, Init, Slot, TextureSpec};
+    let source = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/default/scene.gltf");
+    let scene = psrestir::scene::load(&source).unwrap();
+    let spec = TextureSpec {
+        material: "sphere".into(),
+        slot: Slot::Normal,
+        resolution: [4, 2],
+        init: Init::Vector(vec![0.5, 0.5, 1.0]),
+        learning_rate: None,
+    };
+    let set = ParamSet::from_specs(&scene, &[spec], Filter::Bilinear, &source).unwrap();
+    // A tilt towards +X on every texel, its Z under the floor on the last one.
+    let mut values = [0.7, 0.5, 0.9].repeat(8);
+    values[23] = 0.52;
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("optimized.glb");
+    psrestir::job::export::write_glb(&source, &out, &scene, &set, &values).unwrap();
+    let back = psrestir::scene::load(&out).unwrap();
+    let m = back.materials.iter().find(|m| m.name == "sphere").unwrap();
+    let slot = m.normal_texture.as_ref().expect("no normalTexture");
+    let img = &back.images[slot.image];
+    assert_eq!((img.width, img.height), (4, 2));
+    for (k, px) in img.rgba.iter().enumerate() {
+        let n =
+            psrestir::vocab::decode_normal([values[3 * k], values[3 * k + 1], values[3 * k + 2]]);
+        for c in 0..3 {
+            let stored = px[c] as f32 / 255.0;
+            assert!(
+                (stored - (0.5 + 0.5 * n[c])).abs() <= 0.5 / 255.0 + 1e-6,
+                "texel {k}: {px:?} vs {n:?}"
+            );
+        }
+    }
+}

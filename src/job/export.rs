@@ -2,7 +2,7 @@
 //! image embedded, and the optimized textures written into its materials.
 use crate::assets::authoring::{png_bytes, GltfBuilder};
 use crate::image_io::linear_to_srgb;
-use crate::render::params::{slot_values, ParamSet};
+use crate::render::params::{slot_values, ParamSet, ParamTexture};
 use crate::scene::Scene;
 use crate::vocab::Slot;
 use crate::{Error, Result};
@@ -78,6 +78,31 @@ fn single_buffer(
     b
 }
 
+/// Texture `t` of `values` (three channels) embedded in `b` as an RGB8 PNG, each texel
+/// encoded by `encode`; returns the glTF texture's index.
+fn embed_rgb(
+    b: &mut GltfBuilder,
+    t: &ParamTexture,
+    values: &[f32],
+    sampler: usize,
+    encode: impl Fn([f32; 3]) -> [u8; 3],
+) -> Result<usize> {
+    let v = &values[t.offset as usize..t.offset as usize + t.len()];
+    let px: Vec<[u8; 4]> = v
+        .chunks_exact(3)
+        .map(|c| {
+            let [r, g, bl] = encode([c[0], c[1], c[2]]);
+            [r, g, bl, 255]
+        })
+        .collect();
+    let img = b.add_image_embedded(
+        &format!("{} optimized", t.name()),
+        &png_bytes(t.width, t.height, &px)?,
+        "image/png",
+    );
+    Ok(b.add_texture(img, Some(sampler)))
+}
+
 /// Write `out` (.glb): the scene at `source` with the textures of `set` set to `values`.
 pub fn write_glb(
     source: &Path,
@@ -119,41 +144,18 @@ pub fn write_glb(
         };
         match t.slot {
             Slot::BaseColor => {
-                let v = &values[t.offset as usize..t.offset as usize + t.len()];
-                let px: Vec<[u8; 4]> = v
-                    .chunks_exact(3)
-                    .map(|c| {
-                        let e = |x: f32| (linear_to_srgb(x) * 255.0 + 0.5) as u8;
-                        [e(c[0]), e(c[1]), e(c[2]), 255]
-                    })
-                    .collect();
-                let img = b.add_image_embedded(
-                    &format!("{} optimized", t.name()),
-                    &png_bytes(t.width, t.height, &px)?,
-                    "image/png",
-                );
-                let tex = b.add_texture(img, Some(sampler));
+                let e = |x: f32| (linear_to_srgb(x) * 255.0 + 0.5) as u8;
+                let tex = embed_rgb(&mut b, t, values, sampler, |c| c.map(e))?;
                 let pbr = &mut b.json["materials"][m]["pbrMetallicRoughness"];
                 let alpha = pbr["baseColorFactor"][3].as_f64().unwrap_or(1.0);
                 pbr["baseColorFactor"] = json!([1.0, 1.0, 1.0, alpha]);
                 pbr["baseColorTexture"] = json!({"index": tex});
             }
             Slot::Normal => {
-                let v = &values[t.offset as usize..t.offset as usize + t.len()];
-                let px: Vec<[u8; 4]> = v
-                    .chunks_exact(3)
-                    .map(|c| {
-                        let n = crate::vocab::decode_normal([c[0], c[1], c[2]]);
-                        let e = |x: f32| ((x * 0.5 + 0.5).clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
-                        [e(n[0]), e(n[1]), e(n[2]), 255]
-                    })
-                    .collect();
-                let img = b.add_image_embedded(
-                    &format!("{} optimized", t.name()),
-                    &png_bytes(t.width, t.height, &px)?,
-                    "image/png",
-                );
-                let tex = b.add_texture(img, Some(sampler));
+                let e = |x: f32| ((x * 0.5 + 0.5).clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
+                let tex = embed_rgb(&mut b, t, values, sampler, |c| {
+                    crate::vocab::decode_normal(c).map(e)
+                })?;
                 b.json["materials"][m]["normalTexture"] = json!({"index": tex});
             }
             Slot::Roughness | Slot::Metallic => {
