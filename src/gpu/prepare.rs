@@ -225,7 +225,7 @@ impl Gpu {
     /// passes finds them. Join the handle before creating them here. `None` where it would
     /// not help: a GPU (creation compiles, in parallel already), or the cache switched off.
     /// The passes are composed with the modules `off` names in their `_off` form, as the
-    /// passes over the task's scene will be (`crate::render::GpuScene::off_modules`).
+    /// passes over the task's scene will be.
     pub fn compile_elsewhere_in(
         &self,
         library: &'static Library,

@@ -192,3 +192,27 @@ impl Optimizer {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The schedule's progress is the larger share, iterations counted from `first`; a limit
+    /// is reached at the count or the seconds; time set aside is not counted.
+    #[test]
+    fn limits_and_the_clock() {
+        let l = Limits {
+            first: 10,
+            iterations: Some(30),
+            seconds: Some(4.0),
+        };
+        assert_eq!(l.progress(20, 1.0), 0.5);
+        assert_eq!(l.progress(12, 3.0), 0.75);
+        assert!(!l.reached(29, 3.9) && l.reached(30, 0.0) && l.reached(11, 4.0));
+        assert_eq!(Limits::default().progress(5, 9.0), 0.0);
+        let mut c = Clock::start(2.0);
+        c.aside(|| std::thread::sleep(std::time::Duration::from_millis(30)));
+        assert!(c.seconds() >= 2.0 && c.seconds() < 2.02, "{}", c.seconds());
+        assert!(c.session_seconds() < 0.02);
+    }
+}
