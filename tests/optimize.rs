@@ -934,16 +934,12 @@ fn the_uncertainty_map_ranks_dim_texels_above_well_lit_ones() {
 
 /// Mean angle (degrees) between the normals that two normal maps' texels stand for.
 fn mean_angle(a: &[f32], b: &[f32]) -> f64 {
-    let n = a.len() / 3;
-    (0..n)
-        .map(|i| {
-            let p = psrestir::vocab::decode_normal([a[3 * i], a[3 * i + 1], a[3 * i + 2]]);
-            let q = psrestir::vocab::decode_normal([b[3 * i], b[3 * i + 1], b[3 * i + 2]]);
-            let d = (p[0] * q[0] + p[1] * q[1] + p[2] * q[2]).clamp(-1.0, 1.0);
-            (d as f64).acos().to_degrees()
-        })
+    let texel = |v: &[f32]| [v[0], v[1], v[2]];
+    let angles = a.chunks_exact(3).zip(b.chunks_exact(3));
+    angles
+        .map(|(p, q)| psrestir::vocab::normal_angle_deg(texel(p), texel(q)))
         .sum::<f64>()
-        / n as f64
+        / (a.len() / 3) as f64
 }
 
 /// A 4x4 normal map of bumps (tilts up to 27 degrees) recovered from a flat start on the plane

@@ -439,11 +439,7 @@ fn compile_ahead(gpu: &Gpu, task: &Task, o: &BenchOptions) -> Option<std::thread
             }
         }
     }
-    let normal_maps = task
-        .textures
-        .iter()
-        .any(|t| t.slot == crate::vocab::Slot::Normal);
-    gpu.compile_elsewhere(&passes, normal_maps)
+    gpu.compile_elsewhere(&passes, task.optimizes(crate::vocab::Slot::Normal))
 }
 
 /// With `--tune`, each run's settings searched on another seed (the baseline's first, then

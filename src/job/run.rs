@@ -348,11 +348,7 @@ fn prepare(
         task_method(task, opts.method, named_cameras(task)).method,
         &opts.estimator_options,
     ));
-    let normal_maps = task
-        .textures
-        .iter()
-        .any(|t| t.slot == crate::vocab::Slot::Normal);
-    let helper = gpu.compile_elsewhere(&passes, normal_maps);
+    let helper = gpu.compile_elsewhere(&passes, task.optimizes(crate::vocab::Slot::Normal));
     // On an error the helper is left to finish alone (its work is a cache for later runs).
     let prep = Problem::from_task(gpu, task, out, opts.resume)?;
     if let Some(h) = helper {

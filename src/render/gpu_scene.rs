@@ -582,10 +582,7 @@ impl GpuScene {
             bytes,
             param_count: param_set.values.len() as u32,
             n_texels: texel_offset,
-            normal_maps: param_set
-                .textures
-                .iter()
-                .any(|t| t.slot == crate::vocab::Slot::Normal),
+            normal_maps: param_set.find_slot(crate::vocab::Slot::Normal).is_some(),
             lights,
             light_power,
             radius: scene.bounding_sphere().1,

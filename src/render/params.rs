@@ -137,6 +137,11 @@ impl ParamSet {
         &self.values[t.offset as usize..t.offset as usize + t.len()]
     }
 
+    /// The first optimized texture replacing `slot` of any material, if any.
+    pub fn find_slot(&self, slot: Slot) -> Option<usize> {
+        self.textures.iter().position(|t| t.slot == slot)
+    }
+
     /// The optimized texture replacing `slot` of `material`, if any.
     pub fn find(&self, material: u32, slot: Slot) -> Option<usize> {
         self.textures

@@ -436,6 +436,12 @@ impl LightDef {
 }
 
 impl Task {
+    /// Whether one of the task's textures replaces `slot` (a normal map changes which
+    /// estimators can run it and how its passes are composed).
+    pub fn optimizes(&self, slot: crate::vocab::Slot) -> bool {
+        self.textures.iter().any(|t| t.slot == slot)
+    }
+
     /// Read and check a task file.
     pub fn load(path: &Path) -> Result<Task> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e.to_string()))?;

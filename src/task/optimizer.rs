@@ -193,10 +193,7 @@ pub fn task_regime(task: &Task, cameras: usize) -> Regime {
             .sum(),
         max_depth: task.max_depth,
         recovers_light: task.environment.as_ref().is_some_and(|e| e.optimize),
-        normal_maps: task
-            .textures
-            .iter()
-            .any(|t| t.slot == crate::vocab::Slot::Normal),
+        normal_maps: task.optimizes(crate::vocab::Slot::Normal),
     }
 }
 
