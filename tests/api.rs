@@ -899,3 +899,68 @@ fn backward_from_an_external_adjoint_is_the_optimizers_gradient() {
         }
     }
 }
+
+/// A capture that sees some of the scene's lights (`Camera::lights`, a task's
+/// `target.lights`) is the scene without the others: its target renders bit for bit the
+/// same (the same light choices: a light that is off has an empty interval of the choice's
+/// CDF, the others their shares of the lights that are on), and every estimator's gradient
+/// the same up to the order of its atomic sums; the same camera seeing every light differs.
+#[test]
+fn a_capture_sees_only_its_own_lights() {
+    if no_gpu() {
+        return;
+    }
+    use psrestir::scene::{EnvMap, PunctualLight, Scene};
+    let gpu = Gpu::new().unwrap();
+    // The example's lamp A, a brighter lamp B listed before it, a sky; `sees`: the camera's
+    // lights, or None for a scene without B.
+    let lit = |mut s: Scene, sees: Option<Option<Vec<usize>>>| {
+        s.env = Some(EnvMap::constant([0.2, 0.25, 0.3]));
+        if let Some(sees) = sees {
+            let b = glam::Vec3::new(-0.6, 1.5, -0.2);
+            s.lights
+                .insert(0, PunctualLight::point("B", b, glam::Vec3::splat(9.0)));
+            s.cameras[0].lights = sees;
+        }
+        s
+    };
+    let colors = [[230, 60, 40], [40, 90, 220]];
+    let problem = |sees: Option<Option<Vec<usize>>>| {
+        let mut p = Problem::new(
+            lit(in_memory::scene(), sees.clone()),
+            vec![0],
+            &[in_memory::texture()],
+            Filter::Bilinear,
+        )
+        .unwrap();
+        p.render_targets(&gpu, lit(in_memory::truth(colors), sees), 32, 32, 64, 3)
+            .unwrap();
+        p
+    };
+    let (alone, seen, all) = (
+        problem(None),
+        problem(Some(Some(vec![1]))),
+        problem(Some(None)),
+    );
+    assert_eq!(alone.targets[0].rgb, seen.targets[0].rgb);
+    let d = in_memory::rmse;
+    let flat = |p: &Problem| -> Vec<f32> { p.targets[0].rgb.iter().flatten().copied().collect() };
+    assert!(d(&flat(&alone), &flat(&all)) > 0.05);
+    for method in [Method::BASELINE, Method::RESTIR, Method::RECURSIVE] {
+        let gradient = |p: &Problem| {
+            let mut o = Optimizer::for_problem(&gpu, p, settings(method)).unwrap();
+            let mut g = o.estimate_gradient(0).unwrap().0;
+            g.extend(o.estimate_gradient(1).unwrap().0);
+            g
+        };
+        let (ga, gs, gall) = (gradient(&alone), gradient(&seen), gradient(&all));
+        let scale = ga.iter().fold(0f32, |m, x| m.max(x.abs())) as f64;
+        let (same, other) = (d(&ga, &gs) / scale, d(&ga, &gall) / scale);
+        assert!(
+            same < 1e-5 && other > 0.05,
+            "{}: gradient differences relative to its largest entry: {same:e} seeing lamp A \
+             alone, {other:e} seeing both lamps",
+            method.name()
+        );
+    }
+}

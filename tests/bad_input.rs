@@ -512,3 +512,39 @@ fn degenerate_triangles_and_missing_uvs_are_skipped_or_warned_about() {
         "{all}"
     );
 }
+
+/// `[target] lights` (the punctual lights of each camera's capture) names the task file, the
+/// key and what is wrong: a light or a camera the scene and the task do not have.
+#[test]
+fn a_captures_lights_must_exist() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/default/scene.gltf");
+    let task = |lights: &str| {
+        let path = dir.path().join("lit.toml");
+        let text = format!(
+            "scene = {scene:?}\nwidth = 16\nheight = 16\n\n[target]\nscene = {scene:?}\n\
+             lights = {{ {lights} }}\n\n[optimizer]\niterations = 1\n\n[[textures]]\n\
+             material = \"floor\"\nslot = \"base_color\"\nresolution = [4, 4]\n\
+             init = [0.5, 0.5, 0.5]\n"
+        );
+        std::fs::write(&path, text).unwrap();
+        let t = psrestir::task::Task::load(&path).unwrap();
+        psrestir::Problem::load(&t).map(|p| p.scene.cameras)
+    };
+    let cams = task("main = [\"sun\", \"point\"], top = []").unwrap();
+    assert_eq!(cams[0].lights, Some(vec![2, 0]));
+    assert_eq!(cams[1].lights, Some(vec![]));
+    for (lights, says) in [
+        (
+            "main = [\"lamp\"]",
+            "`target.lights.main`: no punctual light `lamp` (the scene's and the task's: point, spot, sun)",
+        ),
+        (
+            "side = [\"sun\"]",
+            "`target.lights.side`: the scene and the task have no camera `side`",
+        ),
+    ] {
+        let e = task(lights).unwrap_err().to_string();
+        assert!(e.contains("lit.toml") && e.contains(says), "{e}");
+    }
+}

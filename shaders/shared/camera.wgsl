@@ -13,7 +13,8 @@ struct CameraInfo {
     // Principal point in pixels (x right, y down; the image center is (width, height) / 2).
     cx: f32,
     cy: f32,
-    _pad0: u32,
+    // The first entry of this camera's capture's lights in lights[] (shared/lights.wgsl).
+    light_base: u32,
     _pad1: u32,
 }
 

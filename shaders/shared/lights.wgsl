@@ -25,13 +25,21 @@ struct LightSample {
     env: bool,
 }
 
+// The lights of the capture being traced: lights[] holds the scene's n_lights lights once
+// for every set of them that a capture sees (src/render/gpu_scene.rs, light_tables; the
+// first copy has them all), in the same order, each copy with its own choice probabilities
+// (0 for a punctual light that is off). Every pass that traces sets this from its camera
+// (CameraInfo.light_base) before it traces; light indices (TriShading.light,
+// scene.env_light, pick_light's) count from it.
+var<private> light_base: u32;
+
 // Index of the light whose CDF interval holds u. Bounded binary search.
 fn pick_light(u: f32) -> u32 {
     var lo = 0u;
     var hi = scene.n_lights;
     for (var it = 0u; it < 32u && lo < hi; it++) {
         let mid = (lo + hi) / 2u;
-        if lights[mid].cdf <= u {
+        if lights[light_base + mid].cdf <= u {
             lo = mid + 1u;
         } else {
             hi = mid;
@@ -198,7 +206,7 @@ fn sample_light(p: vec3f, u_pick: f32, u: vec2f) -> LightSample {
         return s;
     }
     let li = pick_light(u_pick);
-    let light = lights[li];
+    let light = lights[light_base + li];
     switch light.kind {
         case 0u, 1u: {
             let to = light.position - p;
@@ -267,12 +275,12 @@ fn area_light_pdf(tri: u32, p: vec3f, q: vec3f) -> f32 {
     let to = q - p;
     let d2 = dot(to, to);
     let cos_l = abs(dot(c / area2, to / sqrt(d2)));
-    return lights[li].pmf * d2 / (0.5 * area2 * max(cos_l, 1e-12));
+    return lights[light_base + li].pmf * d2 / (0.5 * area2 * max(cos_l, 1e-12));
 }
 
 fn env_light_pdf(d: vec3f) -> f32 {
     if scene.env_light == NONE {
         return 0.0;
     }
-    return lights[scene.env_light].pmf * env_pdf(d);
+    return lights[light_base + scene.env_light].pmf * env_pdf(d);
 }

@@ -285,6 +285,7 @@ fn task_scene(task: &Task, path: &Path) -> Result<(Scene, Vec<usize>, FrameImage
         }
     }
     let added: Vec<usize> = (first..s.cameras.len()).collect();
+    capture_lights(task, &mut s)?;
     // Camera names must be unique: targets, masks and `cameras` refer to them.
     for (i, c) in s.cameras.iter().enumerate() {
         if s.cameras[..i].iter().any(|o| o.name == c.name) {
@@ -302,6 +303,37 @@ fn task_scene(task: &Task, path: &Path) -> Result<(Scene, Vec<usize>, FrameImage
         log::warn!("{}: {note}", s.source.display());
     }
     Ok((s, added, frames))
+}
+
+/// The lights of each camera's capture that `target.lights` names.
+fn capture_lights(task: &Task, s: &mut Scene) -> Result<()> {
+    for (cam, names) in task.target.lights.iter().flatten() {
+        let key = format!("target.lights.{cam}");
+        let bad = |m: String| Error::file(&task.path, format!("`{key}`: {m}"));
+        let c = s
+            .cameras
+            .iter()
+            .position(|c| &c.name == cam)
+            .ok_or_else(|| bad(format!("the scene and the task have no camera `{cam}`")))?;
+        let lights = names
+            .iter()
+            .map(|n| {
+                s.lights.iter().position(|l| &l.name == n).ok_or_else(|| {
+                    let known: Vec<&str> = s.lights.iter().map(|l| l.name.as_str()).collect();
+                    bad(format!(
+                        "no punctual light `{n}` (the scene's and the task's: {})",
+                        if known.is_empty() {
+                            "none".to_string()
+                        } else {
+                            known.join(", ")
+                        }
+                    ))
+                })
+            })
+            .collect::<Result<Vec<usize>>>()?;
+        s.cameras[c].lights = Some(lights);
+    }
+    Ok(())
 }
 
 /// `<index>_<name>` of a camera, safe in file names.

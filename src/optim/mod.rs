@@ -38,7 +38,7 @@ use crate::gpu::abi::stat;
 use crate::gpu::Gpu;
 use crate::image_io::Image;
 use crate::render::params::{ParamBuffers, ParamSet};
-use crate::render::{camera_info, Renderer, Techniques};
+use crate::render::{Renderer, Techniques};
 use crate::scene::Scene;
 use crate::{Error, Result};
 use cameras::{camera_passes, check_inputs, CameraPasses, CameraSetup, Stats};
@@ -143,21 +143,16 @@ fn iteration_buffers(
     (adjoint, grad, moments, stats)
 }
 
-/// The constants of the settings' cameras at the settings' image size.
+/// The constants of the settings' cameras at the settings' image size, each with the
+/// lights of its capture.
 fn camera_infos(
-    scene: &Scene,
+    scene: &crate::render::GpuScene,
     settings: &Settings,
 ) -> Result<Vec<crate::render::layout::GpuCameraInfo>> {
     settings
         .cameras
         .iter()
-        .map(|&cam| {
-            let c = scene
-                .cameras
-                .get(cam)
-                .ok_or_else(|| Error::Invalid(format!("camera index {cam} out of range")))?;
-            Ok(camera_info(c, settings.width, settings.height))
-        })
+        .map(|&cam| scene.camera_info(cam, settings.width, settings.height))
         .collect()
 }
 
@@ -182,12 +177,12 @@ impl Optimizer {
     ) -> Result<Optimizer> {
         let (w, h) = (settings.width, settings.height);
         check_inputs(&settings, targets)?;
-        let camera_infos = camera_infos(scene, &settings)?;
         // Textures and scene first: the texels the paths reach decide what ReSTIR allocates.
         let depth = scene.max_depth.get();
         memory_plan(&set, &settings, targets.len(), 0, depth).check(gpu)?;
         let params = ParamBuffers::new(gpu, &set);
         let renderer = Renderer::with_param_buffers(gpu, scene, &set, &params)?;
+        let camera_infos = camera_infos(&renderer.scene, &settings)?;
         let grid = renderer.tile_grid(w, h);
         let observed = observed::observed_mask(gpu, &renderer.scene, &camera_infos, grid)?;
         let n_state = state_texels(&observed.0, settings.method, depth);

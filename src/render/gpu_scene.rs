@@ -31,10 +31,13 @@ pub struct GpuScene {
     /// Whether an optimized texture replaces a normal map (see [`GpuScene::off_modules`]).
     pub normal_maps: bool,
     /// What [`GpuScene::update_environment`] rewrites: the lights as uploaded with each one's
-    /// power estimate, the scene's radius, and the buffers of the lights, the environment's
-    /// table and the scene's info.
+    /// power estimate and the sets of punctual lights the cameras' captures see (each
+    /// sorted; [`light_tables`]), the scene's radius, and the buffers of the lights, the
+    /// environment's table and the scene's info.
     lights: Vec<GpuLight>,
     light_power: Vec<f64>,
+    light_sets: Vec<Vec<usize>>,
+    n_punctual: usize,
     radius: f32,
     lights_buffer: wgpu::Buffer,
     env_buffer: wgpu::Buffer,
@@ -417,10 +420,62 @@ fn choose_lights(lights: &mut [GpuLight], power: &[f64]) -> bool {
         l.pmf = pmf as f32;
         l.cdf = acc as f32;
     }
-    if let Some(last) = lights.last_mut() {
-        last.cdf = 1.0;
+    // The last light with a positive probability, and any after it, end the CDF at 1: a
+    // light that is never chosen keeps an empty interval.
+    let last = power.iter().rposition(|&p| p > 0.0).unwrap_or(0);
+    for l in lights.iter_mut().skip(last) {
+        l.cdf = 1.0;
     }
     total > 0.0
+}
+
+/// The sets of punctual lights that the cameras' captures see other than all of them
+/// ([`crate::scene::Camera::lights`]), each sorted, in order of first appearance.
+fn light_sets(scene: &Scene) -> Vec<Vec<usize>> {
+    let mut sets: Vec<Vec<usize>> = Vec::new();
+    for set in scene.cameras.iter().filter_map(|c| c.lights.as_ref()) {
+        let set = sorted(set);
+        if !sets.contains(&set) {
+            sets.push(set);
+        }
+    }
+    sets
+}
+
+fn sorted(set: &[usize]) -> Vec<usize> {
+    let mut s = set.to_vec();
+    s.sort_unstable();
+    s.dedup();
+    s
+}
+
+/// The lights buffer (shared/lights.wgsl, `light_base`): `lights` once with every light, then
+/// once per set of `sets`, in which the first `n_punctual` lights (the scene's punctual ones)
+/// not in the set are never chosen; each copy's choice probabilities in proportion to the
+/// power of the lights it has. Also returns, per set, whether it has a light with positive
+/// power.
+fn light_tables(
+    lights: &[GpuLight],
+    power: &[f64],
+    sets: &[Vec<usize>],
+    n_punctual: usize,
+) -> (Vec<GpuLight>, Vec<bool>) {
+    let mut table = Vec::with_capacity(lights.len() * (1 + sets.len()));
+    let mut lit = Vec::with_capacity(1 + sets.len());
+    for set in std::iter::once(None).chain(sets.iter().map(Some)) {
+        let mut copy = lights.to_vec();
+        let p: Vec<f64> = power
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| match set {
+                Some(s) if i < n_punctual && !s.contains(&i) => 0.0,
+                _ => p,
+            })
+            .collect();
+        lit.push(choose_lights(&mut copy, &p));
+        table.extend(copy);
+    }
+    (table, lit)
 }
 
 /// Positions (vec4 per vertex) and shading attributes of the triangles, in BVH order.
@@ -515,6 +570,14 @@ impl GpuScene {
 
         let (lights, light_power, tri_light, env_table, info) = gpu_lights(scene, &bvh, &gpu_index);
         check("the environment map", env_table.len() * 4)?;
+        let sets = light_sets(scene);
+        let (light_table, lit) = light_tables(&lights, &light_power, &sets, scene.lights.len());
+        for (set, _) in sets.iter().zip(&lit[1..]).filter(|(_, &lit)| !lit) {
+            log::warn!(
+                "{}: the capture of a camera that sees only the lights {set:?} has no light                  with positive power: its renders are black",
+                scene.source.display()
+            );
+        }
 
         let (positions, shading) = bvh_triangles(scene, &bvh, &tri_light, &materials);
         check("the triangle positions", positions.len() * 16)?;
@@ -536,7 +599,7 @@ impl GpuScene {
             gpu.storage("scene tri_shading", bytemuck::cast_slice(&shading), none),
             gpu.storage("scene materials", bytemuck::cast_slice(&materials), none),
             gpu.storage("scene texels", bytemuck::cast_slice(&texels), none),
-            gpu.storage("scene lights", bytemuck::cast_slice(&lights), none),
+            gpu.storage("scene lights", bytemuck::cast_slice(&light_table), none),
             gpu.storage("scene env", bytemuck::cast_slice(&env_table), none),
             gpu.uniform("scene info", bytemuck::bytes_of(&info)),
             gpu.storage(
@@ -585,6 +648,8 @@ impl GpuScene {
             normal_maps: param_set.find_slot(crate::vocab::Slot::Normal).is_some(),
             lights,
             light_power,
+            light_sets: sets,
+            n_punctual: scene.lights.len(),
             radius: scene.bounding_sphere().1,
             lights_buffer: buffers[5].clone(),
             env_buffer: buffers[6].clone(),
@@ -624,6 +689,31 @@ impl GpuScene {
         gpu.compute_pipeline_without(pass, layouts, self.off_modules())
     }
 
+    /// The constants of camera `cam` (an index into [`GpuScene::cameras`]) for a `width` x
+    /// `height` render ([`super::camera_info`]), with the lights of its capture.
+    pub fn camera_info(&self, cam: usize, width: u32, height: u32) -> Result<GpuCameraInfo> {
+        let c = self
+            .cameras
+            .get(cam)
+            .ok_or_else(|| Error::Invalid(format!("camera index {cam} out of range")))?;
+        let mut info = super::camera_info(c, width, height);
+        if let Some(set) = &c.lights {
+            let set = sorted(set);
+            let k = self
+                .light_sets
+                .iter()
+                .position(|s| *s == set)
+                .ok_or_else(|| {
+                    Error::Invalid(format!(
+                    "camera `{}` sees the lights {set:?}, a set the scene was not uploaded with",
+                    c.name
+                ))
+                })?;
+            info.light_base = (1 + k as u32) * self.info.n_lights;
+        }
+        Ok(info)
+    }
+
     /// Write a new environment of the uploaded one's size (the optimized environment): its
     /// texels, and with `tables` its sampling tables and its share of the light choice, rebuilt
     /// from these values. Between rebuilds the sampling follows the tables of the last one,
@@ -649,9 +739,14 @@ impl GpuScene {
                 .write_buffer(&self.env_buffer, 0, bytemuck::cast_slice(&table));
             if let Some(p) = self.light_power.get_mut(self.info.env_light as usize) {
                 *p = env.power(self.radius);
-                choose_lights(&mut self.lights, &self.light_power);
+                let (table, _) = light_tables(
+                    &self.lights,
+                    &self.light_power,
+                    &self.light_sets,
+                    self.n_punctual,
+                );
                 gpu.queue
-                    .write_buffer(&self.lights_buffer, 0, bytemuck::cast_slice(&self.lights));
+                    .write_buffer(&self.lights_buffer, 0, bytemuck::cast_slice(&table));
             }
         } else {
             let texels: Vec<f32> = env.rgb.iter().flatten().copied().collect();

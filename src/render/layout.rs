@@ -152,7 +152,10 @@ pub struct GpuCameraInfo {
     pub height: u32,
     pub cx: f32,
     pub cy: f32,
-    pub _pad: [u32; 2],
+    /// The first entry of the camera's capture's lights in the lights buffer
+    /// ([`GpuScene::camera_info`](super::GpuScene::camera_info)).
+    pub light_base: u32,
+    pub _pad: u32,
 }
 
 /// `RenderParams` in render.wgsl.

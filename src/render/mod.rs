@@ -151,7 +151,8 @@ pub fn camera_info(cam: &crate::scene::Camera, width: u32, height: u32) -> GpuCa
         height,
         cx,
         cy,
-        _pad: [0; 2],
+        light_base: 0,
+        _pad: 0,
     }
 }
 
@@ -272,13 +273,11 @@ impl Renderer {
                 "image size {w}x{h} out of range (1..16384)"
             )));
         }
-        let cam = self.scene.cameras.get(settings.camera).ok_or_else(|| {
-            Error::Invalid(format!("camera index {} out of range", settings.camera))
-        })?;
+        let camera = self.scene.camera_info(settings.camera, w, h)?;
         let n_pixels = w * h;
         let grid = self.tile_grid(w, h);
         let mut params = GpuRenderParams {
-            camera: camera_info(cam, w, h),
+            camera,
             seed: settings.seed,
             sample_offset: 0,
             spp: 0,

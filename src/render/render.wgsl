@@ -46,6 +46,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     let py = xy_px.y;
     let pixel = py * width + px;
     techniques = rp.techniques;
+    light_base = rp.camera.light_base;
     let xy = vec2f(f32(px), f32(py));
     var sum = vec3f(0.0);
     var sum_prev = vec3f(0.0);

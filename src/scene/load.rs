@@ -474,6 +474,7 @@ impl<'a> Loader<'a> {
                     yfov: p.yfov(),
                     aspect: p.aspect_ratio(),
                     intrinsics: None,
+                    lights: None,
                 })
             }
             gltf::camera::Projection::Orthographic(_) => self.scene.warnings.push(format!(

@@ -167,6 +167,11 @@ pub struct Camera {
     /// Pinhole intrinsics from a capture (focal lengths and principal point in pixels of an
     /// image of a given size); they replace `yfov` and put the principal point anywhere.
     pub intrinsics: Option<Intrinsics>,
+    /// The punctual lights that are on in this camera's capture (indices into
+    /// [`Scene::lights`]); None: all of them. Photos of one object under several lights,
+    /// one at a time, are captures from cameras at the same pose with different lights.
+    /// Emissive surfaces and the environment light every capture.
+    pub lights: Option<Vec<usize>>,
 }
 
 /// Pinhole intrinsics in pixels of a `width` x `height` image (x right, y down, the origin at
@@ -230,6 +235,7 @@ impl Camera {
             yfov,
             aspect: None,
             intrinsics: None,
+            lights: None,
         }
     }
 
@@ -242,6 +248,7 @@ impl Camera {
             yfov: 2.0 * (0.5 * k.height as f32 / k.fy).atan(),
             aspect: Some(k.width as f32 / k.height as f32),
             intrinsics: Some(k),
+            lights: None,
         }
     }
 
@@ -515,6 +522,13 @@ impl Scene {
                     "camera `{}` has a non-finite transform, a field of view outside (0, pi), \
                      a non-positive aspect ratio or invalid intrinsics",
                     c.name
+                ));
+            }
+            if let Some(&i) = c.lights.iter().flatten().find(|&&i| i >= self.lights.len()) {
+                return Err(format!(
+                    "camera `{}` sees light {i}, the scene has {} punctual lights",
+                    c.name,
+                    self.lights.len()
                 ));
             }
         }

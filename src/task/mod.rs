@@ -104,6 +104,12 @@ pub struct TargetSpec {
     /// Fixed exposure per camera name: the render is multiplied by it before it is compared
     /// with the target (default 1; see `optimizer.optimize_exposure`).
     pub exposure: Option<BTreeMap<String, f32>>,
+    /// The punctual lights (the scene's and the task's `[[light]]`s, by name) that are on in
+    /// a camera's capture, per camera name: photos of one object under several lights, one
+    /// set at a time, are cameras at the same pose (`[[camera]]` tables) with different
+    /// sets. A camera not listed sees every light; emissive surfaces and the environment
+    /// light every capture.
+    pub lights: Option<BTreeMap<String, Vec<String>>>,
 }
 
 /// A camera defined in a task file: look-at, or a camera-to-world matrix with pinhole

@@ -60,6 +60,7 @@ fn differentiate_pixel(id: vec3u) {
         return;
     }
     techniques = gp.techniques;
+    light_base = gp.camera.light_base;
     pixel_adj = a.adj;
     env_adj = a.adj;
     env_gradients = scene.env_optimized != 0u;

@@ -153,6 +153,7 @@ fn differentiate_pixel(id: vec3u) {
     if all(adj == vec3f(0.0)) && all(adj_prev == vec3f(0.0)) {
         return;
     }
+    light_base = rp.camera.light_base;
     pixel_adj = adj;
     pixel_adj_prev = adj_prev;
     env_adj = adj;

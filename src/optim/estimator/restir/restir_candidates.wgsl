@@ -345,6 +345,7 @@ fn offer_pixel(id: vec3u) {
         return;
     }
     techniques = TECH_MIS;
+    light_base = cp.camera.light_base;
     compact_paths = true;
     let info = a.pixel | (cp.camera_index << INFO_CAMERA_SHIFT);
     pixel_adj = a.adj;
