@@ -1,12 +1,14 @@
-//! The normal-map scene (see `bench_scenes`): `wall`, a brick wall under a grazing sun and a
-//! sky, seen by two cameras, whose bricks' bevels and bumps are in its normal map. Three
-//! tasks on the same targets measure what recovering the normal map is worth: the base color
-//! and the normal map recovered together (`task.toml`), the base color alone with the true
-//! normal map given (`task_given_normals.toml`), and the base color alone on a wall without
-//! one (`task_flat_normals.toml`, its scene `scene_flat.gltf`).
-use super::{camera, create, hash, texture, unit, write_png, write_task_named};
+//! The normal-map scene (see `bench_scenes`): `wall`, a brick wall whose bricks' bevels and
+//! bumps are in its normal map, under a sky and grazing suns, one at a time: three captures,
+//! two from the front and one oblique. Three tasks on the same targets measure what
+//! recovering the normal map is worth: the base color and the normal map recovered together
+//! (`task.toml`), the base color alone with the true normal map given
+//! (`task_given_normals.toml`), and the base color alone on a wall without one
+//! (`task_flat_normals.toml`, its scene `scene_flat.gltf`).
+use super::{camera, create, hash, texture, unit, write_png, TASK_COMMON};
 use crate::assets::authoring::GltfBuilder;
 use crate::assets::bundled::{look_at, srgb8, write_sky};
+use crate::image_io::write_atomic;
 use crate::Result;
 use glam::Vec3;
 use serde_json::json;
@@ -15,6 +17,8 @@ use std::path::Path;
 /// Bricks per row and rows, and the mortar's half-width in a brick's width and height.
 const BRICKS: (f32, f32) = (4.0, 8.0);
 const MORTAR: (f32, f32) = (0.03, 0.06);
+/// The cameras' vertical field of view, radians.
+const FOV: f32 = 0.75;
 
 /// Where texture coordinates (u, v) fall: the brick (column, row) and the position in it
 /// (0..1 across, 0..1 down), or None in the mortar.
@@ -60,7 +64,8 @@ fn normal_at(u: f32, v: f32) -> Vec3 {
 }
 
 /// A 2 m x 2 m brick wall facing +Z under a grazing sun from the upper left and the sky, its base
-/// color and normal map 256², two cameras; and the same wall without its normal map.
+/// color and normal map 256², two cameras; the same wall without its normal map; and the
+/// tasks, which add the other suns and the third capture.
 pub fn write_wall(dir: &Path) -> Result<()> {
     create(dir)?;
     write_textures(dir)?;
@@ -145,8 +150,8 @@ fn write_scenes(dir: &Path) -> Result<()> {
                 json!({"name": "sun", "matrix": look_at(Vec3::new(-2.2, 3.2, 1.2),
                 Vec3::from(c), Vec3::Y), "extensions": {"KHR_lights_punctual": {"light": sun}}}),
             ),
-            camera(&mut b, "front", 0.75, [0.0, 1.0, 3.2], c),
-            camera(&mut b, "oblique", 0.75, [2.2, 1.5, 2.3], c),
+            camera(&mut b, "front", FOV, [0.0, 1.0, 3.2], c),
+            camera(&mut b, "oblique", FOV, [2.2, 1.5, 2.3], c),
         ];
         b.set_scene(&nodes);
         b.write_gltf(&dir.join(file), false)?;
@@ -154,19 +159,47 @@ fn write_scenes(dir: &Path) -> Result<()> {
     Ok(())
 }
 
-/// The three tasks on the same targets.
+/// The three tasks on the same targets: three captures, each under one sun (the scene's
+/// from the upper left, and two the tasks add, from the right and from below), two of them
+/// from the front camera's pose. Under one light a texel's shading gives one equation for its
+/// normal's two unknowns, and its color trades against its shading; three lights, one at a
+/// time, determine both (photometric stereo).
 fn write_tasks(dir: &Path) -> Result<()> {
+    let fov_deg = FOV.to_degrees();
     let head = |what: &str, scene: &str, out: &str| {
         format!(
             r#"# Normal-map scene "wall": {what}
+# Three captures, each under one sun and the sky: `front` under the scene's sun (upper left),
+# `front_right` from the same pose under a sun from the right, `oblique` under a sun from
+# below ([target] lights).
 # Written by `psrestir make-scenes`; paths are relative to this file.
 scene = "{scene}"
 env = "sky.exr"
-cameras = ["front", "oblique"]
+cameras = ["front", "front_right", "oblique"]
 width = 128
 height = 128
 seed = 23
 output = "out/bench/{out}"
+
+[[camera]]
+name = "front_right"
+eye = [0.0, 1.0, 3.2]
+target = [0.0, 1.0, 0.0]
+yfov_deg = {fov_deg}
+
+[[light]]
+name = "sun_right"
+type = "directional"
+direction = [-2.6, -0.3, -1.2]
+color = [0.9, 0.95, 1.0]
+intensity = 4.0
+
+[[light]]
+name = "sun_below"
+type = "directional"
+direction = [-0.5, 2.4, -1.2]
+color = [0.9, 0.95, 1.0]
+intensity = 4.0
 "#
         )
     };
@@ -180,11 +213,11 @@ resolution = [256, 256]
 init = [0.5, 0.5, 0.5]
 learning_rate = 0.03
 "#;
-    write_task_named(
+    write(
         dir,
         "task.toml",
         &head(
-            "recover the base color and the normal map of a brick wall under a grazing sun,\n# the normal map from flat (it replaces the scene's).",
+            "recover the base color and the normal map of a brick wall under grazing suns,\n# the normal map from flat (it replaces the scene's).",
             "scene.gltf",
             "wall",
         ),
@@ -198,7 +231,7 @@ init = [0.5, 0.5, 1.0]
 "
         ),
     )?;
-    write_task_named(
+    write(
         dir,
         "task_given_normals.toml",
         &head(
@@ -208,7 +241,7 @@ init = [0.5, 0.5, 1.0]
         ),
         base_color,
     )?;
-    write_task_named(
+    write(
         dir,
         "task_flat_normals.toml",
         &head(
@@ -218,4 +251,14 @@ init = [0.5, 0.5, 1.0]
         ),
         base_color,
     )
+}
+
+/// A task: the head, the bench's shared settings with each capture's sun, the textures.
+fn write(dir: &Path, name: &str, head: &str, textures: &str) -> Result<()> {
+    let common = TASK_COMMON.replacen(
+        "spp = 256\n",
+        "spp = 256\nlights = { front = [\"sun\"], front_right = [\"sun_right\"], oblique = [\"sun_below\"] }\n",
+        1,
+    );
+    write_atomic(&dir.join(name), format!("{head}{common}{textures}").as_bytes())
 }
