@@ -414,7 +414,9 @@ fn curve_point(
         iteration: opt.iteration,
         seconds,
         loss,
-        texture_rmse: truth.map(|r| rmse(&values, r)).unwrap_or(f64::NAN),
+        texture_rmse: truth
+            .map(|r| texture_rmse(&prep.set, &values, r))
+            .unwrap_or(f64::NAN),
         texture_rmse_observed: truth
             .map(|r| rmse_observed(&prep.set, &values, r, observed))
             .unwrap_or(f64::NAN),
@@ -440,7 +442,9 @@ impl Start {
         let observed = init.observed_texels()?.to_vec();
         Ok(Start {
             image,
-            texture: truth.map(|r| rmse(&prep.set.values, r)).unwrap_or(f64::NAN),
+            texture: truth
+                .map(|r| texture_rmse(&prep.set, &prep.set.values, r))
+                .unwrap_or(f64::NAN),
             texture_observed: truth
                 .map(|r| rmse_observed(&prep.set, &prep.set.values, r, &observed))
                 .unwrap_or(f64::NAN),

@@ -21,9 +21,10 @@
 //!   The variance-scaled step moves a texel by its estimate over the estimate's spread, less
 //!   a threshold of one spread, clipped at one learning rate, so a texel moves only as far
 //!   as its gradient is sure and the rate is a distance in the slot's units.
-//! - **Filtered moments over base color only, with the variance-scaled step**
-//!   ([`moment_filter`]): over roughness and metallic the filter blurred, and with Adam it
-//!   did not pay.
+//! - **Filtered moments over base color only, with the variance-scaled step, and over base
+//!   color and normal maps with either step** ([`moment_filter`]): over roughness and
+//!   metallic the filter blurred, with Adam over base color alone it did not pay, and over a
+//!   normal map it took Adam's speckle away.
 //! - **Learning rates**: for Adam the bench tasks' (0.03 for base color and metallic, 0.02
 //!   for roughness); for the variance step 0.01 per step, 0.03 with indirect light
 //!   ([`learning_rate`], [`learning_rate_for`]).
@@ -84,11 +85,12 @@ pub const FINAL_FACTOR: f32 = 0.05;
 /// roughness (whose derivative is the steepest). Adam moves every texel by about its rate per
 /// step.
 ///
-/// A normal map takes smaller rates: on the `wall` scene (scenes/bench/wall, base color and
-/// normal map together, lavapipe) Adam at 0.03 drove the normal map away from its flat start
-/// (mean angle error 16.0 -> 44.7 degrees in 60 s); in 20 s, at 0.01 to 22.4 and at 0.005 to
-/// 17.9, and the variance-scaled step at 0.003 to 15.4 (at 0.01: 18.0). None of them recovers
-/// that map (docs/guide.md, "Normal maps").
+/// A normal map takes smaller rates: on the `wall` scene under a single sun (scenes/bench/wall,
+/// base color and normal map together, lavapipe) Adam at 0.03 drove the normal map away from
+/// its flat start (mean angle error 16.0 -> 44.7 degrees in 60 s); in 20 s, at 0.01 to 22.4
+/// and at 0.005 to 17.9, and the variance-scaled step at 0.003 to 15.4 (at 0.01: 18.0). Under
+/// its three suns, one per capture, Adam at 0.005 with filtered moments recovers it (16.0 ->
+/// 6.5 degrees in 60 s; docs/guide.md, "Normal maps").
 pub fn learning_rate(step: StepKind, slot: Slot) -> f32 {
     match (step, slot) {
         (StepKind::Variance, Slot::Normal) => 0.003,
@@ -125,10 +127,16 @@ pub fn texture_rate(tex: &crate::render::params::ParamTexture, step: StepKind) -
 /// metallic it blurred: with the variance step, `vase` (roughness) ended above its start
 /// (0.318 from 0.238, against 0.213 unfiltered) and `dish` (metallic) at 0.461 against 0.340:
 /// a scalar's differences rarely exceed the edge-stopping scale, which is in texture units.
+///
+/// With a normal map (and base color) the filter is on with either step: a normal-map texel
+/// has two unknowns that its few pixels constrain weakly, and Adam's normalized steps turn
+/// that noise into speckle. On the `wall` scene (base color and normal map from flat, 60 s on
+/// lavapipe) Adam ended at a mean angle error of 11.1 degrees unfiltered and 6.5 filtered (from
+/// 16.0), the base color at 0.0647 and 0.0577 observed-texel RMSE.
 pub fn moment_filter(step: StepKind, slots: &[Slot]) -> MomentFilterOptions {
-    let on = step == StepKind::Variance
-        && !slots.is_empty()
-        && slots.iter().all(|&s| s == Slot::BaseColor);
+    let only = |allowed: &[Slot]| !slots.is_empty() && slots.iter().all(|s| allowed.contains(s));
+    let on = (step == StepKind::Variance && only(&[Slot::BaseColor]))
+        || (slots.contains(&Slot::Normal) && only(&[Slot::BaseColor, Slot::Normal]));
     MomentFilterOptions {
         levels: if on { SUGGESTED_LEVELS } else { 0 },
         ..Default::default()
@@ -211,7 +219,7 @@ impl Configuration {
                      variance averaged over texels that look alike",
                     f.levels, f.taps, f.taps
                 ));
-            } else if step == StepKind::Variance {
+            } else if step == StepKind::Variance || slots.contains(&Slot::Normal) {
                 reasons.push(
                     "no moment filter: it blurs roughness and metallic textures, whose \
                      differences rarely exceed its edge-stopping scale"
@@ -384,7 +392,7 @@ mod tests {
     }
 
     #[test]
-    fn the_filter_is_for_base_color_alone() {
+    fn the_filter_is_for_base_color_and_normal_maps() {
         // Indirect light: the variance-scaled step, which the filter goes with.
         let r = regime(1, 128 * 128, 256 * 256, 3);
         let with = |textures: &[(Slot, bool)]| {
@@ -401,5 +409,20 @@ mod tests {
                 c.reasons
             );
         }
+        // Direct light, sparse samples: Adam, filtered where a normal map is optimized.
+        let adam = |textures: &[(Slot, bool)]| {
+            let r = Regime {
+                normal_maps: true,
+                ..regime(1, 128 * 128, 256 * 256, 1)
+            };
+            Configuration::choose(&r, MethodChoice::Auto, None, None, None, None, textures)
+        };
+        let c = adam(&[(Slot::BaseColor, true), (Slot::Normal, true)]);
+        assert_eq!(c.step, StepKind::Adam);
+        assert!(c.moment_filter.enabled());
+        assert!(adam(&[(Slot::Normal, true)]).moment_filter.enabled());
+        let c = adam(&[(Slot::Normal, true), (Slot::Roughness, true)]);
+        assert!(!c.moment_filter.enabled());
+        assert!(!adam(&[(Slot::BaseColor, true)]).moment_filter.enabled());
     }
 }

@@ -92,6 +92,18 @@ pub(crate) fn observed_mask(
     Ok((m, mask))
 }
 
+/// RMSE of `values` against `truth` (laid out like `set.values`) over every channel, normal
+/// maps as the renderer sees them ([`ParamSet::as_seen`]).
+pub fn texture_rmse(set: &ParamSet, values: &[f32], truth: &[f32]) -> f64 {
+    let (a, b) = (set.as_seen(values), set.as_seen(truth));
+    let s: f64 = a
+        .iter()
+        .zip(b.iter())
+        .map(|(x, y)| ((x - y) as f64).powi(2))
+        .sum();
+    (s / a.len().max(1) as f64).sqrt()
+}
+
 /// RMSE of `values` against `truth` (laid out like `set.values`) over the channels of the
 /// texels marked in `observed` (one flag per texel, as [`Optimizer::observed_texels`]);
 /// NaN when none is observed.
@@ -154,13 +166,15 @@ pub fn mean_angle_observed_per_texture(
     out
 }
 
-/// Per texture, the sum of squared errors over its observed texels' channels and their count.
+/// Per texture, the sum of squared errors over its observed texels' channels and their count
+/// (normal maps as the renderer sees them, [`ParamSet::as_seen`]).
 fn squared_errors_observed(
     set: &ParamSet,
     values: &[f32],
     truth: &[f32],
     observed: &[bool],
 ) -> Vec<(f64, usize)> {
+    let (values, truth) = (&*set.as_seen(values), &*set.as_seen(truth));
     let mut texel = 0usize;
     let mut out = Vec::with_capacity(set.textures.len());
     for t in &set.textures {

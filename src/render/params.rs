@@ -85,6 +85,30 @@ pub struct ParamSet {
 }
 
 impl ParamSet {
+    /// `values` (laid out like [`ParamSet::values`]) as a renderer sees them: each normal-map
+    /// texel re-encoded from the unit normal it stands for ([`crate::vocab::decode_normal`];
+    /// its length, which the renderer and glTF viewers normalize away, dropped), the other
+    /// textures as they are. Errors of a normal map count its directions alone.
+    pub fn as_seen<'a>(&self, values: &'a [f32]) -> std::borrow::Cow<'a, [f32]> {
+        let normals = self
+            .textures
+            .iter()
+            .filter(|t| t.slot == crate::vocab::Slot::Normal);
+        let mut out = std::borrow::Cow::Borrowed(values);
+        for t in normals {
+            let v = out.to_mut();
+            let start = t.offset as usize;
+            let end = (start + 3 * (t.width * t.height) as usize).min(v.len());
+            for c in v[start..end].chunks_exact_mut(3) {
+                let n = crate::vocab::decode_normal([c[0], c[1], c[2]]);
+                for k in 0..3 {
+                    c[k] = 0.5 + 0.5 * n[k];
+                }
+            }
+        }
+        out
+    }
+
     /// Textures as the task asks, at their initial values. Materials are found by name in
     /// `scene`; `task_path` names the task in errors.
     pub fn from_specs(

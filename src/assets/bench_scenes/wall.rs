@@ -260,5 +260,8 @@ fn write(dir: &Path, name: &str, head: &str, textures: &str) -> Result<()> {
         "spp = 256\nlights = { front = [\"sun\"], front_right = [\"sun_right\"], oblique = [\"sun_below\"] }\n",
         1,
     );
-    write_atomic(&dir.join(name), format!("{head}{common}{textures}").as_bytes())
+    write_atomic(
+        &dir.join(name),
+        format!("{head}{common}{textures}").as_bytes(),
+    )
 }
