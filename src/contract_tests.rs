@@ -194,7 +194,7 @@ fn scene_mirrors_match_wgsl_field_by_field() {
         "render",
         "CameraInfo",
         GpuCameraInfo,
-        [origin, fx, right, fy, up, width, forward, height, cx, cy]
+        [origin, fx, right, fy, up, width, forward, height, cx, cy, light_base]
     );
     mirror!(
         "render",
