@@ -6,7 +6,7 @@ mod common;
 
 use common::*;
 use psrestir::image_io::Image;
-use psrestir::optim::light::EnvFitOptions;
+use psrestir::optim::environment_fit::EnvFitOptions;
 use psrestir::optim::{Method, Optimizer, Settings};
 use psrestir::render::params::ParamSet;
 use psrestir::scene::{EnvMap, Scene};

@@ -68,7 +68,7 @@ struct Stored {
     exposure: ExposureState,
     /// The environment's fit, when it is optimized.
     #[serde(default)]
-    environment: Option<crate::optim::light::EnvFitState>,
+    environment: Option<crate::optim::environment_fit::EnvFitState>,
 }
 
 /// [`EstimatorState`] without its arrays' data.
@@ -271,7 +271,7 @@ mod tests {
                     wb_m2: vec![[0.001; 3]],
                     wb_steps: 2,
                 },
-                environment: Some(crate::optim::light::EnvFitState {
+                environment: Some(crate::optim::environment_fit::EnvFitState {
                     size: [2, 1],
                     log: vec![0.5; 6],
                     m1: vec![0.1; 6],

@@ -539,7 +539,7 @@ impl DiffRender {
                     ));
                 };
                 let gains = self.opt.gains();
-                super::targets::log_gain_gradients(d, &gains)
+                super::gains::log_gain_gradients(d, &gains)
             }
         };
         self.gain_gradient = None;

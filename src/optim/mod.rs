@@ -7,8 +7,8 @@ pub mod auto;
 mod cameras;
 pub mod checkpoint;
 mod diff_render;
+pub mod environment_fit;
 pub mod estimator;
-pub mod light;
 pub mod loss;
 pub mod observed;
 pub mod primal;
@@ -20,18 +20,18 @@ pub mod step;
 pub mod texture_export;
 pub mod uncertainty;
 
+mod gains;
 mod measure;
 mod memory;
 mod seeds;
 mod settings;
-mod state;
-mod targets;
+mod snapshot;
 mod timing;
 pub use diff_render::{DiffRender, Gradients};
 pub use memory::*;
 pub use seeds::*;
 pub use settings::*;
-pub use state::*;
+pub use snapshot::*;
 pub use timing::*;
 
 use crate::gpu::abi::stat;
@@ -88,7 +88,7 @@ pub struct Optimizer {
     /// The environment's gradient (light.rs), and the environment's fit when it is
     /// optimized, with the gradient updates its passes lost or dropped.
     env_grad: wgpu::Buffer,
-    env_fit: Option<light::EnvFit>,
+    env_fit: Option<environment_fit::EnvFit>,
     env_faults: u32,
     grid: (u32, u32),
     step: Box<dyn step::Step>,
@@ -208,7 +208,7 @@ impl Optimizer {
         let (adjoint, grad, moments, stats) =
             iteration_buffers(gpu, w * h * n_cams, set.values.len() as u64);
         let loss = loss::LossPass::new(gpu, settings.loss, (w, h), targets, &accum, &adjoint)?;
-        let env_grad = light::env_gradient_buffer(gpu, scene);
+        let env_grad = environment_fit::env_gradient_buffer(gpu, scene);
         let estimator = estimator::build(&estimator::Setup {
             gpu,
             scene: &renderer.scene,

@@ -50,7 +50,7 @@ pub struct EnvironmentFit {
     /// The starting environment.
     pub start: crate::scene::EnvMap,
     /// How it is stepped.
-    pub options: super::light::EnvFitOptions,
+    pub options: super::environment_fit::EnvFitOptions,
 }
 
 impl Problem {
@@ -107,7 +107,7 @@ impl Problem {
     pub fn recover_environment(
         &mut self,
         start: crate::scene::EnvMap,
-        options: super::light::EnvFitOptions,
+        options: super::environment_fit::EnvFitOptions,
     ) -> Result<()> {
         options
             .check()

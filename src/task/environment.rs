@@ -14,7 +14,7 @@
 //! warmup_iterations = 0           # iterations in which only the environment steps
 //! # optimize = false              # the environment fixed at `init` instead (an assumption)
 //! ```
-use crate::optim::light::{EnvFitOptions, Gauge};
+use crate::optim::environment_fit::{EnvFitOptions, Gauge};
 use crate::scene::EnvMap;
 use crate::{Error, Result};
 use serde::Deserialize;

@@ -154,7 +154,7 @@ impl Optimizer {
         let e = &mut self.exposure;
         if let Some(lr) = lr_e {
             e.steps += 1;
-            let t = e.steps as i32;
+            let t = e.steps;
             for k in first..d_e.len() {
                 if let Some(v) = adam_log_step(
                     &mut e.m1[k],
@@ -170,7 +170,7 @@ impl Optimizer {
         }
         if let Some(lr) = lr_wb {
             e.wb_steps += 1;
-            let t = e.wb_steps as i32;
+            let t = e.wb_steps;
             for k in first..d_wb.len() {
                 for c in 0..3 {
                     let (m1, m2) = (&mut e.wb_m1[k][c], &mut e.wb_m2[k][c]);
@@ -202,16 +202,25 @@ pub(super) fn log_gain_gradients(d: &[[f64; 3]], gains: &[[f32; 3]]) -> (Vec<f32
         .unzip()
 }
 
-/// One Adam step of log(value) with gradient `g` (step `t`, rate `lr`); the new value, or None
-/// for a gradient that is not finite.
-fn adam_log_step(m1: &mut f32, m2: &mut f32, g: f32, t: i32, lr: f32, value: f32) -> Option<f32> {
+/// One Adam step of log(value) with gradient `g` (step `t`, rate `lr`; [`adam::step_with`]);
+/// the new value, or None for a gradient that is not finite.
+fn adam_log_step(m1: &mut f32, m2: &mut f32, g: f32, t: u32, lr: f32, value: f32) -> Option<f32> {
     if !g.is_finite() {
         return None;
     }
-    *m1 = adam::BETA1 * *m1 + (1.0 - adam::BETA1) * g;
-    *m2 = adam::BETA2 * *m2 + (1.0 - adam::BETA2) * g * g;
-    let m = *m1 / (1.0 - adam::BETA1.powi(t));
-    let v = *m2 / (1.0 - adam::BETA2.powi(t));
-    let log_v = value.ln() - lr * m / (v.sqrt() + adam::EPS);
-    Some(log_v.clamp(-20.0, 20.0).exp())
+    let mut log_v = [value.ln()];
+    let (m1, m2) = (std::slice::from_mut(m1), std::slice::from_mut(m2));
+    let defaults = adam::AdamOptions::default();
+    adam::step_with(
+        &defaults,
+        &mut log_v,
+        m1,
+        m2,
+        &[g],
+        lr,
+        t,
+        (-20.0, 20.0),
+        false,
+    );
+    Some(log_v[0].exp())
 }

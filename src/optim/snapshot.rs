@@ -64,7 +64,7 @@ pub struct OptimizerState {
     /// Per-camera exposures and, when they are optimized, their Adam moments.
     pub exposure: ExposureState,
     /// The environment's fit, when it is optimized.
-    pub environment: Option<super::light::EnvFitState>,
+    pub environment: Option<super::environment_fit::EnvFitState>,
 }
 
 /// Per-camera exposures and white balances, and the Adam moments of their logarithms. A

@@ -244,14 +244,19 @@ impl EnvFitState {
             .collect();
         self.add_priors(opts, &mut g);
         self.steps += 1;
-        let t = self.steps as i32;
-        let (c1, c2) = (1.0 - adam::BETA1.powi(t), 1.0 - adam::BETA2.powi(t));
-        for (k, &gk) in g.iter().enumerate() {
-            self.m1[k] = adam::BETA1 * self.m1[k] + (1.0 - adam::BETA1) * gk;
-            self.m2[k] = adam::BETA2 * self.m2[k] + (1.0 - adam::BETA2) * gk * gk;
-            let step = lr * (self.m1[k] / c1) / ((self.m2[k] / c2).sqrt() + adam::EPS);
-            self.log[k] = (self.log[k] - step).clamp(-20.0, 20.0);
-        }
+        let (m1, m2) = (&mut self.m1, &mut self.m2);
+        let defaults = adam::AdamOptions::default();
+        adam::step_with(
+            &defaults,
+            &mut self.log,
+            m1,
+            m2,
+            &g,
+            lr,
+            self.steps,
+            (-20.0, 20.0),
+            false,
+        );
         if opts.gauge == Gauge::Mean {
             let now = luminance(channel_means(&self.env()));
             if now > 0.0 && self.mean_luminance > 0.0 {
