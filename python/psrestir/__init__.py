@@ -256,6 +256,7 @@ class DiffRender:
         seed=1,
         filter="bilinear",
         method="baseline",
+        lights=None,
     ):
         """A differentiable render of a glTF file without a task file.
 
@@ -264,7 +265,10 @@ class DiffRender:
         ``"roughness"``, ``"metallic"``, ``"normal"`` (``init``: a value or an RGB triple; by
         default 0.5 gray, roughness 0.5, metallic 0, a flat normal map [0.5, 0.5, 1]). ``cameras`` names the file's cameras (None: all);
         ``env`` an environment map (lat-long EXR or HDR); ``max_depth`` the path depth
-        (1: direct light). :meth:`targets` renders the file's own materials.
+        (1: direct light); ``lights`` the punctual lights on in each camera's capture,
+        ``{camera: [light, ...]}`` by name (None: every light in every capture; photos of one
+        object under one light at a time are cameras at the same pose with different lights).
+        :meth:`targets` renders the file's own materials.
         """
         defaults = {
             "base_color": [0.5, 0.5, 0.5],
@@ -304,6 +308,8 @@ class DiffRender:
             task["cameras"] = list(cameras)
         if env is not None:
             task["env"] = _os.path.abspath(_os.fspath(env))
+        if lights is not None:
+            task["target"]["lights"] = {c: list(names) for c, names in dict(lights).items()}
         return cls(task, method=method)
 
     @property

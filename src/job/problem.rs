@@ -216,21 +216,15 @@ fn targets_key_with(task: &Task, truth: &Path, renderer: u64) -> Result<u64> {
     fnv1a(&mut h, &renderer.to_le_bytes());
     let text = std::fs::read(&task.path).unwrap_or_default();
     fnv1a(&mut h, &text);
-    // The task as parsed too, for tasks built in code (their file may not exist).
-    fnv1a(
-        &mut h,
-        format!(
-            "{:?}",
-            (
-                task.width,
-                task.height,
-                task.seed,
-                task.target.spp,
-                task.max_depth
-            )
-        )
-        .as_bytes(),
-    );
+    // What the targets depend on as parsed too, for tasks built in code (their file may not
+    // exist: a Python dict's cameras, lights or captures' lights would otherwise reuse
+    // another task's targets). Not the optimizer's settings: a run resumed with other
+    // limits reads its targets back.
+    let t = task;
+    let scene = (&t.scene, &t.env, t.env_scale, t.default_environment, &t.lights);
+    let views = (&t.cameras, &t.camera_defs, &t.cameras_file);
+    let render = (t.width, t.height, t.seed, t.max_depth, &t.target);
+    fnv1a(&mut h, format!("{scene:?}{views:?}{render:?}").as_bytes());
     let (json, buffers, images) = scene::load_source(&task.resolve(truth))?;
     fnv1a(&mut h, json.to_string().as_bytes());
     for b in &buffers {

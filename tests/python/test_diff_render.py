@@ -228,3 +228,18 @@ def test_a_normal_map_is_a_texture_like_the_others(tmp_path, monkeypatch):
         psrestir.DiffRender.from_scene(
             SCENE, [("sphere", "normal", (8, 4))], method="restir", **kw
         )
+
+
+def test_each_capture_sees_its_own_lights(tmp_path, monkeypatch):
+    from conftest import SCENE
+
+    monkeypatch.chdir(tmp_path)
+    kw = dict(cameras=["main"], width=32, height=32)
+    tex = [("sphere", "base_color", (8, 4))]
+    every = psrestir.DiffRender.from_scene(SCENE, tex, **kw).targets()[0]
+    sun = psrestir.DiffRender.from_scene(SCENE, tex, lights={"main": ["sun"]}, **kw).targets()[0]
+    # The default scene's point and spot lamps are off in the second capture: darker, and
+    # nowhere brighter than the noise of a 256-spp target.
+    assert sun.mean() < 0.8 * every.mean()
+    with pytest.raises(psrestir.PsrestirError, match="no punctual light `lamp`"):
+        psrestir.DiffRender.from_scene(SCENE, tex, lights={"main": ["lamp"]}, **kw)
