@@ -183,6 +183,12 @@ pub(crate) struct OptimizeArgs {
     /// Continue from the checkpoint in the output folder.
     #[arg(long)]
     pub(crate) resume: bool,
+    /// Set any key of the task file: `--set optimizer.smoothness=0.01`,
+    /// `--set textures.0.learning_rate=0.02`, `--set 'target.lights={main=["sun"]}'` (a TOML
+    /// value; a bare word is a string). Repeatable; applied after the flags below, which are
+    /// shorthands for such keys, and checked as the file is.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub(crate) set: Vec<String>,
     /// Vertices of a camera path: 1 is direct light only, each more one bounce of indirect
     /// light (overrides the task's `max_depth`).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=psrestir::scene::MaxDepth::LIMIT as i64))]

@@ -364,15 +364,35 @@ fn task_with_flags(args: &OptimizeArgs) -> Result<(PathBuf, Task)> {
         ..
     } = args;
     let path = task.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_TASK));
-    let mut task = Task::load(&path)?;
-    task.max_depth = max_depth.unwrap_or(task.max_depth);
-    let adam = &mut task.optimizer.adam;
-    adam.beta1 = adam_beta1.unwrap_or(adam.beta1);
-    adam.beta2 = adam_beta2.unwrap_or(adam.beta2);
-    adam.eps = adam_eps.unwrap_or(adam.eps);
-    if let Some(s) = step {
-        task.optimizer.step = Some(s.kind());
-    }
+    // The flags that stand for one key of the task file, then `--set`.
+    let key = |k: &str, v: Option<String>| v.map(|v| format!("{k}={v}"));
+    let quoted = |name: Option<&str>| name.map(|n| format!("{n:?}"));
+    let mut sets: Vec<String> = [
+        key("max_depth", max_depth.map(|v| v.to_string())),
+        key("optimizer.adam.beta1", adam_beta1.map(|v| v.to_string())),
+        key("optimizer.adam.beta2", adam_beta2.map(|v| v.to_string())),
+        key("optimizer.adam.eps", adam_eps.map(|v| v.to_string())),
+        key("optimizer.step", quoted(step.map(|s| s.kind().name()))),
+        key(
+            "optimizer.variance_step.clip",
+            step_clip.map(|v| v.to_string()),
+        ),
+        key(
+            "optimizer.variance_step.threshold",
+            step_threshold.map(|v| v.to_string()),
+        ),
+        key("optimizer.primal", quoted(primal.map(|p| p.mode().name()))),
+        key(
+            "optimizer.multiscale_levels",
+            multiscale_levels.map(|v| v.to_string()),
+        ),
+        key("optimizer.smoothness", smoothness.map(|v| v.to_string())),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    sets.extend(args.set.iter().cloned());
+    let mut task = Task::load_with(&path, &sets)?;
     if let Some(f) = lr_scale {
         if !(f.is_finite() && f > 0.0) {
             bail!("--lr-scale must be a positive number");
@@ -387,12 +407,6 @@ fn task_with_flags(args: &OptimizeArgs) -> Result<(PathBuf, Task)> {
             let rate = t.learning_rate.unwrap_or_else(|| config.rate(t.slot));
             t.learning_rate = Some(rate * f);
         }
-    }
-    let vs = &mut task.optimizer.variance_step;
-    vs.clip = step_clip.unwrap_or(vs.clip);
-    vs.threshold = step_threshold.unwrap_or(vs.threshold);
-    if let Some(p) = primal {
-        task.optimizer.primal = p.mode();
     }
     // A flag on the filter changes the filter the task would run with (its own, or `auto`'s
     // for its step).
@@ -415,12 +429,6 @@ fn task_with_flags(args: &OptimizeArgs) -> Result<(PathBuf, Task)> {
     mf.own_weight = moment_filter_own_weight.unwrap_or(mf.own_weight);
     mf.log_space |= moment_filter_log;
     mf.write_back |= moment_filter_write_back;
-    if let Some(l) = multiscale_levels {
-        task.optimizer.multiscale_levels = l;
-    }
-    if let Some(s) = smoothness {
-        task.optimizer.smoothness = Some(s);
-    }
     Ok((path, task))
 }
 

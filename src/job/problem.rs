@@ -221,7 +221,13 @@ fn targets_key_with(task: &Task, truth: &Path, renderer: u64) -> Result<u64> {
     // another task's targets). Not the optimizer's settings: a run resumed with other
     // limits reads its targets back.
     let t = task;
-    let scene = (&t.scene, &t.env, t.env_scale, t.default_environment, &t.lights);
+    let scene = (
+        &t.scene,
+        &t.env,
+        t.env_scale,
+        t.default_environment,
+        &t.lights,
+    );
     let views = (&t.cameras, &t.camera_defs, &t.cameras_file);
     let render = (t.width, t.height, t.seed, t.max_depth, &t.target);
     fnv1a(&mut h, format!("{scene:?}{views:?}{render:?}").as_bytes());

@@ -591,6 +591,7 @@ impl Task {
 
 mod environment;
 mod optimizer;
+mod set;
 pub use environment::{EnvInit, EnvironmentSpec};
 pub use optimizer::{
     named_cameras, task_configuration, task_method, task_regime, task_settings, OptimizerSpec,

@@ -173,3 +173,37 @@ fn the_environment_table_parses_and_names_what_is_wrong() {
     ));
     assert!(e.contains("optimizer.white_balance_learning_rate"), "{e}");
 }
+
+#[test]
+fn set_options_are_checked_as_the_file_is_and_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.toml");
+    std::fs::write(&path, GOOD).unwrap();
+    let sets = |s: &[&str]| s.iter().map(|x| x.to_string()).collect::<Vec<_>>();
+    let t = Task::load_with(
+        &path,
+        &sets(&["optimizer.smoothness=0.1", "optimizer.step=adam"]),
+    )
+    .unwrap();
+    assert_eq!(t.optimizer.smoothness, Some(0.1));
+    assert_eq!(t.optimizer.step, Some(crate::optim::StepKind::Adam));
+    for (bad, says) in [
+        (
+            "optimizer.smoothnes=0.1",
+            "`optimizer.smoothnes`: unknown key",
+        ),
+        (
+            "optimizer.smoothness=-1",
+            "`optimizer.smoothness`: must be a number",
+        ),
+        ("optimizer.step=sideways", "unknown variant `sideways`"),
+    ] {
+        let e = Task::load_with(&path, &sets(&[bad]))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("t.toml") && e.contains(says) && e.contains(&format!("--set {bad}")),
+            "{e}"
+        );
+    }
+}
