@@ -142,6 +142,10 @@ pub(crate) struct RenderArgs {
     /// lit by its emissive surfaces alone).
     #[arg(long)]
     pub(crate) no_default_env: bool,
+    /// The punctual lights that are on, by name, comma-separated (default: all): one capture
+    /// of a set of photos under different lights. Emissive surfaces and the environment stay.
+    #[arg(long, value_delimiter = ',', value_name = "NAME,...")]
+    pub(crate) lights: Option<Vec<String>>,
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     pub(crate) seed: u32,

@@ -244,6 +244,7 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
         env,
         env_scale,
         no_default_env,
+        lights,
         seed,
         technique,
         max_depth,
@@ -281,6 +282,26 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
         &frame,
         no_default_env,
     )?;
+    if let Some(names) = lights {
+        let on = names
+            .iter()
+            .map(|n| {
+                sc.lights.iter().position(|l| &l.name == n).ok_or_else(|| {
+                    let known: Vec<&str> = sc.lights.iter().map(|l| l.name.as_str()).collect();
+                    anyhow::anyhow!(
+                        "{}: --lights: no punctual light `{n}` (the scene's: {})",
+                        path.display(),
+                        if known.is_empty() {
+                            "none".into()
+                        } else {
+                            known.join(", ")
+                        }
+                    )
+                })
+            })
+            .collect::<Result<Vec<usize>>>()?;
+        sc.cameras[cam].lights = Some(on);
+    }
     let (width, height) = size.unwrap_or_else(|| {
         match sc.cameras[cam].intrinsics {
             // A capture's own image size.

@@ -326,6 +326,14 @@ fn render_cli_rejects_bad_arguments_clearly() {
     ]);
     assert_eq!(code, Some(1));
     assert!(err.contains("sky.exr"), "{err}");
+    let (code, err) = run(&["render", scene, "--lights", "sun,lamp", "-o", "/tmp/x.png"]);
+    assert_eq!(code, Some(1));
+    assert!(
+        err.contains(
+            "scene.gltf: --lights: no punctual light `lamp` (the scene's: point, spot, sun)"
+        ),
+        "{err}"
+    );
 }
 
 #[test]

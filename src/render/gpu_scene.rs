@@ -573,9 +573,12 @@ impl GpuScene {
         let sets = light_sets(scene);
         let (light_table, lit) = light_tables(&lights, &light_power, &sets, scene.lights.len());
         for (set, _) in sets.iter().zip(&lit[1..]).filter(|(_, &lit)| !lit) {
+            let names: Vec<&str> = set.iter().map(|&i| scene.lights[i].name.as_str()).collect();
             log::warn!(
-                "{}: the capture of a camera that sees only the lights {set:?} has no light                  with positive power: its renders are black",
-                scene.source.display()
+                "{}: a capture that sees only the lights [{}] has no light with positive \
+                 power: its renders are black",
+                scene.source.display(),
+                names.join(", ")
             );
         }
 
@@ -758,5 +761,39 @@ impl GpuScene {
         gpu.queue
             .write_buffer(&self.info_buffer, 0, bytemuck::bytes_of(&self.info));
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each set's copy chooses among the lights it has, in proportion to their power; a light
+    /// that is off, the last one included, has probability 0 and an empty CDF interval.
+    #[test]
+    fn each_light_set_chooses_among_its_own_lights() {
+        let lights = vec![GpuLight::default(); 4];
+        // Two punctual lights, an area light and the environment.
+        let power = [2.0, 6.0, 1.0, 1.0];
+        let sets = [vec![0], vec![1], vec![]];
+        let (table, lit) = light_tables(&lights, &power, &sets, 2);
+        assert_eq!(table.len(), 16);
+        assert_eq!(lit, [true; 4]);
+        let pmf =
+            |s: usize| -> Vec<f32> { table[4 * s..4 * s + 4].iter().map(|l| l.pmf).collect() };
+        let cdf =
+            |s: usize| -> Vec<f32> { table[4 * s..4 * s + 4].iter().map(|l| l.cdf).collect() };
+        assert_eq!(pmf(0), [0.2, 0.6, 0.1, 0.1]);
+        assert_eq!(pmf(1), [0.5, 0.0, 0.25, 0.25]);
+        assert_eq!(pmf(2), [0.0, 0.75, 0.125, 0.125]);
+        assert_eq!(pmf(3), [0.0, 0.0, 0.5, 0.5]);
+        assert_eq!(cdf(1), [0.5, 0.5, 0.75, 1.0]);
+        // Only the first light on: the CDF is 1 from it on, so no u picks the others.
+        let (table, _) = light_tables(&lights[..2], &power[..2], &[vec![0]], 2);
+        assert_eq!([table[2].cdf, table[3].cdf], [1.0, 1.0]);
+        assert_eq!([table[2].pmf, table[3].pmf], [1.0, 0.0]);
+        // No light with power: black, and said so.
+        let (_, lit) = light_tables(&lights[..2], &power[..2], &[vec![]], 2);
+        assert_eq!(lit, [true, false]);
     }
 }

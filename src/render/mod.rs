@@ -133,7 +133,8 @@ pub struct RayHit {
 
 /// Camera constants for a pinhole camera at the given image size: the camera's intrinsics
 /// scaled to it, or, without intrinsics, square pixels with the vertical field of view and
-/// the principal point at the center.
+/// the principal point at the center. Its `light_base` is 0, every light of the scene; a
+/// camera whose capture sees some of them takes [`GpuScene::camera_info`]'s.
 pub fn camera_info(cam: &crate::scene::Camera, width: u32, height: u32) -> GpuCameraInfo {
     let m = cam.world;
     let right = m.transform_vector3(Vec3::X).normalize_or(Vec3::X);
