@@ -17,6 +17,12 @@ var<private> bsdf_rays: u32 = 0u;
 // that escapes to the environment (a gradient pass sets it when the environment is
 // optimized): shared/env_gradient.wgsl. The first vertex is then shaded on every material.
 var<private> env_gradients: bool = false;
+// With compact_paths (ReSTIR's candidates) the camera ray's hit (and with record_paths every
+// vertex) is moved to the fixed-point barycentrics ReSTIR stores, and gradient_sample rounds
+// the incident directions and the radiances to the compact path encoding
+// (shared/path_encoding.wgsl) before anything is evaluated, so that a stored path
+// (stored_vertex, path_factor) re-evaluates to the same value.
+var<private> compact_paths: bool = false;
 
 // With record_paths (ReSTIR's candidates keeping whole paths, restir_candidates.wgsl), the
 // path's first PATH_RECORD_VERTICES vertices (triangle and fixed-point barycentrics, the
@@ -616,11 +622,8 @@ fn radiance_states(o: vec3f, d: vec3f, both: bool) -> array<vec3f, 2> {
 // samples with their BRDF derivatives. valid is false when the ray misses, hits the back of a
 // single-sided surface, or hits a material without optimized textures. The outgoing and each
 // sample's incident direction are taken to the shading frame and rounded through the
-// octahedral encoding (about 1e-7), and the derivatives are taken there. With compact_paths
-// (ReSTIR's candidates) the hit's barycentrics, the incident directions and the radiances are
-// rounded to the compact path encoding (shared/path_encoding.wgsl) before anything is evaluated, so
-// that a stored path (stored_vertex, path_factor) re-evaluates to the same value.
-var<private> compact_paths: bool = false;
+// octahedral encoding (about 1e-7), and the derivatives are taken there (with compact_paths,
+// as the top of this file says).
 
 // One technique's sample as the gradient passes use it.
 struct TechniqueSample {
