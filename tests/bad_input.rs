@@ -556,3 +556,34 @@ fn a_captures_lights_must_exist() {
         assert!(e.contains("lit.toml") && e.contains(says), "{e}");
     }
 }
+
+/// `optimize --set` with a key the task file does not have, or a bad value: exit 1, no panic,
+/// the file, the key and the `--set` it came from named, before any GPU work.
+#[test]
+fn optimize_cli_names_a_bad_set() {
+    let task = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/default/task.toml");
+    for (set, says) in [
+        (
+            "optimizer.smoothnes=0.1",
+            "`optimizer.smoothnes`: unknown key",
+        ),
+        (
+            "optimizer.smoothness=-1",
+            "`optimizer.smoothness`: must be a number",
+        ),
+        ("width.x=1", "`width` is a value (integer), not a table"),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_psrestir"))
+            .args(["optimize", task, "--iterations", "1", "--set", set])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains("task.toml")
+                && err.contains(says)
+                && err.contains(&format!("--set {set}")),
+            "{err}"
+        );
+    }
+}
