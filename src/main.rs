@@ -283,23 +283,9 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
         no_default_env,
     )?;
     if let Some(names) = lights {
-        let on = names
-            .iter()
-            .map(|n| {
-                sc.lights.iter().position(|l| &l.name == n).ok_or_else(|| {
-                    let known: Vec<&str> = sc.lights.iter().map(|l| l.name.as_str()).collect();
-                    anyhow::anyhow!(
-                        "{}: --lights: no punctual light `{n}` (the scene's: {})",
-                        path.display(),
-                        if known.is_empty() {
-                            "none".into()
-                        } else {
-                            known.join(", ")
-                        }
-                    )
-                })
-            })
-            .collect::<Result<Vec<usize>>>()?;
+        let on = sc
+            .light_indices(&names)
+            .map_err(|m| anyhow::anyhow!("{}: --lights: {m}", path.display()))?;
         sc.cameras[cam].lights = Some(on);
     }
     let (width, height) = size.unwrap_or_else(|| {

@@ -330,7 +330,7 @@ fn render_cli_rejects_bad_arguments_clearly() {
     assert_eq!(code, Some(1));
     assert!(
         err.contains(
-            "scene.gltf: --lights: no punctual light `lamp` (the scene's: point, spot, sun)"
+            "scene.gltf: --lights: no punctual light `lamp` (there are: point, spot, sun)"
         ),
         "{err}"
     );
@@ -545,7 +545,7 @@ fn a_captures_lights_must_exist() {
     for (lights, says) in [
         (
             "main = [\"lamp\"]",
-            "`target.lights.main`: no punctual light `lamp` (the scene's and the task's: point, spot, sun)",
+            "`target.lights.main`: no punctual light `lamp` (there are: point, spot, sun)",
         ),
         (
             "side = [\"sun\"]",

@@ -315,22 +315,7 @@ fn capture_lights(task: &Task, s: &mut Scene) -> Result<()> {
             .iter()
             .position(|c| &c.name == cam)
             .ok_or_else(|| bad(format!("the scene and the task have no camera `{cam}`")))?;
-        let lights = names
-            .iter()
-            .map(|n| {
-                s.lights.iter().position(|l| &l.name == n).ok_or_else(|| {
-                    let known: Vec<&str> = s.lights.iter().map(|l| l.name.as_str()).collect();
-                    bad(format!(
-                        "no punctual light `{n}` (the scene's and the task's: {})",
-                        if known.is_empty() {
-                            "none".to_string()
-                        } else {
-                            known.join(", ")
-                        }
-                    ))
-                })
-            })
-            .collect::<Result<Vec<usize>>>()?;
+        let lights = s.light_indices(names).map_err(bad)?;
         s.cameras[c].lights = Some(lights);
     }
     Ok(())

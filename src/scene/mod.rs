@@ -381,6 +381,29 @@ pub struct Scene {
 }
 
 impl Scene {
+    /// The indices of the punctual lights named `names` (a capture's lights,
+    /// [`Camera::lights`]); on failure, which name no light has and the names there are.
+    pub fn light_indices(&self, names: &[String]) -> std::result::Result<Vec<usize>, String> {
+        names
+            .iter()
+            .map(|n| {
+                self.lights
+                    .iter()
+                    .position(|l| &l.name == n)
+                    .ok_or_else(|| {
+                        let known: Vec<&str> =
+                            self.lights.iter().map(|l| l.name.as_str()).collect();
+                        let known = if known.is_empty() {
+                            "none".to_string()
+                        } else {
+                            known.join(", ")
+                        };
+                        format!("no punctual light `{n}` (there are: {known})")
+                    })
+            })
+            .collect()
+    }
+
     /// Find a camera by name or by index.
     pub fn camera(&self, which: Option<&str>) -> crate::Result<usize> {
         if self.cameras.is_empty() {
