@@ -26,7 +26,7 @@ struct LightSample {
 }
 
 // The lights of the capture being traced: lights[] holds the scene's n_lights lights once
-// for every set of them that a capture sees (src/render/gpu_scene.rs, light_tables; the
+// for every set of them that a capture sees (src/render/gpu_lights.rs, light_tables; the
 // first copy has them all), in the same order, each copy with its own choice probabilities
 // (0 for a punctual light that is off). Every pass that traces sets this from its camera
 // (CameraInfo.light_base) before it traces; light indices (TriShading.light,

@@ -3,6 +3,7 @@
 
 // Field-for-field mirrors of WGSL structs: each struct names its WGSL twin, whose comments
 // document the fields.
+mod gpu_lights;
 pub(crate) mod gpu_scene;
 #[allow(missing_docs)]
 pub mod layout;
