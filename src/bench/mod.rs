@@ -40,7 +40,7 @@ use crate::gpu::Gpu;
 use crate::image_io::Image;
 
 use crate::job::Problem;
-use crate::optim::observed::{rmse_observed, texture_rmse};
+use crate::optim::observed::rmse_observed;
 use crate::optim::{EstimatorOptions, Method, Optimizer, PassTimes, Settings};
 use crate::task::task_settings;
 use crate::task::Task;

@@ -414,9 +414,7 @@ fn curve_point(
         iteration: opt.iteration,
         seconds,
         loss,
-        texture_rmse: truth
-            .map(|r| texture_rmse(&prep.set, &values, r))
-            .unwrap_or(f64::NAN),
+        texture_rmse: prep.texture_rmse(&values).unwrap_or(f64::NAN),
         texture_rmse_observed: truth
             .map(|r| rmse_observed(&prep.set, &values, r, observed))
             .unwrap_or(f64::NAN),
@@ -442,9 +440,7 @@ impl Start {
         let observed = init.observed_texels()?.to_vec();
         Ok(Start {
             image,
-            texture: truth
-                .map(|r| texture_rmse(&prep.set, &prep.set.values, r))
-                .unwrap_or(f64::NAN),
+            texture: prep.texture_rmse(&prep.set.values).unwrap_or(f64::NAN),
             texture_observed: truth
                 .map(|r| rmse_observed(&prep.set, &prep.set.values, r, &observed))
                 .unwrap_or(f64::NAN),

@@ -24,11 +24,7 @@ impl Metrics<'_> {
     pub(super) fn texture_errors(&self, values: &[f32]) -> (Option<f64>, Option<f64>) {
         match &self.prep.reference {
             Some(r) => (
-                Some(crate::optim::observed::texture_rmse(
-                    &self.prep.set,
-                    values,
-                    r,
-                )),
+                self.prep.texture_rmse(values),
                 Some(crate::optim::observed::rmse_observed(
                     &self.prep.set,
                     values,
@@ -105,9 +101,7 @@ impl Metrics<'_> {
             crate::optim::observed::rmse_observed(&p.set, v, r, self.observed)
         };
         (
-            p.reference
-                .as_ref()
-                .map(|r| crate::optim::observed::texture_rmse(&p.set, values, r)),
+            p.texture_rmse(values),
             p.reference.as_ref().map(|r| observed(values, r)),
             p.reference.as_ref().map(|r| observed(&p.set.values, r)),
         )

@@ -183,10 +183,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     let ckpt_path = out.join("checkpoint.bin");
     let checkpoint = open_checkpoint(&out, &ckpt_path, opts.resume)?;
     let (prep, mut opt, pipeline_s) = prepare(gpu, task, opts, &out)?;
-    let initial_rmse = prep
-        .reference
-        .as_ref()
-        .map(|r| crate::optim::observed::texture_rmse(&prep.set, &prep.set.values, r));
+    let initial_rmse = prep.texture_rmse(&prep.set.values);
     // The model's path depth is part of what a checkpoint continues (said only above 1, so
     // that checkpoints of direct-light runs read as before).
     let mut layout = layout_string(&prep.set);

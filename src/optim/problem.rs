@@ -220,6 +220,14 @@ impl Optimizer {
 }
 
 impl Problem {
+    /// The RMSE of `values` (laid out like `set.values`) against the ground truth over every
+    /// texel, normal maps as the renderer reads them ([`super::observed::texture_rmse`]);
+    /// None without a ground truth.
+    pub fn texture_rmse(&self, values: &[f32]) -> Option<f64> {
+        let r = self.reference.as_ref()?;
+        Some(super::observed::texture_rmse(&self.set, values, r))
+    }
+
     /// Give `opt` the problem's cameras' exposures, the environment's fit and the white
     /// balances' rate: what an optimizer (or a differentiable render, whose loss is the
     /// caller's) takes from the problem besides its targets and masks.
