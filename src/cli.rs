@@ -250,6 +250,41 @@ pub(crate) struct OptimizeArgs {
     pub(crate) moment_filter_write_back: bool,
 }
 
+impl OptimizeArgs {
+    /// The task-file keys the flags set, as `--set` assignments: the flags that stand for one
+    /// key, then `--set` itself (later ones win).
+    pub(crate) fn task_sets(&self) -> Vec<String> {
+        let key = |k: &str, v: Option<String>| v.map(|v| format!("{k}={v}"));
+        let text = |v: Option<f32>| v.map(|v| v.to_string());
+        let quoted = |name: Option<&str>| name.map(|n| format!("{n:?}"));
+        [
+            key("max_depth", self.max_depth.map(|v| v.to_string())),
+            key("optimizer.adam.beta1", text(self.adam_beta1)),
+            key("optimizer.adam.beta2", text(self.adam_beta2)),
+            key("optimizer.adam.eps", text(self.adam_eps)),
+            key("optimizer.step", quoted(self.step.map(|s| s.kind().name()))),
+            key("optimizer.variance_step.clip", text(self.step_clip)),
+            key(
+                "optimizer.variance_step.threshold",
+                text(self.step_threshold),
+            ),
+            key(
+                "optimizer.primal",
+                quoted(self.primal.map(|p| p.mode().name())),
+            ),
+            key(
+                "optimizer.multiscale_levels",
+                self.multiscale_levels.map(|v| v.to_string()),
+            ),
+            key("optimizer.smoothness", text(self.smoothness)),
+        ]
+        .into_iter()
+        .flatten()
+        .chain(self.set.iter().cloned())
+        .collect()
+    }
+}
+
 /// The arguments of `psrestir bench`.
 #[derive(clap::Args)]
 pub(crate) struct BenchArgs {

@@ -351,17 +351,7 @@ fn cmd_render(args: RenderArgs) -> Result<()> {
 fn task_with_flags(args: &OptimizeArgs) -> Result<(PathBuf, Task)> {
     let &OptimizeArgs {
         ref task,
-        max_depth,
-        primal,
-        multiscale_levels,
-        smoothness,
         lr_scale,
-        adam_beta1,
-        adam_beta2,
-        adam_eps,
-        step,
-        step_clip,
-        step_threshold,
         moment_filter,
         moment_filter_sigma,
         moment_filter_taps,
@@ -371,34 +361,7 @@ fn task_with_flags(args: &OptimizeArgs) -> Result<(PathBuf, Task)> {
         ..
     } = args;
     let path = task.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_TASK));
-    // The flags that stand for one key of the task file, then `--set`.
-    let key = |k: &str, v: Option<String>| v.map(|v| format!("{k}={v}"));
-    let quoted = |name: Option<&str>| name.map(|n| format!("{n:?}"));
-    let mut sets: Vec<String> = [
-        key("max_depth", max_depth.map(|v| v.to_string())),
-        key("optimizer.adam.beta1", adam_beta1.map(|v| v.to_string())),
-        key("optimizer.adam.beta2", adam_beta2.map(|v| v.to_string())),
-        key("optimizer.adam.eps", adam_eps.map(|v| v.to_string())),
-        key("optimizer.step", quoted(step.map(|s| s.kind().name()))),
-        key(
-            "optimizer.variance_step.clip",
-            step_clip.map(|v| v.to_string()),
-        ),
-        key(
-            "optimizer.variance_step.threshold",
-            step_threshold.map(|v| v.to_string()),
-        ),
-        key("optimizer.primal", quoted(primal.map(|p| p.mode().name()))),
-        key(
-            "optimizer.multiscale_levels",
-            multiscale_levels.map(|v| v.to_string()),
-        ),
-        key("optimizer.smoothness", smoothness.map(|v| v.to_string())),
-    ]
-    .into_iter()
-    .flatten()
-    .collect();
-    sets.extend(args.set.iter().cloned());
+    let sets = args.task_sets();
     let mut task = Task::load_with(&path, &sets)?;
     if let Some(f) = lr_scale {
         if !(f.is_finite() && f > 0.0) {
