@@ -214,7 +214,15 @@ fn scene_mirrors_match_wgsl_field_by_field() {
         "render",
         "ParamTex",
         GpuParamTex,
-        [offset, width, height, channels, filtering, texel_offset]
+        [
+            offset,
+            width,
+            height,
+            channels,
+            filtering,
+            texel_offset,
+            slot
+        ]
     );
     mirror!(
         "render",

@@ -10,7 +10,7 @@ use common::*;
 use glam::Vec3;
 use psrestir::image_io::Image;
 use psrestir::job::run::rmse;
-use psrestir::optim::{adam, Optimizer, Schedule, ScheduleKind, Settings};
+use psrestir::optim::{adam, Method, Optimizer, Schedule, ScheduleKind, Settings};
 use psrestir::render::params::ParamSet;
 use psrestir::scene::{Material, PunctualKind, PunctualLight, Scene};
 use psrestir::task::{Filter, Init, Loss, Slot, TextureSpec};
@@ -944,7 +944,12 @@ fn mean_angle(a: &[f32], b: &[f32]) -> f64 {
 
 /// A 4x4 normal map of bumps (tilts up to 27 degrees) recovered from a flat start on the plane
 /// lit by the overhead point light, a grazing one and the sky: the mean angle error falls
-/// below half the flat start's. ReSTIR refuses the slot with an error that names it.
+/// below half the flat start's, with the baseline (measured 22.1 -> 5.4 degrees) and the
+/// recursive estimator (8.4). Not with ReSTIR at this dense sampling (576 gradient samples
+/// per texel and iteration): its mean matches the baseline's (tests/restir.rs), but one kept
+/// sample per texel and sign stands for the map's three channels, whose signs differ between
+/// samples, and its estimates' spread was 5-10x their mean here: Adam at 0.02 drifted to 26
+/// degrees, at 0.003 over 800 iterations it reached 13.
 #[test]
 fn optimization_recovers_a_known_normal_map() {
     let Some(gpu) = gpu() else { return };
@@ -977,7 +982,6 @@ fn optimization_recovers_a_known_normal_map() {
         seed: 3,
         primal_spp: 4,
         gradient_spp: 4,
-        method: psrestir::optim::Method::BASELINE,
         step: psrestir::optim::StepKind::Adam,
         ..Settings::new(48, 48, vec![0])
     };
@@ -993,36 +997,26 @@ fn optimization_recovers_a_known_normal_map() {
     probe.write_params(&truth).unwrap();
     let target = probe.render(0, 1024, 77).unwrap();
     drop(probe);
-    let restir = Settings {
-        method: psrestir::optim::Method::RESTIR,
-        ..settings.clone()
-    };
-    let err = Optimizer::new(
-        &gpu,
-        &scene,
-        set.clone(),
-        restir,
-        std::slice::from_ref(&target),
-    )
-    .err()
-    .expect("ReSTIR accepted a normal map")
-    .to_string();
-    assert!(
-        err.contains("normal maps") && err.contains("plane"),
-        "{err}"
-    );
-    let mut opt = Optimizer::new(&gpu, &scene, set, settings, &[target]).unwrap();
     let before = mean_angle(&flat, &truth);
-    for _ in 0..150 {
-        opt.step().unwrap();
+    for method in [Method::BASELINE, Method::RECURSIVE] {
+        let s = Settings {
+            method,
+            ..settings.clone()
+        };
+        let target = std::slice::from_ref(&target);
+        let mut opt = Optimizer::new(&gpu, &scene, set.clone(), s, target).unwrap();
+        for _ in 0..150 {
+            opt.step().unwrap();
+        }
+        let after = mean_angle(&opt.read_params().unwrap(), &truth);
+        let name = method.name();
+        eprintln!("{name}: normal map mean angle error {before:.2} -> {after:.2} degrees");
+        assert!(
+            after < 0.5 * before,
+            "{name}: the mean angle error fell only from {before:.2} to {after:.2} degrees"
+        );
+        assert_eq!(opt.faults().unwrap(), Default::default());
     }
-    let after = mean_angle(&opt.read_params().unwrap(), &truth);
-    eprintln!("normal map mean angle error: {before:.2} -> {after:.2} degrees");
-    assert!(
-        after < 0.5 * before,
-        "the mean angle error fell only from {before:.2} to {after:.2} degrees"
-    );
-    assert_eq!(opt.faults().unwrap(), Default::default());
 }
 
 /// Photos of one pose under one light at a time (three cameras, each seeing one of three

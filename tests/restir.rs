@@ -391,6 +391,11 @@ fn assert_means_agree(
 fn check_unbiased_across_shifts(filter: Filter) {
     let Some(gpu) = gpu() else { return };
     let trial = shift_trial(&gpu, filter, 11);
+    check_shift_trial(&format!("{filter:?}"), trial);
+}
+
+/// [`check_unbiased_across_shifts`]'s checks of one trial.
+fn check_shift_trial(label: &str, trial: ShiftTrial) {
     // 5.5 standard errors: the standard error comes from 24 batch means, so the difference
     // over it follows Student's t with 23 degrees of freedom: P(|t| > 5.5) x 32 parameters is
     // about 4e-4 per test. (4.5 with 12 batches was a 3% false alarm per test under that
@@ -399,9 +404,9 @@ fn check_unbiased_across_shifts(filter: Filter) {
     // other runs'.)
     let means = (&trial.mean[..], &trial.se[..]);
     let reference = (&trial.ref_mean[..], &trial.ref_se[..]);
-    assert_means_agree(&format!("{filter:?}"), 5.5, means, reference);
+    assert_means_agree(label, 5.5, means, reference);
     let d = trial.diagnostics;
-    eprintln!("{filter:?}: {d:?}");
+    eprintln!("{label}: {d:?}");
     // Both sides evaluate the same f32 arithmetic on the same stored path (the candidate
     // pass evaluates it at the rounded hit, direction and radiance it stores), in two
     // separately compiled shaders; the stored target is a bfloat16, so they agree to its
@@ -433,21 +438,33 @@ fn shift_trial(gpu: &psrestir::gpu::Gpu, filter: Filter, seed: u32) -> ShiftTria
     let t = [
         0.8, 0.2, 0.1, 0.3, 0.6, 0.4, 0.5, 0.5, 0.5, 0.2, 0.3, 0.9, 0.8, 0.2, 0.4, 0.9,
     ];
+    shift_trial_of(gpu, &slots, [&a, &b, &t], filter, seed)
+}
+
+/// [`shift_trial`] of 2x2 textures of `slots` on the plane, alternating between states A and
+/// B (`states`: A, B, the target's).
+fn shift_trial_of(
+    gpu: &psrestir::gpu::Gpu,
+    slots: &[Slot],
+    [a, b, t]: [&[f32]; 3],
+    filter: Filter,
+    seed: u32,
+) -> ShiftTrial {
     let opts = RestirOptions {
         verify_paths: true,
         ..Default::default()
     };
     let (base_method, re_method) = (Method::BASELINE, Method::RESTIR);
-    let mut base = optimizer_seeded(gpu, &slots, filter, base_method, opts, &a, &t, seed);
+    let mut base = optimizer_seeded(gpu, slots, filter, base_method, opts, a, t, seed);
     let reference: Vec<Vec<f32>> = (0..160)
         .map(|it| base.estimate_gradient(10_000 + it).unwrap().0)
         .collect();
     let (ref_mean, ref_se) = batch_mean(&reference, 16);
-    let mut re = optimizer_seeded(gpu, &slots, filter, re_method, opts, &a, &t, seed);
+    let mut re = optimizer_seeded(gpu, slots, filter, re_method, opts, a, t, seed);
     let mut samples = Vec::new();
     for it in 0..1240 {
         let at_a = it % 2 == 0;
-        re.write_params(if at_a { &a } else { &b }).unwrap();
+        re.write_params(if at_a { a } else { b }).unwrap();
         re.step().unwrap();
         if at_a {
             samples.push(re.read_gradient().unwrap());
@@ -513,13 +530,30 @@ fn restir_is_unbiased_across_texture_changes_bilinear() {
     check_unbiased_across_shifts(Filter::Bilinear);
 }
 
-/// Whole paths at depth 3: the corner's floor (base color and roughness) lights its walls
-/// (base color), all optimized, and the camera sees the walls only, so the floor's texels are
-/// reached only after a bounce. The textures alternate between A and B every iteration, so
-/// every kept path is shifted across a change of every vertex's material; the mean of
-/// ReSTIR's gradients at A matches a high-sample baseline reference at A, every stored path
-/// evaluates to its stored target, and no candidate finds its texel without a reservoir.
-fn check_whole_paths_unbiased(filter: Filter) {
+/// The A/B alternation over base color and a normal map: every kept path is evaluated in a
+/// shading frame that moved since it was stored (its direction kept in the geometric
+/// normal's frame), and each candidate's target under the previous state in the previous
+/// normal's frame.
+#[test]
+fn restir_is_unbiased_across_normal_map_changes() {
+    let Some(gpu) = gpu() else { return };
+    let color = |a: f32| -> Vec<f32> { (0..12).map(|i| a + 0.05 * (i % 5) as f32).collect() };
+    let state = |a: f32| -> Vec<f32> { [color(a), tilted_normals(a)].concat() };
+    let (a, b, t) = (state(0.3), state(0.55), state(0.45));
+    let slots = [Slot::BaseColor, Slot::Normal];
+    let trial = shift_trial_of(&gpu, &slots, [&a, &b, &t], Filter::Bilinear, 13);
+    check_shift_trial("normal map", trial);
+}
+
+/// Whole paths at depth 3: the corner's floor (base color and roughness, and with
+/// `normal_map` a normal map) lights its walls (base color), all optimized, and the camera
+/// sees the walls only, so the floor's texels are reached only after a bounce. The textures
+/// alternate between A and B every iteration, so every kept path is shifted across a change
+/// of every vertex's material (with the normal map, of the floor's shading frame, at a path's
+/// last vertex or before it); the mean of ReSTIR's gradients at A matches a high-sample
+/// baseline reference at A, every stored path evaluates to its stored target, and no
+/// candidate finds its texel without a reservoir.
+fn check_whole_paths_unbiased(filter: Filter, normal_map: bool) {
     let Some(gpu) = gpu() else { return };
     let mut scene = corner_scene(3);
     scene.cameras = vec![look_at(
@@ -528,17 +562,24 @@ fn check_whole_paths_unbiased(filter: Filter) {
         Vec3::Y,
         0.7,
     )];
-    let textures = [
+    let mut textures = vec![
         ("plane", Slot::BaseColor),
         ("plane", Slot::Roughness),
         ("wall", Slot::BaseColor),
     ];
-    // 2x2 texels each: 12 + 4 + 12 values.
+    // 2x2 texels each: 12 + 4 + 12 values (and the normal map's 12, tilted normals).
     let ramp = |a: f32, b: f32| -> Vec<f32> {
-        (0..28)
+        let mut v: Vec<f32> = (0..28)
             .map(|i| a + b * ((i * 7 % 11) as f32 / 10.0))
-            .collect()
+            .collect();
+        if normal_map {
+            v.extend(tilted_normals(a));
+        }
+        v
     };
+    if normal_map {
+        textures.push(("plane", Slot::Normal));
+    }
     let (a, b, t) = (ramp(0.3, 0.4), ramp(0.5, 0.3), ramp(0.2, 0.6));
     let opts = RestirOptions {
         verify_paths: true,
@@ -573,7 +614,7 @@ fn check_whole_paths_unbiased(filter: Filter) {
     // Drop the first 20 estimates at A, 16 batches of 25 (5.5 standard errors, as above).
     let (mean, se) = batch_mean(&samples[20..], 16);
     assert_eq!(re.faults().unwrap(), Default::default());
-    let label = format!("whole paths {filter:?}");
+    let label = format!("whole paths {filter:?}, normal map {normal_map}");
     assert_means_agree(&label, 5.5, (&mean, &se), (&ref_mean, &ref_se));
     let d = MergeDiagnostics::of(&re).unwrap().unwrap();
     eprintln!("{label}: {d:?}");
@@ -590,12 +631,28 @@ fn check_whole_paths_unbiased(filter: Filter) {
 
 #[test]
 fn whole_paths_at_depth_3_are_unbiased_across_changes_of_every_surface_nearest() {
-    check_whole_paths_unbiased(Filter::Nearest);
+    check_whole_paths_unbiased(Filter::Nearest, false);
 }
 
+/// With a normal map on the floor as well.
 #[test]
 fn whole_paths_at_depth_3_are_unbiased_across_changes_of_every_surface_bilinear() {
-    check_whole_paths_unbiased(Filter::Bilinear);
+    check_whole_paths_unbiased(Filter::Bilinear, true);
+}
+
+/// A normal map's 2x2 texels (12 values) of tilted normals, varying with `a`: Z well above
+/// the floor, X and Y either side of flat.
+fn tilted_normals(a: f32) -> Vec<f32> {
+    (0..4)
+        .flat_map(|i| {
+            let s = (i as f32 - 1.5) * 0.1;
+            [
+                0.5 + s + 0.2 * (a - 0.4),
+                0.5 - 0.5 * s + 0.1 * (a - 0.4),
+                0.9,
+            ]
+        })
+        .collect()
 }
 
 #[test]
@@ -797,6 +854,15 @@ fn restir_with_reuse_is_unbiased_for_roughness_bilinear() {
         &[0.3, 0.5, 0.7, 0.4],
         &[0.8, 0.2, 0.4, 0.9],
     );
+}
+
+/// A normal map held fixed: each texel's factor is a 3x3 matrix (every image channel moves
+/// each of the map's channels), its target the plain sum of the values' magnitudes.
+#[test]
+fn restir_with_reuse_is_unbiased_for_normal_map_bilinear() {
+    let v = tilted_normals(0.3);
+    let t = tilted_normals(0.6);
+    check_unbiased_with_reuse(Slot::Normal, Filter::Bilinear, &v, &t);
 }
 
 #[test]

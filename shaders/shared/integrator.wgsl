@@ -667,20 +667,21 @@ fn technique_sample(g: GradientSample, t: u32) -> TechniqueSample {
     return g.nee;
 }
 
-// The octahedral coordinates of wi (world space) in sf's frame, rounded to the fixed point
-// ReSTIR stores when compact_paths (ko: the fixed-point values).
+// The octahedral coordinates of wi (world space) in sf's frame; when compact_paths, of wi
+// as ReSTIR stores it (ko: the fixed-point values in the frame it is stored in,
+// shared/path_encoding.wgsl, stored_frame).
 struct RoundedDirection {
     oct: vec2f,
     ko: vec2u,
 }
 
 fn rounded_direction(sf: Surface, wi: vec3f) -> RoundedDirection {
-    let e = oct_encode(to_local(sf.frame, wi));
     if !compact_paths {
-        return RoundedDirection(e, vec2u(0u));
+        return RoundedDirection(oct_encode(to_local(sf.frame, wi)), vec2u(0u));
     }
+    let e = oct_encode(to_local(stored_frame(sf), wi));
     let ko = vec2u(oct_round(e.x), oct_round(e.y));
-    return RoundedDirection(vec2f(oct_value(ko.x), oct_value(ko.y)), ko);
+    return RoundedDirection(stored_direction(sf, sf.frame, ko), ko);
 }
 
 // With `both`, the BSDF sample's radiance_prev holds what its further vertices bring back

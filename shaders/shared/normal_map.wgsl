@@ -9,6 +9,9 @@
 // The slots a texture may replace (shared/params.wgsl, material_param).
 const SLOTS: u32 = 4u;
 
+// Whether normal maps may be optimized (false in shared/normal_map_off).
+const NORMAL_MAPS: bool = true;
+
 // An optimized normal map's normal that the viewer sees at a smaller cosine than this is bent
 // towards the viewer to it (optimized_normal).
 const NORMAL_BEND: f32 = 0.01;

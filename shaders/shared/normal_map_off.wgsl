@@ -5,6 +5,8 @@
 // The slots a texture may replace, the normal map left out.
 const SLOTS: u32 = 3u;
 
+const NORMAL_MAPS: bool = false;
+
 struct MappedNormal {
     n: vec3f,
     d: mat3x3f,

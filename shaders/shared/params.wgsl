@@ -115,6 +115,42 @@ fn with_adjoint(e: vec3f, adj: vec3f, channels: u32) -> vec3f {
     return vec3f(dot(adj, e), 0.0, 0.0);
 }
 
+// What a pixel's adjoint multiplies in a path's derivative with respect to one texel, for an
+// estimator that keeps a path's factor apart from the adjoint (ReSTIR): the slot factor per
+// image channel (e) for base color and the scalar slots, or for a normal map a matrix (n)
+// whose column c is image channel c's derivative in the map's RGB.
+struct TexelFactor {
+    e: vec3f,
+    n: mat3x3f,
+}
+
+// The factor of the contribution brdf x weight for one input of the slot.
+fn texel_factor(slot: u32, bg: BrdfGrad, weight: vec3f) -> TexelFactor {
+    if slot == SLOT_NORMAL {
+        let d = bg.d_normal;
+        return TexelFactor(vec3f(0.0), mat3x3f(d[0] * weight.x, d[1] * weight.y, d[2] * weight.z));
+    }
+    return TexelFactor(slot_factor(slot, bg, weight), mat3x3f());
+}
+
+fn factor_scaled(f: TexelFactor, s: f32) -> TexelFactor {
+    return TexelFactor(s * f.e, s * f.n);
+}
+
+fn factor_finite(f: TexelFactor) -> bool {
+    let big = vec3f(3.0e38);
+    return all(abs(f.e) < big) && all(abs(f.n[0]) < big) && all(abs(f.n[1]) < big) && all(abs(f.n[2]) < big);
+}
+
+// The derivative with respect to a texel of texture p that factor f gives under adjoint adj
+// (per channel of the texture: slot_derivative for one path and texel).
+fn texel_value(f: TexelFactor, adj: vec3f, p: ParamTex) -> vec3f {
+    if p.slot == SLOT_NORMAL {
+        return f.n * adj;
+    }
+    return with_adjoint(f.e, adj, p.channels);
+}
+
 // Filtered value (up to 3 channels; unused channels are 0).
 fn param_value(p: ParamTex, fp: Footprint) -> vec3f {
     var v = vec3f(0.0);

@@ -1,7 +1,8 @@
 // The compact path encoding: a path vertex kept in a few words by an estimator that stores
 // paths (ReSTIR's reservoirs) and rebuilt from the scene. A vertex is the camera ray's hit
 // (triangle, barycentrics in fixed point, PATH_BARY_BITS), the incident direction in the
-// hit's shading frame (octahedral, fixed point, PATH_OCT_BITS) and the incident radiance
+// hit's shading frame, or the geometric normal's where an optimized normal map moves the
+// shading frame (stored_frame; octahedral, fixed point, PATH_OCT_BITS) and the incident radiance
 // (RGBE); everything else the BRDF needs (texture coordinates, shading frame, outgoing
 // direction, the material inputs that no optimized texture replaces) is rebuilt by the same
 // functions that made it (path_vertex). With compact_paths the integrator samples at the
@@ -74,6 +75,33 @@ fn bf16_unpack(h: u32) -> f32 {
     return bitcast<f32>(h << 16u);
 }
 
+// Whether a direction stored at sf is kept in a frame of its own (stored_frame): with an
+// optimized normal map, whose texels move the shading frame between the iteration a path is
+// stored in and those that evaluate it.
+fn own_stored_frame(sf: Surface) -> bool {
+    return NORMAL_MAPS && materials[sf.material].param_normal != NONE;
+}
+
+// The frame a direction stored at sf is kept in: the shading frame, or with an optimized
+// normal map the geometric normal's, which depends on the geometry alone.
+fn stored_frame(sf: Surface) -> mat3x3f {
+    if own_stored_frame(sf) {
+        return onb(sf.ng);
+    }
+    return sf.frame;
+}
+
+// The octahedral coordinates in sf's shading frame `frame` (under either iteration's
+// textures) of the direction stored at sf as fixed-point ko (in stored_frame): the stored
+// values themselves unless the frame is the normal map's.
+fn stored_direction(sf: Surface, frame: mat3x3f, ko: vec2u) -> vec2f {
+    let e = vec2f(oct_value(ko.x), oct_value(ko.y));
+    if !own_stored_frame(sf) {
+        return e;
+    }
+    return oct_encode(to_local(frame, onb(sf.ng) * oct_decode(e)));
+}
+
 // The hit of triangle `tri` at fixed-point barycentrics kb.
 fn stored_hit(tri: u32, kb: vec2u) -> Hit {
     return Hit(0.0, tri, bary_value(kb.x), bary_value(kb.y));
@@ -83,6 +111,6 @@ fn stored_hit(tri: u32, kb: vec2u) -> Hit {
 // with the material inputs that the glTF material gives there and incident direction wi
 // (octahedral, in the shading frame).
 fn path_vertex(sf: Surface, gltf: SurfaceMaterial, wi: vec2f) -> PathVertex {
-    return PathVertex(sf.material, sf.uv, oct_encode(to_local(sf.frame, sf.wo)), wi, fixed_pack(sf.material, gltf));
+    return PathVertex(sf.material, sf.uv, oct_encode(to_local(sf.frame, sf.wo)), wi, fixed_pack(sf.material, gltf), gltf.roughness);
 }
 

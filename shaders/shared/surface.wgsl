@@ -193,9 +193,11 @@ fn with_optimized(mi: u32, uv: vec2f, m: SurfaceMaterial) -> SurfaceMaterial {
 
 // The inputs of m that no optimized texture of material `mi` replaces (they never change
 // during an optimization), packed in four floats: base color (RGB), then metallic, then
-// roughness, skipping the optimized ones. ReSTIR stores them with a path (RES_FIXED), so that
-// re-evaluating it samples no glTF texture. Only for a material with an optimized slot (at
-// most four inputs are left); fixed_unpack gives them back exactly.
+// roughness, skipping the optimized ones. A path vertex keeps them (PathVertex.fixed), so
+// that re-evaluating it samples no glTF texture. For a material with an optimized base
+// color, metallic or roughness at most four inputs are left; with none of them optimized
+// (a normal map alone) the roughness is kept beside them (PathVertex.fixed_roughness).
+// fixed_unpack gives them back exactly.
 fn fixed_pack(mi: u32, m: SurfaceMaterial) -> vec4f {
     if materials[mi].param_base_color == NONE {
         return vec4f(m.base_color, select(m.metallic, m.roughness, materials[mi].param_metallic != NONE));
@@ -203,9 +205,10 @@ fn fixed_pack(mi: u32, m: SurfaceMaterial) -> vec4f {
     return vec4f(m.metallic, m.roughness, 0.0, 0.0);
 }
 
-fn fixed_unpack(mi: u32, fixed: vec4f) -> SurfaceMaterial {
+fn fixed_unpack(mi: u32, fixed: vec4f, roughness: f32) -> SurfaceMaterial {
     if materials[mi].param_base_color == NONE {
-        return SurfaceMaterial(fixed.xyz, fixed.w, fixed.w);
+        let all_gltf = NORMAL_MAPS && materials[mi].param_metallic == NONE && materials[mi].param_roughness == NONE;
+        return SurfaceMaterial(fixed.xyz, fixed.w, select(fixed.w, roughness, all_gltf));
     }
     return SurfaceMaterial(vec3f(1.0), fixed.x, fixed.y);
 }
@@ -238,14 +241,16 @@ fn oct_decode(e: vec2f) -> vec3f {
 }
 
 // The factor of a path's contribution to texel `local` of optimized texture `ti` that the
-// adjoint multiplies, d(f)/d(texel) per image channel with f = BRDF x cos x L_i:
-// with_adjoint(path_factor(...), adjoint, channels) is the path-space integrand of the
-// gradient, before any sampling density. Zero when the path's material does not use the
-// texture or its filter does not reach the texel. Uses the textures that use_prev_params
-// selects. No geometry and no glTF texture is looked at.
-fn path_factor(pv: PathVertex, li: vec3f, ti: u32, local: u32) -> vec3f {
+// adjoint multiplies (shared/params.wgsl, TexelFactor), d(f)/d(texel) with f = BRDF x cos x
+// L_i at path vertex pv of surface sf (its directions in sf.frame): texel_value(factor,
+// adjoint, texture) is the path-space integrand of the gradient, before any sampling density.
+// Zero when the path's material does not use the texture or its filter does not reach the
+// texel. Uses the textures that use_prev_params selects (and sf.frame the frame under them).
+// No geometry and no glTF texture is looked at.
+fn path_factor(sf: Surface, pv: PathVertex, li: vec3f, ti: u32, local: u32) -> TexelFactor {
+    let none = TexelFactor(vec3f(0.0), mat3x3f());
     if pv.material >= arrayLength(&materials) {
-        return vec3f(0.0);
+        return none;
     }
     var slot = NONE;
     if materials[pv.material].param_roughness == ti {
@@ -254,9 +259,11 @@ fn path_factor(pv: PathVertex, li: vec3f, ti: u32, local: u32) -> vec3f {
         slot = 1u;
     } else if materials[pv.material].param_base_color == ti {
         slot = 0u;
+    } else if NORMAL_MAPS && materials[pv.material].param_normal == ti {
+        slot = SLOT_NORMAL;
     }
     if slot == NONE {
-        return vec3f(0.0);
+        return none;
     }
     let fp = footprint_merged(param_footprint(param_textures[ti], pv.uv));
     var wf = 0.0;
@@ -266,22 +273,21 @@ fn path_factor(pv: PathVertex, li: vec3f, ti: u32, local: u32) -> vec3f {
         }
     }
     if wf == 0.0 {
-        return vec3f(0.0);
+        return none;
     }
-    return wf * slot_factor(slot, vertex_grad(pv), li);
+    return factor_scaled(texel_factor(slot, vertex_grad(sf, pv, slot == SLOT_NORMAL), li), wf);
 }
 
-// The BRDF derivatives of path vertex pv, with the glTF inputs it kept and the textures that
-// use_prev_params selects.
-fn vertex_grad(pv: PathVertex) -> BrdfGrad {
-    let mat = with_optimized(pv.material, pv.uv, fixed_unpack(pv.material, pv.fixed));
-    return brdf_eval_cos_grad(mat, oct_decode(pv.wo), oct_decode(pv.wi));
-}
-
-// vertex_grad under the previous iteration's textures.
-fn vertex_grad_prev(pv: PathVertex) -> BrdfGrad {
-    use_prev_params = true;
-    let bg = vertex_grad(pv);
-    use_prev_params = false;
+// The BRDF derivatives of path vertex pv of surface sf, with the glTF inputs it kept and the
+// textures that use_prev_params selects; with `normal`, the derivative with respect to the
+// optimized normal map's RGB too (sf.frame is then the map's frame under those textures).
+fn vertex_grad(sf: Surface, pv: PathVertex, normal: bool) -> BrdfGrad {
+    let mat = with_optimized(pv.material, pv.uv, fixed_unpack(pv.material, pv.fixed, pv.fixed_roughness));
+    let wo = oct_decode(pv.wo);
+    let wi = oct_decode(pv.wi);
+    var bg = brdf_eval_cos_grad(mat, wo, wi);
+    if NORMAL_MAPS && normal && materials[pv.material].param_normal != NONE {
+        bg.d_normal = normal_rgb_grad(sf, use_prev_params, mat, wo, wi);
+    }
     return bg;
 }

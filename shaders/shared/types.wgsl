@@ -117,8 +117,9 @@ struct ParamTex {
     channels: u32,
     filtering: u32,
     texel_offset: u32,
-    _pad1: u32,
-    _pad2: u32,
+    // The material input it replaces (shared/params.wgsl, material_param's slot).
+    slot: u32,
+    _pad0: u32,
 }
 
 struct Hit {
@@ -140,4 +141,7 @@ struct PathVertex {
     wo: vec2f,
     wi: vec2f,
     fixed: vec4f,
+    // The glTF roughness: with base color, metallic and roughness all from the glTF
+    // material (only a normal map optimized), five inputs that `fixed` cannot hold.
+    fixed_roughness: f32,
 }

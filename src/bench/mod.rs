@@ -325,11 +325,7 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
             let _ = h.join();
         }
         progress.done();
-        let refused = crate::optim::estimator::task_refusal(o.gradient_method, &task.textures);
-        if let Some(why) = &refused {
-            log::warn!("{name}: the gradient phase is skipped: {why}");
-        }
-        let (pp, g) = if o.end_to_end_only || refused.is_some() {
+        let (pp, g) = if o.end_to_end_only {
             (
                 PrimalPhase::not_measured(),
                 gradient::GradientPhase::not_measured(&prep),
@@ -470,9 +466,8 @@ fn tune_contenders(
     );
     let mut t = Vec::new();
     for c in std::iter::once(Contender::BASELINE).chain(o.contenders.iter().copied()) {
-        // The default configuration is measured as it is, untuned; a contender that cannot
-        // optimize the task is not run.
-        if c.auto || crate::optim::estimator::task_refusal(c.method, &task.textures).is_some() {
+        // The default configuration is measured as it is, untuned.
+        if c.auto {
             t.push(None);
             continue;
         }

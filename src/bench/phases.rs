@@ -585,10 +585,6 @@ pub(super) fn optimization_phases(
         runs: Vec::new(),
     };
     for (who, tuned) in runs_of.zip(tuned) {
-        if let Some(why) = crate::optim::estimator::task_refusal(who.method, &task.textures) {
-            log::warn!("{}: not run: {why}", who.name());
-            continue;
-        }
         let t_best = tuned.as_ref().map(|t| &t.best);
         let mut run = optimization_phase(gpu, task, prep, o, who, t_best, progress)?;
         let empty = Image {

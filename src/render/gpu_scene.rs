@@ -279,11 +279,11 @@ fn bind_optimized(
                 scene.materials.len()
             ))
         })?;
-        let slot = match t.slot {
-            crate::vocab::Slot::BaseColor => &mut m.param_base_color,
-            crate::vocab::Slot::Metallic => &mut m.param_metallic,
-            crate::vocab::Slot::Roughness => &mut m.param_roughness,
-            crate::vocab::Slot::Normal => &mut m.param_normal,
+        let (slot, index) = match t.slot {
+            crate::vocab::Slot::BaseColor => (&mut m.param_base_color, 0),
+            crate::vocab::Slot::Metallic => (&mut m.param_metallic, 1),
+            crate::vocab::Slot::Roughness => (&mut m.param_roughness, 2),
+            crate::vocab::Slot::Normal => (&mut m.param_normal, 3),
         };
         *slot = i as u32;
         param_textures.push(GpuParamTex {
@@ -296,7 +296,8 @@ fn bind_optimized(
                 crate::vocab::Filter::Bilinear => 1,
             },
             texel_offset,
-            _pad: [0; 2],
+            slot: index,
+            _pad: 0,
         });
         texel_offset += t.width * t.height;
     }

@@ -182,7 +182,10 @@ pub struct GpuParamTex {
     pub channels: u32,
     pub filtering: u32,
     pub texel_offset: u32,
-    pub _pad: [u32; 2],
+    /// The material input it replaces: 0 base color, 1 metallic, 2 roughness, 3 normal map
+    /// (`material_param` in params.wgsl).
+    pub slot: u32,
+    pub _pad: u32,
 }
 
 /// `TraceParams` in trace_rays.wgsl.

@@ -32,7 +32,9 @@ pub const RESTIR_MAX_TEXELS_CHEAP_PRIMAL: u64 = 1 << 20;
 /// The rule in one sentence, with its thresholds (for `psrestir estimators` and reports).
 pub fn rule() -> String {
     format!(
-        "the baseline where a normal map is optimized (ReSTIR does not optimize one), where the environment is recovered (the light's fit is plain Monte Carlo \
+        "the baseline where a normal map is optimized (ReSTIR's derivatives of one cost it 2.5x the \
+         baseline's time per iteration on `wall`, where it ended at 1.41x the baseline's \
+         base-color error at 60 s), where the environment is recovered (the light's fit is plain Monte Carlo \
          in every estimator and needs iterations) and with indirect light (max_depth above 1: \
          with whole paths reused, ReSTIR with its best step ended at 0.93x the baseline's \
          texture error on gallery and 1.09x on atelier, measured at 60 s on lavapipe: no gain \
@@ -58,7 +60,7 @@ pub struct Regime {
     pub max_depth: u32,
     /// Whether the environment is recovered with the textures.
     pub recovers_light: bool,
-    /// Whether a normal map is optimized (ReSTIR does not optimize one).
+    /// Whether a normal map is optimized.
     pub normal_maps: bool,
 }
 
@@ -140,8 +142,10 @@ fn auto(r: &Regime) -> Choice {
     let (method, why) = if r.normal_maps {
         (
             Method::BASELINE,
-            "a normal map optimized: ReSTIR's stored paths keep their directions in the \
-             shading frame, which a normal map being optimized moves"
+            "a normal map optimized: with one ReSTIR takes the map's 3x3 derivative in \
+             every candidate and merge evaluation, under both iterations' frames (measured \
+             on `wall`, 60 s: 2.5x the baseline's time per iteration, 1.41x its base-color \
+             error, 14.7 against 9.9 degrees of normal-map error)"
                 .to_string(),
         )
     } else if r.recovers_light {

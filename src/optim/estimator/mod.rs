@@ -81,8 +81,6 @@ pub struct Kind {
     /// Whether, with paths of this many vertices, it keeps state for every texel rather
     /// than the observed ones only (a path can reach any texel after a bounce).
     pub every_texel: fn(u32) -> bool,
-    /// Why it cannot optimize a texture replacing this slot, if it cannot (None: it can).
-    pub refuses: fn(crate::vocab::Slot) -> Option<&'static str>,
     pub(crate) build: fn(&Setup) -> Result<Box<dyn Estimator>>,
 }
 
@@ -372,32 +370,6 @@ pub(crate) fn groups() -> Vec<GroupDecl> {
 /// The passes (WGSL files) `method` creates, the slowest to compile first.
 pub(crate) fn passes(method: Method) -> Vec<&'static str> {
     method.kind().passes.to_vec()
-}
-
-/// Why `method` cannot optimize a texture named `name` replacing `slot`, if it cannot
-/// ([`Kind::refuses`]). The estimator refuses such a task with this reason; the bench skips
-/// it.
-pub fn refusal(method: Method, name: &str, slot: crate::vocab::Slot) -> Option<String> {
-    (method.kind().refuses)(slot).map(|why| {
-        format!(
-            "{} does not optimize {} textures (texture `{name}`): {why}; use another \
-             estimator (--method)",
-            method.name(),
-            slot.name()
-        )
-    })
-}
-
-/// An estimator that optimizes every slot ([`Kind::refuses`]).
-pub(crate) fn every_slot(_: crate::vocab::Slot) -> Option<&'static str> {
-    None
-}
-
-/// [`refusal`] for the first of a task's textures that `method` cannot optimize.
-pub fn task_refusal(method: Method, textures: &[crate::vocab::TextureSpec]) -> Option<String> {
-    textures
-        .iter()
-        .find_map(|t| refusal(method, &format!("{}_{}", t.material, t.slot.name()), t.slot))
 }
 
 /// Whether `method` keeps state for every texel at paths of `max_depth` vertices

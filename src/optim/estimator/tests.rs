@@ -4,33 +4,6 @@ mod options_tests {
     use super::super::restir::RestirOptions;
     use super::super::*;
 
-    /// ReSTIR refuses normal maps, by name and with a reason; the others take every slot;
-    /// a task's first refused texture is named.
-    #[test]
-    fn estimators_say_which_slots_they_refuse() {
-        use crate::vocab::{Init, Slot, TextureSpec};
-        let why = refusal(Method::RESTIR, "wall_normal", Slot::Normal).unwrap();
-        assert!(
-            why.contains("wall_normal") && why.contains("normal maps"),
-            "{why}"
-        );
-        for m in [Method::BASELINE, Method::RECURSIVE] {
-            assert_eq!(refusal(m, "wall_normal", Slot::Normal), None);
-        }
-        let spec = |slot| TextureSpec {
-            material: "wall".into(),
-            slot,
-            resolution: [4, 4],
-            init: Init::Scalar(0.5),
-            learning_rate: None,
-        };
-        assert_eq!(task_refusal(Method::RESTIR, &[spec(Slot::BaseColor)]), None);
-        let t = [spec(Slot::BaseColor), spec(Slot::Normal)];
-        assert!(task_refusal(Method::RESTIR, &t)
-            .unwrap()
-            .contains("wall_normal"));
-    }
-
     #[test]
     fn default_tables_round_trip_and_optional_keys_are_options() {
         for m in Method::all() {

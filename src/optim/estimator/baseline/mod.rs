@@ -25,7 +25,6 @@ pub const KIND: Kind = Kind {
     memory: super::no_memory,
     warnings: super::no_warnings,
     every_texel: super::observed_only,
-    refuses: super::every_slot,
     build: |setup| Ok(Box::new(Baseline::new(setup)?)),
 };
 

@@ -46,7 +46,6 @@ pub const KIND: Kind = Kind {
     memory: |sizes, _| memory(sizes.params),
     warnings: super::no_warnings,
     every_texel: super::observed_only,
-    refuses: super::every_slot,
     build: |setup| Ok(Box::new(Recursive::new(setup)?)),
 };
 

@@ -172,7 +172,9 @@ fn differentiate_pixel(id: vec3u) {
             if rp.have_prev != 0u {
                 // The same path under the previous textures, with the glTF inputs it kept
                 // (and, with an optimized normal map, the previous normal's frame).
-                grad_prev = vertex_grad_prev(ts.vertex);
+                use_prev_params = true;
+                grad_prev = vertex_grad(g.sf, ts.vertex, false);
+                use_prev_params = false;
                 if g.m.param_normal != NONE {
                     grad_prev = surface_brdf_grad(g.sf, material_at(g.sf, true), ts.ds.wi, true);
                 }

@@ -83,15 +83,15 @@ fn unpack_path(w: array<u32, RES_PATH_WORDS>) -> PathWords {
 }
 
 // A stored path rebuilt from the scene, seen from the camera at `origin`: every vertex's
-// path vertex (shared/surface.wgsl) with the glTF material's inputs there, the radiance at
-// the last one, and its shape. valid is false where a vertex shades black (the back of a
-// single-sided surface).
+// surface (shared/surface.wgsl) and path vertex with the glTF material's inputs there, the
+// radiance at the last one, and its shape. valid is false where a vertex shades black (the
+// back of a single-sided surface).
 struct DecodedPath {
     valid: bool,
-    // How many of the vertices from the first on are valid, and their shading frames (the
-    // candidate pass stores a direction in the last one's).
+    // How many of the vertices from the first on are valid, and their surfaces, each with
+    // the shading frame that its path vertex's directions are in.
     n_valid: u32,
-    frame: array<mat3x3f, MAX_PATH_VERTICES>,
+    sf: array<Surface, MAX_PATH_VERTICES>,
     n: u32,
     k: u32,
     pv: array<PathVertex, MAX_PATH_VERTICES>,
@@ -99,32 +99,39 @@ struct DecodedPath {
     radiance: vec3f,
 }
 
-fn decode_path(origin: vec3f, p: PathWords) -> DecodedPath {
+// The path in p rebuilt, its shading frames those of the current or (prev) the previous
+// iteration's textures (they differ only where an optimized normal map changed): a path is
+// evaluated under the previous textures in their frames.
+fn decode_path(origin: vec3f, p: PathWords, prev: bool) -> DecodedPath {
     var out: DecodedPath;
     out.n_valid = 0u;
     out.n = p.n;
     out.k = p.k;
     out.radiance = p.radiance;
-    var sf: array<Surface, MAX_PATH_VERTICES>;
     var seen_from = origin;
     for (var j = 0u; j < p.n; j++) {
-        sf[j] = surface_at(seen_from, stored_hit(p.tri[j], p.kb[j]));
-        if sf[j].valid && out.n_valid == j {
+        out.sf[j] = surface_at(seen_from, stored_hit(p.tri[j], p.kb[j]));
+        if NORMAL_MAPS && prev {
+            out.sf[j].frame = frame_of(out.sf[j], true);
+        }
+        if out.sf[j].valid && out.n_valid == j {
             out.n_valid = j + 1u;
         }
-        out.frame[j] = sf[j].frame;
-        seen_from = sf[j].p;
+        seen_from = out.sf[j].p;
     }
     out.valid = out.n_valid >= p.n;
     for (var j = 0u; j < p.n; j++) {
         // The direction to the next vertex, or the stored one at the last.
-        var wi = vec2f(oct_value(p.ko.x), oct_value(p.ko.y));
+        let sf = out.sf[j];
+        var wi = vec2f(0.0);
         if j + 1u < p.n {
-            wi = oct_encode(to_local(sf[j].frame, normalize(sf[j + 1u].p - sf[j].p)));
+            wi = oct_encode(to_local(sf.frame, normalize(out.sf[j + 1u].p - sf.p)));
+        } else {
+            wi = stored_direction(sf, sf.frame, p.ko);
         }
-        let gltf = gltf_inputs(sf[j].material, sf[j].uv);
+        let gltf = gltf_inputs(sf.material, sf.uv);
         out.gltf[j] = gltf;
-        out.pv[j] = path_vertex(sf[j], gltf, wi);
+        out.pv[j] = path_vertex(sf, gltf, wi);
     }
     return out;
 }

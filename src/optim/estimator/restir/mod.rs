@@ -123,7 +123,6 @@ pub const KIND: Kind = Kind {
     },
     warnings,
     every_texel: abi::reservoir::whole_paths,
-    refuses: refused_slot,
     build: |setup| Ok(Box::new(Restir::new(setup)?)),
 };
 
@@ -204,14 +203,6 @@ pub(crate) struct Restir {
     moment_updates: u32,
 }
 
-/// The slots ReSTIR does not optimize: normal maps, whose texels move the shading frame that
-/// its stored paths keep their last direction in (and that its stored paths' factors are
-/// evaluated without).
-fn refused_slot(slot: crate::vocab::Slot) -> Option<&'static str> {
-    (slot == crate::vocab::Slot::Normal)
-        .then_some("its stored paths keep their directions in the shading frame, which normal maps move")
-}
-
 impl Restir {
     /// An error naming what this estimator cannot handle in `s`.
     fn check_setup(s: &Setup) -> Result<()> {
@@ -227,14 +218,6 @@ impl Restir {
                 "ReSTIR handles images of at most 2^{} pixels, the task has {n_pixels}",
                 reservoir::CAMERA_SHIFT
             )));
-        }
-        if let Some(why) = s
-            .set
-            .textures
-            .iter()
-            .find_map(|t| super::refusal(super::Method::RESTIR, &t.name(), t.slot))
-        {
-            return Err(Error::Invalid(why));
         }
         let n_tris = s.scene.info.n_tris;
         if u64::from(n_tris) > 1 << reservoir::TRI_BITS {

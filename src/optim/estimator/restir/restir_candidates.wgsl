@@ -1,8 +1,12 @@
 // ReSTIR candidate pass: every camera sample's light-sampled and BSDF-sampled paths are
 // candidates for every texel that their hit point touches. A candidate's value v for a texel
-// is the path-space integrand adjoint x e, with e = d(BRDF cos L_i)/d(texel) per image
-// channel (shared/surface.wgsl, path_factor); its target q is target_of(the target adjoint x
-// e) (shared/params.wgsl). The target adjoint is an exponential moving average of
+// is the path-space integrand e applied to the adjoint, with e = d(BRDF cos L_i)/d(texel)
+// per image channel, or for a normal-map texel per image channel and map channel (a 3x3
+// factor: shared/params.wgsl, TexelFactor; shared/surface.wgsl, path_factor); its target q
+// is target_of(e applied to the target adjoint) (target.wgsl). With an optimized normal map
+// a path's last direction is stored in the geometric normal's frame, which the map does not
+// move (shared/path_encoding.wgsl, stored_frame), and the previous state's target is taken
+// in the previous textures' shading frames. The target adjoint is an exponential moving average of
 // the adjoints (cp.smoothing; reservoir.wgsl), which this pass forms for every pixel.
 // A candidate is offered to the texel's positive reservoir when q > 0, to the negative one
 // when q < 0 (or to one reservoir without positivization) with the resampling weight |q| x
@@ -182,28 +186,26 @@ fn offer_path(o: Offer, adj: vec3f, adj_t: vec3f, adj_t_prev: vec3f, info: u32) 
         return;
     }
     let m = materials[o.mi];
-    // (ReSTIR does not optimize normal maps: src/optim/estimator/restir refuses the slot.)
-    for (var slot = 0u; slot < SLOT_NORMAL; slot++) {
+    for (var slot = 0u; slot < SLOTS; slot++) {
         let pi = material_param(m, slot);
         if pi == NONE {
             continue;
         }
         let p = param_textures[pi];
         let fp = footprint_merged(param_footprint(p, o.uv));
-        let ch = p.channels;
-        let d = slot_factor(slot, o.bg, o.li);
-        var d_prev = vec3f(0.0);
+        let d = texel_factor(slot, o.bg, o.li);
+        var d_prev = TexelFactor(vec3f(0.0), mat3x3f());
         if cp.prev_targets != 0u {
-            d_prev = slot_factor(slot, o.bg_prev, o.li_prev);
+            d_prev = texel_factor(slot, o.bg_prev, o.li_prev);
         }
         for (var k = 0u; k < 4u; k++) {
             if fp.weight[k] == 0.0 {
                 continue;
             }
-            let e = fp.weight[k] * d;
-            let v = with_adjoint(e, adj, ch);
-            let q = target_of(with_adjoint(e, adj_t, ch), ch);
-            var q_prev = target_of(with_adjoint(fp.weight[k] * d_prev, adj_t_prev, ch), ch);
+            let e = factor_scaled(d, fp.weight[k]);
+            let v = texel_value(e, adj, p);
+            let q = target_of(texel_value(e, adj_t, p), p);
+            var q_prev = target_of(texel_value(factor_scaled(d_prev, fp.weight[k]), adj_t_prev, p), p);
             if !(abs(q_prev) < 3.0e38) {
                 q_prev = 0.0;
             }
@@ -211,7 +213,7 @@ fn offer_path(o: Offer, adj: vec3f, adj_t: vec3f, adj_t_prev: vec3f, info: u32) 
             if w == 0.0 {
                 continue;
             }
-            if !(w < 3.0e38) || !all(abs(v) < vec3f(3.0e38)) || !all(abs(e) < vec3f(3.0e38)) {
+            if !(w < 3.0e38) || !all(abs(v) < vec3f(3.0e38)) || !factor_finite(e) {
                 dropped += 1u;
                 continue;
             }
@@ -250,8 +252,18 @@ fn technique_offer(g: GradientSample, t: u32) -> Offer {
     o.bg_prev = ts.grad;
     if cp.prev_targets != 0u {
         // The path's derivatives under the previous textures, from the stored (rounded)
-        // directions, as the merge would evaluate them (path_factor).
-        o.bg_prev = vertex_grad_prev(ts.vertex);
+        // directions, as the merge would evaluate them (path_factor), in the shading frame
+        // of those textures.
+        var sf = g.sf;
+        var pv = ts.vertex;
+        if NORMAL_MAPS && g.m.param_normal != NONE {
+            sf.frame = frame_of(sf, true);
+            pv.wo = oct_encode(to_local(sf.frame, sf.wo));
+            pv.wi = stored_direction(sf, sf.frame, ts.ko);
+        }
+        use_prev_params = true;
+        o.bg_prev = vertex_grad(sf, pv, true);
+        use_prev_params = false;
     }
     o.li = ts.ds.radiance;
     o.li_prev = ts.ds.radiance;
@@ -262,8 +274,10 @@ fn technique_offer(g: GradientSample, t: u32) -> Offer {
 }
 
 // The camera path's vertices (record_paths, shared/integrator.wgsl) rebuilt as the merge
-// rebuilds a stored path (compact_path.wgsl), once per camera sample.
+// rebuilds a stored path (compact_path.wgsl), once per camera sample; with optimized normal
+// maps and cp.prev_targets, in the previous textures' frames too.
 var<private> recorded: DecodedPath;
+var<private> recorded_prev: DecodedPath;
 
 // Whole paths: arrival a (a path that reaches an emitter from its last vertex), differentiated
 // at its vertex k, evaluated from the words the reservoir will keep exactly as the merge
@@ -284,20 +298,30 @@ fn arrival_offer(a: u32, k: u32) -> Offer {
     var dp = recorded;
     dp.n = n;
     dp.k = k;
-    let e = oct_encode(to_local(dp.frame[n - 1u], ar.wi));
+    let last = dp.sf[n - 1u];
+    let e = oct_encode(to_local(stored_frame(last), ar.wi));
     let ko = vec2u(oct_round(e.x), oct_round(e.y));
-    dp.pv[n - 1u].wi = vec2f(oct_value(ko.x), oct_value(ko.y));
+    dp.pv[n - 1u].wi = stored_direction(last, last.frame, ko);
     let rgbe = rgbe_pack(ar.radiance);
     dp.radiance = rgbe_unpack(rgbe);
     o.mi = dp.pv[k].material;
     o.uv = dp.pv[k].uv;
-    o.bg = vertex_grad(dp.pv[k]);
+    o.bg = vertex_grad(dp.sf[k], dp.pv[k], true);
     o.li = arriving_at(dp, k);
     o.bg_prev = o.bg;
     o.li_prev = o.li;
     if cp.prev_targets != 0u {
-        o.bg_prev = vertex_grad_prev(dp.pv[k]);
+        if NORMAL_MAPS {
+            let radiance = dp.radiance;
+            dp = recorded_prev;
+            dp.n = n;
+            dp.k = k;
+            let last_prev = dp.sf[n - 1u];
+            dp.pv[n - 1u].wi = stored_direction(last_prev, last_prev.frame, ko);
+            dp.radiance = radiance;
+        }
         use_prev_params = true;
+        o.bg_prev = vertex_grad(dp.sf[k], dp.pv[k], true);
         o.li_prev = arriving_at(dp, k);
         use_prev_params = false;
     }
@@ -371,7 +395,11 @@ fn offer_pixel(id: vec3u) {
                 n = max(n, arrivals[j].n);
             }
             if n > 0u {
-                recorded = decode_path(cp.camera.origin, PathWords(rec_tri, rec_kb, vec2u(0u), vec3f(0.0), 0.0, n, 0u));
+                let pw = PathWords(rec_tri, rec_kb, vec2u(0u), vec3f(0.0), 0.0, n, 0u);
+                recorded = decode_path(cp.camera.origin, pw, false);
+                if NORMAL_MAPS && cp.prev_targets != 0u {
+                    recorded_prev = decode_path(cp.camera.origin, pw, true);
+                }
             }
         } else if !g.valid {
             continue;

@@ -19,7 +19,8 @@
 // barycentrics and the previous vertex's position (the camera's for the first): texture
 // coordinates, shading frame, the directions to its neighbours, the glTF material's inputs
 // there; its factor e is the derivative of vertex k's BRDF cos times the radiance times every
-// other vertex's BRDF cos; its value is the pixel's adjoint times e, its target
+// other vertex's BRDF cos (a 3x3 matrix for a normal-map texel: shared/params.wgsl,
+// TexelFactor), each in the shading frame of the textures it is evaluated under; its value is the pixel's adjoint times e, its target
 // target_of(the pixel's target adjoint times e). Its target under the previous state is
 // stored with it: the candidate pass computes it for a fresh sample, and the merge stores
 // each merged sample's current target, which is its previous-state target at the next merge. With the verify flag the merge
@@ -163,7 +164,13 @@ fn slot_words(k: u32, b: u32) -> array<u32, RESERVOIR_WORDS_MAX> {
     return w;
 }
 
-// The reservoir in slot k of observed texel i.
+// The position of the camera that a stored path's info word names.
+fn origin_of(info: u32) -> vec3f {
+    let cam = min((info >> INFO_CAMERA_SHIFT) & INFO_CAMERA_MASK, MAX_CAMERAS - 1u);
+    return mp.origins[cam].xyz;
+}
+
+// The reservoir in slot k of observed texel i, in the current textures' frames.
 fn load(k: u32, i: u32) -> Stored {
     let w = slot_words(k, i * res_stride);
     var pw: array<u32, RES_PATH_WORDS>;
@@ -172,8 +179,7 @@ fn load(k: u32, i: u32) -> Stored {
     }
     let path = unpack_path(pw);
     let info = w[RES_INFO];
-    let cam = min((info >> INFO_CAMERA_SHIFT) & INFO_CAMERA_MASK, MAX_CAMERAS - 1u);
-    return Stored(info, bitcast<f32>(w[RES_W]), path, decode_path(mp.origins[cam].xyz, path));
+    return Stored(info, bitcast<f32>(w[RES_W]), path, decode_path(origin_of(info), path, false));
 }
 
 fn slot_w(k: u32, i: u32) -> f32 {
@@ -233,18 +239,21 @@ fn pixel_adjoints(info: u32) -> PixelAdjoints {
 }
 
 // Factor of the stored path for texel `local` of texture `ti` (shared/surface.wgsl,
-// path_factor), under the current (prev = false) or previous textures.
-fn evaluate(st: Stored, ti: u32, local: u32, prev: bool) -> vec3f {
+// path_factor), under the current (prev = false) or previous textures: st decoded in the
+// frames of the same textures.
+fn evaluate(st: Stored, ti: u32, local: u32, prev: bool) -> TexelFactor {
     evaluations += 1u;
+    let none = TexelFactor(vec3f(0.0), mat3x3f());
     if !st.dp.valid {
-        return vec3f(0.0);
+        return none;
     }
     use_prev_params = prev;
-    let e = path_factor(st.dp.pv[st.dp.k], arriving_at(st.dp, st.dp.k), ti, local);
+    let k = st.dp.k;
+    let e = path_factor(st.dp.sf[k], st.dp.pv[k], arriving_at(st.dp, k), ti, local);
     use_prev_params = false;
-    if !all(abs(e) < vec3f(3.0e38)) {
+    if !factor_finite(e) {
         dropped += 1u;
-        return vec3f(0.0);
+        return none;
     }
     return e;
 }
@@ -272,7 +281,7 @@ struct Evaluated {
 // MAX_PATH_VERTICES): the same value and target from the same words, read and rebuilt
 // without the whole-path decoding's arrays (which a CPU device keeps in memory; measured on
 // lavapipe: the merge of `sphere` in 30 ms instead of 44).
-fn evaluate_first(k: u32, i: u32, ti: u32, local: u32, ch: u32) -> Evaluated {
+fn evaluate_first(k: u32, i: u32, ti: u32, local: u32, p: ParamTex) -> Evaluated {
     evaluations += 1u;
     let b = i * res_stride;
     let info = slot_word(k, b + RES_INFO);
@@ -281,37 +290,41 @@ fn evaluate_first(k: u32, i: u32, ti: u32, local: u32, ch: u32) -> Evaluated {
     let wy = slot_word(k, b + RES_WI_Y);
     let radiance = rgbe_unpack(slot_word(k, b + RES_RADIANCE));
     let q_prev = bf16_unpack((wx >> PATH_OCT_BITS) | ((wy >> PATH_OCT_BITS) << 8u));
-    let cam = min((info >> INFO_CAMERA_SHIFT) & INFO_CAMERA_MASK, MAX_CAMERAS - 1u);
-    let sf = surface_at(mp.origins[cam].xyz, stored_hit(v.x, v.yz));
+    let sf = surface_at(origin_of(info), stored_hit(v.x, v.yz));
     if !sf.valid {
         return Evaluated(q_prev, vec3f(0.0), 0.0);
     }
     let oct_mask = (1u << PATH_OCT_BITS) - 1u;
-    let wi = vec2f(oct_value(wx & oct_mask), oct_value(wy & oct_mask));
+    let wi = stored_direction(sf, sf.frame, vec2u(wx & oct_mask, wy & oct_mask));
     let pv = path_vertex(sf, gltf_inputs(sf.material, sf.uv), wi);
-    var e = path_factor(pv, radiance, ti, local);
-    if !all(abs(e) < vec3f(3.0e38)) {
+    var e = path_factor(sf, pv, radiance, ti, local);
+    if !factor_finite(e) {
         dropped += 1u;
-        e = vec3f(0.0);
+        e = TexelFactor(vec3f(0.0), mat3x3f());
     }
     let pa = pixel_adjoints(info);
-    return Evaluated(q_prev, with_adjoint(e, pa.value, ch), target_of(with_adjoint(e, pa.target_cur, ch), ch));
+    return Evaluated(q_prev, texel_value(e, pa.value, p), target_of(texel_value(e, pa.target_cur, p), p));
 }
 
-fn evaluate_stored(k: u32, i: u32, ti: u32, local: u32, ch: u32, verify: bool) -> Evaluated {
+fn evaluate_stored(k: u32, i: u32, ti: u32, local: u32, p: ParamTex, verify: bool) -> Evaluated {
     if !whole_paths() && !verify {
-        return evaluate_first(k, i, ti, local, ch);
+        return evaluate_first(k, i, ti, local, p);
     }
-    let st = load(k, i);
+    var st = load(k, i);
     let pa = pixel_adjoints(st.info);
     let e = evaluate(st, ti, local, false);
-    let q = target_of(with_adjoint(e, pa.target_cur, ch), ch);
+    let q = target_of(texel_value(e, pa.target_cur, p), p);
+    let v = texel_value(e, pa.value, p);
     if verify {
-        let again = target_of(with_adjoint(evaluate(st, ti, local, true), pa.target_prev, ch), ch);
+        // Under the previous textures, in their frames.
+        if NORMAL_MAPS {
+            st.dp = decode_path(origin_of(st.info), st.path, true);
+        }
+        let again = target_of(texel_value(evaluate(st, ti, local, true), pa.target_prev, p), p);
         let scale = max(max(abs(again), abs(q)), 1e-30);
         record_verified(abs(again - st.path.q_prev) / scale);
     }
-    return Evaluated(st.path.q_prev, with_adjoint(e, pa.value, ch), q);
+    return Evaluated(st.path.q_prev, v, q);
 }
 
 // What the candidate pass added into gradient entry j: the later vertices' derivatives beyond
@@ -406,7 +419,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         let j = firstTrailingBit(rest);
         rest &= rest - 1u;
         let k = select(select(kept_k.y, kept_k.x, j == 2u), select(fresh_k.y, fresh_k.x, j == 0u), j < 2u);
-        let e = evaluate_stored(k, i, ti, local, ch, verify);
+        let e = evaluate_stored(k, i, ti, local, p, verify);
         switch j {
             case 0u: {
                 f0 = e;

@@ -23,7 +23,6 @@ pub const KIND: Kind = Kind {
     memory: no_memory,
     warnings: no_warnings,
     every_texel: super::observed_only,
-    refuses: super::every_slot,
     build: |setup| Ok(Box::new(Toy::new(setup)?)),
 };
 
