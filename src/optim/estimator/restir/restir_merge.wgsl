@@ -358,6 +358,143 @@ fn write_entry(j: u32, g: f32, f: f32) {
     variance[j] = max(m.y / mp.moment_bias - mean * mean, 0.0) * mp.variance_factor;
 }
 
+// A texel's inputs of the merge: the slots and weight sums of its fresh and kept
+// reservoirs (signs 0 and 1; the kept ones' weights 0 without reuse) and their samples
+// evaluated under the current state. Plain fields, not arrays indexed by a loop counter: on
+// a CPU device those live in memory.
+struct MergeInputs {
+    fresh_k: vec2u,
+    kept_k: vec2u,
+    fresh_w: vec2f,
+    kept_w: vec2f,
+    f0: Evaluated,
+    f1: Evaluated,
+    k0: Evaluated,
+    k1: Evaluated,
+}
+
+// `inputs` with every one that holds a sample (the fresh ones of signs 0 and 1, then the
+// kept ones) evaluated for texel `local` of texture ti (p), in one loop so that
+// neighbouring invocations run their evaluations together.
+fn evaluate_inputs(inputs: MergeInputs, i: u32, ti: u32, local: u32, p: ParamTex, verify: bool) -> MergeInputs {
+    var out = inputs;
+    var rest = u32(inputs.fresh_w.x > 0.0) | (u32(inputs.fresh_w.y > 0.0) << 1u) | (u32(inputs.kept_w.x > 0.0) << 2u) | (u32(inputs.kept_w.y > 0.0) << 3u);
+    while rest != 0u {
+        let j = firstTrailingBit(rest);
+        rest &= rest - 1u;
+        let k = select(select(inputs.kept_k.y, inputs.kept_k.x, j == 2u), select(inputs.fresh_k.y, inputs.fresh_k.x, j == 0u), j < 2u);
+        let e = evaluate_stored(k, i, ti, local, p, verify);
+        switch j {
+            case 0u: {
+                out.f0 = e;
+            }
+            case 1u: {
+                out.f1 = e;
+            }
+            case 2u: {
+                out.k0 = e;
+            }
+            default: {
+                out.k1 = e;
+            }
+        }
+    }
+    return out;
+}
+
+// What the merge of one sign kept: its term of the gradient (the selected sample's value x
+// its W), the fresh reservoir's own estimate (write_entry), and the slot it lies in.
+struct SignMerge {
+    g: vec3f,
+    fresh: vec3f,
+    slot: u32,
+}
+
+// The merge of sign s of observed texel i (texel t of all optimized texels): the
+// confidence-weighted balance heuristic over all inputs, empty ones included, and the
+// selection in place (the selected reservoir's W and target rewritten where it lies; an
+// empty merge leaves the fresh slot, with W = 0).
+fn merge_sign(inputs: MergeInputs, s: u32, i: u32, t: u32, reuse: bool, n_signs: u32) -> SignMerge {
+    var out = SignMerge(vec3f(0.0), vec3f(0.0), inputs.fresh_k[s]);
+    let k_qprev = vec2f(inputs.k0.q_prev, inputs.k1.q_prev);
+    let k_qcur = vec2f(inputs.k0.q, inputs.k1.q);
+    let m_c = mp.m_fresh;
+    let m_k = select(0.0, mp.m_kept, reuse);
+    var c = inputs.f0;
+    if s == 1u {
+        c = inputs.f1;
+    }
+    let c_qcur = c.q;
+    let c_qprev = select(0.0, c.q_prev, reuse);
+    // The candidate pass offered the fresh sample to this sign for the sign of the same
+    // target from the same stored path; a rounding difference between the two shaders that
+    // flips a target of about zero drops it.
+    var c_ok = inputs.fresh_w[s] > 0.0;
+    if c_ok && !(tau(c_qcur, s) > 0.0) {
+        c_ok = false;
+        dropped += 1u;
+    }
+    // Resampling weights m_r(y_r) * tau_s(q_cur(y_r)) * W_r of the fresh input (w0) and the
+    // kept ones (wk).
+    var w0 = 0.0;
+    if c_ok {
+        out.fresh = c.v * (inputs.fresh_w[s] / tau(c_qcur, s));
+        let own = m_c * tau(c_qcur, s);
+        var den = own;
+        for (var r = 0u; r < n_signs; r++) {
+            den += m_k * tau(c_qprev, r);
+        }
+        let big_w = inputs.fresh_w[s] / tau(c_qcur, s);
+        w0 = select(0.0, own / den * tau(c_qcur, s) * big_w, den > 0.0);
+    }
+    var wk = vec2f(0.0);
+    for (var r = 0u; r < 2u; r++) {
+        let qc = k_qcur[r];
+        if inputs.kept_w[r] > 0.0 && tau(qc, s) > 0.0 {
+            let qp = k_qprev[r];
+            let own = m_k * tau(qp, r);
+            var den = m_c * tau(qc, s);
+            for (var r2 = 0u; r2 < n_signs; r2++) {
+                den += m_k * tau(qp, r2);
+            }
+            wk[r] = select(0.0, own / den * tau(qc, s) * inputs.kept_w[r], den > 0.0);
+        }
+    }
+    let total = w0 + wk.x + wk.y;
+    if !(total > 0.0) || !(total < 3.0e38) {
+        // Empty: the fresh slot (W = 0 from here on) stands for it.
+        if inputs.fresh_w[s] > 0.0 {
+            set_w(inputs.fresh_k[s], i, 0.0);
+        }
+        return out;
+    }
+    rng_init(mp.seed, t, 1u + s);
+    let u = rand() * total;
+    var pick = 0u;
+    if u >= w0 {
+        pick = select(2u, 1u, u < w0 + wk.x);
+    }
+    // Guard against rounding picking a zero-weight input.
+    if (pick == 0u && w0 <= 0.0) || (pick == 1u && wk.x <= 0.0) || (pick == 2u && wk.y <= 0.0) {
+        pick = select(select(2u, 1u, wk.x > 0.0), 0u, w0 > 0.0);
+    }
+    // A kept sample goes to at most one sign (its weight is zero for the other), so the two
+    // merged reservoirs always lie in different slots.
+    var v = c.v;
+    var q = c_qcur;
+    if pick != 0u {
+        out.slot = inputs.kept_k[pick - 1u];
+        v = select(inputs.k0.v, inputs.k1.v, pick == 2u);
+        q = select(inputs.k0.q, inputs.k1.q, pick == 2u);
+    }
+    let w_out = total / tau(q, s);
+    set_w(out.slot, i, w_out);
+    // Its target now is its target under the previous state at the next merge.
+    set_q_prev(out.slot, i, q);
+    out.g = v * w_out;
+    return out;
+}
+
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3u) {
     res_stride = reservoir_stride();
@@ -381,21 +518,20 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     let reuse = (mp.flags & MERGE_FLAG_TEMPORAL) != 0u && (mp.flags & MERGE_FLAG_HAVE_PREV) != 0u;
     let verify = (mp.flags & MERGE_FLAG_VERIFY) != 0u && reuse;
     let h = headers[i];
-    // Slots of the kept reservoirs (signs 0 and 1 of the last merge) and of the fresh ones.
-    let kept_k = vec2u(header_slot(h, 0u), header_slot(h, 1u));
-    let fresh_k = vec2u(fresh_slot(h, 0u), fresh_slot(h, 1u));
-    let fresh_w = vec2f(fresh_weight(fresh_k.x, i), fresh_weight(fresh_k.y, i));
-    var kept_w = vec2f(0.0);
+    // Slots of the fresh reservoirs and of the kept ones (signs 0 and 1 of the last merge).
+    let none = Evaluated(0.0, vec3f(0.0), 0.0);
+    var inputs = MergeInputs(vec2u(fresh_slot(h, 0u), fresh_slot(h, 1u)), vec2u(header_slot(h, 0u), header_slot(h, 1u)), vec2f(0.0), vec2f(0.0), none, none, none, none);
+    inputs.fresh_w = vec2f(fresh_weight(inputs.fresh_k.x, i), fresh_weight(inputs.fresh_k.y, i));
     if reuse {
-        kept_w = vec2f(slot_w(kept_k.x, i), slot_w(kept_k.y, i));
+        inputs.kept_w = vec2f(slot_w(inputs.kept_k.x, i), slot_w(inputs.kept_k.y, i));
         // Without positivization the sign-1 reservoir is always empty.
-        kept_w.y = select(0.0, kept_w.y, n_signs == 2u);
+        inputs.kept_w.y = select(0.0, inputs.kept_w.y, n_signs == 2u);
     }
     // Many observed texels hold no sample in an iteration (not hit this iteration and never
     // before): their gradient is 0, found from the header and four words, and their slots
     // and header stay as they are (the fresh slots are empty; kept ones that are not reused
     // keep their slots until a merge selects something else).
-    if !any(fresh_w > vec2f(0.0)) && !any(kept_w > vec2f(0.0)) {
+    if !any(inputs.fresh_w > vec2f(0.0)) && !any(inputs.kept_w > vec2f(0.0)) {
         for (var c = 0u; c < ch; c++) {
             write_entry(p.offset + local * ch + c, 0.0, 0.0);
         }
@@ -404,122 +540,17 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         }
         return;
     }
-
-    // Every input that holds a sample (the fresh ones of signs 0 and 1, then the kept ones),
-    // evaluated under the current state, in one loop so that neighbouring invocations run
-    // their evaluations together. Plain variables, not arrays indexed by a loop counter: on a
-    // CPU device those live in memory.
-    let none = Evaluated(0.0, vec3f(0.0), 0.0);
-    var f0 = none;
-    var f1 = none;
-    var k0 = none;
-    var k1 = none;
-    var rest = u32(fresh_w.x > 0.0) | (u32(fresh_w.y > 0.0) << 1u) | (u32(kept_w.x > 0.0) << 2u) | (u32(kept_w.y > 0.0) << 3u);
-    while rest != 0u {
-        let j = firstTrailingBit(rest);
-        rest &= rest - 1u;
-        let k = select(select(kept_k.y, kept_k.x, j == 2u), select(fresh_k.y, fresh_k.x, j == 0u), j < 2u);
-        let e = evaluate_stored(k, i, ti, local, p, verify);
-        switch j {
-            case 0u: {
-                f0 = e;
-            }
-            case 1u: {
-                f1 = e;
-            }
-            case 2u: {
-                k0 = e;
-            }
-            default: {
-                k1 = e;
-            }
-        }
-    }
-    let k_qprev = vec2f(k0.q_prev, k1.q_prev);
-    let k_qcur = vec2f(k0.q, k1.q);
-    // Confidence-weighted balance heuristic over all inputs, empty ones included.
-    let m_c = mp.m_fresh;
-    let m_k = select(0.0, mp.m_kept, reuse);
+    inputs = evaluate_inputs(inputs, i, ti, local, p, verify);
     var g = vec3f(0.0);
     // The fresh reservoirs' own estimate (write_entry).
     var fresh = vec3f(0.0);
     // The slot each sign's merged reservoir ends in.
-    var out_slot = fresh_k;
+    var out_slot = inputs.fresh_k;
     for (var s = 0u; s < n_signs; s++) {
-        var c = f0;
-        if s == 1u {
-            c = f1;
-        }
-        let c_qcur = c.q;
-        let c_qprev = select(0.0, c.q_prev, reuse);
-        // The candidate pass offered the fresh sample to this sign for the sign of the same
-        // target from the same stored path; a rounding difference between the two shaders
-        // that flips a target of about zero drops it.
-        var c_ok = fresh_w[s] > 0.0;
-        if c_ok && !(tau(c_qcur, s) > 0.0) {
-            c_ok = false;
-            dropped += 1u;
-        }
-        // Resampling weights m_r(y_r) * tau_s(q_cur(y_r)) * W_r of the fresh input (w0) and
-        // the kept ones (wk).
-        var w0 = 0.0;
-        if c_ok {
-            fresh += c.v * (fresh_w[s] / tau(c_qcur, s));
-            let own = m_c * tau(c_qcur, s);
-            var den = own;
-            for (var r = 0u; r < n_signs; r++) {
-                den += m_k * tau(c_qprev, r);
-            }
-            let big_w = fresh_w[s] / tau(c_qcur, s);
-            w0 = select(0.0, own / den * tau(c_qcur, s) * big_w, den > 0.0);
-        }
-        var wk = vec2f(0.0);
-        for (var r = 0u; r < 2u; r++) {
-            let qc = k_qcur[r];
-            if kept_w[r] > 0.0 && tau(qc, s) > 0.0 {
-                let qp = k_qprev[r];
-                let own = m_k * tau(qp, r);
-                var den = m_c * tau(qc, s);
-                for (var r2 = 0u; r2 < n_signs; r2++) {
-                    den += m_k * tau(qp, r2);
-                }
-                wk[r] = select(0.0, own / den * tau(qc, s) * kept_w[r], den > 0.0);
-            }
-        }
-        let total = w0 + wk.x + wk.y;
-        if !(total > 0.0) || !(total < 3.0e38) {
-            // Empty: the fresh slot (W = 0 from here on) stands for it.
-            if fresh_w[s] > 0.0 {
-                set_w(fresh_k[s], i, 0.0);
-            }
-            continue;
-        }
-        rng_init(mp.seed, t, 1u + s);
-        let u = rand() * total;
-        var pick = 0u;
-        if u >= w0 {
-            pick = select(2u, 1u, u < w0 + wk.x);
-        }
-        // Guard against rounding picking a zero-weight input.
-        if (pick == 0u && w0 <= 0.0) || (pick == 1u && wk.x <= 0.0) || (pick == 2u && wk.y <= 0.0) {
-            pick = select(select(2u, 1u, wk.x > 0.0), 0u, w0 > 0.0);
-        }
-        // A kept sample goes to at most one sign (its weight is zero for the other), so the
-        // two merged reservoirs always lie in different slots.
-        var k_out = fresh_k[s];
-        var v = c.v;
-        var q = c_qcur;
-        if pick != 0u {
-            k_out = kept_k[pick - 1u];
-            v = select(k0.v, k1.v, pick == 2u);
-            q = select(k0.q, k1.q, pick == 2u);
-        }
-        let w_out = total / tau(q, s);
-        set_w(k_out, i, w_out);
-        // Its target now is its target under the previous state at the next merge.
-        set_q_prev(k_out, i, q);
-        out_slot[s] = k_out;
-        g += v * w_out;
+        let m = merge_sign(inputs, s, i, t, reuse, n_signs);
+        g += m.g;
+        fresh += m.fresh;
+        out_slot[s] = m.slot;
     }
     let new_h = out_slot.x | (out_slot.y << HEADER_SLOT_BITS);
     headers[i] = new_h;
