@@ -153,8 +153,8 @@ fn max_component(v: vec3f) -> f32 {
 
 // Uses 6 random numbers per vertex in a fixed order (light choice, light sample, BSDF sample;
 // then, from vertex RR_VERTEX on, one for Russian roulette before them), so that the primal
-// and gradient passes draw the same samples from the same camera-sample index. With `both`,
-// the vertices after the first are also evaluated under the previous iteration's textures
+// and gradient passes draw the same samples from the same camera-sample index (options:
+// PathOptions, below). With `both`, the vertices after the first are also evaluated under the previous iteration's textures
 // (same directions, densities and MIS weights), for bsdf_prev.
 //
 // With `replay`, the derivatives at the vertices after the first (path replay
@@ -168,7 +168,24 @@ fn max_component(v: vec3f) -> f32 {
 // Both include the first vertex's BRDF x cos / density along its BSDF sample. The memory is
 // the same at every depth; the cost is a second tracing of the paths that reach an optimized
 // material after the first vertex.
-fn camera_path(o: vec3f, d: vec3f, optimized_only: bool, both: bool, replay: bool) -> CameraPath {
+// What a camera path computes besides its value, set by name at every call site
+// (path_options, then the fields): optimized_only shades the first vertex only where its
+// material has an optimized texture (the gradient passes); both and replay as above.
+struct PathOptions {
+    optimized_only: bool,
+    both: bool,
+    replay: bool,
+}
+
+// No option set: the path's value under the current textures.
+fn path_options() -> PathOptions {
+    return PathOptions(false, false, false);
+}
+
+fn camera_path(o: vec3f, d: vec3f, opts: PathOptions) -> CameraPath {
+    let optimized_only = opts.optimized_only;
+    let both = opts.both;
+    let replay = opts.replay;
     var out: CameraPath;
     out.hit = Hit(3.0e38, NONE, 0.0, 0.0);
     out.shaded = false;
@@ -592,7 +609,9 @@ fn contribution(mat: SurfaceMaterial, sf: Surface, s: DirectSample, prev: bool) 
 // vertex's two techniques' contributions under each state are added in one loop, for the
 // reason camera_path traces in one.
 fn radiance_states(o: vec3f, d: vec3f, both: bool) -> array<vec3f, 2> {
-    let p = camera_path(o, d, false, both, false);
+    var po = path_options();
+    po.both = both;
+    let p = camera_path(o, d, po);
     var l = array<vec3f, 2>(p.e, p.e);
     if !p.shaded {
         return l;
@@ -684,13 +703,16 @@ fn rounded_direction(sf: Surface, wi: vec3f) -> RoundedDirection {
     return RoundedDirection(stored_direction(sf, sf.frame, ko), ko);
 }
 
-// With `both`, the BSDF sample's radiance_prev holds what its further vertices bring back
-// under the previous iteration's textures (the recursive estimator's second state). With
-// `replay`, the path's later vertices are differentiated on the way (camera_path): the pass
-// defines differentiate_later_vertex.
-fn gradient_sample(o: vec3f, d: vec3f, both: bool, replay: bool) -> GradientSample {
+// With opts.both, the BSDF sample's radiance_prev holds what its further vertices bring
+// back under the previous iteration's textures (the recursive estimator's second state).
+// With opts.replay, the path's later vertices are differentiated on the way (camera_path):
+// the pass defines differentiate_later_vertex. The first vertex is shaded only where its
+// material has an optimized texture (opts.optimized_only is set here).
+fn gradient_sample(o: vec3f, d: vec3f, opts: PathOptions) -> GradientSample {
     var out: GradientSample;
-    let p = camera_path(o, d, true, both, replay);
+    var po = opts;
+    po.optimized_only = true;
+    let p = camera_path(o, d, po);
     out.valid = p.shaded && has_optimized(p.sf.material);
     if !out.valid {
         return out;

@@ -67,7 +67,9 @@ fn differentiate_pixel(id: vec3u) {
     for (var s = 0u; s < gp.spp; s++) {
         rng_init(gp.seed, (gp.sample_offset + s) * a.n_pixels + a.pixel, 0u);
         let d = camera_direction(gp.camera, a.xy + rand2());
-        let g = gradient_sample(gp.camera.origin, d, false, true);
+        var po = path_options();
+        po.replay = true;
+        let g = gradient_sample(gp.camera.origin, d, po);
         if !g.valid {
             continue;
         }

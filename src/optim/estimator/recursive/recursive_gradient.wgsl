@@ -162,7 +162,10 @@ fn differentiate_pixel(id: vec3u) {
         // The same random numbers as the baseline's sample s of this pixel.
         rng_init(rp.seed, s * n_pixels + pixel, 0u);
         let d = camera_direction(rp.camera, vec2f(xy) + rand2());
-        let g = gradient_sample(rp.camera.origin, d, rp.have_prev != 0u, true);
+        var po = path_options();
+        po.both = rp.have_prev != 0u;
+        po.replay = true;
+        let g = gradient_sample(rp.camera.origin, d, po);
         if !g.valid {
             continue;
         }

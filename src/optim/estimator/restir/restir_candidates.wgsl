@@ -384,7 +384,9 @@ fn offer_pixel(id: vec3u) {
     for (var s = 0u; s < cp.spp; s++) {
         rng_init(cp.seed, s * a.n_pixels + a.pixel, 0u);
         let d = camera_direction(cp.camera, a.xy + rand2());
-        let g = gradient_sample(cp.camera.origin, d, false, !whole);
+        var po = path_options();
+        po.replay = !whole;
+        let g = gradient_sample(cp.camera.origin, d, po);
         // Offers: the first vertex's two techniques, or with whole paths every arrival at
         // every vertex (at most 6 arrivals of up to MAX_PATH_VERTICES vertices).
         var n_offers = 2u;
