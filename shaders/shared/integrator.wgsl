@@ -151,23 +151,6 @@ fn max_component(v: vec3f) -> f32 {
     return max(max(v.x, v.y), v.z);
 }
 
-// Uses 6 random numbers per vertex in a fixed order (light choice, light sample, BSDF sample;
-// then, from vertex RR_VERTEX on, one for Russian roulette before them), so that the primal
-// and gradient passes draw the same samples from the same camera-sample index (options:
-// PathOptions, below). With `both`, the vertices after the first are also evaluated under the previous iteration's textures
-// (same directions, densities and MIS weights), for bsdf_prev.
-//
-// With `replay`, the derivatives at the vertices after the first (path replay
-// backpropagation): once the path is traced and everything it brings back is known, it is
-// traced again from the same random numbers, and at every later vertex with an optimized
-// material the pass's differentiate_later_vertex receives the surface, the incident direction
-// (world space), the BRDF's inputs under each state and the factor that its derivative
-// multiplies: for a light sample, the throughput up to the vertex times the sample's weight;
-// for the BSDF sample, what the rest of the path brings back (everything less what the
-// vertices before it brought) over the BRDF's value there.
-// Both include the first vertex's BRDF x cos / density along its BSDF sample. The memory is
-// the same at every depth; the cost is a second tracing of the paths that reach an optimized
-// material after the first vertex.
 // What a camera path computes besides its value, set by name at every call site
 // (path_options, then the fields): optimized_only shades the first vertex only where its
 // material has an optimized texture (the gradient passes); both and replay as above.
@@ -182,414 +165,501 @@ fn path_options() -> PathOptions {
     return PathOptions(false, false, false);
 }
 
-fn camera_path(o: vec3f, d: vec3f, opts: PathOptions) -> CameraPath {
-    let optimized_only = opts.optimized_only;
-    let both = opts.both;
-    let replay = opts.replay;
-    var out: CameraPath;
-    out.hit = Hit(3.0e38, NONE, 0.0, 0.0);
-    out.shaded = false;
-    out.e = vec3f(0.0);
-    out.nee = NO_SAMPLE;
-    out.bsdf = NO_SAMPLE;
-    out.bsdf_prev = vec3f(0.0);
-    let max_depth = max(scene.max_depth, 1u);
-    let rng_start = rng_state;
+// camera_path's state between its steps: its options, the vertex whose samples are being
+// traced, what the path has gathered, and its result so far.
+struct PathState {
+    out: CameraPath,
+    optimized_only: bool,
+    both: bool,
+    replay: bool,
+    max_depth: u32,
+    rng_start: u32,
     // Whether the path is being replayed (with `replay`) to differentiate later vertices,
     // knowing what it brought back in all (ind_total, ind_prev_total).
-    var replaying = false;
-    var ind_total = vec3f(0.0);
-    var ind_prev_total = vec3f(0.0);
-    var later_optimized = false;
-    var ray_o = o;
-    var ray_d = d;
-    var ray_tmax = 3.0e38;
-    var stage = STAGE_CAMERA;
-    var ls: LightSample;
-    var nee_weight = 0.0;
-    var u_bsdf = vec3f(0.0);
-    var bsdf_pdf = 0.0;
+    replaying: bool,
+    ind_total: vec3f,
+    ind_prev_total: vec3f,
+    later_optimized: bool,
+    // The ray to trace next and what it is (STAGE_*).
+    ray_o: vec3f,
+    ray_d: vec3f,
+    ray_tmax: f32,
+    stage: u32,
+    ls: LightSample,
+    nee_weight: f32,
+    u_bsdf: vec3f,
+    bsdf_pdf: f32,
     // The vertex whose samples are being traced (1 = the camera ray's hit, 0 before it is
     // shaded), its surface and material under the current and (with both) the previous
     // textures.
-    var depth = 0u;
-    var vsf: Surface;
-    var vmat: SurfaceMaterial;
-    var vmat_prev: SurfaceMaterial;
+    depth: u32,
+    vsf: Surface,
+    vmat: SurfaceMaterial,
+    vmat_prev: SurfaceMaterial,
     // The surface at the hit of a ray that a vertex is shaded at next.
-    var next_sf: Surface;
+    next_sf: Surface,
     // From vertex 2 on: the throughput from vertex 2 to this vertex (1 at vertex 2) and to the
     // next one along the BSDF sample, under each state, and the radiance gathered so far,
     // arriving at the first vertex along its BSDF sample (before its BRDF and density).
-    var beta = vec3f(1.0);
-    var beta_prev = vec3f(1.0);
-    var beta_next = vec3f(1.0);
-    var beta_next_prev = vec3f(1.0);
-    var ind = vec3f(0.0);
-    var ind_prev = vec3f(0.0);
+    beta: vec3f,
+    beta_prev: vec3f,
+    beta_next: vec3f,
+    beta_next_prev: vec3f,
+    ind: vec3f,
+    ind_prev: vec3f,
     // The first vertex's BRDF x cos / density along its BSDF sample (for Russian roulette and
     // the later vertices' derivatives), under each state.
-    var first_weight = vec3f(1.0);
-    var first_weight_prev = vec3f(1.0);
+    first_weight: vec3f,
+    first_weight_prev: vec3f,
     // The first vertex's BSDF sample: its direction, density and the MIS-weighted emission
     // it finds.
-    var first_wi = vec3f(0.0, 0.0, 1.0);
-    var first_pdf = 0.0;
-    var first_e = vec3f(0.0);
+    first_wi: vec3f,
+    first_pdf: f32,
+    first_e: vec3f,
     // With env_gradients: the direction of this step's escape to the environment (zero for
     // none) and the MIS weight / density its radiance is multiplied by at its vertex.
-    var env_dir = vec3f(0.0);
-    var env_factor = 0.0;
+    env_dir: vec3f,
+    env_factor: f32,
     // With record_paths: 1 / the densities of the BSDF samples that led to this vertex (and
     // to the next one), and the next vertex's triangle and barycentrics.
-    var path_scale = 1.0;
-    var path_scale_next = 1.0;
-    var next_tri = NONE;
-    var next_kb = vec2u(0u);
+    path_scale: f32,
+    path_scale_next: f32,
+    next_tri: u32,
+    next_kb: vec2u,
+}
+
+// What one step of camera_path passes from stage to stage: the traced ray's hit, whether the
+// light sample arrived and what comes next (the BSDF sample, shading the hit), and after the
+// first vertex the direction in which this vertex's BRDF is evaluated in this step (zero for
+// none) with the radiance arriving along it, weighted by MIS and density (from a light
+// sample, or the emission a BSDF sample found), and whether that direction is the BSDF
+// sample's that leads to the next vertex.
+struct PathStep {
+    hit: Hit,
+    next_bsdf: bool,
+    nee_arrives: bool,
+    shade: bool,
+    eval_wi: vec3f,
+    arrives: vec3f,
+    to_next: bool,
+}
+
+// A camera path, traced in steps (one ray each: the camera ray, a light sample's shadow ray,
+// a BSDF sample) through the stages path_arrival, path_light_arrives, path_evaluate,
+// path_next_vertex and path_bsdf_sample, which share PathState and PathStep. Uses 6 random
+// numbers per vertex in a fixed order (light choice, light sample, BSDF sample; then, from
+// vertex RR_VERTEX on, one for Russian roulette before them), so that the primal and
+// gradient passes draw the same samples from the same camera-sample index (options:
+// PathOptions). With `both`, the vertices after the first are also evaluated under the
+// previous iteration's textures (same directions, densities and MIS weights), for bsdf_prev.
+//
+// With `replay`, the derivatives at the vertices after the first (path replay
+// backpropagation): once the path is traced and everything it brings back is known, it is
+// traced again from the same random numbers, and at every later vertex with an optimized
+// material the pass's differentiate_later_vertex receives the surface, the incident direction
+// (world space), the BRDF's inputs under each state and the factor that its derivative
+// multiplies: for a light sample, the throughput up to the vertex times the sample's weight;
+// for the BSDF sample, what the rest of the path brings back (everything less what the
+// vertices before it brought) over the BRDF's value there.
+// Both include the first vertex's BRDF x cos / density along its BSDF sample. The memory is
+// the same at every depth; the cost is a second tracing of the paths that reach an optimized
+// material after the first vertex.
+fn camera_path(o: vec3f, d: vec3f, opts: PathOptions) -> CameraPath {
+    // (A variable without an initializer is zero: the other fields start at 0.)
+    var st: PathState;
+    st.out.hit = Hit(3.0e38, NONE, 0.0, 0.0);
+    st.out.nee = NO_SAMPLE;
+    st.out.bsdf = NO_SAMPLE;
+    st.optimized_only = opts.optimized_only;
+    st.both = opts.both;
+    st.replay = opts.replay;
+    st.max_depth = max(scene.max_depth, 1u);
+    st.rng_start = rng_state;
+    st.ray_o = o;
+    st.ray_d = d;
+    st.ray_tmax = 3.0e38;
+    st.stage = STAGE_CAMERA;
+    st.beta = vec3f(1.0);
+    st.beta_prev = vec3f(1.0);
+    st.beta_next = vec3f(1.0);
+    st.beta_next_prev = vec3f(1.0);
+    st.first_weight = vec3f(1.0);
+    st.first_weight_prev = vec3f(1.0);
+    st.first_wi = vec3f(0.0, 0.0, 1.0);
+    st.path_scale = 1.0;
+    st.path_scale_next = 1.0;
+    st.next_tri = NONE;
     n_arrivals = 0u;
-    let steps = (1u + 3u * max_depth) * select(1u, 2u, replay && max_depth > 1u);
-    for (var step = 0u; step < steps && stage != STAGE_DONE; step++) {
-        var hit = Hit(ray_tmax, NONE, 0.0, 0.0);
-        if stage != STAGE_LIGHT {
-            hit = trace_ray(ray_o, ray_d, ray_tmax, stage == STAGE_SHADOW);
+    let steps = (1u + 3u * st.max_depth) * select(1u, 2u, st.replay && st.max_depth > 1u);
+    for (var step = 0u; step < steps && st.stage != STAGE_DONE; step++) {
+        var sp: PathStep;
+        sp.hit = Hit(st.ray_tmax, NONE, 0.0, 0.0);
+        if st.stage != STAGE_LIGHT {
+            sp.hit = trace_ray(st.ray_o, st.ray_d, st.ray_tmax, st.stage == STAGE_SHADOW);
         }
-        var next_bsdf = false;
-        var nee_arrives = false;
-        var shade = false;
-        // After the first vertex: the direction in which this vertex's BRDF is evaluated in
-        // this step (zero for none), and the radiance arriving along it, weighted by MIS
-        // and density (from a light sample, or the emission a BSDF sample found).
-        var eval_wi = vec3f(0.0);
-        var arrives = vec3f(0.0);
-        // Whether eval_wi is the direction of the BSDF sample that leads to the next vertex.
-        var to_next = false;
-        env_dir = vec3f(0.0);
-        if stage == STAGE_SHADOW {
-            nee_arrives = hit.tri == NONE;
-            next_bsdf = true;
+        st.env_dir = vec3f(0.0);
+        if st.stage == STAGE_SHADOW {
+            sp.nee_arrives = sp.hit.tri == NONE;
+            sp.next_bsdf = true;
         } else {
-            // What arrives: from the emitter point (tri, b) seen from its front or back, or
-            // from the environment along dir when tri is NONE.
-            var tri = hit.tri;
-            var dir = ray_d;
-            var front = false;
-            // A hit that becomes the next vertex: the camera ray's, or a BSDF sample's below
-            // the maximum depth.
-            let continues = stage == STAGE_CAMERA || (stage == STAGE_BSDF && depth < max_depth);
-            if stage == STAGE_LIGHT {
-                tri = ls.tri;
-                hit.b1 = ls.b.x;
-                hit.b2 = ls.b.y;
-                dir = ls.wi;
-                front = ls.front;
-            } else if continues && hit.tri != NONE {
-                if compact_paths && (stage == STAGE_CAMERA || record_paths) {
-                    // (The distance is kept: a BSDF sample's hit on an emitter reads it.)
-                    next_kb = vec2u(bary_round(hit.b1), bary_round(hit.b2));
-                    let t = hit.t;
-                    hit = stored_hit(hit.tri, next_kb);
-                    hit.t = t;
-                }
-                next_tri = hit.tri;
-                next_sf = surface_at(ray_o, hit);
-                if stage == STAGE_CAMERA {
-                    out.hit = hit;
-                    out.sf = next_sf;
-                }
-                front = next_sf.front;
-            } else if hit.tri != NONE {
-                let p0 = tri_vertex(hit.tri, 0u);
-                let ng = cross(tri_vertex(hit.tri, 1u) - p0, tri_vertex(hit.tri, 2u) - p0);
-                front = dot(ng, ray_d) < 0.0;
-            }
-            var le = vec3f(0.0);
-            // The environment's density in direction dir, light choice included.
-            var p_env = 0.0;
-            if !(stage == STAGE_LIGHT && ls.is_delta) {
-                if tri == NONE {
-                    le = env_radiance(dir);
-                    if stage != STAGE_CAMERA {
-                        p_env = env_light_pdf(dir);
-                    }
-                } else {
-                    // Zero at the back of a single-sided surface (which shades black).
-                    le = emitted(tri, hit.b1, hit.b2, front);
-                }
-            }
-            if stage == STAGE_BSDF {
-                var p_light = p_env;
-                if hit.tri != NONE {
-                    p_light = area_light_pdf(hit.tri, vsf.p, ray_o + hit.t * ray_d);
-                }
-                let w = mis_bsdf(bsdf_pdf, p_light);
-                if !(all(le == vec3f(0.0)) || w <= 0.0) {
-                    record_arrival(depth, ray_d, le, path_scale * w / bsdf_pdf);
-                    if depth == 1u {
-                        out.bsdf = DirectSample(ray_d, le, w / bsdf_pdf);
-                        first_e = le * w;
-                    } else {
-                        arrives = le * w;
-                    }
-                    if env_gradients && hit.tri == NONE {
-                        env_dir = ray_d;
-                        env_factor = w / bsdf_pdf;
-                    }
-                }
-                if max_depth > 1u || any(env_dir != vec3f(0.0)) {
-                    eval_wi = ray_d;
-                    to_next = true;
-                }
-                stage = STAGE_DONE;
-                shade = continues && hit.tri != NONE && next_sf.valid;
-            } else if stage == STAGE_LIGHT {
-                if ls.env {
-                    ls.radiance = le;
-                    ls.pdf = p_env;
-                } else if !ls.is_delta {
-                    ls.radiance = le;
-                }
-                let sf = vsf;
-                stage = STAGE_DONE;
-                next_bsdf = true;
-                if !(ls.pdf <= 0.0 || all(ls.radiance == vec3f(0.0)) || dot(ls.wi, sf.ng) <= 0.0) {
-                    nee_weight = 1.0;
-                    if !ls.is_delta {
-                        let p_bsdf = brdf_pdf(vmat, to_local(sf.frame, sf.wo), to_local(sf.frame, ls.wi));
-                        nee_weight = mis_light(ls.pdf, p_bsdf);
-                    }
-                    if !(nee_weight <= 0.0) {
-                        shadow_rays += 1u;
-                        // The shadow segment runs from the offset origin to the light point
-                        // itself, moved off an emitter's surface towards the shading point by
-                        // the same relative offset, so that neither end hits its own surface.
-                        // (A ray of length `dist` along wi from the offset origin would end
-                        // past an emitter's plane wherever the origin's offset exceeds its
-                        // margin along the plane's normal, and find the emitter itself in the
-                        // way; tests/techniques.rs and tests/analytic.rs catch that.)
-                        let so = offset_origin(sf, ls.wi);
-                        if ls.dist >= 3.0e38 {
-                            ray_o = so;
-                            ray_d = ls.wi;
-                            ray_tmax = 3.0e38;
-                            stage = STAGE_SHADOW;
-                        } else {
-                            var q = sf.p + ls.dist * ls.wi;
-                            if any(ls.n != vec3f(0.0)) {
-                                let scale = 1e-4 * (1.0 + max(max(abs(q.x), abs(q.y)), abs(q.z)));
-                                q += ls.n * select(-scale, scale, dot(ls.n, -ls.wi) >= 0.0);
-                            }
-                            let to = q - so;
-                            let len = length(to);
-                            if len <= 0.0 {
-                                nee_arrives = true;
-                            } else {
-                                ray_o = so;
-                                ray_d = to / len;
-                                ray_tmax = len * (1.0 - 1e-4);
-                                stage = STAGE_SHADOW;
-                            }
-                        }
-                        if stage == STAGE_SHADOW {
-                            next_bsdf = false;
-                        }
-                    }
-                }
-            } else {
-                out.e = le;
-                if env_gradients && tri == NONE && !replaying {
-                    differentiate_env(dir, vec3f(1.0));
-                }
-                stage = STAGE_DONE;
-                // (With replay, a path whose first vertex is not optimized may still reach one.)
-                shade = hit.tri != NONE && next_sf.valid && (!optimized_only || has_optimized(next_sf.material) || (replay && max_depth > 1u) || env_gradients || record_paths);
-                out.shaded = shade;
-            }
+            path_arrival(&st, &sp);
         }
-        if nee_arrives {
-            record_arrival(depth, ls.wi, ls.radiance, path_scale * nee_weight / ls.pdf);
-            if env_gradients && ls.env {
-                env_dir = ls.wi;
-                env_factor = nee_weight / ls.pdf;
-            }
-            if depth == 1u {
-                out.nee = DirectSample(ls.wi, ls.radiance, nee_weight / ls.pdf);
-                if any(env_dir != vec3f(0.0)) {
-                    eval_wi = ls.wi;
-                }
-            } else {
-                eval_wi = ls.wi;
-                arrives = ls.radiance * (nee_weight / ls.pdf);
-            }
+        if sp.nee_arrives {
+            path_light_arrives(&st, &sp);
         }
-        if any(eval_wi != vec3f(0.0)) {
-            // The vertex's BRDF x cos towards eval_wi under each state, at one call site (the
-            // light sample's and the BSDF sample's; see above). A BSDF sample's carries the
-            // path on to the next vertex (beta_next); at the first vertex it only weighs
-            // Russian roulette.
-            let wo = to_local(vsf.frame, vsf.wo);
-            let wi = to_local(vsf.frame, eval_wi);
-            // What the rest of the path brings back from here (replay only).
-            let rest = ind_total - ind;
-            let rest_prev = ind_prev_total - ind_prev;
-            var fc = vec3f(0.0);
-            var fc_prev = vec3f(0.0);
-            for (var state = 0u; state < select(1u, 2u, both); state++) {
-                var m = vmat;
-                var b = beta;
-                var wo_s = wo;
-                var wi_s = wi;
-                if state == 1u {
-                    m = vmat_prev;
-                    b = beta_prev;
-                    if materials[vsf.material].param_normal != NONE {
-                        // (The previous normal map's frame; the directions are the same.)
-                        let frame_prev = frame_of(vsf, true);
-                        wo_s = to_local(frame_prev, vsf.wo);
-                        wi_s = to_local(frame_prev, eval_wi);
-                    }
-                }
-                var f = brdf_eval_cos(m, wo_s, wi_s);
-                if state == 0u {
-                    fc = f;
-                } else {
-                    fc_prev = f;
-                }
-                if to_next {
-                    f /= bsdf_pdf;
-                }
-                if depth == 1u {
-                    // (At the first vertex a light sample is evaluated here only for the
-                    // environment's derivative.)
-                    if to_next && state == 0u {
-                        first_weight = f;
-                    } else if to_next {
-                        first_weight_prev = f;
-                    }
-                } else if to_next {
-                    if state == 0u {
-                        beta_next = b * f;
-                        ind += beta_next * arrives;
-                    } else {
-                        beta_next_prev = b * f;
-                        ind_prev += beta_next_prev * arrives;
-                    }
-                } else if state == 0u {
-                    ind += b * f * arrives;
-                } else {
-                    ind_prev += b * f * arrives;
-                }
-            }
-            if any(env_dir != vec3f(0.0)) && !replaying {
-                // The escape's factor on the way to the pixel: the throughput to this vertex
-                // (1 at the first), its BRDF x cos, the MIS weight / density.
-                var through = vec3f(1.0);
-                if depth > 1u {
-                    through = first_weight * beta;
-                }
-                differentiate_env(env_dir, through * fc * env_factor);
-            }
-            if replaying && depth > 1u && has_optimized(vsf.material) {
-                var w = first_weight * beta * arrives;
-                var w_prev = first_weight_prev * beta_prev * arrives;
-                if to_next {
-                    w = first_weight * select(vec3f(0.0), rest / fc, fc > vec3f(0.0));
-                    w_prev = first_weight_prev * select(vec3f(0.0), rest_prev / fc_prev, fc_prev > vec3f(0.0));
-                }
-                differentiate_later_vertex(vsf, eval_wi, vmat, vmat_prev, w, w_prev);
-            }
+        if any(sp.eval_wi != vec3f(0.0)) {
+            path_evaluate(&st, &sp);
         }
-        if shade {
-            // The hit becomes the next vertex: the first at the camera ray's hit.
-            depth += 1u;
-            vsf = next_sf;
-            if record_paths && depth <= PATH_RECORD_VERTICES {
-                rec_tri[depth - 1u] = next_tri;
-                rec_kb[depth - 1u] = next_kb;
-            }
-            let gltf = gltf_inputs(vsf.material, vsf.uv);
-            // The optimized inputs under each state, at one call site.
-            for (var state = 0u; state < select(1u, 2u, both); state++) {
-                use_prev_params = state == 1u;
-                let m = with_optimized(vsf.material, vsf.uv, gltf);
-                if state == 0u {
-                    vmat = m;
-                } else {
-                    vmat_prev = m;
-                }
-            }
-            use_prev_params = false;
-            if depth == 1u {
-                out.gltf = gltf;
-                out.mat = vmat;
-                out.mat_prev = vmat_prev;
-            } else {
-                later_optimized = later_optimized || has_optimized(vsf.material);
-                beta = beta_next;
-                beta_prev = beta_next_prev;
-                path_scale = path_scale_next;
-                if depth >= RR_VERTEX {
-                    let q = min(max_component(beta * first_weight), 0.95);
-                    if rand() < q {
-                        beta /= q;
-                        beta_prev /= q;
-                        path_scale /= q;
-                    } else {
-                        shade = false;
-                    }
-                }
-            }
-            if shade {
-                let u_pick = rand();
-                let u_light = rand2();
-                u_bsdf = vec3f(rand(), rand2());
-                ls = sample_light(vsf.p, u_pick, u_light);
-                stage = STAGE_LIGHT;
-            }
+        if sp.shade {
+            path_next_vertex(&st, &sp);
         }
-        if next_bsdf {
-            stage = STAGE_DONE;
-            let wo = to_local(vsf.frame, vsf.wo);
-            let wi_local = brdf_sample(vmat, wo, u_bsdf);
-            let wi = to_world(vsf.frame, wi_local);
-            if !(wi_local.z <= 0.0 || dot(wi, vsf.ng) <= 0.0) {
-                bsdf_pdf = brdf_pdf(vmat, wo, wi_local);
-                if !(bsdf_pdf <= 0.0) {
-                    bsdf_rays += 1u;
-                    ray_o = offset_origin(vsf, wi);
-                    ray_d = wi;
-                    ray_tmax = 3.0e38;
-                    stage = STAGE_BSDF;
-                    path_scale_next = path_scale / bsdf_pdf;
-                    if depth == 1u {
-                        first_wi = wi;
-                        first_pdf = bsdf_pdf;
-                    }
-                }
-            }
+        if sp.next_bsdf {
+            path_bsdf_sample(&st);
         }
-        if stage == STAGE_DONE && replay && !replaying && later_optimized && (any(ind != vec3f(0.0)) || any(ind_prev != vec3f(0.0))) {
-            // Replay: the same path from the same random numbers, now knowing its total.
-            replaying = true;
-            ind_total = ind;
-            ind_prev_total = ind_prev;
-            ind = vec3f(0.0);
-            ind_prev = vec3f(0.0);
-            rng_state = rng_start;
-            ray_o = o;
-            ray_d = d;
-            ray_tmax = 3.0e38;
-            stage = STAGE_CAMERA;
-            depth = 0u;
-            beta_next = vec3f(1.0);
-            beta_next_prev = vec3f(1.0);
+        if st.stage == STAGE_DONE && st.replay && !st.replaying && st.later_optimized && (any(st.ind != vec3f(0.0)) || any(st.ind_prev != vec3f(0.0))) {
+            path_replay(&st, o, d);
         }
     }
-    out.bsdf_prev = out.bsdf.radiance;
-    if any(ind != vec3f(0.0)) || any(ind_prev != vec3f(0.0)) {
-        out.bsdf = DirectSample(first_wi, first_e + ind, 1.0 / first_pdf);
-        out.bsdf_prev = first_e + ind_prev;
+    st.out.bsdf_prev = st.out.bsdf.radiance;
+    if any(st.ind != vec3f(0.0)) || any(st.ind_prev != vec3f(0.0)) {
+        st.out.bsdf = DirectSample(st.first_wi, st.first_e + st.ind, 1.0 / st.first_pdf);
+        st.out.bsdf_prev = st.first_e + st.ind_prev;
     }
-    return out;
+    return st.out;
+}
+
+// Replay: the same path from the same random numbers (from camera ray o, d), now knowing
+// what it brought back in all.
+fn path_replay(st: ptr<function, PathState>, o: vec3f, d: vec3f) {
+    st.replaying = true;
+    st.ind_total = st.ind;
+    st.ind_prev_total = st.ind_prev;
+    st.ind = vec3f(0.0);
+    st.ind_prev = vec3f(0.0);
+    rng_state = st.rng_start;
+    st.ray_o = o;
+    st.ray_d = d;
+    st.ray_tmax = 3.0e38;
+    st.stage = STAGE_CAMERA;
+    st.depth = 0u;
+    st.beta_next = vec3f(1.0);
+    st.beta_next_prev = vec3f(1.0);
+}
+
+// A step of camera_path other than a shadow ray: what arrives along the ray (an emitter's
+// or the environment's radiance) and what the stage makes of it: the camera ray's hit, a
+// BSDF sample's arrival (and its hit, the next vertex below the maximum depth), or a light
+// sample's shadow ray to trace.
+fn path_arrival(st: ptr<function, PathState>, sp: ptr<function, PathStep>) {
+    // What arrives: from the emitter point (tri, b) seen from its front or back, or
+    // from the environment along dir when tri is NONE.
+    var tri = sp.hit.tri;
+    var dir = st.ray_d;
+    var front = false;
+    // A hit that becomes the next vertex: the camera ray's, or a BSDF sample's below
+    // the maximum depth.
+    let continues = st.stage == STAGE_CAMERA || (st.stage == STAGE_BSDF && st.depth < st.max_depth);
+    if st.stage == STAGE_LIGHT {
+        tri = st.ls.tri;
+        sp.hit.b1 = st.ls.b.x;
+        sp.hit.b2 = st.ls.b.y;
+        dir = st.ls.wi;
+        front = st.ls.front;
+    } else if continues && sp.hit.tri != NONE {
+        if compact_paths && (st.stage == STAGE_CAMERA || record_paths) {
+            // (The distance is kept: a BSDF sample's hit on an emitter reads it.)
+            st.next_kb = vec2u(bary_round(sp.hit.b1), bary_round(sp.hit.b2));
+            let t = sp.hit.t;
+            sp.hit = stored_hit(sp.hit.tri, st.next_kb);
+            sp.hit.t = t;
+        }
+        st.next_tri = sp.hit.tri;
+        st.next_sf = surface_at(st.ray_o, sp.hit);
+        if st.stage == STAGE_CAMERA {
+            st.out.hit = sp.hit;
+            st.out.sf = st.next_sf;
+        }
+        front = st.next_sf.front;
+    } else if sp.hit.tri != NONE {
+        let p0 = tri_vertex(sp.hit.tri, 0u);
+        let ng = cross(tri_vertex(sp.hit.tri, 1u) - p0, tri_vertex(sp.hit.tri, 2u) - p0);
+        front = dot(ng, st.ray_d) < 0.0;
+    }
+    var le = vec3f(0.0);
+    // The environment's density in direction dir, light choice included.
+    var p_env = 0.0;
+    if !(st.stage == STAGE_LIGHT && st.ls.is_delta) {
+        if tri == NONE {
+            le = env_radiance(dir);
+            if st.stage != STAGE_CAMERA {
+                p_env = env_light_pdf(dir);
+            }
+        } else {
+            // Zero at the back of a single-sided surface (which shades black).
+            le = emitted(tri, sp.hit.b1, sp.hit.b2, front);
+        }
+    }
+    if st.stage == STAGE_BSDF {
+        var p_light = p_env;
+        if sp.hit.tri != NONE {
+            p_light = area_light_pdf(sp.hit.tri, st.vsf.p, st.ray_o + sp.hit.t * st.ray_d);
+        }
+        let w = mis_bsdf(st.bsdf_pdf, p_light);
+        if !(all(le == vec3f(0.0)) || w <= 0.0) {
+            record_arrival(st.depth, st.ray_d, le, st.path_scale * w / st.bsdf_pdf);
+            if st.depth == 1u {
+                st.out.bsdf = DirectSample(st.ray_d, le, w / st.bsdf_pdf);
+                st.first_e = le * w;
+            } else {
+                sp.arrives = le * w;
+            }
+            if env_gradients && sp.hit.tri == NONE {
+                st.env_dir = st.ray_d;
+                st.env_factor = w / st.bsdf_pdf;
+            }
+        }
+        if st.max_depth > 1u || any(st.env_dir != vec3f(0.0)) {
+            sp.eval_wi = st.ray_d;
+            sp.to_next = true;
+        }
+        st.stage = STAGE_DONE;
+        sp.shade = continues && sp.hit.tri != NONE && st.next_sf.valid;
+    } else if st.stage == STAGE_LIGHT {
+        if st.ls.env {
+            st.ls.radiance = le;
+            st.ls.pdf = p_env;
+        } else if !st.ls.is_delta {
+            st.ls.radiance = le;
+        }
+        let sf = st.vsf;
+        st.stage = STAGE_DONE;
+        sp.next_bsdf = true;
+        if !(st.ls.pdf <= 0.0 || all(st.ls.radiance == vec3f(0.0)) || dot(st.ls.wi, sf.ng) <= 0.0) {
+            st.nee_weight = 1.0;
+            if !st.ls.is_delta {
+                let p_bsdf = brdf_pdf(st.vmat, to_local(sf.frame, sf.wo), to_local(sf.frame, st.ls.wi));
+                st.nee_weight = mis_light(st.ls.pdf, p_bsdf);
+            }
+            if !(st.nee_weight <= 0.0) {
+                shadow_rays += 1u;
+                // The shadow segment runs from the offset origin to the light point
+                // itself, moved off an emitter's surface towards the shading point by
+                // the same relative offset, so that neither end hits its own surface.
+                // (A ray of length `dist` along wi from the offset origin would end
+                // past an emitter's plane wherever the origin's offset exceeds its
+                // margin along the plane's normal, and find the emitter itself in the
+                // way; tests/techniques.rs and tests/analytic.rs catch that.)
+                let so = offset_origin(sf, st.ls.wi);
+                if st.ls.dist >= 3.0e38 {
+                    st.ray_o = so;
+                    st.ray_d = st.ls.wi;
+                    st.ray_tmax = 3.0e38;
+                    st.stage = STAGE_SHADOW;
+                } else {
+                    var q = sf.p + st.ls.dist * st.ls.wi;
+                    if any(st.ls.n != vec3f(0.0)) {
+                        let scale = 1e-4 * (1.0 + max(max(abs(q.x), abs(q.y)), abs(q.z)));
+                        q += st.ls.n * select(-scale, scale, dot(st.ls.n, -st.ls.wi) >= 0.0);
+                    }
+                    let to = q - so;
+                    let len = length(to);
+                    if len <= 0.0 {
+                        sp.nee_arrives = true;
+                    } else {
+                        st.ray_o = so;
+                        st.ray_d = to / len;
+                        st.ray_tmax = len * (1.0 - 1e-4);
+                        st.stage = STAGE_SHADOW;
+                    }
+                }
+                if st.stage == STAGE_SHADOW {
+                    sp.next_bsdf = false;
+                }
+            }
+        }
+    } else {
+        st.out.e = le;
+        if env_gradients && tri == NONE && !st.replaying {
+            differentiate_env(dir, vec3f(1.0));
+        }
+        st.stage = STAGE_DONE;
+        // (With replay, a path whose first vertex is not optimized may still reach one.)
+        sp.shade = sp.hit.tri != NONE && st.next_sf.valid && (!st.optimized_only || has_optimized(st.next_sf.material) || (st.replay && st.max_depth > 1u) || env_gradients || record_paths);
+        st.out.shaded = sp.shade;
+    }
+}
+
+// A light sample that reached its light (its shadow ray unblocked): its arrival recorded,
+// and the first vertex's light sample, or the direction a later vertex is evaluated in.
+fn path_light_arrives(st: ptr<function, PathState>, sp: ptr<function, PathStep>) {
+    record_arrival(st.depth, st.ls.wi, st.ls.radiance, st.path_scale * st.nee_weight / st.ls.pdf);
+    if env_gradients && st.ls.env {
+        st.env_dir = st.ls.wi;
+        st.env_factor = st.nee_weight / st.ls.pdf;
+    }
+    if st.depth == 1u {
+        st.out.nee = DirectSample(st.ls.wi, st.ls.radiance, st.nee_weight / st.ls.pdf);
+        if any(st.env_dir != vec3f(0.0)) {
+            sp.eval_wi = st.ls.wi;
+        }
+    } else {
+        sp.eval_wi = st.ls.wi;
+        sp.arrives = st.ls.radiance * (st.nee_weight / st.ls.pdf);
+    }
+}
+
+// The vertex's BRDF x cos towards sp.eval_wi under each state: the throughput and the
+// radiance gathered, the environment's derivative, and with replay the vertex's own.
+fn path_evaluate(st: ptr<function, PathState>, sp: ptr<function, PathStep>) {
+    // The vertex's BRDF x cos towards eval_wi under each state, at one call site (the
+    // light sample's and the BSDF sample's; see above). A BSDF sample's carries the
+    // path on to the next vertex (beta_next); at the first vertex it only weighs
+    // Russian roulette.
+    let wo = to_local(st.vsf.frame, st.vsf.wo);
+    let wi = to_local(st.vsf.frame, sp.eval_wi);
+    // What the rest of the path brings back from here (replay only).
+    let rest = st.ind_total - st.ind;
+    let rest_prev = st.ind_prev_total - st.ind_prev;
+    var fc = vec3f(0.0);
+    var fc_prev = vec3f(0.0);
+    for (var state = 0u; state < select(1u, 2u, st.both); state++) {
+        var m = st.vmat;
+        var b = st.beta;
+        var wo_s = wo;
+        var wi_s = wi;
+        if state == 1u {
+            m = st.vmat_prev;
+            b = st.beta_prev;
+            if materials[st.vsf.material].param_normal != NONE {
+                // (The previous normal map's frame; the directions are the same.)
+                let frame_prev = frame_of(st.vsf, true);
+                wo_s = to_local(frame_prev, st.vsf.wo);
+                wi_s = to_local(frame_prev, sp.eval_wi);
+            }
+        }
+        var f = brdf_eval_cos(m, wo_s, wi_s);
+        if state == 0u {
+            fc = f;
+        } else {
+            fc_prev = f;
+        }
+        if sp.to_next {
+            f /= st.bsdf_pdf;
+        }
+        if st.depth == 1u {
+            // (At the first vertex a light sample is evaluated here only for the
+            // environment's derivative.)
+            if sp.to_next && state == 0u {
+                st.first_weight = f;
+            } else if sp.to_next {
+                st.first_weight_prev = f;
+            }
+        } else if sp.to_next {
+            if state == 0u {
+                st.beta_next = b * f;
+                st.ind += st.beta_next * sp.arrives;
+            } else {
+                st.beta_next_prev = b * f;
+                st.ind_prev += st.beta_next_prev * sp.arrives;
+            }
+        } else if state == 0u {
+            st.ind += b * f * sp.arrives;
+        } else {
+            st.ind_prev += b * f * sp.arrives;
+        }
+    }
+    if any(st.env_dir != vec3f(0.0)) && !st.replaying {
+        // The escape's factor on the way to the pixel: the throughput to this vertex
+        // (1 at the first), its BRDF x cos, the MIS weight / density.
+        var through = vec3f(1.0);
+        if st.depth > 1u {
+            through = st.first_weight * st.beta;
+        }
+        differentiate_env(st.env_dir, through * fc * st.env_factor);
+    }
+    if st.replaying && st.depth > 1u && has_optimized(st.vsf.material) {
+        var w = st.first_weight * st.beta * sp.arrives;
+        var w_prev = st.first_weight_prev * st.beta_prev * sp.arrives;
+        if sp.to_next {
+            w = st.first_weight * select(vec3f(0.0), rest / fc, fc > vec3f(0.0));
+            w_prev = st.first_weight_prev * select(vec3f(0.0), rest_prev / fc_prev, fc_prev > vec3f(0.0));
+        }
+        differentiate_later_vertex(st.vsf, sp.eval_wi, st.vmat, st.vmat_prev, w, w_prev);
+    }
+}
+
+// The ray's hit becomes the next vertex (the first at the camera ray's hit): its inputs under
+// each state, Russian roulette from RR_VERTEX on, and its light sample drawn.
+fn path_next_vertex(st: ptr<function, PathState>, sp: ptr<function, PathStep>) {
+    // The hit becomes the next vertex: the first at the camera ray's hit.
+    st.depth += 1u;
+    st.vsf = st.next_sf;
+    if record_paths && st.depth <= PATH_RECORD_VERTICES {
+        rec_tri[st.depth - 1u] = st.next_tri;
+        rec_kb[st.depth - 1u] = st.next_kb;
+    }
+    let gltf = gltf_inputs(st.vsf.material, st.vsf.uv);
+    // The optimized inputs under each state, at one call site.
+    for (var state = 0u; state < select(1u, 2u, st.both); state++) {
+        use_prev_params = state == 1u;
+        let m = with_optimized(st.vsf.material, st.vsf.uv, gltf);
+        if state == 0u {
+            st.vmat = m;
+        } else {
+            st.vmat_prev = m;
+        }
+    }
+    use_prev_params = false;
+    if st.depth == 1u {
+        st.out.gltf = gltf;
+        st.out.mat = st.vmat;
+        st.out.mat_prev = st.vmat_prev;
+    } else {
+        st.later_optimized = st.later_optimized || has_optimized(st.vsf.material);
+        st.beta = st.beta_next;
+        st.beta_prev = st.beta_next_prev;
+        st.path_scale = st.path_scale_next;
+        if st.depth >= RR_VERTEX {
+            let q = min(max_component(st.beta * st.first_weight), 0.95);
+            if rand() < q {
+                st.beta /= q;
+                st.beta_prev /= q;
+                st.path_scale /= q;
+            } else {
+                sp.shade = false;
+            }
+        }
+    }
+    if sp.shade {
+        let u_pick = rand();
+        let u_light = rand2();
+        st.u_bsdf = vec3f(rand(), rand2());
+        st.ls = sample_light(st.vsf.p, u_pick, u_light);
+        st.stage = STAGE_LIGHT;
+    }
+}
+
+// The vertex's BSDF sample: the ray to trace next, or the end of the path.
+fn path_bsdf_sample(st: ptr<function, PathState>) {
+    st.stage = STAGE_DONE;
+    let wo = to_local(st.vsf.frame, st.vsf.wo);
+    let wi_local = brdf_sample(st.vmat, wo, st.u_bsdf);
+    let wi = to_world(st.vsf.frame, wi_local);
+    if !(wi_local.z <= 0.0 || dot(wi, st.vsf.ng) <= 0.0) {
+        st.bsdf_pdf = brdf_pdf(st.vmat, wo, wi_local);
+        if !(st.bsdf_pdf <= 0.0) {
+            bsdf_rays += 1u;
+            st.ray_o = offset_origin(st.vsf, wi);
+            st.ray_d = wi;
+            st.ray_tmax = 3.0e38;
+            st.stage = STAGE_BSDF;
+            st.path_scale_next = st.path_scale / st.bsdf_pdf;
+            if st.depth == 1u {
+                st.first_wi = wi;
+                st.first_pdf = st.bsdf_pdf;
+            }
+        }
+    }
 }
 
 // Sample s's contribution at sf with inputs mat, in sf's frame under the current or (prev)
