@@ -184,6 +184,12 @@ fn scene_mirrors_match_wgsl_field_by_field() {
             env_bilinear
         ]
     );
+}
+
+// The render passes' parameters, the optimized textures' table and the BVH, field by field
+// against naga's layout of the WGSL.
+#[test]
+fn render_mirrors_match_wgsl_field_by_field() {
     mirror!(
         "texture_wrap_test",
         "TextureWrapTestParams",
