@@ -9,32 +9,13 @@
 #import shared/surface
 #import shared/path_encoding
 
-// Which techniques contribute to area and environment lights (delta lights always use NEE).
-var<private> techniques: u32 = TECH_MIS;
+// Rays traced, counted for the pass's statistics.
 var<private> shadow_rays: u32 = 0u;
 var<private> bsdf_rays: u32 = 0u;
-// Whether camera_path calls the pass's differentiate_env(direction, factor) for every segment
-// that escapes to the environment (a gradient pass sets it when the environment is
-// optimized): shared/env_gradient.wgsl. The first vertex is then shaded on every material.
-var<private> env_gradients: bool = false;
-// With compact_paths (ReSTIR's candidates) the camera ray's hit (and with record_paths every
-// vertex) is moved to the fixed-point barycentrics ReSTIR stores, and gradient_sample rounds
-// the incident directions and the radiances to the compact path encoding
-// (shared/path_encoding.wgsl) before anything is evaluated, so that a stored path
-// (stored_vertex, path_factor) re-evaluates to the same value.
-var<private> compact_paths: bool = false;
 
-// With record_paths (ReSTIR's candidates keeping whole paths, restir_candidates.wgsl), the
-// path's first PATH_RECORD_VERTICES vertices (triangle and fixed-point barycentrics, the
-// camera ray's hit first; with compact_paths every vertex is moved to the barycentrics stored)
-// and every sample that reaches an emitter from one of them (an arrival): the path of `n`
-// vertices that it ends, the direction from its last vertex, the radiance arriving (unweighted)
-// and its factor, MIS weight / density of the whole path (the BSDF samples' densities that led
-// to the last vertex included). Such a path's contribution is its radiance times every
-// vertex's BRDF x cos times the factor. camera_path also shades a first vertex without
-// optimized textures then.
+// The path's first PATH_RECORD_VERTICES vertices and its arrivals, with
+// PathOptions.record_paths (see there).
 const PATH_RECORD_VERTICES: u32 = 3u;
-var<private> record_paths: bool = false;
 var<private> rec_tri: array<u32, PATH_RECORD_VERTICES>;
 var<private> rec_kb: array<vec2u, PATH_RECORD_VERTICES>;
 
@@ -48,8 +29,8 @@ struct Arrival {
 var<private> arrivals: array<Arrival, 6>;
 var<private> n_arrivals: u32 = 0u;
 
-fn record_arrival(n: u32, wi: vec3f, radiance: vec3f, scale: f32) {
-    if record_paths && n <= PATH_RECORD_VERTICES && n_arrivals < 6u {
+fn record_arrival(opts: PathOptions, n: u32, wi: vec3f, radiance: vec3f, scale: f32) {
+    if opts.record_paths && n <= PATH_RECORD_VERTICES && n_arrivals < 6u {
         arrivals[n_arrivals] = Arrival(n, wi, radiance, scale);
         n_arrivals += 1u;
     }
@@ -67,7 +48,7 @@ struct DirectSample {
 
 const NO_SAMPLE = DirectSample(vec3f(0.0, 0.0, 1.0), vec3f(0.0), 0.0);
 
-fn mis_light(p_light: f32, p_bsdf: f32) -> f32 {
+fn mis_light(techniques: u32, p_light: f32, p_bsdf: f32) -> f32 {
     switch techniques {
         case 1u: {
             return 1.0;
@@ -81,7 +62,7 @@ fn mis_light(p_light: f32, p_bsdf: f32) -> f32 {
     }
 }
 
-fn mis_bsdf(p_bsdf: f32, p_light: f32) -> f32 {
+fn mis_bsdf(techniques: u32, p_bsdf: f32, p_light: f32) -> f32 {
     switch techniques {
         case 1u: {
             return 0.0;
@@ -151,27 +132,50 @@ fn max_component(v: vec3f) -> f32 {
     return max(max(v.x, v.y), v.z);
 }
 
-// What a camera path computes besides its value, set by name at every call site
-// (path_options, then the fields): optimized_only shades the first vertex only where its
-// material has an optimized texture (the gradient passes); both and replay as above.
+// What a camera path computes besides its value, and how, set by name at every call site
+// (path_options, then the fields):
+// - optimized_only shades the first vertex only where its material has an optimized texture
+//   (the gradient passes); both and replay as camera_path says.
+// - techniques: which techniques contribute to area and environment lights (TECH_*; delta
+//   lights always use NEE).
+// - env_gradients: camera_path calls the pass's differentiate_env(direction, factor) for
+//   every segment that escapes to the environment (a gradient pass sets it when the
+//   environment is optimized): shared/env_gradient.wgsl. The first vertex is then shaded on
+//   every material.
+// - compact_paths (ReSTIR's candidates): the camera ray's hit (and with record_paths every
+//   vertex) is moved to the fixed-point barycentrics ReSTIR stores, and gradient_sample
+//   rounds the incident directions and the radiances to the compact path encoding
+//   (shared/path_encoding.wgsl) before anything is evaluated, so that a stored path
+//   (stored_vertex, path_factor) re-evaluates to the same value.
+// - record_paths (ReSTIR's candidates keeping whole paths, restir_candidates.wgsl): the
+//   path's first PATH_RECORD_VERTICES vertices (rec_tri, rec_kb: triangle and fixed-point
+//   barycentrics, the camera ray's hit first; with compact_paths every vertex is moved to the
+//   barycentrics stored) and every sample that reaches an emitter from one of them (an
+//   arrival): the path of `n` vertices that it ends, the direction from its last vertex, the
+//   radiance arriving (unweighted) and its factor, MIS weight / density of the whole path (the
+//   BSDF samples' densities that led to the last vertex included). Such a path's contribution
+//   is its radiance times every vertex's BRDF x cos times the factor. camera_path also shades
+//   a first vertex without optimized textures then.
 struct PathOptions {
     optimized_only: bool,
     both: bool,
     replay: bool,
+    techniques: u32,
+    env_gradients: bool,
+    compact_paths: bool,
+    record_paths: bool,
 }
 
-// No option set: the path's value under the current textures.
+// The defaults: the path's value under the current textures, by MIS, nothing else.
 fn path_options() -> PathOptions {
-    return PathOptions(false, false, false);
+    return PathOptions(false, false, false, TECH_MIS, false, false, false);
 }
 
 // camera_path's state between its steps: its options, the vertex whose samples are being
 // traced, what the path has gathered, and its result so far.
 struct PathState {
     out: CameraPath,
-    optimized_only: bool,
-    both: bool,
-    replay: bool,
+    opts: PathOptions,
     max_depth: u32,
     rng_start: u32,
     // Whether the path is being replayed (with `replay`) to differentiate later vertices,
@@ -270,9 +274,7 @@ fn camera_path(o: vec3f, d: vec3f, opts: PathOptions) -> CameraPath {
     st.out.hit = Hit(3.0e38, NONE, 0.0, 0.0);
     st.out.nee = NO_SAMPLE;
     st.out.bsdf = NO_SAMPLE;
-    st.optimized_only = opts.optimized_only;
-    st.both = opts.both;
-    st.replay = opts.replay;
+    st.opts = opts;
     st.max_depth = max(scene.max_depth, 1u);
     st.rng_start = rng_state;
     st.ray_o = o;
@@ -290,7 +292,7 @@ fn camera_path(o: vec3f, d: vec3f, opts: PathOptions) -> CameraPath {
     st.path_scale_next = 1.0;
     st.next_tri = NONE;
     n_arrivals = 0u;
-    let steps = (1u + 3u * st.max_depth) * select(1u, 2u, st.replay && st.max_depth > 1u);
+    let steps = (1u + 3u * st.max_depth) * select(1u, 2u, st.opts.replay && st.max_depth > 1u);
     for (var step = 0u; step < steps && st.stage != STAGE_DONE; step++) {
         var sp: PathStep;
         sp.hit = Hit(st.ray_tmax, NONE, 0.0, 0.0);
@@ -316,7 +318,7 @@ fn camera_path(o: vec3f, d: vec3f, opts: PathOptions) -> CameraPath {
         if sp.next_bsdf {
             path_bsdf_sample(&st);
         }
-        if st.stage == STAGE_DONE && st.replay && !st.replaying && st.later_optimized && (any(st.ind != vec3f(0.0)) || any(st.ind_prev != vec3f(0.0))) {
+        if st.stage == STAGE_DONE && st.opts.replay && !st.replaying && st.later_optimized && (any(st.ind != vec3f(0.0)) || any(st.ind_prev != vec3f(0.0))) {
             path_replay(&st, o, d);
         }
     }
@@ -366,7 +368,7 @@ fn path_arrival(st: ptr<function, PathState>, sp: ptr<function, PathStep>) {
         dir = st.ls.wi;
         front = st.ls.front;
     } else if continues && sp.hit.tri != NONE {
-        if compact_paths && (st.stage == STAGE_CAMERA || record_paths) {
+        if st.opts.compact_paths && (st.stage == STAGE_CAMERA || st.opts.record_paths) {
             // (The distance is kept: a BSDF sample's hit on an emitter reads it.)
             st.next_kb = vec2u(bary_round(sp.hit.b1), bary_round(sp.hit.b2));
             let t = sp.hit.t;
@@ -404,16 +406,16 @@ fn path_arrival(st: ptr<function, PathState>, sp: ptr<function, PathStep>) {
         if sp.hit.tri != NONE {
             p_light = area_light_pdf(sp.hit.tri, st.vsf.p, st.ray_o + sp.hit.t * st.ray_d);
         }
-        let w = mis_bsdf(st.bsdf_pdf, p_light);
+        let w = mis_bsdf(st.opts.techniques, st.bsdf_pdf, p_light);
         if !(all(le == vec3f(0.0)) || w <= 0.0) {
-            record_arrival(st.depth, st.ray_d, le, st.path_scale * w / st.bsdf_pdf);
+            record_arrival(st.opts, st.depth, st.ray_d, le, st.path_scale * w / st.bsdf_pdf);
             if st.depth == 1u {
                 st.out.bsdf = DirectSample(st.ray_d, le, w / st.bsdf_pdf);
                 st.first_e = le * w;
             } else {
                 sp.arrives = le * w;
             }
-            if env_gradients && sp.hit.tri == NONE {
+            if st.opts.env_gradients && sp.hit.tri == NONE {
                 st.env_dir = st.ray_d;
                 st.env_factor = w / st.bsdf_pdf;
             }
@@ -438,7 +440,7 @@ fn path_arrival(st: ptr<function, PathState>, sp: ptr<function, PathStep>) {
             st.nee_weight = 1.0;
             if !st.ls.is_delta {
                 let p_bsdf = brdf_pdf(st.vmat, to_local(sf.frame, sf.wo), to_local(sf.frame, st.ls.wi));
-                st.nee_weight = mis_light(st.ls.pdf, p_bsdf);
+                st.nee_weight = mis_light(st.opts.techniques, st.ls.pdf, p_bsdf);
             }
             if !(st.nee_weight <= 0.0) {
                 shadow_rays += 1u;
@@ -479,12 +481,12 @@ fn path_arrival(st: ptr<function, PathState>, sp: ptr<function, PathStep>) {
         }
     } else {
         st.out.e = le;
-        if env_gradients && tri == NONE && !st.replaying {
+        if st.opts.env_gradients && tri == NONE && !st.replaying {
             differentiate_env(dir, vec3f(1.0));
         }
         st.stage = STAGE_DONE;
         // (With replay, a path whose first vertex is not optimized may still reach one.)
-        sp.shade = sp.hit.tri != NONE && st.next_sf.valid && (!st.optimized_only || has_optimized(st.next_sf.material) || (st.replay && st.max_depth > 1u) || env_gradients || record_paths);
+        sp.shade = sp.hit.tri != NONE && st.next_sf.valid && (!st.opts.optimized_only || has_optimized(st.next_sf.material) || (st.opts.replay && st.max_depth > 1u) || st.opts.env_gradients || st.opts.record_paths);
         st.out.shaded = sp.shade;
     }
 }
@@ -492,8 +494,8 @@ fn path_arrival(st: ptr<function, PathState>, sp: ptr<function, PathStep>) {
 // A light sample that reached its light (its shadow ray unblocked): its arrival recorded,
 // and the first vertex's light sample, or the direction a later vertex is evaluated in.
 fn path_light_arrives(st: ptr<function, PathState>, sp: ptr<function, PathStep>) {
-    record_arrival(st.depth, st.ls.wi, st.ls.radiance, st.path_scale * st.nee_weight / st.ls.pdf);
-    if env_gradients && st.ls.env {
+    record_arrival(st.opts, st.depth, st.ls.wi, st.ls.radiance, st.path_scale * st.nee_weight / st.ls.pdf);
+    if st.opts.env_gradients && st.ls.env {
         st.env_dir = st.ls.wi;
         st.env_factor = st.nee_weight / st.ls.pdf;
     }
@@ -522,7 +524,7 @@ fn path_evaluate(st: ptr<function, PathState>, sp: ptr<function, PathStep>) {
     let rest_prev = st.ind_prev_total - st.ind_prev;
     var fc = vec3f(0.0);
     var fc_prev = vec3f(0.0);
-    for (var state = 0u; state < select(1u, 2u, st.both); state++) {
+    for (var state = 0u; state < select(1u, 2u, st.opts.both); state++) {
         var m = st.vmat;
         var b = st.beta;
         var wo_s = wo;
@@ -594,13 +596,13 @@ fn path_next_vertex(st: ptr<function, PathState>, sp: ptr<function, PathStep>) {
     // The hit becomes the next vertex: the first at the camera ray's hit.
     st.depth += 1u;
     st.vsf = st.next_sf;
-    if record_paths && st.depth <= PATH_RECORD_VERTICES {
+    if st.opts.record_paths && st.depth <= PATH_RECORD_VERTICES {
         rec_tri[st.depth - 1u] = st.next_tri;
         rec_kb[st.depth - 1u] = st.next_kb;
     }
     let gltf = gltf_inputs(st.vsf.material, st.vsf.uv);
     // The optimized inputs under each state, at one call site.
-    for (var state = 0u; state < select(1u, 2u, st.both); state++) {
+    for (var state = 0u; state < select(1u, 2u, st.opts.both); state++) {
         use_prev_params = state == 1u;
         let m = with_optimized(st.vsf.material, st.vsf.uv, gltf);
         if state == 0u {
@@ -674,14 +676,13 @@ fn contribution(mat: SurfaceMaterial, sf: Surface, s: DirectSample, prev: bool) 
 }
 
 // Radiance along a camera ray (origin o, unit direction d), paths of scene.max_depth vertices:
-// [0] under the current textures and, when `both`, [1] the same path (same hits, samples and
+// [0] under the current textures and, with opts.both, [1] the same path (same hits, samples and
 // MIS weights) under the previous iteration's textures (otherwise [1] = [0]). The first
 // vertex's two techniques' contributions under each state are added in one loop, for the
 // reason camera_path traces in one.
-fn radiance_states(o: vec3f, d: vec3f, both: bool) -> array<vec3f, 2> {
-    var po = path_options();
-    po.both = both;
-    let p = camera_path(o, d, po);
+fn radiance_states(o: vec3f, d: vec3f, opts: PathOptions) -> array<vec3f, 2> {
+    let both = opts.both;
+    let p = camera_path(o, d, opts);
     var l = array<vec3f, 2>(p.e, p.e);
     if !p.shaded {
         return l;
@@ -764,7 +765,7 @@ struct RoundedDirection {
     ko: vec2u,
 }
 
-fn rounded_direction(sf: Surface, wi: vec3f) -> RoundedDirection {
+fn rounded_direction(sf: Surface, wi: vec3f, compact_paths: bool) -> RoundedDirection {
     if !compact_paths {
         return RoundedDirection(oct_encode(to_local(sf.frame, wi)), vec2u(0u));
     }
@@ -789,7 +790,7 @@ fn gradient_sample(o: vec3f, d: vec3f, opts: PathOptions) -> GradientSample {
     }
     out.sf = p.sf;
     out.m = materials[p.sf.material];
-    if compact_paths {
+    if opts.compact_paths {
         out.tri = p.hit.tri;
         out.kb = vec2u(bary_round(p.hit.b1), bary_round(p.hit.b2));
     }
@@ -803,7 +804,7 @@ fn gradient_sample(o: vec3f, d: vec3f, opts: PathOptions) -> GradientSample {
             ts.radiance_prev = p.bsdf_prev;
         }
         ts.rgbe = 0u;
-        if compact_paths {
+        if opts.compact_paths {
             // A radiance too large for any format is left as it is, so that the candidate
             // pass finds its value not finite and drops and counts it.
             ts.rgbe = rgbe_pack(ts.ds.radiance);
@@ -811,7 +812,7 @@ fn gradient_sample(o: vec3f, d: vec3f, opts: PathOptions) -> GradientSample {
                 ts.ds.radiance = rgbe_unpack(ts.rgbe);
             }
         }
-        let wi = rounded_direction(out.sf, ts.ds.wi);
+        let wi = rounded_direction(out.sf, ts.ds.wi, opts.compact_paths);
         ts.ko = wi.ko;
         ts.vertex = path_vertex(out.sf, p.gltf, wi.oct);
         let wi_l = oct_decode(wi.oct);

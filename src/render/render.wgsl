@@ -45,7 +45,6 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     let px = xy_px.x;
     let py = xy_px.y;
     let pixel = py * width + px;
-    techniques = rp.techniques;
     light_base = rp.camera.light_base;
     let xy = vec2f(f32(px), f32(py));
     var sum = vec3f(0.0);
@@ -55,7 +54,10 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
         // The camera-sample index identifies this sample.
         rng_init(rp.seed, (rp.sample_offset + s) * n_pixels + pixel, 0u);
         let d = camera_direction(rp.camera, xy + rand2());
-        let l = radiance_states(rp.camera.origin, d, rp.two_states != 0u);
+        var po = path_options();
+        po.both = rp.two_states != 0u;
+        po.techniques = rp.techniques;
+        let l = radiance_states(rp.camera.origin, d, po);
         if all(l[0] == l[0]) && all(abs(l[0]) < vec3f(3.0e38)) && all(l[1] == l[1]) && all(abs(l[1]) < vec3f(3.0e38)) {
             sum += l[0];
             sum_prev += l[1];

@@ -59,16 +59,16 @@ fn differentiate_pixel(id: vec3u) {
     if a.pixel == NONE {
         return;
     }
-    techniques = gp.techniques;
     light_base = gp.camera.light_base;
     pixel_adj = a.adj;
     env_adj = a.adj;
-    env_gradients = scene.env_optimized != 0u;
     for (var s = 0u; s < gp.spp; s++) {
         rng_init(gp.seed, (gp.sample_offset + s) * a.n_pixels + a.pixel, 0u);
         let d = camera_direction(gp.camera, a.xy + rand2());
         var po = path_options();
         po.replay = true;
+        po.techniques = gp.techniques;
+        po.env_gradients = scene.env_optimized != 0u;
         let g = gradient_sample(gp.camera.origin, d, po);
         if !g.valid {
             continue;

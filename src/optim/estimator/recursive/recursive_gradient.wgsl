@@ -157,7 +157,6 @@ fn differentiate_pixel(id: vec3u) {
     pixel_adj = adj;
     pixel_adj_prev = adj_prev;
     env_adj = adj;
-    env_gradients = scene.env_optimized != 0u;
     for (var s = 0u; s < rp.spp; s++) {
         // The same random numbers as the baseline's sample s of this pixel.
         rng_init(rp.seed, s * n_pixels + pixel, 0u);
@@ -165,6 +164,7 @@ fn differentiate_pixel(id: vec3u) {
         var po = path_options();
         po.both = rp.have_prev != 0u;
         po.replay = true;
+        po.env_gradients = scene.env_optimized != 0u;
         let g = gradient_sample(rp.camera.origin, d, po);
         if !g.valid {
             continue;

@@ -368,24 +368,23 @@ fn offer_pixel(id: vec3u) {
     if a.pixel == NONE {
         return;
     }
-    techniques = TECH_MIS;
     light_base = cp.camera.light_base;
-    compact_paths = true;
     let info = a.pixel | (cp.camera_index << INFO_CAMERA_SHIFT);
     pixel_adj = a.adj;
     env_adj = a.adj;
-    env_gradients = scene.env_optimized != 0u && cp.phase == 0u;
     var adj_t_prev = vec3f(0.0);
     if cp.prev_targets != 0u {
         adj_t_prev = last * cp.inv_spp;
     }
     let whole = whole_paths();
-    record_paths = whole;
     for (var s = 0u; s < cp.spp; s++) {
         rng_init(cp.seed, s * a.n_pixels + a.pixel, 0u);
         let d = camera_direction(cp.camera, a.xy + rand2());
         var po = path_options();
         po.replay = !whole;
+        po.env_gradients = scene.env_optimized != 0u && cp.phase == 0u;
+        po.compact_paths = true;
+        po.record_paths = whole;
         let g = gradient_sample(cp.camera.origin, d, po);
         // Offers: the first vertex's two techniques, or with whole paths every arrival at
         // every vertex (at most 6 arrivals of up to MAX_PATH_VERTICES vertices).
