@@ -208,8 +208,11 @@ fn steps_after_prepare_create_no_pipeline() {
         ] {
             let mut s = settings(method);
             s.step = step;
-            s.smoothness = 0.01;
-            s.multiscale_levels = 2;
+            s.priors = Default::default();
+            s.priors
+                .put(&psrestir::optim::smoothness::SmoothnessOptions { weight: 0.01 });
+            s.priors
+                .put(&psrestir::optim::multiscale::MultiscaleOptions { levels: 2 });
             let created = gpu.pipeline_times().len();
             let mut o = Optimizer::for_problem(&gpu, &p, s.clone()).unwrap();
             o.prepare().unwrap();
@@ -433,7 +436,8 @@ fn a_1024_squared_texture_optimizes_with_restir() {
     // With the multiscale gradient, as a texture of many texels per pixel needs (each texel
     // alone is seen by a few samples at most).
     let s = Settings {
-        multiscale_levels: 4,
+        priors: psrestir::optim::Priors::default()
+            .with(&psrestir::optim::multiscale::MultiscaleOptions { levels: 4 }),
         gradient_spp: 4,
         ..Settings {
             width: 64,
@@ -796,8 +800,9 @@ fn a_step_after_backward_is_the_optimizers_iteration() {
         let s = Settings {
             primal: psrestir::optim::PrimalMode::Independent,
             step,
-            smoothness: 0.01,
-            multiscale_levels: 2,
+            priors: psrestir::optim::Priors::default()
+                .with(&psrestir::optim::smoothness::SmoothnessOptions { weight: 0.01 })
+                .with(&psrestir::optim::multiscale::MultiscaleOptions { levels: 2 }),
             moment_filter: psrestir::optim::moment_filter::MomentFilterOptions {
                 levels: 2,
                 ..Default::default()

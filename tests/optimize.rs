@@ -81,8 +81,7 @@ fn setup_with(
         schedule: Default::default(),
         adam: Default::default(),
         adam_mask: false,
-        multiscale_levels: 0,
-        smoothness: 0.0,
+        priors: Default::default(),
         exposure_learning_rate: None,
         moment_filter: Default::default(),
         step: Default::default(),
@@ -343,14 +342,16 @@ fn the_multiscale_gradient_on_the_gpu_equals_the_cpu_reference() {
     let (res, n) = (40u32, set.values.len());
     // More levels than the pass has is refused by name.
     let mut too_many = Settings::new(48, 48, vec![0]);
-    too_many.multiscale_levels = 5;
+    too_many.priors.set("multiscale", "levels", 5.into());
     let e = Optimizer::new(&gpu, &scene, set.clone(), too_many, &[Image::new(48, 48)])
         .err()
         .expect("5 levels accepted");
-    assert!(e.to_string().contains("multiscale_levels"), "{e}");
+    assert!(e.to_string().contains("optimizer.multiscale.levels"), "{e}");
     for levels in [1, 4] {
         let mut settings = Settings::new(48, 48, vec![0]);
-        settings.multiscale_levels = levels;
+        settings
+            .priors
+            .put(&psrestir::optim::multiscale::MultiscaleOptions { levels });
         settings.seed = 11;
         let mut opt =
             Optimizer::new(&gpu, &scene, set.clone(), settings, &[Image::new(48, 48)]).unwrap();
@@ -404,7 +405,7 @@ fn the_smoothness_prior_on_the_gpu_equals_the_cpu_reference() {
     // A negative or non-finite weight is refused by name.
     for bad in [-1.0, f32::NAN] {
         let mut s = Settings::new(48, 48, vec![0]);
-        s.smoothness = bad;
+        s.priors.set("smoothness", "weight", (bad as f64).into());
         let e = Optimizer::new(&gpu, &scene, set.clone(), s, &[Image::new(48, 48)])
             .err()
             .expect("bad smoothness accepted");
@@ -412,7 +413,9 @@ fn the_smoothness_prior_on_the_gpu_equals_the_cpu_reference() {
     }
     let lambda = 0.5;
     let mut settings = Settings::new(48, 48, vec![0]);
-    settings.smoothness = lambda;
+    settings
+        .priors
+        .put(&psrestir::optim::smoothness::SmoothnessOptions { weight: lambda });
     let mut opt =
         Optimizer::new(&gpu, &scene, set.clone(), settings, &[Image::new(48, 48)]).unwrap();
     let observed = opt.observed_texels().unwrap().to_vec();
@@ -468,7 +471,8 @@ fn optimization_recovers_a_known_texture() {
             &truth,
             Filter::Bilinear,
             |s| {
-                s.multiscale_levels = levels;
+                s.priors
+                    .put(&psrestir::optim::multiscale::MultiscaleOptions { levels });
                 s.moment_filter.levels = filter_levels;
             },
         );

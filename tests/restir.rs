@@ -145,8 +145,7 @@ fn optimizer_textures(
         schedule: Default::default(),
         adam: Default::default(),
         adam_mask: false,
-        multiscale_levels: 0,
-        smoothness: 0.0,
+        priors: Default::default(),
         exposure_learning_rate: None,
         moment_filter: Default::default(),
         step: Default::default(),
@@ -232,8 +231,7 @@ fn restir_without_reuse_equals_the_baseline(
             schedule: Default::default(),
             adam: Default::default(),
             adam_mask: false,
-            multiscale_levels: 0,
-            smoothness: 0.0,
+            priors: Default::default(),
             exposure_learning_rate: None,
             moment_filter: Default::default(),
             step: Default::default(),
@@ -896,8 +894,7 @@ fn gradients_follow_a_sign_change() {
             schedule: Default::default(),
             adam: Default::default(),
             adam_mask: false,
-            multiscale_levels: 0,
-            smoothness: 0.0,
+            priors: Default::default(),
             exposure_learning_rate: None,
             moment_filter: Default::default(),
             step: Default::default(),
@@ -1004,7 +1001,7 @@ fn restir_beats_the_baseline_on_the_default_scene_at_low_sampling() {
     task.optimizer.primal_spp = 2;
     task.optimizer.gradient_spp = 1;
     task.optimizer.primal = psrestir::optim::PrimalMode::Independent;
-    task.optimizer.smoothness = Some(0.03);
+    task.optimizer.set("smoothness", 0.03);
     let iterations = 60;
     let dir = tempfile::tempdir().unwrap();
     let prep = psrestir::job::Problem::from_task(&gpu, &task, dir.path(), false).unwrap();
@@ -1105,8 +1102,7 @@ fn without_priors_at_tuned_settings_neither_estimator_drifts() {
     let mut task = shrunk_default_task(64, 512);
     task.textures[0].resolution = [128, 64];
     task.textures[0].learning_rate = task.textures[0].learning_rate.map(|r| r * 0.5);
-    task.optimizer.multiscale_levels = 0;
-    task.optimizer.smoothness = Some(0.0);
+    task.optimizer.priors_off();
     let dir = tempfile::tempdir().unwrap();
     let prep = psrestir::job::Problem::from_task(&gpu, &task, dir.path(), false).unwrap();
     let truth = prep.reference.clone().unwrap();

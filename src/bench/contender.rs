@@ -33,11 +33,11 @@ pub fn bare(task: &Task) -> Task {
     o.step = None;
     o.moment_filter = None;
     o.schedule = None;
-    o.multiscale_levels = 0;
-    o.smoothness = None;
     o.adam = Default::default();
     o.variance_step = Default::default();
-    o.estimators.clear();
+    // The estimators' and the priors' tables: every prior off but the smoothness prior,
+    // whose weight is `auto`'s where none is given.
+    o.tables.clear();
     for tex in &mut t.textures {
         tex.learning_rate = None;
     }

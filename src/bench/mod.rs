@@ -394,8 +394,7 @@ fn check_options(o: &BenchOptions) -> Result<()> {
 fn load_task(path: &Path, o: &BenchOptions) -> Result<Task> {
     let mut t = o.protocol.apply(&scaled(&Task::load(path)?, o.scale));
     if o.no_priors {
-        t.optimizer.multiscale_levels = 0;
-        t.optimizer.smoothness = Some(0.0);
+        t.optimizer.priors_off();
     }
     if let Some(d) = o.max_depth {
         crate::scene::MaxDepth::new(d)

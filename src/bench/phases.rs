@@ -560,7 +560,9 @@ fn describe_run(
         "{d}; auto's rates {}, {}, smoothness {}",
         rates.join(" / "),
         s.schedule.describe(),
-        s.smoothness
+        s.priors
+            .of::<crate::optim::smoothness::SmoothnessOptions>()
+            .weight
     )
 }
 

@@ -122,7 +122,7 @@ fn log_configuration(
 ) {
     let own = settings.estimator_options.describe(settings.method);
     log::info!(
-        "gradient estimator: {}{}; step: {}{}; learning rates {}; schedule: {}; smoothness {}",
+        "gradient estimator: {}{}; step: {}{}; learning rates {}; schedule: {}; priors: {}",
         settings.method.name(),
         if own.is_empty() {
             String::new()
@@ -148,7 +148,7 @@ fn log_configuration(
             .collect::<Vec<_>>()
             .join(", "),
         settings.schedule.describe(),
-        settings.smoothness,
+        settings.priors.describe(),
     );
     for reason in &config.reasons {
         log::info!("auto: {reason}");

@@ -279,7 +279,9 @@ impl Configuration {
         settings.step = self.step;
         settings.moment_filter = self.moment_filter;
         settings.schedule = self.schedule.clone();
-        settings.smoothness = self.smoothness;
+        let mut smoothness = settings.priors.of::<super::smoothness::SmoothnessOptions>();
+        smoothness.weight = self.smoothness;
+        settings.priors.put(&smoothness);
     }
 }
 

@@ -70,22 +70,21 @@ impl Optimizer {
         self.read_gradient()
     }
 
-    /// `grad` through the prior whose pass is `pass`, as iteration `iteration` applies it;
-    /// an error naming `what` when the settings have no such prior.
-    fn apply_prior(
-        &mut self,
-        what: &str,
-        pass: &str,
-        grad: &[f32],
-        iteration: u32,
-    ) -> Result<Vec<f32>> {
+    /// `grad` (laid out like the parameters) through the prior called `name` on the GPU, as
+    /// iteration `iteration` applies it: it is written to the gradient buffer, transformed
+    /// and read back. For tests against the prior's CPU reference; an error when the settings
+    /// do not switch that prior on.
+    pub fn apply_prior(&mut self, name: &str, grad: &[f32], iteration: u32) -> Result<Vec<f32>> {
+        let what = format!("apply_prior({name})");
         self.prepare()?;
         // Taken out for the call, which borrows the optimizer, and put back after.
         let mut priors = self.priors.take().unwrap_or_default();
         let seed = self.settings.seed;
-        let result = match priors.iter().position(|p| p.pass() == pass) {
-            Some(k) => self.transform_gradient(what, grad, |opt, enc| {
-                priors[k].encode(&opt.gpu, enc, seed, iteration, &mut opt.timer)
+        let result = match priors.iter().position(|(k, _)| k.name == name) {
+            Some(k) => self.transform_gradient(&what, grad, |opt, enc| {
+                priors[k]
+                    .1
+                    .encode(&opt.gpu, enc, seed, iteration, &mut opt.timer)
             }),
             None => Err(Error::Invalid(format!(
                 "{what}: the settings do not ask for this prior"
@@ -95,21 +94,17 @@ impl Optimizer {
         result
     }
 
-    /// The multiscale pass of `iteration` on the GPU applied to `grad` (laid out like the
-    /// parameters): it is written to the gradient buffer, transformed and read back. For
-    /// tests against [`super::multiscale::reference`]; an error when the settings have no
-    /// multiscale levels.
+    /// The multiscale pass of `iteration` applied to `grad` ([`Optimizer::apply_prior`]),
+    /// for tests against [`super::multiscale::reference`].
     pub fn apply_multiscale(&mut self, grad: &[f32], iteration: u32) -> Result<Vec<f32>> {
-        self.apply_prior("apply_multiscale", "multiscale_gradient", grad, iteration)
+        self.apply_prior("multiscale", grad, iteration)
     }
 
-    /// The gradient `grad` (laid out like the parameters) plus the smoothness prior's
-    /// derivative at the current parameters, computed on the GPU. For tests against
-    /// [`super::smoothness::reference`]; an error when the settings have no smoothness
-    /// weight.
+    /// The gradient `grad` plus the smoothness prior's derivative at the current parameters
+    /// ([`Optimizer::apply_prior`]), for tests against [`super::smoothness::reference`].
     pub fn apply_smoothness(&mut self, grad: &[f32]) -> Result<Vec<f32>> {
         let it = self.iteration;
-        self.apply_prior("apply_smoothness", "smoothness", grad, it)
+        self.apply_prior("smoothness", grad, it)
     }
 
     /// The moment filter on the GPU applied to `pair` (two arrays laid out like the

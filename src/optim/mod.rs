@@ -3,6 +3,17 @@
 //! ([`prior`]) and a step ([`step`]: Adam or the variance-scaled step, with or without
 //! filtered moments), as one submission per iteration.
 
+/// Declares the folders of a registry (the estimators', the priors') and lists each one's
+/// `KIND` in the module's `REGISTRY` of `&Kind`, documented by the string given first.
+macro_rules! registry {
+    ($doc:literal, $($(#[$attr:meta])* $folder:ident),* $(,)?) => {
+        $($(#[$attr])* pub mod $folder;)*
+        #[doc = $doc]
+        pub const REGISTRY: &[&Kind] = &[$($(#[$attr])* &$folder::KIND),*];
+    };
+}
+use registry;
+
 pub mod auto;
 mod cameras;
 pub mod checkpoint;
@@ -23,6 +34,8 @@ pub mod uncertainty;
 mod gains;
 mod measure;
 mod memory;
+#[cfg(test)]
+mod plane_tests;
 mod seeds;
 mod settings;
 mod snapshot;
@@ -45,7 +58,7 @@ use cameras::{camera_passes, check_inputs, CameraPasses, CameraSetup, Stats};
 use estimator::Estimator;
 pub use estimator::{Choice, EstimatorOptions, EstimatorState, Method, MethodChoice};
 pub use primal::{ControlVariateSnapshot, PrimalMode};
-pub use prior::{multiscale, smoothness};
+pub use prior::{multiscale, smoothness, Priors};
 /// The optimizer's own passes besides the steps', priors' and estimators' (a pass is named
 /// after its file, which lies beside its driver in this folder).
 pub(crate) const WGSL: &[(&str, &str)] = &[
@@ -105,11 +118,11 @@ pub struct Optimizer {
     camera_images: std::sync::OnceLock<wgpu::Buffer>,
     /// The observed-texel mask, computed when the optimizer is made: its flags, and the GPU
     /// buffer they were read from (one word per texel, nonzero: observed), which the
-    /// multiscale and smoothness passes bind.
+    /// priors bind.
     observed: (Vec<bool>, wgpu::Buffer),
     /// The priors the settings ask for, in the order they apply, built by
     /// [`Optimizer::prepare`] (the first step's, or the caller's before it).
-    priors: Option<Vec<Box<dyn prior::Prior>>>,
+    priors: Option<Vec<(&'static prior::Kind, Box<dyn prior::Prior>)>>,
     /// Fraction of the run done, for the learning-rate schedule.
     progress: f64,
     /// Learning rate of each texture in the last Adam step.
@@ -242,12 +255,12 @@ impl Optimizer {
                 grad: &grad,
                 params: &params.values,
                 moments: &moments,
-                // The estimator's variance is that of its own estimate; the multiscale
-                // gradient averages it over blocks, so the step then tracks the variance
-                // of what it is given.
+                // The estimator's variance is that of its own estimate; a prior that mixes
+                // texels (the multiscale gradient) changes it, so the step then tracks the
+                // variance of what it is given.
                 variance: estimator
                     .variance()
-                    .filter(|_| settings.multiscale_levels == 0),
+                    .filter(|_| settings.priors.keep_variance()),
                 stats: &stats.adam,
             },
         )?;
@@ -399,7 +412,7 @@ impl Optimizer {
             StepKind::Adam => "adam",
             StepKind::Variance => "variance_step",
         });
-        p.extend(prior::passes(settings));
+        p.extend(prior::passes(&settings.priors));
         if settings.moment_filter.enabled() {
             p.push("moment_filter");
         }
@@ -411,16 +424,16 @@ impl Optimizer {
     /// timed iteration. `step` calls it too; calling it first only moves the work.
     pub fn prepare(&mut self) -> Result<()> {
         if self.priors.is_none() {
-            self.priors = Some(prior::build(&prior::Setup {
+            let setup = prior::Setup {
                 gpu: &self.gpu,
                 set: &self.set,
-                settings: &self.settings,
                 grad: &self.grad,
                 params: &self.params.values,
                 observed: &self.observed,
-            })?);
-            for p in self.priors.iter().flatten() {
-                log::debug!("prior `{}` ready", p.pass());
+            };
+            self.priors = Some(prior::build(&setup, &self.settings.priors)?);
+            for (kind, _) in self.priors.iter().flatten() {
+                log::debug!("prior `{}` ready", kind.name);
             }
         }
         Ok(())
@@ -458,7 +471,7 @@ impl Optimizer {
         iteration: u32,
         t: u32,
     ) -> f32 {
-        for p in self.priors.iter_mut().flatten() {
+        for (_, p) in self.priors.iter_mut().flatten() {
             p.encode(
                 &self.gpu,
                 enc,

@@ -43,17 +43,14 @@ pub struct Settings {
     /// Masked (sparse) Adam: entries whose gradient is exactly zero in an iteration keep
     /// their value and moments, as Mitsuba 3's `mask_updates`.
     pub adam_mask: bool,
-    /// Levels of the multiscale gradient (0: off; at most 4; see [`super::multiscale`]): each
-    /// observed texel's gradient is averaged with its 2^l x 2^l blocks' before Adam.
-    pub multiscale_levels: u32,
     /// The moment filter (off unless `levels` > 0; see [`super::moment_filter`]): the pair the
     /// step divides (Adam's moments, or the variance step's estimate and variance) smoothed
     /// in texture space, across the texture's edges only where they are weak.
     pub moment_filter: super::moment_filter::MomentFilterOptions,
-    /// Weight of the smoothness prior (0: off; see [`super::smoothness`]): the gradient of
-    /// `smoothness * mean squared difference of observed neighbouring texels` is added to
-    /// the image loss's before the multiscale gradient and Adam.
-    pub smoothness: f32,
+    /// Each prior's options, a table per prior name ([`super::prior`]: the smoothness prior,
+    /// the multiscale gradient); the priors they switch on act on the gradient before the
+    /// step, in the registry's order.
+    pub priors: super::prior::Priors,
     /// Optimize the per-camera exposures (see [`Optimizer::set_exposure`](super::Optimizer::set_exposure)) with Adam on
     /// their logarithms, at this learning rate; None: exposures stay fixed.
     pub exposure_learning_rate: Option<f32>,
@@ -80,9 +77,8 @@ impl Settings {
             schedule: Schedule::constant(),
             adam: Default::default(),
             adam_mask: false,
-            multiscale_levels: 0,
             moment_filter: Default::default(),
-            smoothness: 0.0,
+            priors: Default::default(),
             exposure_learning_rate: None,
         }
     }
@@ -119,10 +115,7 @@ impl Settings {
         if let Err((key, msg)) = self.variance_step.check() {
             return bad(&format!("optimizer.variance_step.{key}"), msg);
         }
-        if self.multiscale_levels > super::multiscale::MAX_LEVELS {
-            let msg = format!("must be between 0 and {}", super::multiscale::MAX_LEVELS);
-            return bad("optimizer.multiscale_levels", &msg);
-        }
+        self.priors.check()?;
         if let Err((key, msg)) = self.moment_filter.check() {
             return bad(&format!("optimizer.moment_filter.{key}"), &msg);
         }
@@ -130,12 +123,6 @@ impl Settings {
             return bad(
                 "optimizer.moment_filter.write_back",
                 "only with step = \"adam\" (the variance step keeps no first moment)",
-            );
-        }
-        if !(self.smoothness.is_finite() && (0.0..=1.0e6).contains(&self.smoothness)) {
-            return bad(
-                "optimizer.smoothness",
-                "must be a number between 0 (off) and 1e6",
             );
         }
         if let Some(lr) = self.exposure_learning_rate {
@@ -213,12 +200,20 @@ mod tests {
                 Box::new(|s| s.cv_max_weight = 1.5),
             ),
             (
-                "optimizer.multiscale_levels",
-                Box::new(|s| s.multiscale_levels = 9),
+                "optimizer.multiscale.levels",
+                Box::new(|s| s.priors.set("multiscale", "levels", 9.into())),
+            ),
+            (
+                "optimizer.smoothness.weight",
+                Box::new(|s| s.priors.set("smoothness", "weight", f64::NAN.into())),
             ),
             (
                 "optimizer.smoothness",
-                Box::new(|s| s.smoothness = f32::NAN),
+                Box::new(|s| s.priors.set("smoothness", "wieght", 0.1.into())),
+            ),
+            (
+                "optimizer.smooth",
+                Box::new(|s| s.priors.set("smooth", "weight", 0.1.into())),
             ),
             (
                 "optimizer.moment_filter.levels",

@@ -34,7 +34,7 @@ impl Optimizer {
             .estimator
             .variance()
             .filter(|_| self.settings.step == StepKind::Variance)
-            .filter(|_| self.settings.multiscale_levels == 0);
+            .filter(|_| self.settings.priors.keep_variance());
         let v: Vec<f32> = match own {
             Some(buf) => {
                 let mut v: Vec<f32> = self.gpu.read_pod(buf)?;

@@ -28,8 +28,8 @@
 //! filter = "bilinear"             # or "nearest"
 //! checkpoint_every = 25
 //! adam_mask = true                # sparse Adam: zero-gradient entries keep value and moments
-//! multiscale_levels = 4           # gradient averaged over 2^l-texel blocks, l <= 4 (0: off)
-//! smoothness = 0.1                # smoothness prior on observed texels (0: off; absent: auto's)
+//! multiscale_levels = 4           # short for [optimizer.multiscale] levels = 4
+//! smoothness = 0.1                # short for [optimizer.smoothness] weight = 0.1
 //! eval_every = 10                 # low-noise image error every N iterations (0: never)
 //! eval_spp = 16
 //!
@@ -65,6 +65,11 @@
 //! log_space = false               # differences of logarithms instead
 //! own_weight = 0.25               # weight of a texel's own moments against the filtered ones
 //! write_back = false              # the mix replaces Adam's moments (Adam only)
+//!
+//! # [optimizer.multiscale]        # a prior's options, in place of its shorthand above
+//! # levels = 4                    # gradient averaged over 2^l-texel blocks, l <= 4 (0: off)
+//! # [optimizer.smoothness]        # the smoothness prior on observed texels
+//! # weight = 0.1                  # 0: off; absent: auto's
 //!
 //! [optimizer.schedule]            # learning-rate schedule (absent: auto's, cosine to 0.05)
 //! kind = "cosine"                 # or "constant", "step", "exponential"
@@ -476,6 +481,9 @@ impl Task {
         // are checked where it reads them).
         self.optimizer
             .estimator_options()
+            .map_err(|(key, msg)| self.bad(&key, msg))?;
+        self.optimizer
+            .prior_options()
             .map_err(|(key, msg)| self.bad(&key, msg))?;
         let method = task_method(self, self.optimizer.method, named_cameras(self)).method;
         let mut settings = task_settings(self, &[], method, &Default::default());

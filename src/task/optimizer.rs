@@ -2,6 +2,7 @@
 use super::{Filter, Loss, Task};
 use crate::optim::auto::Configuration;
 use crate::optim::estimator::Regime;
+use crate::optim::prior::{self, smoothness, smoothness::SmoothnessOptions, Priors};
 use crate::optim::{Choice, EstimatorOptions, Method, MethodChoice};
 use serde::Deserialize;
 
@@ -76,15 +77,6 @@ pub struct OptimizerSpec {
     /// Adam's decays and epsilon (`[optimizer.adam]`: `beta1`, `beta2`, `eps`).
     #[serde(default)]
     pub adam: crate::optim::adam::AdamOptions,
-    /// Levels of the multiscale gradient (0: off, at most 4): before Adam, each observed
-    /// texel's gradient is averaged with the mean gradients of its 2^l x 2^l blocks.
-    #[serde(default)]
-    pub multiscale_levels: u32,
-    /// Weight of the smoothness prior (0: off): the mean squared difference of observed
-    /// neighbouring texels, times this, is added to the loss that the step descends (None:
-    /// `auto`'s by the sampling).
-    #[serde(default)]
-    pub smoothness: Option<f32>,
     /// The moment filter (`[optimizer.moment_filter]`: `levels` (0: off), `sigma`,
     /// `log_space`, `own_weight`, `write_back`; None: `auto`'s for the step).
     #[serde(default)]
@@ -96,35 +88,132 @@ pub struct OptimizerSpec {
     /// Samples per pixel of the evaluation renders.
     #[serde(default = "default_eval_spp")]
     pub eval_spp: u32,
-    /// Each estimator's options: the tables `[optimizer.<method>]` (`[optimizer.restir]`,
-    /// `[optimizer.recursive]`), passed on to the estimator, which reads and checks its own.
-    /// Any other key is refused when the task is checked.
+    /// Each estimator's and each prior's options: the tables `[optimizer.<estimator>]`
+    /// (`[optimizer.restir]`), passed on to the estimator, which reads and checks its own;
+    /// the tables `[optimizer.<prior>]` (`[optimizer.multiscale]`) and the priors' shorthands
+    /// (`smoothness = 0.03`, `multiscale_levels = 4`), passed on to the priors. Any other key
+    /// is refused when the task is checked.
     #[serde(flatten)]
-    pub estimators: std::collections::BTreeMap<String, toml::Value>,
+    pub tables: std::collections::BTreeMap<String, toml::Value>,
+}
+
+/// What a key under `[optimizer]` that is not one of [`OptimizerSpec`]'s own fields names.
+enum TableKey {
+    Estimator(Method),
+    Prior(&'static prior::Kind),
+    /// A prior's shorthand: the prior and the option it sets.
+    Shorthand(&'static prior::Kind, &'static str),
+}
+
+impl TableKey {
+    fn of(name: &str, value: &toml::Value) -> std::result::Result<TableKey, (String, String)> {
+        let key = format!("optimizer.{name}");
+        let shorthand = prior::REGISTRY
+            .iter()
+            .find_map(|k| k.shorthand.filter(|s| s.0 == name).map(|s| (*k, s.1)));
+        let (method, prior) = (Method::by_name(name), prior::Kind::by_name(name));
+        let found = match (value.is_table(), method, prior, shorthand) {
+            (true, Some(m), _, _) => TableKey::Estimator(m),
+            (true, None, Some(k), _) => TableKey::Prior(k),
+            (false, _, _, Some((k, option))) => TableKey::Shorthand(k, option),
+            (false, Some(_), _, _) => {
+                return Err((key, "must be a table of the estimator's options".into()))
+            }
+            (false, None, Some(_), _) => {
+                return Err((key, "must be a table of the prior's options".into()))
+            }
+            _ => {
+                return Err((
+                    key,
+                    format!(
+                        "unknown key (nor the options of an estimator: {}; nor of a prior: {})",
+                        Method::names().join(", "),
+                        prior::Kind::names().join(", ")
+                    ),
+                ))
+            }
+        };
+        Ok(found)
+    }
 }
 
 impl OptimizerSpec {
     /// The estimators' option tables (an error names a key that is neither an option nor
-    /// an estimator's table).
+    /// an estimator's or a prior's table).
     pub fn estimator_options(&self) -> std::result::Result<EstimatorOptions, (String, String)> {
         let mut o = EstimatorOptions::default();
-        for (name, value) in &self.estimators {
-            let key = format!("optimizer.{name}");
-            let method = Method::by_name(name).ok_or_else(|| {
-                (
-                    key.clone(),
-                    format!(
-                        "unknown key (nor the options of an estimator: {})",
-                        Method::names().join(", ")
-                    ),
-                )
-            })?;
-            match value {
-                toml::Value::Table(t) => o.set_table(method, t.clone()),
-                _ => return Err((key, "must be a table of the estimator's options".into())),
+        for (name, value) in &self.tables {
+            if let (TableKey::Estimator(method), toml::Value::Table(t)) =
+                (TableKey::of(name, value)?, value)
+            {
+                o.set_table(method, t.clone());
             }
         }
         Ok(o)
+    }
+
+    /// The priors' option tables, shorthands included, checked: an error names the key the
+    /// task gave (a shorthand's own key where the option came from one).
+    pub fn prior_options(&self) -> std::result::Result<Priors, (String, String)> {
+        let mut p = Priors::default();
+        let mut shorthands = Vec::new();
+        for (name, value) in &self.tables {
+            if let (TableKey::Prior(k), toml::Value::Table(t)) = (TableKey::of(name, value)?, value)
+            {
+                for (option, v) in t {
+                    p.set(k.name, option, v.clone());
+                }
+            }
+        }
+        // The shorthands after every table, so that a clash is found whichever comes first.
+        for (name, value) in &self.tables {
+            if let TableKey::Shorthand(k, option) = TableKey::of(name, value)? {
+                if p.table(k.name).contains_key(option) {
+                    return Err((
+                        format!("optimizer.{name}"),
+                        format!("`[optimizer.{}]` sets `{option}` too: give one", k.name),
+                    ));
+                }
+                shorthands.push((format!("optimizer.{}.{option}", k.name), name));
+                p.set(k.name, option, value.clone());
+            }
+        }
+        p.check().map_err(
+            |(key, msg)| match shorthands.iter().find(|(long, _)| *long == key) {
+                Some((_, short)) => (format!("optimizer.{short}"), msg),
+                None => (key, msg),
+            },
+        )?;
+        Ok(p)
+    }
+
+    /// The smoothness prior's weight where the task gives one (None: `auto`'s).
+    pub fn smoothness(&self) -> Option<f32> {
+        let p = self.prior_options().ok()?;
+        let given = p.table(smoothness::KIND.name).contains_key("weight");
+        given.then(|| p.of::<SmoothnessOptions>().weight)
+    }
+
+    /// Set `key` of `[optimizer]` among [`OptimizerSpec::tables`] (a prior's shorthand, an
+    /// estimator's or a prior's table) as a task file gives it: `set("smoothness", 0.03)`.
+    pub fn set(&mut self, key: &str, value: impl Into<toml::Value>) {
+        self.tables.insert(key.to_string(), value.into());
+    }
+
+    /// Switch every prior off: each prior's table at its defaults, which leave it off (the
+    /// smoothness prior's weight given as 0, so that `auto` does not choose one).
+    pub fn priors_off(&mut self) {
+        self.tables.retain(|name, value| {
+            !matches!(
+                TableKey::of(name, value),
+                Ok(TableKey::Prior(_) | TableKey::Shorthand(..))
+            )
+        });
+        for kind in prior::REGISTRY {
+            let defaults = (kind.options.defaults)();
+            self.tables
+                .insert(kind.name.to_string(), toml::Value::Table(defaults));
+        }
     }
 }
 
@@ -175,7 +264,7 @@ pub fn task_configuration(task: &Task, choice: MethodChoice, cameras: usize) -> 
         task.optimizer.step,
         task.optimizer.moment_filter,
         task.optimizer.schedule.clone(),
-        task.optimizer.smoothness,
+        task.optimizer.smoothness(),
         &textures,
     )
 }
@@ -242,8 +331,13 @@ pub fn task_settings(
         schedule: config.schedule,
         adam: task.optimizer.adam,
         adam_mask: task.optimizer.adam_mask,
-        multiscale_levels: task.optimizer.multiscale_levels,
-        smoothness: config.smoothness,
+        priors: {
+            let mut priors = task.optimizer.prior_options().unwrap_or_default();
+            priors.put(&SmoothnessOptions {
+                weight: config.smoothness,
+            });
+            priors
+        },
         moment_filter: config.moment_filter,
         exposure_learning_rate: task
             .optimizer

@@ -41,6 +41,7 @@ fn set(doc: &mut toml::Table, assignment: &str) -> std::result::Result<(), Strin
     if parts.iter().any(|p| p.is_empty()) {
         return Err(format!("`{key}` is not a dotted key"));
     }
+    drop_shorthand_twin(doc, &parts);
     let (last, parents) = parts.split_last().expect("split gives at least one part");
     let mut at = Slot::Table(doc);
     for (i, p) in parents.iter().enumerate() {
@@ -62,6 +63,27 @@ fn set(doc: &mut toml::Table, assignment: &str) -> std::result::Result<(), Strin
         Slot::Array(a) => *index(a, last, key)? = value,
     }
     Ok(())
+}
+
+/// A prior's option can be given by its table's key or by its shorthand
+/// (`optimizer.multiscale.levels`, `optimizer.multiscale_levels`): setting one drops the
+/// other from `doc`, so that the assignment replaces what the file gave either way.
+fn drop_shorthand_twin(doc: &mut toml::Table, parts: &[&str]) {
+    let Some(toml::Value::Table(o)) = doc.get_mut("optimizer") else {
+        return;
+    };
+    for kind in crate::optim::prior::REGISTRY {
+        let Some((short, option)) = kind.shorthand else {
+            continue;
+        };
+        if parts == ["optimizer", short] {
+            if let Some(toml::Value::Table(t)) = o.get_mut(kind.name) {
+                t.remove(option);
+            }
+        } else if parts == ["optimizer", kind.name, option] {
+            o.remove(short);
+        }
+    }
 }
 
 /// Where a key's next part is looked up: a table (by name) or an array (by index).
@@ -117,6 +139,21 @@ mod tests {
             set(&mut d, s)?;
         }
         Ok(d)
+    }
+
+    #[test]
+    fn a_prior_option_replaces_its_shorthand_twin_and_back() {
+        let text = "[optimizer]\nmultiscale_levels = 4\n";
+        let d = doc(text, &["optimizer.multiscale.levels=2"]).unwrap();
+        assert!(d["optimizer"].get("multiscale_levels").is_none(), "{d}");
+        assert_eq!(d["optimizer"]["multiscale"]["levels"].as_integer(), Some(2));
+        let d = doc(
+            &toml::to_string(&d).unwrap(),
+            &["optimizer.multiscale_levels=1"],
+        )
+        .unwrap();
+        assert!(d["optimizer"]["multiscale"].get("levels").is_none(), "{d}");
+        assert_eq!(d["optimizer"]["multiscale_levels"].as_integer(), Some(1));
     }
 
     #[test]

@@ -185,7 +185,7 @@ fn set_options_are_checked_as_the_file_is_and_named() {
         &sets(&["optimizer.smoothness=0.1", "optimizer.step=adam"]),
     )
     .unwrap();
-    assert_eq!(t.optimizer.smoothness, Some(0.1));
+    assert_eq!(t.optimizer.smoothness(), Some(0.1));
     assert_eq!(t.optimizer.step, Some(crate::optim::StepKind::Adam));
     for (bad, says) in [
         (
@@ -206,4 +206,58 @@ fn set_options_are_checked_as_the_file_is_and_named() {
             "{e}"
         );
     }
+}
+
+/// The priors' tables and shorthands reach the settings as one table per prior; a clash, an
+/// unknown option or a bad value names the key the task gave.
+#[test]
+fn prior_tables_and_shorthands_reach_the_settings() {
+    use crate::optim::multiscale::MultiscaleOptions;
+    use crate::optim::smoothness::SmoothnessOptions;
+    use crate::optim::Method;
+    let with = |extra: &str| GOOD.replace("iterations = 10", &format!("iterations = 10\n{extra}"));
+    let settings = |text: &str| {
+        let t = Task::parse(text, Path::new("t.toml")).unwrap();
+        task_settings(&t, &[0], Method::BASELINE, &Default::default())
+    };
+    let s = settings(&with("multiscale_levels = 3\nsmoothness = 0.2"));
+    assert_eq!(s.priors.of::<MultiscaleOptions>().levels, 3);
+    assert_eq!(s.priors.of::<SmoothnessOptions>().weight, 0.2);
+    let s = settings(&with(
+        "[optimizer.multiscale]\nlevels = 2\n[optimizer.smoothness]\nweight = 0.5",
+    ));
+    assert_eq!(s.priors.of::<MultiscaleOptions>().levels, 2);
+    assert_eq!(s.priors.of::<SmoothnessOptions>().weight, 0.5);
+    assert_eq!(s.priors.describe(), "smoothness 0.5, multiscale 2 levels");
+    // Absent, the smoothness weight is auto's and the multiscale gradient off.
+    let s = settings(GOOD);
+    assert!(s.priors.of::<SmoothnessOptions>().weight > 0.0);
+    assert_eq!(s.priors.active().len(), 1);
+    // Every prior off.
+    let mut t = Task::parse(&with("multiscale_levels = 3"), Path::new("t.toml")).unwrap();
+    t.optimizer.priors_off();
+    let s = task_settings(&t, &[0], Method::BASELINE, &Default::default());
+    assert_eq!(s.priors.describe(), "none");
+    let e = err(&with(
+        "multiscale_levels = 3\n[optimizer.multiscale]\nlevels = 2",
+    ));
+    assert!(
+        e.contains("`optimizer.multiscale_levels`") && e.contains("give one"),
+        "{e}"
+    );
+    let e = err(&with("[optimizer.multiscale]\nlevls = 2"));
+    assert!(
+        e.contains("optimizer.multiscale") && e.contains("levls"),
+        "{e}"
+    );
+    let e = err(&with("[optimizer.multiscale]\nlevels = 7"));
+    assert!(
+        e.contains("`optimizer.multiscale.levels`: must be between 0 and 4"),
+        "{e}"
+    );
+    let e = err(&with("multiscale = 3"));
+    assert!(
+        e.contains("`optimizer.multiscale`: must be a table of the prior's options"),
+        "{e}"
+    );
 }

@@ -34,19 +34,11 @@ use crate::render::layout::GpuCameraInfo;
 use crate::render::{GpuScene, Techniques};
 use crate::Result;
 
-/// Declares each estimator's folder and lists its [`Kind`] in [`REGISTRY`].
-macro_rules! registry {
-    ($($(#[$attr:meta])* $folder:ident),* $(,)?) => {
-        $($(#[$attr])* pub mod $folder;)*
-        /// Every estimator, in the order reports list them: the one place that names each
-        /// folder. The first is the baseline, the reference of every comparison.
-        pub const REGISTRY: &[&Kind] = &[$($(#[$attr])* &$folder::KIND),*];
-    };
-}
-
 // A new estimator: its folder, exporting `KIND`, and its name here. The toy (tests only)
 // is the registry's own test: it is nothing but its folder and this entry.
-registry!(
+super::registry!(
+    "Every estimator, in the order reports list them: the one place that names each \
+     folder. The first is the baseline, the reference of every comparison.",
     baseline,
     restir,
     recursive,

@@ -1,22 +1,221 @@
-//! The priors the gradient passes through before the step: the smoothness prior
-//! ([`smoothness`], a term of the loss over observed neighbouring texels) and the multiscale
-//! gradient ([`multiscale`], each texel's gradient averaged with its blocks'). Each module
-//! holds its pass's driver and the mirror of its uniform; its WGSL lies beside it. The
-//! optimizer sees them through the `Prior` trait, built by `build` as its settings ask.
-pub mod multiscale;
-pub mod smoothness;
-
+//! The priors the gradient passes through before the step. Each one lives in its own folder
+//! and exports one value, its [`Kind`]: name, summary, options (its own type, read from the
+//! task file's `[optimizer.<name>]` table), WGSL, bind groups and builder. [`REGISTRY`] lists
+//! them in the order they apply, and is the one line to add for a new prior; the optimizer,
+//! the task file, the command line (`--set optimizer.<name>.<key>=<value>`) and reports see a
+//! kind and its table in [`Priors`] only.
+//!
+//! - [`smoothness`]: a term of the loss over observed neighbouring texels, whose derivative
+//!   it adds to the gradient (`smoothness.wgsl`).
+//! - [`multiscale`]: each texel's gradient averaged with its blocks'
+//!   (`multiscale_gradient.wgsl`).
+//!
+//! The optimizer drives a prior through the `Prior` trait once per iteration, after the
+//! estimator and before the step.
 use super::timing::PassTimer;
-use super::Settings;
-use crate::gpu::Gpu;
+use crate::gpu::{Gpu, GroupDecl};
 use crate::render::params::ParamSet;
 use crate::Result;
+use std::collections::BTreeMap;
+
+// A new prior: its folder, exporting `KIND`, and its name here, where it is to apply. The
+// toy (tests only) is the registry's own test: it is nothing but its folder and this entry.
+super::registry!(
+    "Every prior, in the order they apply: the one place that names each folder.",
+    smoothness,
+    multiscale,
+    #[cfg(test)]
+    toy
+);
+
+/// A prior as its folder exports it: everything the rest of the crate knows of it.
+pub struct Kind {
+    /// Its name: the task file's `[optimizer.<name>]` table.
+    pub name: &'static str,
+    /// What it does, in one line.
+    pub summary: &'static str,
+    /// Its options.
+    pub options: OptionsKind,
+    /// A task-file key under `[optimizer]` that sets one of its options by a bare value,
+    /// and that option (`smoothness = 0.03` for `[optimizer.smoothness] weight = 0.03`).
+    pub shorthand: Option<(&'static str, &'static str)>,
+    /// Its pass (WGSL file), which names it in timings and tests.
+    pub pass: &'static str,
+    /// Whether each entry's variance is the same after it as before (it adds a term that
+    /// does not depend on the samples), so that an estimator's own variance still describes
+    /// the gradient the step is given.
+    pub keeps_variance: bool,
+    /// Its WGSL files: (name, source).
+    pub wgsl: &'static [(&'static str, &'static str)],
+    /// Its bind-group declarations (checked against its WGSL by the contract test).
+    pub groups: &'static [GroupDecl],
+    pub(crate) build: fn(&Setup, &Priors) -> Result<Box<dyn Prior>>,
+}
+
+impl Kind {
+    /// The prior called `name`.
+    pub fn by_name(name: &str) -> Option<&'static Kind> {
+        REGISTRY.iter().copied().find(|k| k.name == name)
+    }
+
+    /// Every prior's name.
+    pub fn names() -> Vec<&'static str> {
+        REGISTRY.iter().map(|k| k.name).collect()
+    }
+}
+
+/// A prior's options as its folder defines them: read from and written to its table in
+/// [`Priors`] (missing keys take their defaults, which leave the prior off).
+pub trait Options:
+    Clone + Default + serde::Serialize + serde::de::DeserializeOwned + std::fmt::Debug
+{
+    /// The prior they belong to.
+    const KIND: &'static Kind;
+    /// An error naming the option (its key in the table) and what is wrong.
+    fn check(&self) -> std::result::Result<(), (String, String)>;
+    /// Whether the prior acts at all with these options.
+    fn on(&self) -> bool;
+    /// A short description for reports, e.g. `smoothness 0.03`.
+    fn describe(&self) -> String;
+}
+
+/// What the registry knows of a prior's options without their type: functions of the
+/// tables in [`Priors`], made from an [`Options`] type by [`OptionsKind::of`].
+#[derive(Clone, Copy)]
+pub struct OptionsKind {
+    check: fn(&Priors) -> std::result::Result<(), (String, String)>,
+    on: fn(&Priors) -> bool,
+    describe: fn(&Priors) -> String,
+    /// The options at their defaults, as a table (which leaves the prior off).
+    pub defaults: fn() -> toml::Table,
+}
+
+impl OptionsKind {
+    /// The options `T` defines.
+    pub const fn of<T: Options + 'static>() -> OptionsKind {
+        OptionsKind {
+            check: |p| p.get::<T>().map(|_| ()),
+            on: |p| p.get::<T>().is_ok_and(|t| t.on()),
+            describe: |p| p.get::<T>().map(|t| t.describe()).unwrap_or_default(),
+            defaults: || match toml::Value::try_from(T::default()) {
+                Ok(toml::Value::Table(t)) => t,
+                _ => unreachable!("a prior's options serialize to a table"),
+            },
+        }
+    }
+}
+
+/// Every prior's options, one table of TOML values per prior name: the task file's
+/// `[optimizer.<name>]` tables (and shorthands). Each prior reads its own ([`Options`]).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(transparent)]
+pub struct Priors {
+    tables: BTreeMap<String, toml::Table>,
+}
+
+impl Priors {
+    /// These priors with `options` in place of their prior's table:
+    /// `Priors::default().with(&SmoothnessOptions { weight: 0.01 })`.
+    pub fn with<T: Options>(mut self, options: &T) -> Priors {
+        self.put(options);
+        self
+    }
+
+    /// The options of `T`'s prior, parsed from its table and checked: an error names the
+    /// task-file key and what is wrong.
+    pub fn get<T: Options>(&self) -> std::result::Result<T, (String, String)> {
+        let key = format!("optimizer.{}", T::KIND.name);
+        let table = self.tables.get(T::KIND.name).cloned().unwrap_or_default();
+        let o = T::deserialize(toml::Value::Table(table))
+            .map_err(|e| (key.clone(), e.to_string().trim().replace('\n', " ")))?;
+        o.check().map_err(|(k, m)| (format!("{key}.{k}"), m))?;
+        Ok(o)
+    }
+
+    /// The options of `T`'s prior, at their defaults where the table is not valid (settings
+    /// are checked before an optimizer reads them).
+    pub fn of<T: Options>(&self) -> T {
+        self.get().unwrap_or_default()
+    }
+
+    /// Replace the table of `T`'s prior by `options`.
+    pub fn put<T: Options>(&mut self, options: &T) {
+        let table = match toml::Value::try_from(options) {
+            Ok(toml::Value::Table(t)) => t,
+            _ => unreachable!("a prior's options serialize to a table"),
+        };
+        self.tables.insert(T::KIND.name.to_string(), table);
+    }
+
+    /// `name`'s table (empty: every option at its default).
+    pub fn table(&self, name: &str) -> toml::Table {
+        self.tables.get(name).cloned().unwrap_or_default()
+    }
+
+    /// Set one option of the prior `name` (checked by [`Priors::check`]).
+    pub fn set(&mut self, name: &str, key: &str, value: toml::Value) {
+        self.tables
+            .entry(name.to_string())
+            .or_default()
+            .insert(key.to_string(), value);
+    }
+
+    /// These tables with `over`'s options on top, option by option.
+    pub fn merged(mut self, over: &Priors) -> Priors {
+        for (name, table) in &over.tables {
+            for (k, v) in table {
+                self.set(name, k, v.clone());
+            }
+        }
+        self
+    }
+
+    /// Check every table: an error names the task-file key and what is wrong.
+    pub fn check(&self) -> std::result::Result<(), (String, String)> {
+        for name in self.tables.keys() {
+            let kind = Kind::by_name(name).ok_or_else(|| {
+                (
+                    format!("optimizer.{name}"),
+                    format!("is no prior ({})", Kind::names().join(", ")),
+                )
+            })?;
+            (kind.options.check)(self)?;
+        }
+        Ok(())
+    }
+
+    /// The priors that act, in the order they apply.
+    pub fn active(&self) -> Vec<&'static Kind> {
+        REGISTRY
+            .iter()
+            .copied()
+            .filter(|k| (k.options.on)(self))
+            .collect()
+    }
+
+    /// Whether every prior that acts keeps each entry's variance ([`Kind::keeps_variance`]).
+    pub fn keep_variance(&self) -> bool {
+        self.active().iter().all(|k| k.keeps_variance)
+    }
+
+    /// The priors that act, described for reports (`none` without any).
+    pub fn describe(&self) -> String {
+        let on: Vec<String> = self
+            .active()
+            .iter()
+            .map(|k| (k.options.describe)(self))
+            .collect();
+        if on.is_empty() {
+            "none".into()
+        } else {
+            on.join(", ")
+        }
+    }
+}
 
 /// A prior as the optimizer drives it: passes that turn the gradient in place after the
 /// estimator and before the step.
 pub(crate) trait Prior: Send {
-    /// Its pass (WGSL file), which names it.
-    fn pass(&self) -> &'static str;
     /// Record its passes for `iteration` (of the run seeded `seed`).
     fn encode(
         &mut self,
@@ -32,7 +231,6 @@ pub(crate) trait Prior: Send {
 pub(crate) struct Setup<'a> {
     pub gpu: &'a Gpu,
     pub set: &'a ParamSet,
-    pub settings: &'a Settings,
     /// The gradient, laid out like the parameters.
     pub grad: &'a wgpu::Buffer,
     /// The parameters.
@@ -41,50 +239,56 @@ pub(crate) struct Setup<'a> {
     pub observed: &'a (Vec<bool>, wgpu::Buffer),
 }
 
-/// The priors `setup.settings` ask for, in the order they apply: the smoothness prior adds
-/// its derivative at the current textures, then the multiscale gradient averages the sum.
-pub(crate) fn build(s: &Setup) -> Result<Vec<Box<dyn Prior>>> {
-    let mut priors: Vec<Box<dyn Prior>> = Vec::new();
-    if s.settings.smoothness > 0.0 {
-        priors.push(Box::new(smoothness::Smoothness::new(
-            s.gpu,
-            s.set,
-            s.grad,
-            s.params,
-            s.observed,
-            s.settings.smoothness,
-        )?));
-    }
-    let levels = s.settings.multiscale_levels;
-    if levels > 0 {
-        priors.push(Box::new(multiscale::Multiscale::new(
-            s.gpu,
-            s.set,
-            s.grad,
-            &s.observed.1,
-            levels,
-        )?));
-    }
-    Ok(priors)
+/// The priors that `priors` switch on, in the order they apply, each with its kind.
+pub(crate) fn build(s: &Setup, priors: &Priors) -> Result<Vec<(&'static Kind, Box<dyn Prior>)>> {
+    priors
+        .active()
+        .into_iter()
+        .map(|k| Ok((k, (k.build)(s, priors)?)))
+        .collect()
 }
 
-/// The passes the priors of `settings` create.
-pub(crate) fn passes(settings: &Settings) -> Vec<&'static str> {
-    let mut p = Vec::new();
-    if settings.smoothness > 0.0 {
-        p.push("smoothness");
-    }
-    if settings.multiscale_levels > 0 {
-        p.push("multiscale_gradient");
-    }
-    p
+/// The passes the priors of `priors` create.
+pub(crate) fn passes(priors: &Priors) -> Vec<&'static str> {
+    priors.active().iter().map(|k| k.pass).collect()
 }
 
-/// The priors' WGSL: (name, source) of their passes.
-pub(crate) const WGSL: &[(&str, &str)] = &[
-    (
-        "multiscale_gradient",
-        include_str!("multiscale_gradient.wgsl"),
-    ),
-    ("smoothness", include_str!("smoothness.wgsl")),
-];
+/// Every prior's WGSL files.
+pub(crate) fn wgsl() -> impl Iterator<Item = &'static [(&'static str, &'static str)]> {
+    REGISTRY.iter().map(|k| k.wgsl)
+}
+
+/// Every prior's bind-group declarations (for the contract test).
+#[cfg(test)]
+pub(crate) fn groups() -> Vec<GroupDecl> {
+    REGISTRY
+        .iter()
+        .flat_map(|k| k.groups.iter().copied())
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A prior's table shares `[optimizer]` with the estimators' tables and the priors'
+    /// shorthands: no name may stand for two things, and every prior is off at its defaults.
+    #[test]
+    fn prior_names_are_their_own_and_every_prior_is_off_by_default() {
+        let mut names: Vec<&str> = crate::optim::Method::names();
+        for k in REGISTRY {
+            names.push(k.name);
+            // A shorthand may be its prior's own name (`smoothness = 0.03`).
+            names.extend(k.shorthand.map(|s| s.0).filter(|s| *s != k.name));
+            let mut p = Priors::default();
+            p.tables.insert(k.name.into(), (k.options.defaults)());
+            assert!(p.active().is_empty(), "{} is on at its defaults", k.name);
+            assert_eq!(p.check(), Ok(()));
+            assert_eq!(Kind::by_name(k.name).unwrap().pass, k.pass);
+        }
+        let n = names.len();
+        names.sort();
+        names.dedup();
+        assert_eq!(names.len(), n, "a name stands for two things: {names:?}");
+    }
+}

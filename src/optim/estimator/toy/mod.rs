@@ -158,9 +158,8 @@ const KIND_METHOD: Method = Method::of(&KIND);
 mod tests {
     use super::*;
     use crate::contract_tests::mirror;
-    use crate::glam::Vec3;
-    use crate::scene::{Camera, Material, PunctualLight, Triangle};
-    use crate::{Init, Optimizer, Problem, Scene, Settings, Slot, Stop, TextureSpec};
+    use crate::optim::plane_tests::run_on_plane;
+    use crate::optim::EstimatorOptions;
 
     #[test]
     fn uniform_mirror_matches_wgsl() {
@@ -178,58 +177,15 @@ mod tests {
     fn a_folder_and_a_registry_entry_make_an_estimator() {
         let method: Method = "toy".parse().unwrap();
         assert_eq!(method.summary(), KIND.summary);
-        let plane = Material {
-            name: "plane".into(),
-            ..Default::default()
-        };
-        let mut scene = Scene {
-            materials: vec![plane],
-            ..Default::default()
-        };
-        scene.triangles.extend(Triangle::quad(
-            Vec3::new(-1.0, 0.0, 1.0),
-            2.0 * Vec3::X,
-            -2.0 * Vec3::Z,
-            0,
-        ));
-        scene.cameras.push(Camera::look_at(
-            "top",
-            Vec3::new(0.0, 2.5, 0.0),
-            Vec3::ZERO,
-            Vec3::NEG_Z,
-            0.8,
-        ));
-        scene.lights.push(PunctualLight::point(
-            "lamp",
-            Vec3::new(0.3, 2.0, 0.4),
-            Vec3::splat(6.0),
-        ));
-        let texture = TextureSpec {
-            material: "plane".into(),
-            slot: Slot::BaseColor,
-            resolution: [8, 8],
-            init: Init::Vector(vec![0.5; 3]),
-            learning_rate: Some(0.01),
-        };
-        let mut problem = Problem::new(scene.clone(), vec![0], &[texture], Default::default());
-        let problem = problem.as_mut().unwrap();
-        let gpu = Gpu::quiet(Default::default()).unwrap();
-        problem.render_targets(&gpu, scene, 16, 16, 1, 1).unwrap();
-        let mut settings = Settings::new(16, 16, vec![0]);
-        settings.method = method;
-        settings.multiscale_levels = 0;
-        settings.smoothness = 0.0;
-        settings
-            .estimator_options
-            .assign("toy.target=0.125")
-            .unwrap();
-        let bad = settings.estimator_options.clone().assign("toy.target=2");
+        let bad = EstimatorOptions::default().assign("toy.target=2");
         assert!(bad.unwrap_err().to_string().contains("target must be in [0, 1]"));
-        let mut opt = Optimizer::for_problem(&gpu, problem, settings).unwrap();
-        opt.run(Stop::iterations(120), |_| std::ops::ControlFlow::Continue(()))
-            .unwrap();
-        let values = opt.texture_values(0).unwrap();
-        assert_eq!(values.len(), 8 * 8 * 3);
+        let values = run_on_plane(120, |settings| {
+            settings.method = method;
+            settings
+                .estimator_options
+                .assign("toy.target=0.125")
+                .unwrap();
+        });
         for v in values {
             // Adam at 0.01 reaches the target in about 38 steps and then circles it by
             // about its rate.

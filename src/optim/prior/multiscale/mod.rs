@@ -7,9 +7,59 @@
 
 use bytemuck::{Pod, Zeroable};
 
+use super::{Kind, Options, OptionsKind};
 use crate::error::Result;
 use crate::gpu::{encode_timed_pass, Gpu, GroupDecl};
 use crate::render::params::ParamSet;
+
+/// The multiscale gradient as the registry knows it.
+pub const KIND: Kind = Kind {
+    name: "multiscale",
+    summary: "each observed texel's gradient averaged with its 2^l x 2^l blocks'",
+    options: OptionsKind::of::<MultiscaleOptions>(),
+    shorthand: Some(("multiscale_levels", "levels")),
+    pass: "multiscale_gradient",
+    keeps_variance: false,
+    wgsl: &[(
+        "multiscale_gradient",
+        include_str!("multiscale_gradient.wgsl"),
+    )],
+    groups: &[MULTISCALE_GROUP],
+    build: |s, priors| {
+        let levels = priors.of::<MultiscaleOptions>().levels;
+        let pass = Multiscale::new(s.gpu, s.set, s.grad, &s.observed.1, levels)?;
+        Ok(Box::new(pass))
+    },
+};
+
+/// The multiscale gradient's options (`[optimizer.multiscale]`, or `multiscale_levels =
+/// <levels>` for short).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MultiscaleOptions {
+    /// Block levels above the texel (0: off; at most [`MAX_LEVELS`]).
+    pub levels: u32,
+}
+
+impl Options for MultiscaleOptions {
+    const KIND: &'static Kind = &KIND;
+
+    fn check(&self) -> std::result::Result<(), (String, String)> {
+        if self.levels > MAX_LEVELS {
+            let msg = format!("must be between 0 and {MAX_LEVELS}");
+            return Err(("levels".into(), msg));
+        }
+        Ok(())
+    }
+
+    fn on(&self) -> bool {
+        self.levels > 0
+    }
+
+    fn describe(&self) -> String {
+        format!("multiscale {} levels", self.levels)
+    }
+}
 
 /// Texels per tile side: the coarsest block is at most this wide.
 pub const TILE: u32 = 16;
@@ -98,9 +148,10 @@ impl Multiscale {
         }
         Ok(Multiscale { pipeline, textures })
     }
+}
 
-    /// Record the pass over every texture for `iteration`.
-    pub fn encode(
+impl super::Prior for Multiscale {
+    fn encode(
         &mut self,
         gpu: &Gpu,
         enc: &mut wgpu::CommandEncoder,
@@ -127,23 +178,6 @@ impl Multiscale {
                 timing,
             );
         }
-    }
-}
-
-impl super::Prior for Multiscale {
-    fn pass(&self) -> &'static str {
-        "multiscale_gradient"
-    }
-
-    fn encode(
-        &mut self,
-        gpu: &Gpu,
-        enc: &mut wgpu::CommandEncoder,
-        seed: u32,
-        iteration: u32,
-        timer: &mut crate::optim::timing::PassTimer,
-    ) {
-        Multiscale::encode(self, gpu, enc, seed, iteration, timer)
     }
 }
 

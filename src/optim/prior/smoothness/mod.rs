@@ -11,9 +11,57 @@
 
 use bytemuck::{Pod, Zeroable};
 
+use super::{Kind, Options, OptionsKind};
 use crate::error::Result;
 use crate::gpu::{encode_timed_pass, Gpu, GroupDecl};
 use crate::render::params::ParamSet;
+
+/// The smoothness prior as the registry knows it.
+pub const KIND: Kind = Kind {
+    name: "smoothness",
+    summary: "the mean squared difference of observed neighbouring texels, added to the loss",
+    options: OptionsKind::of::<SmoothnessOptions>(),
+    shorthand: Some(("smoothness", "weight")),
+    pass: "smoothness",
+    keeps_variance: true,
+    wgsl: &[("smoothness", include_str!("smoothness.wgsl"))],
+    groups: &[SMOOTHNESS_GROUP],
+    build: |s, priors| {
+        let o = priors.of::<SmoothnessOptions>();
+        let pass = Smoothness::new(s.gpu, s.set, s.grad, s.params, s.observed, o.weight)?;
+        Ok(Box::new(pass))
+    },
+};
+
+/// The prior's options (`[optimizer.smoothness]`, or `smoothness = <weight>` for short).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SmoothnessOptions {
+    /// The prior's weight λ (0: off).
+    pub weight: f32,
+}
+
+impl Options for SmoothnessOptions {
+    const KIND: &'static Kind = &KIND;
+
+    fn check(&self) -> std::result::Result<(), (String, String)> {
+        if !(self.weight.is_finite() && (0.0..=1.0e6).contains(&self.weight)) {
+            return Err((
+                "weight".into(),
+                "must be a number between 0 (off) and 1e6".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    fn on(&self) -> bool {
+        self.weight > 0.0
+    }
+
+    fn describe(&self) -> String {
+        format!("smoothness {}", self.weight)
+    }
+}
 
 /// Group 0 of `smoothness.wgsl`.
 pub(crate) const SMOOTHNESS_GROUP: GroupDecl = GroupDecl {
@@ -174,11 +222,15 @@ impl Smoothness {
         }
         Ok(Smoothness { pipeline, textures })
     }
+}
 
-    /// Record the pass over every texture.
-    pub fn encode(
-        &self,
+impl super::Prior for Smoothness {
+    fn encode(
+        &mut self,
+        _gpu: &Gpu,
         enc: &mut wgpu::CommandEncoder,
+        _seed: u32,
+        _iteration: u32,
         timer: &mut crate::optim::timing::PassTimer,
     ) {
         for (g, p) in &self.textures {
@@ -189,23 +241,6 @@ impl Smoothness {
             let timing = timer.next(crate::optim::timing::PassKind::Prior);
             encode_timed_pass(enc, "smoothness", &self.pipeline, &[g], grid, timing);
         }
-    }
-}
-
-impl super::Prior for Smoothness {
-    fn pass(&self) -> &'static str {
-        "smoothness"
-    }
-
-    fn encode(
-        &mut self,
-        _gpu: &Gpu,
-        enc: &mut wgpu::CommandEncoder,
-        _seed: u32,
-        _iteration: u32,
-        timer: &mut crate::optim::timing::PassTimer,
-    ) {
-        Smoothness::encode(self, enc, timer)
     }
 }
 
