@@ -64,7 +64,7 @@ impl Problem {
             let start = spec.start(&task.base)?;
             p.scene.env_bilinear = spec.filter == Some(crate::vocab::Filter::Bilinear);
             if spec.optimize {
-                p.recover_environment(start, spec.options())
+                p.recover_environment(start, spec.fit.clone())
                     .map_err(|e| Error::file(&task.path, e.to_string()))?;
             } else {
                 p.scene.env = Some(start);

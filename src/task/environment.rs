@@ -14,7 +14,7 @@
 //! warmup_iterations = 0           # iterations in which only the environment steps
 //! # optimize = false              # the environment fixed at `init` instead (an assumption)
 //! ```
-use crate::optim::environment_fit::{EnvFitOptions, Gauge};
+use crate::optim::environment_fit::EnvFitOptions;
 use crate::scene::EnvMap;
 use crate::{Error, Result};
 use serde::Deserialize;
@@ -32,41 +32,62 @@ pub enum EnvInit {
     File(PathBuf),
 }
 
-/// The `[environment]` table. It repeats [`EnvFitOptions`]' keys rather than flattening
-/// them in: serde refuses unknown keys only in a struct without flattened fields, and a
-/// misspelt key must be an error.
+/// The `[environment]` table: where the environment starts and whether it is recovered
+/// (its own keys), and how it is stepped (every other key, read by [`EnvFitOptions`] itself,
+/// which refuses a key it does not know).
 #[derive(Clone, Debug, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(try_from = "toml::Table")]
 pub struct EnvironmentSpec {
     /// Texels (width, height) of a constant start; a file keeps its own size.
     pub resolution: Option<[u32; 2]>,
     /// The start (default: gray 0.5).
-    #[serde(default = "default_init")]
     pub init: EnvInit,
-    /// See [`EnvFitOptions`].
-    #[serde(default = "default_lr")]
-    pub learning_rate: f32,
-    /// See [`EnvFitOptions`].
-    #[serde(default = "default_rebuild")]
-    pub rebuild_every: u32,
-    /// See [`EnvFitOptions`].
-    #[serde(default)]
-    pub smoothness: f32,
-    /// See [`EnvFitOptions`].
-    #[serde(default)]
-    pub gray_world: f32,
-    /// See [`EnvFitOptions`].
-    #[serde(default)]
-    pub gauge: Gauge,
-    /// See [`EnvFitOptions`].
-    #[serde(default)]
-    pub warmup_iterations: u32,
     /// The lookup: "nearest" (the default) or "bilinear" (four texels, wrapping in azimuth).
-    #[serde(default)]
     pub filter: Option<crate::vocab::Filter>,
     /// Whether it is recovered (true) or held at `init` (a fit that assumes a light).
-    #[serde(default = "yes")]
     pub optimize: bool,
+    /// How it is stepped: the learning rate, its priors, its gauge and its warm-up.
+    pub fit: EnvFitOptions,
+}
+
+/// The keys of `[environment]` that are the spec's own, not the fit's.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Start {
+    resolution: Option<[u32; 2]>,
+    #[serde(default = "default_init")]
+    init: EnvInit,
+    #[serde(default)]
+    filter: Option<crate::vocab::Filter>,
+    #[serde(default = "yes")]
+    optimize: bool,
+}
+
+impl TryFrom<toml::Table> for EnvironmentSpec {
+    type Error = String;
+
+    fn try_from(mut table: toml::Table) -> std::result::Result<EnvironmentSpec, String> {
+        const OWN: [&str; 4] = ["resolution", "init", "filter", "optimize"];
+        let own: toml::Table = OWN
+            .iter()
+            .filter_map(|k| table.remove(*k).map(|v| (k.to_string(), v)))
+            .collect();
+        let start = Start::deserialize(toml::Value::Table(own)).map_err(|e| e.to_string())?;
+        let fit = EnvFitOptions::deserialize(toml::Value::Table(table)).map_err(|e| {
+            let e = e.to_string();
+            match e.contains("unknown field") {
+                true => format!("{} (or one of {})", e.trim_end(), OWN.join(", ")),
+                false => e,
+            }
+        })?;
+        Ok(EnvironmentSpec {
+            resolution: start.resolution,
+            init: start.init,
+            filter: start.filter,
+            optimize: start.optimize,
+            fit,
+        })
+    }
 }
 
 fn yes() -> bool {
@@ -76,32 +97,14 @@ fn yes() -> bool {
 fn default_init() -> EnvInit {
     EnvInit::Gray(0.5)
 }
-fn default_lr() -> f32 {
-    EnvFitOptions::default().learning_rate
-}
-fn default_rebuild() -> u32 {
-    EnvFitOptions::default().rebuild_every
-}
 
 /// The largest side of a recovered environment.
 pub const MAX_ENV_SIDE: u32 = 1024;
 
 impl EnvironmentSpec {
-    /// The fit's options.
-    pub fn options(&self) -> EnvFitOptions {
-        EnvFitOptions {
-            learning_rate: self.learning_rate,
-            rebuild_every: self.rebuild_every,
-            smoothness: self.smoothness,
-            gray_world: self.gray_world,
-            gauge: self.gauge,
-            warmup_iterations: self.warmup_iterations,
-        }
-    }
-
     /// Range checks: the key (under `environment.`) and what is wrong.
     pub fn check(&self) -> std::result::Result<(), (String, String)> {
-        self.options().check()?;
+        self.fit.check()?;
         let bad = |k: &str, m: String| Err((k.to_string(), m));
         match (&self.init, self.resolution) {
             (EnvInit::File(_), Some(_)) => {
