@@ -97,11 +97,16 @@ impl OptionsKind {
             check: |p| p.get::<T>().map(|_| ()),
             on: |p| p.get::<T>().is_ok_and(|t| t.on()),
             describe: |p| p.get::<T>().map(|t| t.describe()).unwrap_or_default(),
-            defaults: || match toml::Value::try_from(T::default()) {
-                Ok(toml::Value::Table(t)) => t,
-                _ => unreachable!("a prior's options serialize to a table"),
-            },
+            defaults: || as_table(&T::default()),
         }
+    }
+}
+
+/// A prior's options as the TOML table they serialize to.
+fn as_table<T: Options>(options: &T) -> toml::Table {
+    match toml::Value::try_from(options) {
+        Ok(toml::Value::Table(t)) => t,
+        _ => unreachable!("a prior's options serialize to a table"),
     }
 }
 
@@ -140,11 +145,8 @@ impl Priors {
 
     /// Replace the table of `T`'s prior by `options`.
     pub fn put<T: Options>(&mut self, options: &T) {
-        let table = match toml::Value::try_from(options) {
-            Ok(toml::Value::Table(t)) => t,
-            _ => unreachable!("a prior's options serialize to a table"),
-        };
-        self.tables.insert(T::KIND.name.to_string(), table);
+        self.tables
+            .insert(T::KIND.name.to_string(), as_table(options));
     }
 
     /// `name`'s table (empty: every option at its default).
@@ -158,16 +160,6 @@ impl Priors {
             .entry(name.to_string())
             .or_default()
             .insert(key.to_string(), value);
-    }
-
-    /// These tables with `over`'s options on top, option by option.
-    pub fn merged(mut self, over: &Priors) -> Priors {
-        for (name, table) in &over.tables {
-            for (k, v) in table {
-                self.set(name, k, v.clone());
-            }
-        }
-        self
     }
 
     /// Check every table: an error names the task-file key and what is wrong.
