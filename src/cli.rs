@@ -1,5 +1,6 @@
 //! The `psrestir` command line: its commands and their arguments (clap).
 use anyhow::Result;
+use clap::builder::TypedValueParser as _;
 use clap::{Parser, Subcommand};
 use psrestir::optim;
 use std::path::PathBuf;
@@ -25,21 +26,11 @@ pub(crate) enum TechniqueArg {
     Bsdf,
 }
 
-#[derive(Clone, Copy, clap::ValueEnum)]
-pub(crate) enum StepArg {
-    /// Adam.
-    Adam,
-    /// The variance-scaled step: the estimate over its standard deviation, clipped.
-    Variance,
-}
-
-impl StepArg {
-    pub(crate) fn kind(self) -> optim::StepKind {
-        match self {
-            StepArg::Adam => optim::StepKind::Adam,
-            StepArg::Variance => optim::StepKind::Variance,
-        }
-    }
+/// `--step`'s values: the registry's steps by name.
+fn step_parser() -> impl clap::builder::TypedValueParser<Value = optim::StepKind> {
+    clap::builder::PossibleValuesParser::new(optim::StepKind::names()).map(|name: String| {
+        optim::StepKind::by_name(&name).expect("a possible value names a registered step")
+    })
 }
 
 /// Choice of gradient estimator and its options, shared by the commands that estimate
@@ -218,9 +209,10 @@ pub(crate) struct OptimizeArgs {
     /// Adam's epsilon (overrides the task).
     #[arg(long)]
     pub(crate) adam_eps: Option<f32>,
-    /// The step taken with each gradient (overrides the task's `optimizer.step`).
-    #[arg(long, value_enum)]
-    pub(crate) step: Option<StepArg>,
+    /// The step taken with each gradient: `adam`, or `variance` for the variance-scaled step
+    /// (overrides the task's `optimizer.step`).
+    #[arg(long, value_parser = step_parser())]
+    pub(crate) step: Option<optim::StepKind>,
     /// The variance-scaled step's largest step, in learning rates (overrides the task).
     #[arg(long)]
     pub(crate) step_clip: Option<f32>,
@@ -262,7 +254,7 @@ impl OptimizeArgs {
             key("optimizer.adam.beta1", text(self.adam_beta1)),
             key("optimizer.adam.beta2", text(self.adam_beta2)),
             key("optimizer.adam.eps", text(self.adam_eps)),
-            key("optimizer.step", quoted(self.step.map(|s| s.kind().name()))),
+            key("optimizer.step", quoted(self.step.map(|s| s.name()))),
             key("optimizer.variance_step.clip", text(self.step_clip)),
             key(
                 "optimizer.variance_step.threshold",
@@ -411,8 +403,9 @@ pub(crate) enum Command {
     Bench(BenchArgs),
     /// Print the GPU adapter psrestir would use, its features and limits.
     Adapter,
-    /// List the gradient estimators, what each does and its options with their defaults (the
-    /// TOML of its task-file table `[optimizer.<method>]`; `--estimator-option` sets one).
+    /// List the gradient estimators, the steps and the priors: what each does and its options
+    /// with their defaults (the TOML of its task-file table `[optimizer.<name>]`; `--set`
+    /// sets one).
     Estimators,
     /// Regenerate the bundled scenes (scenes/default and scenes/bench/*).
     #[command(hide = true)]

@@ -12,16 +12,14 @@ fn every_bind_group_declaration_names_its_wgsl_bindings() {
         crate::render::RENDER_GROUP,
         crate::render::TRACE_RAYS_GROUP,
         crate::optim::loss::LOSS_GROUP,
-        crate::optim::adam::ADAM_GROUP,
         crate::optim::primal::PRIMAL_CV_GROUP,
         crate::optim::observed::OBSERVED_GROUP,
-        crate::optim::moment_filter::MOMENT_FILTER_GROUP,
-        crate::optim::variance_step::VARIANCE_STEP_GROUP,
         crate::render::gpu_scene::TEXTURE_WRAP_TEST_GROUP,
         crate::optim::texture_export::TEXTURE_EXPORT_GROUP,
     ];
     decls.extend(crate::optim::estimator::groups());
     decls.extend(crate::optim::prior::groups());
+    decls.extend(crate::optim::step::groups());
     for d in &decls {
         let wgsl: Vec<String> = bindings(d.pass, d.group)
             .unwrap()

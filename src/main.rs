@@ -136,26 +136,60 @@ fn cmd_info(path: &std::path::Path) -> Result<()> {
 /// `psrestir estimators`: each estimator with its options at their defaults.
 fn cmd_estimators() {
     println!(
-        "auto (the default): {}\n",
+        "Gradient estimators (`--method`; auto, the default: {})\n",
         psrestir::optim::estimator::auto_rule()
     );
     for m in psrestir::optim::Method::all() {
-        println!("{}: {}", m.name(), m.summary());
         let toml = psrestir::optim::EstimatorOptions::defaults_toml(m);
-        if toml.is_empty() {
-            println!("  no options\n");
-        } else {
-            println!("  [optimizer.{}]", m.name());
-            for line in toml.lines() {
-                println!("  {line}");
-            }
-            println!();
+        print_kind(m.name(), m.summary(), m.name(), &toml);
+    }
+    println!("Steps (`--step`; absent: auto's, by the task's light and samples)\n");
+    for k in psrestir::optim::step::REGISTRY {
+        print_kind(
+            k.name,
+            k.summary,
+            k.table,
+            &table_text((k.options.defaults)()),
+        );
+    }
+    println!("Priors (each off at these defaults)\n");
+    for k in psrestir::optim::prior::REGISTRY {
+        let mut summary = k.summary.to_string();
+        if let Some((short, option)) = k.shorthand {
+            summary += &format!(" (`{short} = ...` sets `{option}`)");
         }
+        print_kind(
+            k.name,
+            &summary,
+            k.name,
+            &table_text((k.options.defaults)()),
+        );
     }
     println!(
-        "Set one with --estimator-option METHOD.KEY=VALUE, or in the task file's table; \
-         docs/guide.md says what each option does."
+        "Set one with --set optimizer.TABLE.OPTION=VALUE (for an estimator, also with \
+         --estimator-option METHOD.OPTION=VALUE), or in the task file's table; docs/guide.md \
+         says what each option does."
     );
+}
+
+/// A kind of estimator, step or prior for `psrestir estimators`: its name, what it does and
+/// its task-file table at its defaults.
+fn print_kind(name: &str, summary: &str, table: &str, defaults: &str) {
+    println!("{name}: {summary}");
+    if defaults.is_empty() {
+        println!("  no options\n");
+        return;
+    }
+    println!("  [optimizer.{table}]");
+    for line in defaults.lines() {
+        println!("  {line}");
+    }
+    println!();
+}
+
+/// A table of options as TOML text.
+fn table_text(table: toml::Table) -> String {
+    toml::to_string(&table).unwrap_or_default()
 }
 
 /// `psrestir adapter`: the device psrestir runs on and what it offers.

@@ -87,8 +87,10 @@ static LIBRARY: LazyLock<Library> = LazyLock::new(|| {
         .with_files(SHARED)
         .with_files(crate::render::WGSL)
         .with_files(crate::optim::WGSL)
-        .with_files(crate::optim::step::WGSL)
         .with_generated(GENERATED);
+    for files in crate::optim::step::wgsl() {
+        library = library.with_files(files);
+    }
     for files in crate::optim::prior::wgsl() {
         library = library.with_files(files);
     }

@@ -203,8 +203,8 @@ fn steps_after_prepare_create_no_pipeline() {
     let p = problem(&gpu, [[230, 60, 40], [40, 90, 220]]);
     for method in [Method::BASELINE, Method::RESTIR, Method::RECURSIVE] {
         for step in [
-            psrestir::optim::StepKind::Adam,
-            psrestir::optim::StepKind::Variance,
+            psrestir::optim::StepKind::ADAM,
+            psrestir::optim::StepKind::VARIANCE,
         ] {
             let mut s = settings(method);
             s.step = step;
@@ -794,8 +794,8 @@ fn a_step_after_backward_is_the_optimizers_iteration() {
     let gpu = Gpu::new().unwrap();
     let p = problem(&gpu, [[230, 60, 40], [40, 90, 220]]);
     for (method, step) in [
-        (Method::BASELINE, StepKind::Variance),
-        (Method::RESTIR, StepKind::Adam),
+        (Method::BASELINE, StepKind::VARIANCE),
+        (Method::RESTIR, StepKind::ADAM),
     ] {
         let s = Settings {
             primal: psrestir::optim::PrimalMode::Independent,

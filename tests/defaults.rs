@@ -38,7 +38,7 @@ fn a_bare_task_takes_autos_configuration_and_ends_below_its_start() {
     let t = task(dir.path(), "iterations = 60", "", "truth.glb");
     // The rule's choices, before any pass runs.
     let c = psrestir::task::task_configuration(&t, t.optimizer.method, 1);
-    assert_eq!(c.step, psrestir::optim::StepKind::Variance);
+    assert_eq!(c.step, psrestir::optim::StepKind::VARIANCE);
     assert!(c.moment_filter.enabled());
     assert_eq!(c.schedule, psrestir::optim::auto::schedule());
     assert!(

@@ -69,13 +69,12 @@ fn check_gradient_on(
         method: psrestir::optim::Method::BASELINE,
         estimator_options: Default::default(),
         schedule: Default::default(),
-        adam: Default::default(),
         adam_mask: false,
         priors: Default::default(),
         exposure_learning_rate: None,
         moment_filter: Default::default(),
         step: Default::default(),
-        variance_step: Default::default(),
+        steps: Default::default(),
     };
     // Target: the scene with other texel values, rendered with many samples.
     let blank = Image::new(W, W);

@@ -79,13 +79,12 @@ fn setup_with(
         method: psrestir::optim::Method::BASELINE,
         estimator_options: Default::default(),
         schedule: Default::default(),
-        adam: Default::default(),
         adam_mask: false,
         priors: Default::default(),
         exposure_learning_rate: None,
         moment_filter: Default::default(),
         step: Default::default(),
-        variance_step: Default::default(),
+        steps: Default::default(),
     };
     change(&mut settings);
     let init = set.values.clone();
@@ -125,7 +124,7 @@ fn adam_steps_on_the_gpu_equal_the_rust_reference() {
             4,
             &truth,
             Filter::Bilinear,
-            |s| s.adam = o,
+            |s| s.steps.put(&o),
         );
         let n = init.len();
         let (mut p, mut m, mut v) = (init.clone(), vec![0.0; n], vec![0.0; n]);
@@ -547,9 +546,9 @@ fn the_moment_filter_on_the_gpu_equals_the_cpu_reference() {
         };
         // The variance step's filter takes its second array as a variance.
         let step = if variance_of_mean {
-            psrestir::optim::StepKind::Variance
+            psrestir::optim::StepKind::VARIANCE
         } else {
-            psrestir::optim::StepKind::Adam
+            psrestir::optim::StepKind::ADAM
         };
         let (mut opt, set, observed, values) = moment_filter_setup(&gpu, o, step);
         let n = set.values.len();
@@ -747,8 +746,8 @@ fn filtered_variance_steps_equal_the_rust_reference() {
         &truth,
         Filter::Bilinear,
         |s| {
-            s.step = StepKind::Variance;
-            s.variance_step = o;
+            s.step = StepKind::VARIANCE;
+            s.steps.put(&o);
             s.moment_filter = f;
         },
     );
@@ -986,7 +985,7 @@ fn optimization_recovers_a_known_normal_map() {
         seed: 3,
         primal_spp: 4,
         gradient_spp: 4,
-        step: psrestir::optim::StepKind::Adam,
+        step: psrestir::optim::StepKind::ADAM,
         ..Settings::new(48, 48, vec![0])
     };
     let flat = set.values.clone();
@@ -1085,7 +1084,7 @@ fn captures_under_separate_lights_recover_base_color_and_normal_map_together() {
         primal_spp: 4,
         gradient_spp: 4,
         method: psrestir::optim::Method::BASELINE,
-        step: psrestir::optim::StepKind::Adam,
+        step: psrestir::optim::StepKind::ADAM,
         ..Settings::new(48, 48, vec![0, 1, 2])
     };
     let blank = vec![Image::new(48, 48); 3];

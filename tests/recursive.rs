@@ -333,7 +333,10 @@ fn recovery_correlated(
     s.width = 32;
     s.height = 32;
     s.step = step;
-    s.variance_step.correlation = correlation;
+    s.steps.put(&psrestir::optim::VarianceStepOptions {
+        correlation,
+        ..Default::default()
+    });
     let probe = Optimizer::new(gpu, &scene, set.clone(), s.clone(), &[Image::new(32, 32)]).unwrap();
     probe.write_params(&truth).unwrap();
     let target = probe.render(0, 1024, 77).unwrap();
@@ -353,8 +356,8 @@ fn variance_step_matches_its_cpu_reference() {
 fn check_variance_step(gpu: &psrestir::gpu::Gpu, correlation: f32) {
     let lr = 0.05;
     let (mut opt, _) =
-        recovery_correlated(gpu, Method::BASELINE, StepKind::Variance, lr, correlation);
-    let o = opt.settings().variance_step;
+        recovery_correlated(gpu, Method::BASELINE, StepKind::VARIANCE, lr, correlation);
+    let o: psrestir::optim::VarianceStepOptions = opt.settings().steps.of();
     assert_eq!(o.correlation, correlation);
     let mut p = opt.read_params().unwrap();
     let n = p.len();
@@ -415,7 +418,7 @@ fn rmse(a: &[f32], b: &[f32]) -> f64 {
 #[test]
 fn recursive_estimator_recovers_a_texture_with_either_step() {
     let Some(gpu) = gpu() else { return };
-    for (step, lr) in [(StepKind::Adam, 0.03), (StepKind::Variance, 0.03)] {
+    for (step, lr) in [(StepKind::ADAM, 0.03), (StepKind::VARIANCE, 0.03)] {
         let (mut opt, truth) = recovery(&gpu, Method::RECURSIVE, step, lr);
         let before = rmse(&opt.read_params().unwrap(), &truth);
         for _ in 0..120 {

@@ -143,13 +143,12 @@ fn optimizer_textures(
         method,
         estimator_options: EstimatorOptions::with(&restir),
         schedule: Default::default(),
-        adam: Default::default(),
         adam_mask: false,
         priors: Default::default(),
         exposure_learning_rate: None,
         moment_filter: Default::default(),
         step: Default::default(),
-        variance_step: Default::default(),
+        steps: Default::default(),
     };
     let base = Settings {
         method: Method::BASELINE,
@@ -229,13 +228,12 @@ fn restir_without_reuse_equals_the_baseline(
             method: Method::BASELINE,
             estimator_options: EstimatorOptions::with(&opts),
             schedule: Default::default(),
-            adam: Default::default(),
             adam_mask: false,
             priors: Default::default(),
             exposure_learning_rate: None,
             moment_filter: Default::default(),
             step: Default::default(),
-            variance_step: Default::default(),
+            steps: Default::default(),
         };
         let opt = Optimizer::new(
             gpu,
@@ -892,13 +890,12 @@ fn gradients_follow_a_sign_change() {
             method,
             estimator_options: Default::default(),
             schedule: Default::default(),
-            adam: Default::default(),
             adam_mask: false,
             priors: Default::default(),
             exposure_learning_rate: None,
             moment_filter: Default::default(),
             step: Default::default(),
-            variance_step: Default::default(),
+            steps: Default::default(),
         };
         let opt = Optimizer::new(
             &gpu,
@@ -981,7 +978,7 @@ fn shrunk_default_task(side: u32, target_spp: u32) -> psrestir::task::Task {
     // These tests compare the estimators under Adam, at the rate Adam was tuned to on this
     // task (the task itself now takes the variance-scaled step at half of it), without the
     // moment filter that the task now has.
-    task.optimizer.step = Some(psrestir::optim::StepKind::Adam);
+    task.optimizer.step = Some(psrestir::optim::StepKind::ADAM);
     task.optimizer.moment_filter = Some(Default::default());
     for t in &mut task.textures {
         t.learning_rate = Some(0.02);

@@ -33,10 +33,8 @@ pub fn bare(task: &Task) -> Task {
     o.step = None;
     o.moment_filter = None;
     o.schedule = None;
-    o.adam = Default::default();
-    o.variance_step = Default::default();
-    // The estimators' and the priors' tables: every prior off but the smoothness prior,
-    // whose weight is `auto`'s where none is given.
+    // The estimators', the steps' and the priors' tables: every prior off but the
+    // smoothness prior, whose weight is `auto`'s where none is given.
     o.tables.clear();
     for tex in &mut t.textures {
         tex.learning_rate = None;
@@ -48,7 +46,7 @@ impl Contender {
     /// The reference of every run: the baseline with Adam, unfiltered.
     pub const BASELINE: Contender = Contender {
         method: Method::BASELINE,
-        step: StepKind::Adam,
+        step: StepKind::ADAM,
         filtered: false,
         auto: false,
     };
@@ -57,7 +55,7 @@ impl Contender {
     /// estimator, step and filter ([`Contender::on`]).
     pub const AUTO: Contender = Contender {
         method: Method::BASELINE,
-        step: StepKind::Variance,
+        step: StepKind::VARIANCE,
         filtered: false,
         auto: true,
     };
@@ -69,31 +67,31 @@ impl Contender {
     pub const DEFAULT: [Contender; 6] = [
         Contender {
             method: Method::RESTIR,
-            step: StepKind::Adam,
+            step: StepKind::ADAM,
             filtered: false,
             auto: false,
         },
         Contender {
             method: Method::RECURSIVE,
-            step: StepKind::Adam,
+            step: StepKind::ADAM,
             filtered: false,
             auto: false,
         },
         Contender {
             method: Method::RECURSIVE,
-            step: StepKind::Variance,
+            step: StepKind::VARIANCE,
             filtered: false,
             auto: false,
         },
         Contender {
             method: Method::BASELINE,
-            step: StepKind::Variance,
+            step: StepKind::VARIANCE,
             filtered: false,
             auto: false,
         },
         Contender {
             method: Method::BASELINE,
-            step: StepKind::Variance,
+            step: StepKind::VARIANCE,
             filtered: true,
             auto: false,
         },
@@ -104,7 +102,7 @@ impl Contender {
     pub fn adam(method: Method) -> Contender {
         Contender {
             method,
-            step: StepKind::Adam,
+            step: StepKind::ADAM,
             filtered: false,
             auto: false,
         }
@@ -161,9 +159,10 @@ impl Contender {
             };
             return format!("default (auto: {})", c.name());
         }
-        let step = match self.step {
-            StepKind::Adam => "Adam",
-            StepKind::Variance => "variance-scaled step",
+        let step = match self.step.name() {
+            "adam" => "Adam",
+            "variance" => "variance-scaled step",
+            other => other,
         };
         let filtered = if self.filtered {
             ", filtered moments"
@@ -193,11 +192,7 @@ impl Contender {
         };
         let (m, st) = s.split_once(':').unwrap_or((s, "adam"));
         let method: Method = m.parse().map_err(|e: Error| e.to_string())?;
-        let step = match st {
-            "adam" => StepKind::Adam,
-            "variance" => StepKind::Variance,
-            _ => return Err(format!("unknown step `{st}` (adam, variance)")),
-        };
+        let step: StepKind = st.parse().map_err(|e: Error| e.to_string())?;
         Ok(Contender {
             method,
             step,

@@ -576,7 +576,7 @@ mod tests {
         let c = Contender::parse("recursive:variance+filtered").unwrap();
         assert_eq!(
             (c.method, c.step, c.filtered),
-            (Method::RECURSIVE, StepKind::Variance, true)
+            (Method::RECURSIVE, StepKind::VARIANCE, true)
         );
         assert_eq!(c.key(), "recursive_variance_filtered");
         let c = Contender::parse("baseline").unwrap();

@@ -20,7 +20,7 @@
 use super::*;
 use crate::optim::adam::AdamOptions;
 use crate::optim::moment_filter::MomentFilterOptions;
-use crate::optim::{EstimatorOptions, StepKind, Stop};
+use crate::optim::{EstimatorOptions, StepKind, Stop, VarianceStepOptions};
 use serde::Deserialize;
 use std::fmt::Write as _;
 
@@ -55,37 +55,42 @@ pub struct Tunable {
 }
 
 fn default_clip() -> f32 {
-    crate::optim::VarianceStepOptions::default().clip
+    VarianceStepOptions::default().clip
 }
 
 fn default_threshold() -> f32 {
-    crate::optim::VarianceStepOptions::default().threshold
+    VarianceStepOptions::default().threshold
 }
 
 impl Tunable {
     /// The task's and the bench options' settings.
     pub fn untuned(settings: &Settings) -> Tunable {
+        let variance = settings.steps.of::<VarianceStepOptions>();
         Tunable {
             learning_rate_scale: 1.0,
-            adam: settings.adam,
+            adam: settings.steps.of(),
             estimator: settings.estimator_options.table(settings.method),
             step: settings.step,
-            variance_clip: settings.variance_step.clip,
-            variance_threshold: settings.variance_step.threshold,
+            variance_clip: variance.clip,
+            variance_threshold: variance.threshold,
             moment_filter: settings.moment_filter,
         }
     }
 
     /// Put these settings into `settings`.
     pub fn apply(&self, settings: &mut Settings) {
-        settings.adam = self.adam;
+        settings.steps.put(&self.adam);
         let method = settings.method;
         settings
             .estimator_options
             .set_table(method, self.estimator.clone());
         settings.step = self.step;
-        settings.variance_step.clip = self.variance_clip;
-        settings.variance_step.threshold = self.variance_threshold;
+        let variance = settings.steps.of::<VarianceStepOptions>();
+        settings.steps.put(&VarianceStepOptions {
+            clip: self.variance_clip,
+            threshold: self.variance_threshold,
+            ..variance
+        });
         settings.moment_filter = self.moment_filter;
     }
 
@@ -99,15 +104,16 @@ impl Tunable {
 
     /// A short description, e.g. `lr x2, β1 0.5, M cap 2 (scheduled)`.
     pub fn describe(&self, method: Method) -> String {
-        let mut s = match self.step {
-            StepKind::Adam => format!(
-                "lr ×{}, β1 {}, β2 {}",
-                self.learning_rate_scale, self.adam.beta1, self.adam.beta2
-            ),
-            StepKind::Variance => format!(
+        let mut s = if self.step == StepKind::VARIANCE {
+            format!(
                 "variance-scaled step, lr ×{}, clip {}, threshold {}",
                 self.learning_rate_scale, self.variance_clip, self.variance_threshold
-            ),
+            )
+        } else {
+            format!(
+                "lr ×{}, β1 {}, β2 {}",
+                self.learning_rate_scale, self.adam.beta1, self.adam.beta2
+            )
         };
         let f = &self.moment_filter;
         if f.enabled() {
@@ -133,13 +139,14 @@ impl Tunable {
     }
 }
 
-/// The name of an estimator with a step in file names: the method's, with `_variance` for the
-/// variance-scaled step (Adam adds nothing, so that earlier caches stay valid) and
+/// The name of an estimator with a step in file names: the method's, with `_<step>` for a
+/// step other than Adam (`_variance`; Adam adds nothing, so that earlier caches stay valid) and
 /// `_filtered` with filtered moments.
 pub fn contender_key(method: Method, step: StepKind, filtered: bool) -> String {
-    let step = match step {
-        StepKind::Adam => "",
-        StepKind::Variance => "_variance",
+    let step = if step == StepKind::ADAM {
+        String::new()
+    } else {
+        format!("_{step}")
     };
     let filtered = if filtered { "_filtered" } else { "" };
     format!("{}{step}{filtered}", method.name())
@@ -183,7 +190,7 @@ fn coordinates(method: Method, step: StepKind, filtered: bool) -> Vec<Coordinate
             .to_vec()
     });
     let mut c: Vec<Coordinate> = vec![learning_rate];
-    if step == StepKind::Variance {
+    if step == StepKind::VARIANCE {
         c.push(Box::new(|b: &Tunable| {
             [0.5, 2.0]
                 .map(|f| Tunable {
@@ -239,7 +246,7 @@ fn coordinates(method: Method, step: StepKind, filtered: bool) -> Vec<Coordinate
             }));
         }
     };
-    if step == StepKind::Variance {
+    if step == StepKind::VARIANCE {
         own(&mut c);
         return c;
     }

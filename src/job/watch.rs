@@ -61,17 +61,7 @@ impl LossWatch {
         if now < start {
             return None;
         }
-        let advice = match self.step {
-            StepKind::Adam => {
-                "Adam moves every texel by about its learning rate per step however noisy its \
-                 gradient: try the variance-scaled step (`--step variance`, or remove `step` \
-                 from the task for auto's configuration) or a lower rate (`--lr-scale 0.25`)"
-            }
-            StepKind::Variance => {
-                "try a lower learning rate (`--lr-scale 0.5`) or more gradient samples per \
-                 pixel (`gradient_spp`)"
-            }
-        };
+        let advice = self.step.kind().if_not_converging;
         Some(format!(
             "the run is not converging: after {:.0}% of its budget the loss (mean of the last \
              {WINDOW} iterations, {now:.4e}) is not below its start ({start:.4e}). {advice}; \
@@ -219,7 +209,7 @@ mod tests {
     #[test]
     fn a_falling_loss_gives_no_warning() {
         // Falls to a fifth, with noise of 20% of the start on each iteration.
-        let w = run(StepKind::Adam, 400, |i| {
+        let w = run(StepKind::ADAM, 400, |i| {
             0.2 + 0.8 * (-(i as f64) / 50.0).exp() + 0.2 * noise(i)
         });
         assert!(w.is_empty(), "{w:?}");
@@ -228,8 +218,8 @@ mod tests {
     #[test]
     fn a_loss_that_rises_or_stays_warns_once_after_a_quarter() {
         for (step, hint) in [
-            (StepKind::Adam, "--step variance"),
-            (StepKind::Variance, "--lr-scale"),
+            (StepKind::ADAM, "--step variance"),
+            (StepKind::VARIANCE, "--lr-scale"),
         ] {
             let mut w = LossWatch::new(step);
             let mut warned = Vec::new();
@@ -252,9 +242,9 @@ mod tests {
     #[test]
     fn short_runs_and_missing_losses_are_not_judged() {
         // Fewer than two disjoint windows of losses: nothing to compare.
-        assert!(run(StepKind::Adam, 2 * WINDOW - 1, |_| 1.0).is_empty());
+        assert!(run(StepKind::ADAM, 2 * WINDOW - 1, |_| 1.0).is_empty());
         // Losses not measured (NaN) are skipped, not counted as a flat loss.
-        assert!(run(StepKind::Adam, 400, |_| f64::NAN).is_empty());
+        assert!(run(StepKind::ADAM, 400, |_| f64::NAN).is_empty());
     }
 
     /// Feed a plateau watch `n` iterations of `loss(i)`, an evaluation every 10 at

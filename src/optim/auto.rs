@@ -44,9 +44,9 @@ use crate::vocab::Slot;
 /// step otherwise (see the module documentation).
 pub fn step(regime: &Regime) -> StepKind {
     if regime.max_depth <= 1 && regime.samples_per_texel() < DENSE_SAMPLES_PER_TEXEL {
-        StepKind::Adam
+        StepKind::ADAM
     } else {
-        StepKind::Variance
+        StepKind::VARIANCE
     }
 }
 
@@ -57,17 +57,17 @@ fn step_reason(regime: &Regime, step: StepKind) -> String {
         regime.samples_per_texel(),
         regime.max_depth
     );
-    match step {
-        StepKind::Adam => format!(
+    if step == StepKind::ADAM {
+        format!(
             "step adam: with direct light and sparse samples ({regime_text}) it ended level \
              with or below the variance-scaled step on every direct-lit bench scene"
-        ),
-        StepKind::Variance => format!(
-            "step {}: it moves a texel only as far as its gradient is sure, which needs no \
+        )
+    } else {
+        format!(
+            "step {step}: it moves a texel only as far as its gradient is sure, which needs no \
              tuning against the gradient's noise ({regime_text}: indirect light or dense \
-             samples, where Adam's walk of about its rate per step is speckle)",
-            StepKind::Variance.name()
-        ),
+             samples, where Adam's walk of about its rate per step is speckle)"
+        )
     }
 }
 
@@ -76,29 +76,10 @@ pub const FINAL_FACTOR: f32 = 0.05;
 
 /// The learning rate of a texture that names none, for `step` and the texture's slot, where
 /// nothing is known of the task's regime (the library's default; a task's is
-/// [`learning_rate_for`]).
-///
-/// The variance-scaled step moves a texel by at most its clip (one learning rate by
-/// default) per step, so its rate is a distance in the slot's units: 0.01, which ended lower
-/// than 0.02 on the default task (dense samples, 500 iterations). Adam's are the rates that
-/// the bundled bench tasks chose for it: 0.03 for base color and metallic, 0.02 for
-/// roughness (whose derivative is the steepest). Adam moves every texel by about its rate per
-/// step.
-///
-/// A normal map takes smaller rates: on the `wall` scene under a single sun (scenes/bench/wall,
-/// base color and normal map together, lavapipe) Adam at 0.03 drove the normal map away from
-/// its flat start (mean angle error 16.0 -> 44.7 degrees in 60 s); in 20 s, at 0.01 to 22.4
-/// and at 0.005 to 17.9, and the variance-scaled step at 0.003 to 15.4 (at 0.01: 18.0). Under
-/// its three suns, one per capture, Adam at 0.005 with filtered moments recovers it (16.0 ->
-/// 6.5 degrees in 60 s; docs/guide.md, "Normal maps").
+/// [`learning_rate_for`]): the step's own ([`super::step::Kind::learning_rate`], whose
+/// documentation gives the measurements that chose it).
 pub fn learning_rate(step: StepKind, slot: Slot) -> f32 {
-    match (step, slot) {
-        (StepKind::Variance, Slot::Normal) => 0.003,
-        (StepKind::Adam, Slot::Normal) => 0.005,
-        (StepKind::Variance, _) => 0.01,
-        (StepKind::Adam, Slot::Roughness) => 0.02,
-        (StepKind::Adam, _) => 0.03,
-    }
+    step.learning_rate(slot)
 }
 
 /// The learning rate of a texture that names none in a task of `regime`: with indirect light
@@ -107,7 +88,7 @@ pub fn learning_rate(step: StepKind, slot: Slot) -> f32 {
 /// texel RMSE filtered, `gallery` 0.1088 against 0.1163, `room` 0.0959 against 0.0983);
 /// otherwise [`learning_rate`].
 pub fn learning_rate_for(step: StepKind, slot: Slot, regime: &Regime) -> f32 {
-    if step == StepKind::Variance && regime.max_depth > 1 && slot != Slot::Normal {
+    if step == StepKind::VARIANCE && regime.max_depth > 1 && slot != Slot::Normal {
         0.03
     } else {
         learning_rate(step, slot)
@@ -135,7 +116,7 @@ pub fn texture_rate(tex: &crate::render::params::ParamTexture, step: StepKind) -
 /// 16.0), the base color at 0.0647 and 0.0577 observed-texel RMSE.
 pub fn moment_filter(step: StepKind, slots: &[Slot]) -> MomentFilterOptions {
     let only = |allowed: &[Slot]| !slots.is_empty() && slots.iter().all(|s| allowed.contains(s));
-    let on = (step == StepKind::Variance && only(&[Slot::BaseColor]))
+    let on = (step == StepKind::VARIANCE && only(&[Slot::BaseColor]))
         || (slots.contains(&Slot::Normal) && only(&[Slot::BaseColor, Slot::Normal]));
     MomentFilterOptions {
         levels: if on { SUGGESTED_LEVELS } else { 0 },
@@ -219,7 +200,7 @@ impl Configuration {
                      variance averaged over texels that look alike",
                     f.levels, f.taps, f.taps
                 ));
-            } else if step == StepKind::Variance || slots.contains(&Slot::Normal) {
+            } else if step == StepKind::VARIANCE || slots.contains(&Slot::Normal) {
                 reasons.push(
                     "no moment filter: it blurs roughness and metallic textures, whose \
                      differences rarely exceed its edge-stopping scale"
@@ -315,7 +296,7 @@ mod tests {
         let r = regime(1, 2 * 128 * 128, 256 * 256, 3);
         let c = unset(&r);
         assert_eq!(c.estimator.method, Method::BASELINE);
-        assert_eq!(c.step, StepKind::Variance);
+        assert_eq!(c.step, StepKind::VARIANCE);
         assert_eq!(c.moment_filter.levels, SUGGESTED_LEVELS);
         assert_eq!(c.schedule.kind, ScheduleKind::Cosine);
         assert_eq!(c.schedule.final_factor, FINAL_FACTOR);
@@ -344,14 +325,14 @@ mod tests {
         let c = Configuration::choose(
             &r,
             MethodChoice::Fixed(Method::RECURSIVE),
-            Some(StepKind::Adam),
+            Some(StepKind::ADAM),
             Some(f),
             Some(Schedule::constant()),
             Some(0.0),
             &[(Slot::BaseColor, true)],
         );
         assert_eq!(c.estimator.method, Method::RECURSIVE);
-        assert_eq!(c.step, StepKind::Adam);
+        assert_eq!(c.step, StepKind::ADAM);
         assert_eq!(c.moment_filter, f);
         assert_eq!(c.schedule, Schedule::constant());
         assert_eq!(c.smoothness, 0.0);
@@ -360,7 +341,7 @@ mod tests {
         let c = Configuration::choose(
             &r,
             MethodChoice::Auto,
-            Some(StepKind::Adam),
+            Some(StepKind::ADAM),
             None,
             None,
             Some(0.1),
@@ -376,7 +357,7 @@ mod tests {
         let sparse = regime(1, 128 * 128, 256 * 256, 1);
         let c = unset(&sparse);
         assert_eq!(c.estimator.method, Method::RESTIR);
-        assert_eq!(c.step, StepKind::Adam);
+        assert_eq!(c.step, StepKind::ADAM);
         assert!(!c.moment_filter.enabled());
         assert!(c.reasons[1].starts_with("step adam"), "{:?}", c.reasons);
         assert_eq!(c.rate(Slot::BaseColor), 0.03);
@@ -385,11 +366,11 @@ mod tests {
         // variance-scaled step.
         assert_eq!(
             step(&regime(2, 2 * 128 * 128, 256 * 128, 1)),
-            StepKind::Variance
+            StepKind::VARIANCE
         );
         assert_eq!(
             step(&regime(1, 128 * 128, 256 * 256, 3)),
-            StepKind::Variance
+            StepKind::VARIANCE
         );
     }
 
@@ -403,7 +384,7 @@ mod tests {
         assert!(with(&[(Slot::BaseColor, true)]).moment_filter.enabled());
         for scalar in [Slot::Roughness, Slot::Metallic] {
             let c = with(&[(Slot::BaseColor, true), (scalar, true)]);
-            assert_eq!(c.step, StepKind::Variance);
+            assert_eq!(c.step, StepKind::VARIANCE);
             assert!(!c.moment_filter.enabled());
             assert!(
                 c.reasons.iter().any(|r| r.contains("no moment filter")),
@@ -420,7 +401,7 @@ mod tests {
             Configuration::choose(&r, MethodChoice::Auto, None, None, None, None, textures)
         };
         let c = adam(&[(Slot::BaseColor, true), (Slot::Normal, true)]);
-        assert_eq!(c.step, StepKind::Adam);
+        assert_eq!(c.step, StepKind::ADAM);
         assert!(c.moment_filter.enabled());
         assert!(adam(&[(Slot::Normal, true)]).moment_filter.enabled());
         let c = adam(&[(Slot::Normal, true), (Slot::Roughness, true)]);

@@ -14,6 +14,29 @@ macro_rules! registry {
 }
 use registry;
 
+/// A kind's options as the TOML table they serialize to (the tables of
+/// [`EstimatorOptions`], [`step::Steps`] and [`Priors`]), by way of their text, so that an `f32` reads as written (0.9, not
+/// 0.8999999761581421) where the table is shown.
+pub(crate) fn as_table<T: serde::Serialize>(options: &T) -> toml::Table {
+    toml::to_string(options)
+        .ok()
+        .and_then(|text| toml::from_str(&text).ok())
+        .expect("a kind's options serialize to a table")
+}
+
+/// The options in the task file's `[optimizer.<name>]` table (None: every option at its
+/// default); an error names that table and what is wrong with it.
+pub(crate) fn parse_table<T: serde::de::DeserializeOwned>(
+    name: &str,
+    table: Option<&toml::Table>,
+) -> std::result::Result<T, (String, String)> {
+    let table = table.cloned().unwrap_or_default();
+    T::deserialize(toml::Value::Table(table)).map_err(|e| {
+        let msg = e.to_string().trim().replace('\n', " ");
+        (format!("optimizer.{name}"), msg)
+    })
+}
+
 pub mod auto;
 mod cameras;
 pub mod checkpoint;
@@ -73,7 +96,7 @@ mod hooks;
 pub use problem::{EnvironmentFit, Problem};
 pub use schedule::{Schedule, ScheduleKind};
 pub use step::variance_step::VarianceStepOptions;
-pub use step::{adam, moment_filter, variance_step, StepKind};
+pub use step::{adam, moment_filter, variance_step, StepKind, Steps};
 
 /// The optimizer: a scene on the GPU with its optimized textures, targets, and the passes.
 pub struct Optimizer {
@@ -408,10 +431,7 @@ impl Optimizer {
             p.push("primal_cv");
         }
         p.push("loss");
-        p.push(match settings.step {
-            StepKind::Adam => "adam",
-            StepKind::Variance => "variance_step",
-        });
+        p.push(settings.step.kind().pass);
         p.extend(prior::passes(&settings.priors));
         if settings.moment_filter.enabled() {
             p.push("moment_filter");

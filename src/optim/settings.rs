@@ -1,7 +1,7 @@
 //! What an optimization samples and how it stops: [`Settings`], [`Stop`], [`Progress`].
 
+use super::step::{StepKind, Steps};
 use super::{EstimatorOptions, Method, PrimalMode, Schedule};
-use super::{StepKind, VarianceStepOptions};
 use crate::vocab::Loss;
 
 /// How each iteration samples.
@@ -31,17 +31,17 @@ pub struct Settings {
     pub method: Method,
     /// Each estimator's options, a table per method name (the one of `method` is used).
     pub estimator_options: EstimatorOptions,
-    /// The step taken with each gradient estimate: Adam, or the variance-scaled step.
+    /// The step taken with each gradient estimate ([`super::step`]: Adam, or the
+    /// variance-scaled step).
     pub step: StepKind,
-    /// The variance-scaled step's options (used when `step` is `Variance`).
-    pub variance_step: VarianceStepOptions,
+    /// Each step's options, a table per step ([`super::step::Kind::table`]: `adam`,
+    /// `variance_step`); the chosen step reads its own.
+    pub steps: Steps,
     /// Learning-rate schedule: a factor of every texture's learning rate over the run (see
     /// [`Optimizer::set_progress`](super::Optimizer::set_progress)).
     pub schedule: Schedule,
-    /// Adam's decays and epsilon.
-    pub adam: super::adam::AdamOptions,
-    /// Masked (sparse) Adam: entries whose gradient is exactly zero in an iteration keep
-    /// their value and moments, as Mitsuba 3's `mask_updates`.
+    /// Masked (sparse) steps: entries whose gradient is exactly zero in an iteration keep
+    /// their value and moments, as Mitsuba 3's `mask_updates` (either step).
     pub adam_mask: bool,
     /// The moment filter (off unless `levels` > 0; see [`super::moment_filter`]): the pair the
     /// step divides (Adam's moments, or the variance step's estimate and variance) smoothed
@@ -73,9 +73,8 @@ impl Settings {
             method: Method::default(),
             estimator_options: EstimatorOptions::default(),
             step: StepKind::default(),
-            variance_step: VarianceStepOptions::default(),
+            steps: Steps::default(),
             schedule: Schedule::constant(),
-            adam: Default::default(),
             adam_mask: false,
             moment_filter: Default::default(),
             priors: Default::default(),
@@ -108,21 +107,20 @@ impl Settings {
         if let Err((key, msg)) = self.schedule.check() {
             return Err((format!("optimizer.schedule.{key}"), msg));
         }
-        if let Err((key, msg)) = self.adam.check() {
-            return bad(&format!("optimizer.adam.{key}"), msg);
-        }
         self.estimator_options.check()?;
-        if let Err((key, msg)) = self.variance_step.check() {
-            return bad(&format!("optimizer.variance_step.{key}"), msg);
-        }
+        self.steps.check()?;
         self.priors.check()?;
         if let Err((key, msg)) = self.moment_filter.check() {
             return bad(&format!("optimizer.moment_filter.{key}"), &msg);
         }
-        if self.moment_filter.write_back && self.step != StepKind::Adam {
+        if self.moment_filter.write_back && !self.step.kind().first_moment {
             return bad(
                 "optimizer.moment_filter.write_back",
-                "only with step = \"adam\" (the variance step keeps no first moment)",
+                &format!(
+                    "only with a step that keeps a first moment, as Adam (the {} step keeps \
+                     none)",
+                    self.step
+                ),
             );
         }
         if let Some(lr) = self.exposure_learning_rate {
@@ -231,7 +229,7 @@ mod tests {
                 "optimizer.moment_filter.write_back",
                 Box::new(|s| {
                     s.moment_filter.write_back = true;
-                    s.step = StepKind::Variance;
+                    s.step = StepKind::VARIANCE;
                 }),
             ),
             (
@@ -273,7 +271,15 @@ mod tests {
             ),
             (
                 "optimizer.variance_step.clip",
-                Box::new(|s| s.variance_step.clip = -1.0),
+                Box::new(|s| s.steps.set("variance_step", "clip", (-1.0).into())),
+            ),
+            (
+                "optimizer.adam.beta1",
+                Box::new(|s| s.steps.set("adam", "beta1", 1.0.into())),
+            ),
+            (
+                "optimizer.adam",
+                Box::new(|s| s.steps.set("adam", "beta3", 0.5.into())),
             ),
         ];
         for (key, spoil) in cases {

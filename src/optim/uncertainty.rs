@@ -16,8 +16,8 @@
 //! dominates: a ranking and a scale, not a calibrated interval. Computed once, from the moments
 //! the step keeps (Adam's second moment, the variance-scaled step's moving second moment, or
 //! the estimator's own variance where the step uses it): no pass and no memory per iteration.
-use super::{Optimizer, StepKind};
-use crate::Result;
+use super::Optimizer;
+use crate::{Error, Result};
 
 /// The value [`Optimizer::uncertainty`] gives a texel the images tell nothing of: one no
 /// camera observes, or one that never received a gradient.
@@ -33,7 +33,7 @@ impl Optimizer {
         let own = self
             .estimator
             .variance()
-            .filter(|_| self.settings.step == StepKind::Variance)
+            .filter(|_| self.settings.step.kind().divides_by_variance)
             .filter(|_| self.settings.priors.keep_variance());
         let v: Vec<f32> = match own {
             Some(buf) => {
@@ -42,10 +42,13 @@ impl Optimizer {
                 v
             }
             None => {
-                let beta = match self.settings.step {
-                    StepKind::Adam => self.settings.adam.beta2,
-                    StepKind::Variance => self.settings.variance_step.beta,
-                };
+                let kind = self.settings.step.kind();
+                let beta = (kind.second_moment_decay)(&self.settings.steps).ok_or_else(|| {
+                    Error::Invalid(format!(
+                        "the {} step keeps no second moment to tell the uncertainty from",
+                        kind.name
+                    ))
+                })?;
                 // The moving moment's bias correction after the steps taken.
                 let bias = 1.0 - (beta as f64).powi(self.iteration.max(1) as i32);
                 let mut m2: Vec<f32> = self.gpu.read_pod(&self.moments[1])?;

@@ -483,6 +483,9 @@ impl Task {
             .estimator_options()
             .map_err(|(key, msg)| self.bad(&key, msg))?;
         self.optimizer
+            .step_options()
+            .map_err(|(key, msg)| self.bad(&key, msg))?;
+        self.optimizer
             .prior_options()
             .map_err(|(key, msg)| self.bad(&key, msg))?;
         let method = task_method(self, self.optimizer.method, named_cameras(self)).method;

@@ -3,6 +3,7 @@ use super::{Filter, Loss, Task};
 use crate::optim::auto::Configuration;
 use crate::optim::estimator::Regime;
 use crate::optim::prior::{self, smoothness, smoothness::SmoothnessOptions, Priors};
+use crate::optim::step::{self, Steps};
 use crate::optim::{Choice, EstimatorOptions, Method, MethodChoice};
 use serde::Deserialize;
 
@@ -35,12 +36,10 @@ pub struct OptimizerSpec {
     #[serde(default)]
     pub method: MethodChoice,
     /// The step taken with each gradient: "adam" or "variance" (None: `auto`'s,
-    /// [`crate::optim::auto`]).
+    /// [`crate::optim::auto`]); its options are its table (`[optimizer.adam]`,
+    /// `[optimizer.variance_step]`).
     #[serde(default)]
     pub step: Option<crate::optim::StepKind>,
-    /// The variance-scaled step's options (`[optimizer.variance_step]`).
-    #[serde(default)]
-    pub variance_step: crate::optim::VarianceStepOptions,
     /// Image loss.
     #[serde(default)]
     pub loss: Loss,
@@ -71,12 +70,9 @@ pub struct OptimizerSpec {
     /// Learning-rate schedule over the run (None: `auto`'s, a cosine decay).
     #[serde(default)]
     pub schedule: Option<crate::optim::Schedule>,
-    /// Sparse Adam: entries with an exactly zero gradient keep their value and moments.
+    /// Sparse steps: entries with an exactly zero gradient keep their value and moments.
     #[serde(default)]
     pub adam_mask: bool,
-    /// Adam's decays and epsilon (`[optimizer.adam]`: `beta1`, `beta2`, `eps`).
-    #[serde(default)]
-    pub adam: crate::optim::adam::AdamOptions,
     /// The moment filter (`[optimizer.moment_filter]`: `levels` (0: off), `sigma`,
     /// `log_space`, `own_weight`, `write_back`; None: `auto`'s for the step).
     #[serde(default)]
@@ -88,11 +84,13 @@ pub struct OptimizerSpec {
     /// Samples per pixel of the evaluation renders.
     #[serde(default = "default_eval_spp")]
     pub eval_spp: u32,
-    /// Each estimator's and each prior's options: the tables `[optimizer.<estimator>]`
-    /// (`[optimizer.restir]`), passed on to the estimator, which reads and checks its own;
-    /// the tables `[optimizer.<prior>]` (`[optimizer.multiscale]`) and the priors' shorthands
-    /// (`smoothness = 0.03`, `multiscale_levels = 4`), passed on to the priors. Any other key
-    /// is refused when the task is checked.
+    /// Each estimator's, each step's and each prior's options: the tables
+    /// `[optimizer.<estimator>]` (`[optimizer.restir]`), passed on to the estimator, which
+    /// reads and checks its own; the steps' tables (`[optimizer.adam]`,
+    /// `[optimizer.variance_step]`), passed on to the steps; the tables `[optimizer.<prior>]`
+    /// (`[optimizer.multiscale]`) and the priors' shorthands (`smoothness = 0.03`,
+    /// `multiscale_levels = 4`), passed on to the priors. Any other key is refused when the
+    /// task is checked.
     #[serde(flatten)]
     pub tables: std::collections::BTreeMap<String, toml::Value>,
 }
@@ -100,6 +98,7 @@ pub struct OptimizerSpec {
 /// What a key under `[optimizer]` that is not one of [`OptimizerSpec`]'s own fields names.
 enum TableKey {
     Estimator(Method),
+    Step(&'static step::Kind),
     Prior(&'static prior::Kind),
     /// A prior's shorthand: the prior and the option it sets.
     Shorthand(&'static prior::Kind, &'static str),
@@ -112,25 +111,33 @@ impl TableKey {
             .iter()
             .find_map(|k| k.shorthand.filter(|s| s.0 == name).map(|s| (*k, s.1)));
         let (method, prior) = (Method::by_name(name), prior::Kind::by_name(name));
-        let found = match (value.is_table(), method, prior, shorthand) {
-            (true, Some(m), _, _) => TableKey::Estimator(m),
-            (true, None, Some(k), _) => TableKey::Prior(k),
-            (false, _, _, Some((k, option))) => TableKey::Shorthand(k, option),
-            (false, Some(_), _, _) => {
+        let step = step::Kind::by_table(name);
+        let found = match (value.is_table(), method, step, prior, shorthand) {
+            (true, Some(m), ..) => TableKey::Estimator(m),
+            (true, None, Some(k), ..) => TableKey::Step(k),
+            (true, None, None, Some(k), _) => TableKey::Prior(k),
+            (false, .., Some((k, option))) => TableKey::Shorthand(k, option),
+            (false, Some(_), ..) => {
                 return Err((key, "must be a table of the estimator's options".into()))
             }
-            (false, None, Some(_), _) => {
+            (false, None, Some(_), ..) => {
+                return Err((key, "must be a table of the step's options".into()))
+            }
+            (false, None, None, Some(_), _) => {
                 return Err((key, "must be a table of the prior's options".into()))
             }
             _ => {
+                let steps: Vec<&str> = step::REGISTRY.iter().map(|k| k.table).collect();
                 return Err((
                     key,
                     format!(
-                        "unknown key (nor the options of an estimator: {}; nor of a prior: {})",
+                        "unknown key (nor the options of an estimator: {}; of a step: {}; of a \
+                         prior: {})",
                         Method::names().join(", "),
+                        steps.join(", "),
                         prior::Kind::names().join(", ")
                     ),
-                ))
+                ));
             }
         };
         Ok(found)
@@ -139,7 +146,7 @@ impl TableKey {
 
 impl OptimizerSpec {
     /// The estimators' option tables (an error names a key that is neither an option nor
-    /// an estimator's or a prior's table).
+    /// an estimator's, a step's or a prior's table).
     pub fn estimator_options(&self) -> std::result::Result<EstimatorOptions, (String, String)> {
         let mut o = EstimatorOptions::default();
         for (name, value) in &self.tables {
@@ -150,6 +157,21 @@ impl OptimizerSpec {
             }
         }
         Ok(o)
+    }
+
+    /// The steps' option tables, checked: an error names the key and what is wrong.
+    pub fn step_options(&self) -> std::result::Result<Steps, (String, String)> {
+        let mut steps = Steps::default();
+        for (name, value) in &self.tables {
+            if let (TableKey::Step(k), toml::Value::Table(t)) = (TableKey::of(name, value)?, value)
+            {
+                for (option, v) in t {
+                    steps.set(k.table, option, v.clone());
+                }
+            }
+        }
+        steps.check()?;
+        Ok(steps)
     }
 
     /// The priors' option tables, shorthands included, checked: an error names the key the
@@ -327,9 +349,8 @@ pub fn task_settings(
             .unwrap_or_default()
             .merged(extra),
         step: config.step,
-        variance_step: task.optimizer.variance_step,
+        steps: task.optimizer.step_options().unwrap_or_default(),
         schedule: config.schedule,
-        adam: task.optimizer.adam,
         adam_mask: task.optimizer.adam_mask,
         priors: {
             let mut priors = task.optimizer.prior_options().unwrap_or_default();

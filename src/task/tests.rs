@@ -186,7 +186,7 @@ fn set_options_are_checked_as_the_file_is_and_named() {
     )
     .unwrap();
     assert_eq!(t.optimizer.smoothness(), Some(0.1));
-    assert_eq!(t.optimizer.step, Some(crate::optim::StepKind::Adam));
+    assert_eq!(t.optimizer.step, Some(crate::optim::StepKind::ADAM));
     for (bad, says) in [
         (
             "optimizer.smoothnes=0.1",
@@ -196,7 +196,7 @@ fn set_options_are_checked_as_the_file_is_and_named() {
             "optimizer.smoothness=-1",
             "`optimizer.smoothness`: must be a number",
         ),
-        ("optimizer.step=sideways", "unknown variant `sideways`"),
+        ("optimizer.step=sideways", "unknown step `sideways`"),
     ] {
         let e = Task::load_with(&path, &sets(&[bad]))
             .unwrap_err()

@@ -141,20 +141,16 @@ impl EstimatorOptions {
 
     /// The options of `T`'s estimator, parsed from its table.
     pub fn get<T: Options>(&self) -> std::result::Result<T, (String, String)> {
-        let key = format!("optimizer.{}", T::METHOD.name());
-        let o = T::deserialize(toml::Value::Table(self.table(T::METHOD)))
-            .map_err(|e| (key.clone(), e.to_string().trim().replace('\n', " ")))?;
-        o.check().map_err(|(k, m)| (format!("{key}.{k}"), m))?;
+        let name = T::METHOD.name();
+        let o: T = crate::optim::parse_table(name, self.tables.get(name))?;
+        o.check()
+            .map_err(|(k, m)| (format!("optimizer.{name}.{k}"), m))?;
         Ok(o)
     }
 
     /// Replace the table of `T`'s estimator by `options`.
     pub fn put<T: Options>(&mut self, options: &T) {
-        let table = match toml::Value::try_from(options) {
-            Ok(toml::Value::Table(t)) => t,
-            _ => unreachable!("an estimator's options serialize to a table"),
-        };
-        self.set_table(T::METHOD, table);
+        self.set_table(T::METHOD, crate::optim::as_table(options));
     }
 
     /// Check `method`'s table: an error names the task-file key and what is wrong.

@@ -97,16 +97,8 @@ impl OptionsKind {
             check: |p| p.get::<T>().map(|_| ()),
             on: |p| p.get::<T>().is_ok_and(|t| t.on()),
             describe: |p| p.get::<T>().map(|t| t.describe()).unwrap_or_default(),
-            defaults: || as_table(&T::default()),
+            defaults: || super::as_table(&T::default()),
         }
-    }
-}
-
-/// A prior's options as the TOML table they serialize to.
-fn as_table<T: Options>(options: &T) -> toml::Table {
-    match toml::Value::try_from(options) {
-        Ok(toml::Value::Table(t)) => t,
-        _ => unreachable!("a prior's options serialize to a table"),
     }
 }
 
@@ -129,11 +121,10 @@ impl Priors {
     /// The options of `T`'s prior, parsed from its table and checked: an error names the
     /// task-file key and what is wrong.
     pub fn get<T: Options>(&self) -> std::result::Result<T, (String, String)> {
-        let key = format!("optimizer.{}", T::KIND.name);
-        let table = self.tables.get(T::KIND.name).cloned().unwrap_or_default();
-        let o = T::deserialize(toml::Value::Table(table))
-            .map_err(|e| (key.clone(), e.to_string().trim().replace('\n', " ")))?;
-        o.check().map_err(|(k, m)| (format!("{key}.{k}"), m))?;
+        let name = T::KIND.name;
+        let o: T = super::parse_table(name, self.tables.get(name))?;
+        o.check()
+            .map_err(|(k, m)| (format!("optimizer.{name}.{k}"), m))?;
         Ok(o)
     }
 
@@ -146,7 +137,7 @@ impl Priors {
     /// Replace the table of `T`'s prior by `options`.
     pub fn put<T: Options>(&mut self, options: &T) {
         self.tables
-            .insert(T::KIND.name.to_string(), as_table(options));
+            .insert(T::KIND.name.to_string(), super::as_table(options));
     }
 
     /// `name`'s table (empty: every option at its default).
@@ -263,11 +254,12 @@ pub(crate) fn groups() -> Vec<GroupDecl> {
 mod tests {
     use super::*;
 
-    /// A prior's table shares `[optimizer]` with the estimators' tables and the priors'
-    /// shorthands: no name may stand for two things, and every prior is off at its defaults.
+    /// A prior's table shares `[optimizer]` with the estimators' and the steps' tables and
+    /// the priors' shorthands: no name may stand for two things, and every prior is off at its defaults.
     #[test]
     fn prior_names_are_their_own_and_every_prior_is_off_by_default() {
         let mut names: Vec<&str> = crate::optim::Method::names();
+        names.extend(crate::optim::step::REGISTRY.iter().map(|k| k.table));
         for k in REGISTRY {
             names.push(k.name);
             // A shorthand may be its prior's own name (`smoothness = 0.03`).

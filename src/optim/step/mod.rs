@@ -1,46 +1,272 @@
-//! The steps the optimizer takes with each gradient estimate, behind one trait (`Step`):
-//! Adam ([`adam`]), the variance-scaled step ([`variance_step`]), and the filtered moments
-//! either can take ([`moment_filter`]). Each module holds its pass's driver, the mirror of its
-//! uniform and its CPU reference; its WGSL lies beside it, named after the pass. The
-//! per-texture dispatch logic they share is `TextureSteps`.
-pub mod adam;
+//! The steps the optimizer takes with each gradient estimate. Each one lives in its own
+//! folder and exports one value, its [`Kind`]: name, summary, options (its own type, read
+//! from the task file's `[optimizer.<table>]` table), default learning rates, WGSL, bind
+//! groups and builder. [`REGISTRY`] lists them and is the one line to add for a new step; the
+//! optimizer, `auto`, the task file, the command line (`--step NAME`, `--set
+//! optimizer.<table>.<key>=<value>`) and reports see a [`StepKind`] and its table in
+//! [`Steps`] only. One step is chosen per run (priors, by contrast, are switched on, any of
+//! them).
+//!
+//! - [`adam`]: Adam (first and second moments), with its CPU twin that the environment and
+//!   the camera gains use.
+//! - [`variance_step`]: the variance-scaled step (the estimate over its standard deviation,
+//!   thresholded and clipped).
+//!
+//! Either may take filtered moments ([`moment_filter`]): the pair it divides, smoothed in
+//! texture space. The per-texture dispatch logic the steps share is `TextureSteps`.
 pub mod moment_filter;
-pub mod variance_step;
 
 use crate::gpu::abi::step_phase;
-use crate::gpu::{encode_timed_pass, grid_2d, Gpu};
+use crate::gpu::{encode_timed_pass, grid_2d, Gpu, GroupDecl};
 use crate::optim::{PassKind, PassTimer, Settings};
 use crate::render::params::{ParamSet, ParamTexture};
 use crate::render::WORKGROUP;
+use crate::vocab::Slot;
 use crate::Result;
 use moment_filter::MomentFilter;
+use std::collections::BTreeMap;
 
-/// The steps' WGSL: (name, source) of their passes.
-pub(crate) const WGSL: &[(&str, &str)] = &[
-    ("adam", include_str!("adam.wgsl")),
-    ("variance_step", include_str!("variance_step.wgsl")),
-    ("moment_filter", include_str!("moment_filter.wgsl")),
-];
+// A new step: its folder, exporting `KIND`, and its name here. The toy (tests only) is the
+// registry's own test: it is nothing but its folder and this entry.
+super::registry!(
+    "Every step, in the order reports list them: the one place that names each folder. \
+     The first is the library's default.",
+    adam,
+    variance_step,
+    #[cfg(test)]
+    toy
+);
 
-/// Which step the optimizer takes with the gradient estimate (the task file's
-/// `optimizer.step`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum StepKind {
-    /// Adam (first and second moments).
-    #[default]
-    Adam,
-    /// The variance-scaled step: no first moment, the estimate's variance in the denominator.
-    Variance,
+/// The moment filter's WGSL (the steps' own are in their kinds).
+pub(crate) const WGSL: &[(&str, &str)] = &[("moment_filter", include_str!("moment_filter.wgsl"))];
+
+/// A step as its folder exports it: everything the rest of the crate knows of it.
+pub struct Kind {
+    /// The name used on the command line (`--step`), in task files (`optimizer.step`) and in
+    /// reports.
+    pub name: &'static str,
+    /// What it does, in one line.
+    pub summary: &'static str,
+    /// Its options' table: the task file's `[optimizer.<table>]`.
+    pub table: &'static str,
+    /// Its options.
+    pub options: OptionsKind,
+    /// Its pass (WGSL file), which names it in timings and tests.
+    pub pass: &'static str,
+    /// Its WGSL files: (name, source).
+    pub wgsl: &'static [(&'static str, &'static str)],
+    /// Its bind-group declarations (checked against its WGSL by the contract test).
+    pub groups: &'static [GroupDecl],
+    /// The learning rate of a texture of a slot that names none.
+    pub learning_rate: fn(Slot) -> f32,
+    /// Whether it keeps a first moment, which the moment filter may write back.
+    pub first_moment: bool,
+    /// Whether it divides by the variance of its estimate: the estimator's own where the
+    /// estimator keeps one (and the priors keep it), otherwise a moving variance. The moment
+    /// filter then filters that variance as the variance of a mean.
+    pub divides_by_variance: bool,
+    /// The decay of the moving second moment it keeps in the optimizer's second moment
+    /// buffer, with its options (None: it keeps none, and no uncertainty can be read).
+    pub second_moment_decay: fn(&Steps) -> Option<f32>,
+    /// What to try when a run with it does not converge (the loss watch's advice).
+    pub if_not_converging: &'static str,
+    pub(crate) build: fn(Setup) -> Result<Box<dyn Step>>,
 }
 
+/// What the registry knows of a step's options without their type: functions of the
+/// tables in [`Steps`], made from an [`Options`] type by [`OptionsKind::of`].
+#[derive(Clone, Copy)]
+pub struct OptionsKind {
+    check: fn(&Steps) -> std::result::Result<(), (String, String)>,
+    /// The options at their defaults, as a table.
+    pub defaults: fn() -> toml::Table,
+}
+
+impl OptionsKind {
+    /// The options `T` defines.
+    pub const fn of<T: Options + 'static>() -> OptionsKind {
+        OptionsKind {
+            check: |s| s.get::<T>().map(|_| ()),
+            defaults: || super::as_table(&T::default()),
+        }
+    }
+}
+
+/// A step's options as its folder defines them: read from and written to its table in
+/// [`Steps`] (missing keys take their defaults).
+pub trait Options:
+    Clone + Default + serde::Serialize + serde::de::DeserializeOwned + std::fmt::Debug
+{
+    /// The step they belong to.
+    const KIND: &'static Kind;
+    /// An error naming the option (its key in the table) and what is wrong.
+    fn check(&self) -> std::result::Result<(), (String, String)>;
+}
+
+/// Which step the optimizer takes with the gradient estimate (the task file's
+/// `optimizer.step`, the command line's `--step`): a handle on its [`Kind`] in the
+/// [`REGISTRY`]. The default is the registry's first, Adam.
+#[derive(Clone, Copy)]
+pub struct StepKind(&'static Kind);
+
 impl StepKind {
+    /// Adam (first and second moments).
+    pub const ADAM: StepKind = StepKind(&adam::KIND);
+    /// The variance-scaled step: no first moment, the estimate's variance in the denominator.
+    pub const VARIANCE: StepKind = StepKind(&variance_step::KIND);
+
+    /// Every step, in the order reports list them.
+    pub fn all() -> impl Iterator<Item = StepKind> {
+        REGISTRY.iter().map(|k| StepKind(k))
+    }
+
     /// The name used on the command line and in reports.
     pub fn name(self) -> &'static str {
-        match self {
-            StepKind::Adam => "adam",
-            StepKind::Variance => "variance",
+        self.0.name
+    }
+
+    /// Everything the registry knows of it.
+    pub fn kind(self) -> &'static Kind {
+        self.0
+    }
+
+    /// Every step's name.
+    pub fn names() -> Vec<&'static str> {
+        StepKind::all().map(|s| s.name()).collect()
+    }
+
+    /// The step called `name`.
+    pub fn by_name(name: &str) -> Option<StepKind> {
+        StepKind::all().find(|s| s.name() == name)
+    }
+
+    /// The learning rate of a texture of `slot` that names none.
+    pub fn learning_rate(self, slot: Slot) -> f32 {
+        (self.0.learning_rate)(slot)
+    }
+}
+
+impl Default for StepKind {
+    fn default() -> StepKind {
+        StepKind(REGISTRY[0])
+    }
+}
+
+impl PartialEq for StepKind {
+    fn eq(&self, other: &StepKind) -> bool {
+        self.name() == other.name()
+    }
+}
+
+impl Eq for StepKind {}
+
+impl std::fmt::Debug for StepKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::fmt::Display for StepKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for StepKind {
+    type Err = crate::Error;
+    fn from_str(s: &str) -> Result<StepKind> {
+        StepKind::by_name(s).ok_or_else(|| {
+            crate::Error::Invalid(format!(
+                "unknown step `{s}` (one of: {})",
+                StepKind::names().join(", ")
+            ))
+        })
+    }
+}
+
+impl serde::Serialize for StepKind {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for StepKind {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<StepKind, D::Error> {
+        let name = String::deserialize(d)?;
+        name.parse().map_err(serde::de::Error::custom)
+    }
+}
+
+/// Every step's options, one table of TOML values per step's table name: the task file's
+/// `[optimizer.adam]`, `[optimizer.variance_step]`, ... Each step reads its own
+/// ([`Options`]); the tables of the steps not chosen are checked all the same.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(transparent)]
+pub struct Steps {
+    tables: BTreeMap<String, toml::Table>,
+}
+
+impl Steps {
+    /// These tables with `options` in place of their step's table.
+    pub fn with<T: Options>(mut self, options: &T) -> Steps {
+        self.put(options);
+        self
+    }
+
+    /// The options of `T`'s step, parsed from its table and checked: an error names the
+    /// task-file key and what is wrong.
+    pub fn get<T: Options>(&self) -> std::result::Result<T, (String, String)> {
+        let table = T::KIND.table;
+        let o: T = super::parse_table(table, self.tables.get(table))?;
+        o.check()
+            .map_err(|(k, m)| (format!("optimizer.{table}.{k}"), m))?;
+        Ok(o)
+    }
+
+    /// The options of `T`'s step, at their defaults where the table is not valid (settings
+    /// are checked before an optimizer reads them).
+    pub fn of<T: Options>(&self) -> T {
+        self.get().unwrap_or_default()
+    }
+
+    /// Replace the table of `T`'s step by `options`.
+    pub fn put<T: Options>(&mut self, options: &T) {
+        let table = super::as_table(options);
+        self.tables.insert(T::KIND.table.to_string(), table);
+    }
+
+    /// The table called `table` (empty: every option at its default).
+    pub fn table(&self, table: &str) -> toml::Table {
+        self.tables.get(table).cloned().unwrap_or_default()
+    }
+
+    /// Set one option of the table `table` (checked by [`Steps::check`]).
+    pub fn set(&mut self, table: &str, key: &str, value: toml::Value) {
+        self.tables
+            .entry(table.to_string())
+            .or_default()
+            .insert(key.to_string(), value);
+    }
+
+    /// Check every table: an error names the task-file key and what is wrong.
+    pub fn check(&self) -> std::result::Result<(), (String, String)> {
+        for table in self.tables.keys() {
+            let kind = Kind::by_table(table).ok_or_else(|| {
+                (
+                    format!("optimizer.{table}"),
+                    "is no step's table".to_string(),
+                )
+            })?;
+            (kind.options.check)(self)?;
         }
+        Ok(())
+    }
+}
+
+impl Kind {
+    /// The step whose options' table is `table`.
+    pub fn by_table(table: &str) -> Option<&'static Kind> {
+        REGISTRY.iter().copied().find(|k| k.table == table)
     }
 }
 
@@ -77,6 +303,19 @@ pub(crate) struct StepBuffers<'a> {
     pub stats: &'a wgpu::Buffer,
 }
 
+/// What a step is built from.
+pub(crate) struct Setup<'a> {
+    pub gpu: &'a Gpu,
+    pub set: &'a ParamSet,
+    /// Every step's options (the step reads its own table).
+    pub steps: &'a Steps,
+    /// Masked updates: an entry whose gradient is exactly zero keeps its value and state.
+    pub mask: bool,
+    /// The moment filter, when the settings ask for one.
+    pub filter: Option<MomentFilter>,
+    pub buffers: &'a StepBuffers<'a>,
+}
+
 /// The step `settings.step` with the moment filter `settings.moment_filter` asks for.
 pub(crate) fn build(
     gpu: &Gpu,
@@ -86,9 +325,9 @@ pub(crate) fn build(
     b: &StepBuffers,
 ) -> Result<Box<dyn Step>> {
     let mf = &settings.moment_filter;
+    let kind = settings.step.kind();
     let filter = if mf.enabled() {
-        // The variance step's second array is the variance of its estimate.
-        let of_mean = settings.step == StepKind::Variance;
+        let of_mean = kind.divides_by_variance;
         Some(MomentFilter::new(
             gpu,
             set,
@@ -99,25 +338,33 @@ pub(crate) fn build(
     } else {
         None
     };
-    Ok(match settings.step {
-        StepKind::Adam => Box::new(adam::AdamPass::new(
-            gpu,
-            set,
-            (settings.adam, settings.adam_mask),
-            filter,
-            b,
-        )?),
-        StepKind::Variance => Box::new(variance_step::VarianceStepPass::new(
-            gpu,
-            set,
-            (settings.variance_step, settings.adam_mask),
-            filter,
-            b,
-        )?),
+    (kind.build)(Setup {
+        gpu,
+        set,
+        steps: &settings.steps,
+        mask: settings.adam_mask,
+        filter,
+        buffers: b,
     })
 }
 
-/// A step pass (Adam or the variance-scaled step) over every optimized texture: per texture
+/// Every step's WGSL files, the moment filter's included.
+pub(crate) fn wgsl() -> impl Iterator<Item = &'static [(&'static str, &'static str)]> {
+    REGISTRY.iter().map(|k| k.wgsl).chain([WGSL])
+}
+
+/// Every step's bind-group declarations, the moment filter's included (for the contract
+/// test).
+#[cfg(test)]
+pub(crate) fn groups() -> Vec<GroupDecl> {
+    REGISTRY
+        .iter()
+        .flat_map(|k| k.groups.iter().copied())
+        .chain([moment_filter::MOMENT_FILTER_GROUP])
+        .collect()
+}
+
+/// A step's pass over every optimized texture: per texture
 /// one dispatch (phase [`step_phase::FUSED`]), or with the moment filter two around it
 /// ([`step_phase::PAIR`], the filter's levels, [`step_phase::FILTERED`]), each with its
 /// uniform, bind group and parameters.
@@ -130,12 +377,11 @@ pub(crate) struct TextureSteps<P> {
 }
 
 impl<P: bytemuck::Pod> TextureSteps<P> {
-    /// The dispatches of pass `label` for every texture of `set`: `make` gives a texture's
-    /// parameters in a phase, `bind` the bind group of a uniform with the filter's pair (a
-    /// small unused pair without the filter).
+    /// The dispatches of `step`'s pass for every texture of `set`: `make` gives a texture's
+    /// parameters in a phase, `bind` the bind group of a uniform (labelled by the pass) with
+    /// the filter's pair (a small unused pair without the filter).
     pub(crate) fn new(
         gpu: &Gpu,
-        label: &'static str,
         step: StepKind,
         pipeline: wgpu::ComputePipeline,
         set: &ParamSet,
@@ -143,6 +389,7 @@ impl<P: bytemuck::Pod> TextureSteps<P> {
         make: impl Fn(&ParamTexture, u32) -> P,
         bind: impl Fn(&str, &wgpu::Buffer, &[wgpu::Buffer; 2]) -> wgpu::BindGroup,
     ) -> TextureSteps<P> {
+        let label = step.kind().pass;
         let unused = || {
             [
                 gpu.storage_zeroed(&format!("{label} unused pair first"), 16),

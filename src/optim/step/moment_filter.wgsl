@@ -12,9 +12,9 @@
 // variance). A neighbour whose edge factor is below exp(-MAX_EXPONENT) (about 1e-7) is left
 // out: it would change nothing, and its loads are saved. Texels no camera observes take no
 // part as neighbours and are copied unchanged; the texture does not wrap.
-// src/optim/moment_filter.rs has the CPU twin.
+// src/optim/step/moment_filter.rs has the CPU twin.
 
-// Mirrored by MomentFilterParams in src/optim/moment_filter.rs.
+// Mirrored by MomentFilterParams in src/optim/step/moment_filter.rs.
 struct MomentFilterParams {
     // First float of the texture in params (the guide); the pair is indexed from 0.
     offset: u32,
@@ -46,10 +46,10 @@ struct MomentFilterParams {
 @group(0) @binding(6) var<storage, read> observed: array<u32>;
 
 // Added to a value before its logarithm, so that values at 0 (a metallic texture's common
-// value) have a finite guide. Mirrored by LOG_FLOOR in src/optim/moment_filter.rs.
+// value) have a finite guide. Mirrored by LOG_FLOOR in src/optim/step/moment_filter.rs.
 const LOG_FLOOR: f32 = 1e-3;
 // Neighbours with exp(-distance / sigma) below exp(-MAX_EXPONENT) are left out. Mirrored by
-// MAX_EXPONENT in src/optim/moment_filter.rs.
+// MAX_EXPONENT in src/optim/step/moment_filter.rs.
 const MAX_EXPONENT: f32 = 16.0;
 
 fn is_observed(x: i32, y: i32) -> bool {

@@ -1,7 +1,7 @@
 // Adam step for one optimized texture, then clamping to the valid range. Non-finite
 // gradients leave their parameter unchanged and are counted; huge ones are clamped. With
 // mask set (sparse Adam, Mitsuba 3's mask_updates), an entry whose gradient is exactly zero
-// keeps its value and moments. With the moment filter (src/optim/moment_filter.rs) the step
+// keeps its value and moments. With the moment filter (src/optim/step/moment_filter.rs) the step
 // takes two dispatches around it: phase STEP_PHASE_PAIR updates the moments and writes them to
 // the pair the filter smooths (entries from 0 for each texture), phase STEP_PHASE_FILTERED
 // steps from own_weight x the entry's own moments + (1 - own_weight) x the filtered ones
@@ -9,7 +9,7 @@
 // neighbours' moments), and with write_back keeps that mix as its moments.
 #import gen/abi
 
-// Mirrored by AdamParams in src/optim/adam.rs.
+// Mirrored by AdamParams in src/optim/step/adam/mod.rs.
 struct AdamParams {
     offset: u32,
     count: u32,

@@ -11,7 +11,7 @@
 // moves by lr times a standard normal shrunk by the threshold, so that a texel the images
 // hardly determine does not drift with errors that a running estimate repeats. Non-finite gradients leave their parameter
 // unchanged and are counted; with mask, an entry whose gradient is exactly zero keeps its
-// value and moments. With the moment filter (src/optim/moment_filter.rs) the step takes two
+// value and moments. With the moment filter (src/optim/step/moment_filter.rs) the step takes two
 // dispatches around it: phase STEP_PHASE_PAIR writes (d, Var[d]) to the pair the filter
 // smooths (entries from 0 for each texture; an entry without a gradient of its own gives d =
 // 0 and its variance as it stands), phase STEP_PHASE_FILTERED steps with
@@ -21,7 +21,7 @@
 // a lower bound and the steps are somewhat bold).
 #import gen/abi
 
-// Mirrored by VarianceStepParams in src/optim/variance_step.rs.
+// Mirrored by VarianceStepParams in src/optim/step/variance_step/mod.rs.
 struct VarianceStepParams {
     offset: u32,
     count: u32,

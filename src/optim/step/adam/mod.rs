@@ -1,12 +1,50 @@
-//! Adam: the constants, the pass of adam.wgsl (`AdamPass`, one or two dispatches per
-//! optimized texture), its CPU reference, and what it shares with the variance-scaled step
-//! (`TextureSteps`).
+//! Adam: its kind, its options, the pass of adam.wgsl (`AdamPass`, one or two dispatches
+//! per optimized texture) and its CPU reference (which the environment and the camera gains
+//! step with).
 use super::moment_filter::MomentFilter;
-use super::{StepBuffers, StepKind, TextureSteps};
+use super::{Kind, Options, OptionsKind, Setup, StepKind, TextureSteps};
 use crate::gpu::Gpu;
 use crate::optim::PassTimer;
 use crate::render::params::{ParamSet, ParamTexture};
+use crate::vocab::Slot;
 use crate::Result;
+
+/// Adam as the registry knows it.
+pub const KIND: Kind = Kind {
+    name: "adam",
+    summary: "Adam: the first moment over the root of the second, per parameter scalar",
+    table: "adam",
+    options: OptionsKind::of::<AdamOptions>(),
+    pass: "adam",
+    wgsl: &[("adam", include_str!("adam.wgsl"))],
+    groups: &[ADAM_GROUP],
+    learning_rate,
+    first_moment: true,
+    divides_by_variance: false,
+    second_moment_decay: |steps| Some(steps.of::<AdamOptions>().beta2),
+    if_not_converging: "Adam moves every texel by about its learning rate per step however \
+        noisy its gradient: try the variance-scaled step (`--step variance`, or remove `step` \
+        from the task for auto's configuration) or a lower rate (`--lr-scale 0.25`)",
+    build: |s| Ok(Box::new(AdamPass::new(s)?)),
+};
+
+/// Adam's learning rate of a texture that names none: the rates the bundled bench tasks
+/// chose for it, 0.03 for base color and metallic, 0.02 for roughness (whose derivative is
+/// the steepest). Adam moves every texel by about its rate per step.
+///
+/// A normal map takes a smaller rate: on the `wall` scene under a single sun
+/// (scenes/bench/wall, base color and normal map together, lavapipe) Adam at 0.03 drove the
+/// normal map away from its flat start (mean angle error 16.0 -> 44.7 degrees in 60 s); in
+/// 20 s, at 0.01 to 22.4 and at 0.005 to 17.9. Under its three suns, one per capture, Adam at
+/// 0.005 with filtered moments recovers it (16.0 -> 6.5 degrees in 60 s; docs/guide.md,
+/// "Normal maps").
+pub fn learning_rate(slot: Slot) -> f32 {
+    match slot {
+        Slot::Normal => 0.005,
+        Slot::Roughness => 0.02,
+        _ => 0.03,
+    }
+}
 
 /// First-moment decay.
 pub const BETA1: f32 = 0.9;
@@ -38,17 +76,20 @@ impl Default for AdamOptions {
     }
 }
 
-impl AdamOptions {
+impl Options for AdamOptions {
+    const KIND: &'static Kind = &KIND;
+
     /// An error naming the field (`beta1`, `beta2`, `eps`) that is out of range.
-    pub fn check(&self) -> std::result::Result<(), (&'static str, &'static str)> {
+    fn check(&self) -> std::result::Result<(), (String, String)> {
+        let bad = |key: &str, msg: &str| Err((key.to_string(), msg.to_string()));
         if !(0.0..1.0).contains(&self.beta1) {
-            return Err(("beta1", "must be in [0, 1)"));
+            return bad("beta1", "must be in [0, 1)");
         }
         if !(0.0..1.0).contains(&self.beta2) {
-            return Err(("beta2", "must be in [0, 1)"));
+            return bad("beta2", "must be in [0, 1)");
         }
         if !(self.eps.is_finite() && self.eps > 0.0) {
-            return Err(("eps", "must be a positive number"));
+            return bad("eps", "must be a positive number");
         }
         Ok(())
     }
@@ -157,13 +198,9 @@ pub(crate) const ADAM_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
 pub(crate) struct AdamPass(TextureSteps<AdamParams>);
 
 impl AdamPass {
-    pub(crate) fn new(
-        gpu: &Gpu,
-        set: &ParamSet,
-        (options, mask): (AdamOptions, bool),
-        filter: Option<MomentFilter>,
-        b: &StepBuffers,
-    ) -> Result<AdamPass> {
+    fn new(s: Setup) -> Result<AdamPass> {
+        let (gpu, set, b, filter) = (s.gpu, s.set, s.buffers, s.filter);
+        let (options, mask) = (s.steps.of::<AdamOptions>(), s.mask);
         let layout = gpu.pass_layout("adam", 0)?;
         let pipeline = gpu.compute_pipeline("adam", &[&layout])?;
         let f = filter.as_ref().map(|f| f.options).unwrap_or_default();
@@ -172,7 +209,7 @@ impl AdamPass {
             AdamParams {
                 offset: t.offset,
                 count: t.len() as u32,
-                lr: crate::optim::auto::texture_rate(t, StepKind::Adam),
+                lr: crate::optim::auto::texture_rate(t, StepKind::ADAM),
                 beta1: options.beta1,
                 beta2: options.beta2,
                 eps: options.eps,
@@ -206,8 +243,7 @@ impl AdamPass {
         };
         Ok(AdamPass(TextureSteps::new(
             gpu,
-            "adam",
-            StepKind::Adam,
+            StepKind::ADAM,
             pipeline,
             set,
             filter,
