@@ -124,7 +124,7 @@ pub struct TextureSpec {
     pub resolution: [u32; 2],
     /// Constant initial value.
     pub init: Init,
-    /// Learning rate (None: the step's for the slot, [`crate::optim::auto::learning_rate`]).
+    /// Learning rate (None: the step's for the slot, [`crate::optim::StepKind::learning_rate`]).
     #[serde(default)]
     pub learning_rate: Option<f32>,
 }

@@ -159,10 +159,12 @@ impl Contender {
             };
             return format!("default (auto: {})", c.name());
         }
-        let step = match self.step.name() {
-            "adam" => "Adam",
-            "variance" => "variance-scaled step",
-            other => other,
+        let step = if self.step == StepKind::ADAM {
+            "Adam"
+        } else if self.step == StepKind::VARIANCE {
+            "variance-scaled step"
+        } else {
+            self.step.name()
         };
         let filtered = if self.filtered {
             ", filtered moments"

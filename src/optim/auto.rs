@@ -27,7 +27,7 @@
 //!   normal map it took Adam's speckle away.
 //! - **Learning rates**: for Adam the bench tasks' (0.03 for base color and metallic, 0.02
 //!   for roughness); for the variance step 0.01 per step, 0.03 with indirect light
-//!   ([`learning_rate`], [`learning_rate_for`]).
+//!   ([`StepKind::learning_rate`], [`learning_rate_for`]).
 //! - **A cosine decay to 5%** over the run (its iterations or its time budget): the last
 //!   steps refine instead of walking.
 //! - **The smoothness prior** at 0.03 with sparse sampling, 0.01 with dense ([`smoothness`]):
@@ -74,31 +74,24 @@ fn step_reason(regime: &Regime, step: StepKind) -> String {
 /// The factor of the learning rate at the end of a run under the default schedule.
 pub const FINAL_FACTOR: f32 = 0.05;
 
-/// The learning rate of a texture that names none, for `step` and the texture's slot, where
-/// nothing is known of the task's regime (the library's default; a task's is
-/// [`learning_rate_for`]): the step's own ([`super::step::Kind::learning_rate`], whose
-/// documentation gives the measurements that chose it).
-pub fn learning_rate(step: StepKind, slot: Slot) -> f32 {
-    step.learning_rate(slot)
-}
-
 /// The learning rate of a texture that names none in a task of `regime`: with indirect light
 /// the variance-scaled step takes 0.03 (on the three indirect-lit bench scenes, 30-s runs on
 /// lavapipe, it ended lower at 0.03 than at 0.01: `atelier` 0.1717 against 0.1843 observed-
 /// texel RMSE filtered, `gallery` 0.1088 against 0.1163, `room` 0.0959 against 0.0983);
-/// otherwise [`learning_rate`].
+/// otherwise the step's own ([`StepKind::learning_rate`], whose documentation in the step's
+/// folder gives the measurements that chose it).
 pub fn learning_rate_for(step: StepKind, slot: Slot, regime: &Regime) -> f32 {
     if step == StepKind::VARIANCE && regime.max_depth > 1 && slot != Slot::Normal {
         0.03
     } else {
-        learning_rate(step, slot)
+        step.learning_rate(slot)
     }
 }
 
 /// The learning rate of texture `tex` under `step`: its own, or the step's default.
 pub fn texture_rate(tex: &crate::render::params::ParamTexture, step: StepKind) -> f32 {
     tex.learning_rate
-        .unwrap_or_else(|| learning_rate(step, tex.slot))
+        .unwrap_or_else(|| step.learning_rate(tex.slot))
 }
 
 /// The moment filter where a task sets none, for `step` over textures of `slots`: with the
@@ -254,7 +247,7 @@ impl Configuration {
     /// Put the estimator, step, moment filter and schedule into `settings` (the library's
     /// way to the task files' defaults: [`Settings::new`](super::Settings::new) keeps the
     /// plain ones, Adam without a filter or schedule; textures whose learning rate is None
-    /// take [`learning_rate`] of the step).
+    /// take the step's, [`StepKind::learning_rate`]).
     pub fn apply(&self, settings: &mut super::Settings) {
         settings.method = self.estimator.method;
         settings.step = self.step;
@@ -348,7 +341,7 @@ mod tests {
             &[(Slot::Roughness, false)],
         );
         assert!(!c.moment_filter.enabled());
-        assert_eq!(learning_rate(c.step, Slot::Roughness), 0.02);
+        assert_eq!(c.step.learning_rate(Slot::Roughness), 0.02);
     }
 
     #[test]

@@ -21,7 +21,7 @@ pub struct ParamTexture {
     pub filter: Filter,
     /// First float in [`ParamSet::values`].
     pub offset: u32,
-    /// Learning rate (None: the step's default for the slot, `optim::auto::learning_rate`).
+    /// Learning rate (None: the step's default for the slot, `optim::StepKind::learning_rate`).
     pub learning_rate: Option<f32>,
 }
 

@@ -127,14 +127,13 @@ impl TableKey {
                 return Err((key, "must be a table of the prior's options".into()))
             }
             _ => {
-                let steps: Vec<&str> = step::REGISTRY.iter().map(|k| k.table).collect();
                 return Err((
                     key,
                     format!(
                         "unknown key (nor the options of an estimator: {}; of a step: {}; of a \
                          prior: {})",
                         Method::names().join(", "),
-                        steps.join(", "),
+                        step::Kind::tables().join(", "),
                         prior::Kind::names().join(", ")
                     ),
                 ));

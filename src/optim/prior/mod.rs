@@ -259,7 +259,7 @@ mod tests {
     #[test]
     fn prior_names_are_their_own_and_every_prior_is_off_by_default() {
         let mut names: Vec<&str> = crate::optim::Method::names();
-        names.extend(crate::optim::step::REGISTRY.iter().map(|k| k.table));
+        names.extend(crate::optim::step::Kind::tables());
         for k in REGISTRY {
             names.push(k.name);
             // A shorthand may be its prior's own name (`smoothness = 0.03`).

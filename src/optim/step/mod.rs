@@ -73,6 +73,18 @@ pub struct Kind {
     pub(crate) build: fn(Setup) -> Result<Box<dyn Step>>,
 }
 
+impl Kind {
+    /// The step whose options' table is `table`.
+    pub fn by_table(table: &str) -> Option<&'static Kind> {
+        REGISTRY.iter().copied().find(|k| k.table == table)
+    }
+
+    /// Every step's table name.
+    pub fn tables() -> Vec<&'static str> {
+        REGISTRY.iter().map(|k| k.table).collect()
+    }
+}
+
 /// What the registry knows of a step's options without their type: functions of the
 /// tables in [`Steps`], made from an [`Options`] type by [`OptionsKind::of`].
 #[derive(Clone, Copy)]
@@ -254,19 +266,12 @@ impl Steps {
             let kind = Kind::by_table(table).ok_or_else(|| {
                 (
                     format!("optimizer.{table}"),
-                    "is no step's table".to_string(),
+                    format!("is no step's table ({})", Kind::tables().join(", ")),
                 )
             })?;
             (kind.options.check)(self)?;
         }
         Ok(())
-    }
-}
-
-impl Kind {
-    /// The step whose options' table is `table`.
-    pub fn by_table(table: &str) -> Option<&'static Kind> {
-        REGISTRY.iter().copied().find(|k| k.table == table)
     }
 }
 
