@@ -66,9 +66,13 @@ pub(crate) fn cmd_estimators() {
     }
     println!("Steps (`--step`; absent: auto's, by the task's light and samples)\n");
     for k in psrestir::optim::step::REGISTRY {
+        let cpu = match k.cpu {
+            Some(_) => "",
+            None => " (textures only: the environment and the cameras' gains then take Adam)",
+        };
         print_kind(
             k.name,
-            k.summary,
+            &format!("{}{cpu}", k.summary),
             k.table,
             &table_text((k.options.defaults)()),
         );

@@ -519,7 +519,7 @@ fn the_exposure_of_a_camera_is_recovered() {
     eprintln!("exposure {e}");
     assert!((e - 1.4).abs() < 0.03, "exposure {e}, the photo's is 1.4");
     // It is part of the state.
-    assert_eq!(opt.state().unwrap().exposure.values, vec![e]);
+    assert_eq!(opt.state().unwrap().groups["exposure"].values, vec![e]);
 }
 
 /// A photo whose channels are scaled unequally (a white balance of 1.3, 1.0, 0.7): the
@@ -558,5 +558,5 @@ fn the_white_balance_of_a_camera_is_recovered() {
             wb[c]
         );
     }
-    assert_eq!(opt.state().unwrap().exposure.white_balance, vec![got]);
+    assert_eq!(opt.state().unwrap().groups["white_balance"].values, got);
 }

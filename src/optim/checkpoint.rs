@@ -3,9 +3,12 @@
 //! drawn at, the metrics so far; the random numbers are a pure function of seed and
 //! iteration, so the iteration is the RNG state). Written atomically: a temporary file, then a
 //! rename.
-use super::{ControlVariateSnapshot, EstimatorState, ExposureState, OptimizerState, PreviousState};
+use super::environment_fit::EnvFitState;
+use super::param_table::{GroupState, ENVIRONMENT, EXPOSURE, WHITE_BALANCE};
+use super::{ControlVariateSnapshot, EstimatorState, OptimizerState, PreviousState};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::path::Path;
 
 const MAGIC: &[u8; 8] = b"PSRCKPT5";
@@ -63,12 +66,93 @@ struct Stored {
     /// Iterations the control variate has run.
     #[serde(default)]
     control_variate_iterations: u32,
-    /// Per-camera exposures and their optimizer state.
+    /// The parameter table's CPU groups with their step's state.
     #[serde(default)]
-    exposure: ExposureState,
-    /// The environment's fit, when it is optimized.
+    groups: BTreeMap<String, GroupState>,
+    /// What the environment's fit keeps besides its group, when it is optimized.
     #[serde(default)]
-    environment: Option<crate::optim::environment_fit::EnvFitState>,
+    environment_fit: Option<EnvFitState>,
+    /// Checkpoints written before the parameter table kept the gains' state and the
+    /// environment's under these keys; read into the table's groups.
+    #[serde(default, skip_serializing)]
+    exposure: Option<LegacyGains>,
+    #[serde(default, skip_serializing)]
+    environment: Option<LegacyEnvironment>,
+}
+
+/// The gains' state in checkpoints written before the parameter table.
+#[derive(Deserialize)]
+struct LegacyGains {
+    values: Vec<f32>,
+    m1: Vec<f32>,
+    m2: Vec<f32>,
+    steps: u32,
+    #[serde(default)]
+    white_balance: Vec<[f32; 3]>,
+    #[serde(default)]
+    wb_m1: Vec<[f32; 3]>,
+    #[serde(default)]
+    wb_m2: Vec<[f32; 3]>,
+    #[serde(default)]
+    wb_steps: u32,
+}
+
+/// The environment's state in checkpoints written before the parameter table.
+#[derive(Deserialize)]
+struct LegacyEnvironment {
+    size: [u32; 2],
+    log: Vec<f32>,
+    m1: Vec<f32>,
+    m2: Vec<f32>,
+    steps: u32,
+    mean_luminance: f64,
+}
+
+impl Stored {
+    /// The table's groups and the environment's fit, from this file's keys or the legacy
+    /// ones.
+    fn groups(&mut self) -> (BTreeMap<String, GroupState>, Option<EnvFitState>) {
+        let mut groups = std::mem::take(&mut self.groups);
+        let mut fit = self.environment_fit.take();
+        if let Some(e) = self.exposure.take().filter(|e| !e.values.is_empty()) {
+            let n = e.values.len();
+            let state = |values, m1, m2, steps| GroupState {
+                values,
+                m1,
+                m2,
+                steps,
+            };
+            groups.insert(EXPOSURE.into(), state(e.values, e.m1, e.m2, e.steps));
+            // Checkpoints written before white balances had none.
+            let wb = if e.white_balance.len() == n {
+                let flat = |v: Vec<[f32; 3]>| v.concat();
+                state(
+                    flat(e.white_balance),
+                    flat(e.wb_m1),
+                    flat(e.wb_m2),
+                    e.wb_steps,
+                )
+            } else {
+                GroupState::new(vec![1.0; 3 * n])
+            };
+            groups.insert(WHITE_BALANCE.into(), wb);
+        }
+        if let Some(e) = self.environment.take() {
+            let (values, m1, m2, steps) = (e.log, e.m1, e.m2, e.steps);
+            let state = GroupState {
+                values,
+                m1,
+                m2,
+                steps,
+            };
+            groups.insert(ENVIRONMENT.into(), state);
+            fit = Some(EnvFitState {
+                size: e.size,
+                mean_luminance: e.mean_luminance,
+            });
+        }
+        (groups, fit)
+    }
 }
 
 /// [`EstimatorState`] without its arrays' data.
@@ -106,8 +190,10 @@ impl Checkpoint {
             },
             control_variate_floats: st.control_variate.as_ref().map(|c| c.state.len()),
             control_variate_iterations: st.control_variate.as_ref().map_or(0, |c| c.iterations),
-            exposure: st.exposure.clone(),
-            environment: st.environment.clone(),
+            groups: st.groups.clone(),
+            environment_fit: st.environment.clone(),
+            exposure: None,
+            environment: None,
         };
         if st.m1.len() != st.params.len()
             || st.m2.len() != st.params.len()
@@ -154,8 +240,17 @@ impl Checkpoint {
             .and_then(|h| h.checked_add(16))
             .filter(|&e| e <= bytes.len())
             .ok_or_else(|| bad("truncated header"))?;
-        let stored: Stored =
+        let mut stored: Stored =
             serde_json::from_slice(&bytes[16..hend]).map_err(|e| bad(&e.to_string()))?;
+        let (groups, environment) = stored.groups();
+        if groups
+            .values()
+            .any(|g| [g.m1.len(), g.m2.len()] != [g.values.len(); 2])
+        {
+            return Err(bad(
+                "a parameter group's state differs in length from its values",
+            ));
+        }
         let n = stored.n_params;
         // Sections of 4-byte words, in file order.
         let mut sizes = vec![Some(n), Some(n), Some(n)];
@@ -211,8 +306,8 @@ impl Checkpoint {
                 previous,
                 estimator,
                 control_variate,
-                exposure: stored.exposure,
-                environment: stored.environment,
+                groups,
+                environment,
             },
         })
     }
@@ -261,22 +356,26 @@ mod tests {
                     state: vec![0.25; 32],
                     iterations: 9,
                 }),
-                exposure: ExposureState {
-                    values: vec![1.5],
-                    m1: vec![0.1],
-                    m2: vec![0.01],
-                    steps: 3,
-                    white_balance: vec![[1.1, 1.0, 0.9]],
-                    wb_m1: vec![[0.01; 3]],
-                    wb_m2: vec![[0.001; 3]],
-                    wb_steps: 2,
-                },
-                environment: Some(crate::optim::environment_fit::EnvFitState {
+                groups: [
+                    (EXPOSURE, vec![1.5], 3),
+                    (WHITE_BALANCE, vec![1.1, 1.0, 0.9], 2),
+                    (ENVIRONMENT, vec![0.5; 6], 4),
+                ]
+                .into_iter()
+                .map(|(name, values, steps)| {
+                    let n = values.len();
+                    let (m1, m2) = (vec![0.1; n], vec![0.01; n]);
+                    let g = GroupState {
+                        values,
+                        m1,
+                        m2,
+                        steps,
+                    };
+                    (name.to_string(), g)
+                })
+                .collect(),
+                environment: Some(EnvFitState {
                     size: [2, 1],
-                    log: vec![0.5; 6],
-                    m1: vec![0.1; 6],
-                    m2: vec![0.01; 6],
-                    steps: 4,
                     mean_luminance: 1.25,
                 }),
             },
@@ -296,5 +395,33 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("truncated"));
+        // A checkpoint written before the parameter table: the gains' and the environment's
+        // state under their own keys (one camera, no white balance yet) reads into the same
+        // groups, the white balance at 1.
+        let data_at = 16 + u64::from_le_bytes(bytes[8..16].try_into().unwrap()) as usize;
+        let mut header: serde_json::Value = serde_json::from_slice(&bytes[16..data_at]).unwrap();
+        let h = header.as_object_mut().unwrap();
+        h.remove("groups");
+        h.remove("environment_fit");
+        h.insert(
+            "exposure".into(),
+            serde_json::json!({"values": [1.5], "m1": [0.1], "m2": [0.01], "steps": 3}),
+        );
+        h.insert(
+            "environment".into(),
+            serde_json::json!({"size": [2, 1], "log": vec![0.5; 6], "m1": vec![0.1; 6],
+                "m2": vec![0.01; 6], "steps": 4, "mean_luminance": 1.25}),
+        );
+        let text = serde_json::to_vec(&header).unwrap();
+        let mut old = MAGIC.to_vec();
+        old.extend((text.len() as u64).to_le_bytes());
+        old.extend(text);
+        old.extend(&bytes[data_at..]);
+        std::fs::write(&p, old).unwrap();
+        let mut want = c.clone();
+        want.state
+            .groups
+            .insert(WHITE_BALANCE.into(), GroupState::new(vec![1.0; 3]));
+        assert_eq!(Checkpoint::load(&p).unwrap(), want);
     }
 }

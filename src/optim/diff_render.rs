@@ -586,7 +586,8 @@ impl DiffRender {
             .write_buffer(&self.opt.grad, 0, bytemuck::cast_slice(&all));
         match (&self.opt.env_fit, &g.environment) {
             (Some(f), Some(e)) => {
-                check_gradient("the environment", e, f.state.log.len())?;
+                let [w, h] = f.state.size;
+                check_gradient("the environment", e, 3 * (w * h) as usize)?;
                 let mut words: Vec<u32> = e.iter().map(|v| v.to_bits()).collect();
                 words.extend([0, 0]);
                 self.opt.gpu.queue.write_buffer(

@@ -1,7 +1,9 @@
-//! The targets' per-pixel masks and the per-camera gains: exposures (optimized with Adam on
-//! their logarithms when [`super::Settings::exposure_learning_rate`] is set) and white
-//! balances (per-channel factors, [`Optimizer::optimize_white_balance`]).
-use super::{adam, Optimizer};
+//! The targets' per-pixel masks and the per-camera gains: exposures (optimized on their
+//! logarithms when [`super::Settings::exposure_learning_rate`] is set) and white balances
+//! (per-channel factors, [`Optimizer::optimize_white_balance`]), both groups of the
+//! parameter table.
+use super::param_table::{EXPOSURE, WHITE_BALANCE};
+use super::Optimizer;
 use crate::{Error, Result};
 
 impl Optimizer {
@@ -63,20 +65,20 @@ impl Optimizer {
                 self.cams.len()
             )));
         }
-        self.exposure.values = values.to_vec();
-        self.gain_prev = self.exposure.gains();
+        self.table.group_mut(EXPOSURE).state.values = values.to_vec();
+        self.gain_prev = self.gains();
         self.upload_exposure();
         self.gpu.check("set exposure")
     }
 
     /// The current per-camera exposures.
     pub fn exposure(&self) -> &[f32] {
-        &self.exposure.values
+        &self.table.group(EXPOSURE).state.values
     }
 
     /// The current per-camera white balances (per-channel factors on top of the exposure).
     pub fn white_balance(&self) -> &[[f32; 3]] {
-        &self.exposure.white_balance
+        bytemuck::cast_slice(&self.table.group(WHITE_BALANCE).state.values)
     }
 
     /// Set each camera's white balance (per-channel factors over its exposure, positive).
@@ -94,8 +96,8 @@ impl Optimizer {
                 self.cams.len()
             )));
         }
-        self.exposure.white_balance = values.to_vec();
-        self.gain_prev = self.exposure.gains();
+        self.table.group_mut(WHITE_BALANCE).state.values = values.concat();
+        self.gain_prev = self.gains();
         self.upload_exposure();
         self.gpu.check("set white balance")
     }
@@ -103,7 +105,9 @@ impl Optimizer {
     /// Each camera's per-channel gain, exposure times white balance: what its render is
     /// multiplied by before the comparison.
     pub fn gains(&self) -> Vec<[f32; 3]> {
-        self.exposure.gains()
+        (self.exposure().iter().zip(self.white_balance()))
+            .map(|(&e, wb)| wb.map(|w| w * e))
+            .collect()
     }
 
     /// Optimize each camera's white balance (per-channel gains over its exposure) with Adam
@@ -117,12 +121,12 @@ impl Optimizer {
                 "optimizer.white_balance_learning_rate: must be a number in (0, 10], not {lr}"
             )));
         }
-        self.white_balance_lr = Some(lr);
+        self.table.group_mut(WHITE_BALANCE).learning_rate = Some(lr);
         Ok(())
     }
 
     pub(super) fn upload_exposure(&mut self) {
-        let gains = self.exposure.gains();
+        let gains = self.gains();
         self.loss.set_gains(&self.gpu, &gains, &self.gain_prev);
     }
 
@@ -133,55 +137,23 @@ impl Optimizer {
             return Ok(());
         }
         let d = self.loss.read_gain_gradients(&self.gpu)?;
-        let g = log_gain_gradients(&d, &self.exposure.gains());
+        let g = log_gain_gradients(&d, &self.gains());
         self.step_log_gains(factor, &g);
         Ok(())
     }
 
     /// Whether the exposures or the white balances are optimized.
     pub(super) fn gains_optimized(&self) -> bool {
-        self.settings.exposure_learning_rate.is_some() || self.white_balance_lr.is_some()
+        self.table.optimizes(&[EXPOSURE, WHITE_BALANCE])
     }
 
-    /// One Adam step of the optimized gains' logarithms from `(d_exposure, d_white_balance)`,
+    /// One step of the optimized gains' logarithms from `(d_exposure, d_white_balance)`,
     /// the derivatives with respect to the logarithms of each camera's exposure and white
     /// balance, at schedule factor `factor`, and their upload.
     pub(super) fn step_log_gains(&mut self, factor: f32, (d_e, d_wb): &(Vec<f32>, Vec<[f32; 3]>)) {
-        let (lr_e, lr_wb) = (self.settings.exposure_learning_rate, self.white_balance_lr);
-        let gains = self.exposure.gains();
-        // The reference camera keeps its response while the light is recovered.
-        let first = usize::from(self.env_fit.is_some());
-        let e = &mut self.exposure;
-        if let Some(lr) = lr_e {
-            e.steps += 1;
-            let t = e.steps;
-            for k in first..d_e.len() {
-                if let Some(v) = adam_log_step(
-                    &mut e.m1[k],
-                    &mut e.m2[k],
-                    d_e[k],
-                    t,
-                    lr * factor,
-                    e.values[k],
-                ) {
-                    e.values[k] = v;
-                }
-            }
-        }
-        if let Some(lr) = lr_wb {
-            e.wb_steps += 1;
-            let t = e.wb_steps;
-            for k in first..d_wb.len() {
-                for c in 0..3 {
-                    let (m1, m2) = (&mut e.wb_m1[k][c], &mut e.wb_m2[k][c]);
-                    if let Some(v) =
-                        adam_log_step(m1, m2, d_wb[k][c], t, lr * factor, e.white_balance[k][c])
-                    {
-                        e.white_balance[k][c] = v;
-                    }
-                }
-            }
-        }
+        let gains = self.gains();
+        self.table.step(EXPOSURE, d_e, factor);
+        self.table.step(WHITE_BALANCE, &d_wb.concat(), factor);
         // The next loss pass pairs its render with this iteration's adjoint, written with
         // the gains before this step.
         self.gain_prev = gains;
@@ -200,27 +172,4 @@ pub(super) fn log_gain_gradients(d: &[[f64; 3]], gains: &[[f32; 3]]) -> (Vec<f32
             (per.iter().sum::<f32>(), per)
         })
         .unzip()
-}
-
-/// One Adam step of log(value) with gradient `g` (step `t`, rate `lr`; [`adam::step_with`]);
-/// the new value, or None for a gradient that is not finite.
-fn adam_log_step(m1: &mut f32, m2: &mut f32, g: f32, t: u32, lr: f32, value: f32) -> Option<f32> {
-    if !g.is_finite() {
-        return None;
-    }
-    let mut log_v = [value.ln()];
-    let (m1, m2) = (std::slice::from_mut(m1), std::slice::from_mut(m2));
-    let defaults = adam::AdamOptions::default();
-    adam::step_with(
-        &defaults,
-        &mut log_v,
-        m1,
-        m2,
-        &[g],
-        lr,
-        t,
-        (-20.0, 20.0),
-        false,
-    );
-    Some(log_v[0].exp())
 }

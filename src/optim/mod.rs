@@ -45,6 +45,7 @@ pub mod environment_fit;
 pub mod estimator;
 pub mod loss;
 pub mod observed;
+pub mod param_table;
 pub mod primal;
 pub mod prior;
 mod problem;
@@ -116,13 +117,13 @@ pub struct Optimizer {
     loss: loss::LossPass,
     /// The targets (CPU copies, for re-uploading them with masks).
     targets: Vec<Image>,
-    /// Exposures and white balances and their optimizer state, the gains the last adjoint
-    /// was written with, and the white balances' learning rate when they are optimized.
-    exposure: ExposureState,
+    /// The parameter table's CPU groups (exposures, white balances, the environment when it
+    /// is optimized) with their step's state.
+    table: param_table::ParamTable,
+    /// The gains the last adjoint was written with.
     gain_prev: Vec<[f32; 3]>,
-    white_balance_lr: Option<f32>,
-    /// The environment's gradient (light.rs), and the environment's fit when it is
-    /// optimized, with the gradient updates its passes lost or dropped.
+    /// The environment's gradient (environment_fit.rs), and the environment's fit when it
+    /// is optimized, with the gradient updates its passes lost or dropped.
     env_grad: wgpu::Buffer,
     env_fit: Option<environment_fit::EnvFit>,
     env_faults: u32,
@@ -289,6 +290,7 @@ impl Optimizer {
         )?;
         let timer = pass_timer(gpu, n_cams, set.textures.len(), step.as_ref());
         gpu.check("optimizer setup")?;
+        let table = param_table::ParamTable::new(targets.len(), &settings);
         Ok(Optimizer {
             gpu: gpu.clone(),
             renderer,
@@ -302,9 +304,8 @@ impl Optimizer {
             stats,
             loss,
             targets: targets.to_vec(),
-            exposure: ExposureState::identity(targets.len()),
+            table,
             gain_prev: vec![[1.0; 3]; targets.len()],
-            white_balance_lr: None,
             env_grad,
             env_fit: None,
             env_faults: 0,

@@ -83,7 +83,7 @@ impl Settings {
     }
 
     /// Every range check of the settings, in one place: the task loader and
-    /// [`Optimizer::new`](super::Optimizer::new)(super::Optimizer::new) both call it. An error names the task-file
+    /// [`Optimizer::new`](super::Optimizer::new) both call it. An error names the task-file
     /// key (`width`, `optimizer.primal_spp`, ...) and what is wrong.
     pub fn validate(&self) -> Result<(), (String, String)> {
         let bad = |key: &str, msg: &str| Err((key.to_string(), msg.to_string()));

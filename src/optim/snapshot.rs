@@ -1,7 +1,9 @@
 //! What an iteration reports, and the optimizer's state as checkpoints save it.
 
+use super::param_table::GroupState;
 use super::{ControlVariateSnapshot, EstimatorState, Optimizer};
 use crate::{Error, Result};
+use std::collections::BTreeMap;
 
 /// What one iteration reports.
 #[derive(Clone, Copy, Debug, Default)]
@@ -61,65 +63,11 @@ pub struct OptimizerState {
     pub estimator: EstimatorState,
     /// The control-variate primal's state; `None` for the independent primal.
     pub control_variate: Option<ControlVariateSnapshot>,
-    /// Per-camera exposures and, when they are optimized, their Adam moments.
-    pub exposure: ExposureState,
-    /// The environment's fit, when it is optimized.
+    /// The parameter table's CPU groups (exposures, white balances, the environment's
+    /// logarithms when it is optimized), by name, with their step's state.
+    pub groups: BTreeMap<String, GroupState>,
+    /// What the environment's fit keeps besides its group, when it is optimized.
     pub environment: Option<super::environment_fit::EnvFitState>,
-}
-
-/// Per-camera exposures and white balances, and the Adam moments of their logarithms. A
-/// camera's render is multiplied by its exposure times its white balance, per channel, before
-/// it is compared with its target.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct ExposureState {
-    /// The factor each camera's render is multiplied by.
-    pub values: Vec<f32>,
-    /// Adam first moments (of the logarithms).
-    pub m1: Vec<f32>,
-    /// Adam second moments.
-    pub m2: Vec<f32>,
-    /// Adam steps taken.
-    pub steps: u32,
-    /// Each camera's per-channel factors (empty: 1 everywhere).
-    #[serde(default)]
-    pub white_balance: Vec<[f32; 3]>,
-    /// Adam first moments of their logarithms.
-    #[serde(default)]
-    pub wb_m1: Vec<[f32; 3]>,
-    /// Adam second moments.
-    #[serde(default)]
-    pub wb_m2: Vec<[f32; 3]>,
-    /// Adam steps taken by the white balances.
-    #[serde(default)]
-    pub wb_steps: u32,
-}
-
-impl ExposureState {
-    /// `n` cameras at exposure 1, before any step.
-    pub fn identity(n: usize) -> ExposureState {
-        ExposureState {
-            values: vec![1.0; n],
-            m1: vec![0.0; n],
-            m2: vec![0.0; n],
-            steps: 0,
-            white_balance: vec![[1.0; 3]; n],
-            wb_m1: vec![[0.0; 3]; n],
-            wb_m2: vec![[0.0; 3]; n],
-            wb_steps: 0,
-        }
-    }
-
-    /// Each camera's per-channel gain: its exposure times its white balance.
-    pub fn gains(&self) -> Vec<[f32; 3]> {
-        self.values
-            .iter()
-            .enumerate()
-            .map(|(k, &e)| {
-                let wb = self.white_balance.get(k).copied().unwrap_or([1.0; 3]);
-                wb.map(|w| w * e)
-            })
-            .collect()
-    }
 }
 
 impl Optimizer {
@@ -214,7 +162,7 @@ impl Optimizer {
                 Some(cv) => Some(cv.snapshot(&self.gpu)?),
                 None => None,
             },
-            exposure: self.exposure.clone(),
+            groups: self.table.states(),
             environment: self.environment_state().cloned(),
         })
     }
@@ -257,20 +205,14 @@ impl Optimizer {
         if let Some(cv) = &mut self.control_variate {
             cv.restore(&self.gpu, cv_snapshot)?;
         }
-        if state.exposure.values.len() == self.cams.len() {
-            let n = self.cams.len();
-            self.exposure = state.exposure.clone();
-            // Checkpoints written before white balances had none.
-            if self.exposure.white_balance.len() != n {
-                let e = &mut self.exposure;
-                (e.white_balance, e.wb_m1, e.wb_m2) =
-                    (vec![[1.0; 3]; n], vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
-            }
-            self.gain_prev = self.exposure.gains();
-            self.upload_exposure();
-        }
         if let Some(env) = &state.environment {
             self.restore_environment(env)?;
+        }
+        self.table.restore(&state.groups)?;
+        self.gain_prev = self.gains();
+        self.upload_exposure();
+        if self.env_fit.is_some() {
+            self.upload_environment(true)?;
         }
         self.iteration = state.iteration;
         self.gpu.check("restore optimizer state")

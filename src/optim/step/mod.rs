@@ -7,8 +7,8 @@
 //! [`Steps`] only. One step is chosen per run (priors, by contrast, are switched on, any of
 //! them).
 //!
-//! - [`adam`]: Adam (first and second moments), with its CPU twin that the environment and
-//!   the camera gains use.
+//! - [`adam`]: Adam (first and second moments), with its CPU path, which moves the parameter
+//!   table's CPU groups (the environment, the cameras' gains) in every run.
 //! - [`variance_step`]: the variance-scaled step (the estimate over its standard deviation,
 //!   thresholded and clipped).
 //!
@@ -70,7 +70,31 @@ pub struct Kind {
     pub second_moment_decay: fn(&Steps) -> Option<f32>,
     /// What to try when a run with it does not converge (the loss watch's advice).
     pub if_not_converging: &'static str,
+    /// Its CPU path, which moves the parameter table's CPU groups (the environment, the
+    /// cameras' gains); None: the table steps them with Adam's.
+    pub cpu: Option<fn(&Steps, CpuGroup)>,
     pub(crate) build: fn(Setup) -> Result<Box<dyn Step>>,
+}
+
+/// A group of parameters a step moves on the CPU (one of the parameter table's), with its
+/// state: step number `t` (from 1), learning rate `lr` (the schedule's factor included) and
+/// the range it clamps `values` to. A value whose gradient is not finite keeps its value and
+/// state.
+pub struct CpuGroup<'a> {
+    /// What the step moves.
+    pub values: &'a mut [f32],
+    /// Its first per-value state (Adam's first moment).
+    pub m1: &'a mut [f32],
+    /// Its second per-value state (Adam's second moment).
+    pub m2: &'a mut [f32],
+    /// The derivative of the loss with respect to each value.
+    pub grad: &'a [f32],
+    /// The step number, from 1.
+    pub t: u32,
+    /// The learning rate.
+    pub lr: f32,
+    /// The range the values are clamped to.
+    pub range: (f32, f32),
 }
 
 impl Kind {

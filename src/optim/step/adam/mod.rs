@@ -1,6 +1,6 @@
 //! Adam: its kind, its options, the pass of adam.wgsl (`AdamPass`, one or two dispatches
-//! per optimized texture) and its CPU reference (which the environment and the camera gains
-//! step with).
+//! per optimized texture) and its CPU path (which moves the parameter table's CPU groups: the
+//! environment, the cameras' gains).
 use super::moment_filter::MomentFilter;
 use super::{Kind, Options, OptionsKind, Setup, StepKind, TextureSteps};
 use crate::gpu::Gpu;
@@ -25,6 +25,10 @@ pub const KIND: Kind = Kind {
     if_not_converging: "Adam moves every texel by about its learning rate per step however \
         noisy its gradient: try the variance-scaled step (`--step variance`, or remove `step` \
         from the task for auto's configuration) or a lower rate (`--lr-scale 0.25`)",
+    cpu: Some(|steps, g| {
+        let o = steps.of::<AdamOptions>();
+        step_with(&o, g.values, g.m1, g.m2, g.grad, g.lr, g.t, g.range, false)
+    }),
     build: |s| Ok(Box::new(AdamPass::new(s)?)),
 };
 

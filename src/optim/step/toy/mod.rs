@@ -1,6 +1,7 @@
 //! A toy step, compiled for the tests only: it shows that a step is its folder and one
 //! entry of the registry. It is plain gradient descent, each parameter scalar moved by
-//! −lr × its gradient (`toy_step.wgsl`), with the learning rate `scale` times the texture's.
+//! −lr × its gradient (`toy_step.wgsl`; its CPU path for the parameter table's CPU groups),
+//! with the learning rate `scale` times the texture's.
 //! The test runs it through the optimizer with the toy estimator, its options read from a
 //! task file's `[optimizer.toy_step]` table.
 use super::{Kind, Options, OptionsKind, Setup, Step, StepKind, TextureSteps};
@@ -24,6 +25,14 @@ pub const KIND: Kind = Kind {
     divides_by_variance: false,
     second_moment_decay: |_| None,
     if_not_converging: "try a lower learning rate",
+    cpu: Some(|steps, g| {
+        let lr = g.lr * steps.of::<ToyStepOptions>().scale;
+        for (v, d) in g.values.iter_mut().zip(g.grad) {
+            if d.is_finite() {
+                *v = (*v - lr * d).clamp(g.range.0, g.range.1);
+            }
+        }
+    }),
     build: |s| Ok(Box::new(ToyStep::new(s)?)),
 };
 

@@ -34,6 +34,8 @@ pub const KIND: Kind = Kind {
     second_moment_decay: |steps| Some(steps.of::<VarianceStepOptions>().beta),
     if_not_converging: "try a lower learning rate (`--lr-scale 0.5`) or more gradient \
         samples per pixel (`gradient_spp`)",
+    // It divides by the estimator's variance of each value, which the CPU groups lack.
+    cpu: None,
     build: |s| Ok(Box::new(VarianceStepPass::new(s)?)),
 };
 
