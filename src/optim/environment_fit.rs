@@ -1,13 +1,13 @@
 //! The environment as a parameter: a lat-long RGB map recovered with the textures.
 //!
 //! Each texel's radiance is `exp(θ)` (positive by construction); θ is the parameter table's
-//! `environment` group, which the run's step (Adam unless the step has a CPU path) moves at
-//! its own learning rate from dL/d(radiance), which every gradient pass scatters from the path
-//! segments that escape to the environment (shared/env_gradient.wgsl). The sampling tables
-//! (the environment's importance sampling and its share of the light choice) are rebuilt
-//! from the current estimate every `rebuild_every` iterations; between rebuilds the texels
-//! change and the tables stay, which every density reads too, so the estimates stay
-//! unbiased. Optional priors act on θ: smoothness (squared differences of neighbouring
+//! `environment` group, moved by the run's step on the CPU (Adam's where the step has no CPU
+//! path) at its own learning rate from dL/d(radiance), which every gradient pass scatters
+//! from the path segments that escape to the environment (shared/env_gradient.wgsl). The
+//! sampling tables (the environment's importance sampling and its share of the light choice)
+//! are rebuilt from the current estimate every `rebuild_every` iterations; between rebuilds
+//! the texels change and the tables stay, which every density reads too, so the estimates
+//! stay unbiased. Optional priors act on θ: smoothness (squared differences of neighbouring
 //! texels' logarithms) and gray world (the logarithms of the three channels' solid-angle
 //! means pulled together). Albedo and light share a scale that images do not fix: the
 //! gauge `mean` holds the environment's mean luminance at its start after every step;

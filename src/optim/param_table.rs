@@ -93,6 +93,7 @@ impl Group {
         };
         let cpu = kind.kind().cpu.expect("the table's step has a CPU path");
         let s = &mut self.state;
+        debug_assert_eq!(grad.len(), s.values.len(), "{}'s gradient", self.name);
         s.steps += 1;
         let h = self.held.min(s.values.len());
         let mut logs: Vec<f32> = match self.space {
