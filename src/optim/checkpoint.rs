@@ -116,36 +116,34 @@ impl Stored {
         let mut fit = self.environment_fit.take();
         if let Some(e) = self.exposure.take().filter(|e| !e.values.is_empty()) {
             let n = e.values.len();
-            let state = |values, m1, m2, steps| GroupState {
-                values,
-                m1,
-                m2,
-                steps,
+            let exposure = GroupState {
+                values: e.values,
+                m1: e.m1,
+                m2: e.m2,
+                steps: e.steps,
             };
-            groups.insert(EXPOSURE.into(), state(e.values, e.m1, e.m2, e.steps));
+            groups.insert(EXPOSURE.into(), exposure);
             // Checkpoints written before white balances had none.
-            let wb = if e.white_balance.len() == n {
-                let flat = |v: Vec<[f32; 3]>| v.concat();
-                state(
-                    flat(e.white_balance),
-                    flat(e.wb_m1),
-                    flat(e.wb_m2),
-                    e.wb_steps,
-                )
+            let white_balance = if e.white_balance.len() == n {
+                GroupState {
+                    values: e.white_balance.concat(),
+                    m1: e.wb_m1.concat(),
+                    m2: e.wb_m2.concat(),
+                    steps: e.wb_steps,
+                }
             } else {
                 GroupState::new(vec![1.0; 3 * n])
             };
-            groups.insert(WHITE_BALANCE.into(), wb);
+            groups.insert(WHITE_BALANCE.into(), white_balance);
         }
         if let Some(e) = self.environment.take() {
-            let (values, m1, m2, steps) = (e.log, e.m1, e.m2, e.steps);
-            let state = GroupState {
-                values,
-                m1,
-                m2,
-                steps,
+            let environment = GroupState {
+                values: e.log,
+                m1: e.m1,
+                m2: e.m2,
+                steps: e.steps,
             };
-            groups.insert(ENVIRONMENT.into(), state);
+            groups.insert(ENVIRONMENT.into(), environment);
             fit = Some(EnvFitState {
                 size: e.size,
                 mean_luminance: e.mean_luminance,

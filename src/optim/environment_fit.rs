@@ -382,17 +382,18 @@ impl Optimizer {
     /// One step of the environment from this iteration's gradient (schedule factor
     /// `factor`), and its upload; the sampling tables when they are due.
     pub(super) fn step_environment(&mut self, factor: f32) -> Result<()> {
-        let Some(fit) = &self.env_fit else {
+        if self.env_fit.is_none() {
             return Ok(());
-        };
-        let (opts, state) = (fit.opts.clone(), fit.state.clone());
+        }
         let (d_radiance, faults) = self.read_environment_gradient()?;
         self.env_faults += faults;
-        let g = state.log_gradient(&opts, self.environment_log(), &d_radiance);
-        self.table.step(ENVIRONMENT, &g, factor);
+        let fit = self.env_fit.as_ref().expect("checked above");
+        let log = &self.table.group(ENVIRONMENT).state.values;
+        let g = fit.state.log_gradient(&fit.opts, log, &d_radiance);
+        self.table.step(&self.settings, ENVIRONMENT, &g, factor);
         let group = self.table.group_mut(ENVIRONMENT);
-        state.hold_gauge(&opts, &mut group.state.values);
-        let tables = group.state.steps % opts.rebuild_every == 0;
+        fit.state.hold_gauge(&fit.opts, &mut group.state.values);
+        let tables = group.state.steps % fit.opts.rebuild_every == 0;
         self.upload_environment(tables)
     }
 }
@@ -466,11 +467,12 @@ mod tests {
     /// One Adam step of the logarithms `log` at rate `lr` from dL/d(radiance) `d`, through
     /// the parameter table as the optimizer takes it, and the gauge after it.
     fn step(s: &EnvFitState, opts: &EnvFitOptions, log: &[f32], d: &[f32], lr: f32) -> Vec<f32> {
-        let mut table = ParamTable::new(0, &Settings::new(8, 8, vec![0]));
+        let settings = Settings::new(8, 8, vec![0]);
+        let mut table = ParamTable::new(0, &settings);
         let mut group = Group::new(ENVIRONMENT, Space::Values, log.to_vec());
         group.learning_rate = Some(lr);
         table.insert(group);
-        table.step(ENVIRONMENT, &s.log_gradient(opts, log, d), 1.0);
+        table.step(&settings, ENVIRONMENT, &s.log_gradient(opts, log, d), 1.0);
         let mut log = table.group(ENVIRONMENT).state.values.clone();
         s.hold_gauge(opts, &mut log);
         log

@@ -152,8 +152,10 @@ impl Optimizer {
     /// balance, at schedule factor `factor`, and their upload.
     pub(super) fn step_log_gains(&mut self, factor: f32, (d_e, d_wb): &(Vec<f32>, Vec<[f32; 3]>)) {
         let gains = self.gains();
-        self.table.step(EXPOSURE, d_e, factor);
-        self.table.step(WHITE_BALANCE, &d_wb.concat(), factor);
+        let settings = &self.settings;
+        self.table.step(settings, EXPOSURE, d_e, factor);
+        self.table
+            .step(settings, WHITE_BALANCE, &d_wb.concat(), factor);
         // The next loss pass pairs its render with this iteration's adjoint, written with
         // the gains before this step.
         self.gain_prev = gains;

@@ -126,36 +126,30 @@ impl Group {
     }
 }
 
-/// The CPU groups of the parameter table and the step that moves them.
+/// The CPU groups of the parameter table.
 pub struct ParamTable {
     groups: Vec<Group>,
-    kind: StepKind,
-    steps: Steps,
 }
 
 impl ParamTable {
-    /// The table of `n_cameras` cameras at exposure and white balance 1, which step with
-    /// `settings.step` where it has a CPU path (Adam otherwise), its options in
-    /// `settings.steps`; the exposures at `settings.exposure_learning_rate` when given.
+    /// The table of `n_cameras` cameras at exposure and white balance 1; the exposures at
+    /// `settings.exposure_learning_rate` when given.
     pub fn new(n_cameras: usize, settings: &Settings) -> ParamTable {
-        let step = settings.step;
         let mut exposure = Group::new(EXPOSURE, Space::Logarithms, vec![1.0; n_cameras]);
         exposure.learning_rate = settings.exposure_learning_rate;
         let white_balance = Group::new(WHITE_BALANCE, Space::Logarithms, vec![1.0; 3 * n_cameras]);
         ParamTable {
             groups: vec![exposure, white_balance],
-            kind: if step.kind().cpu.is_some() {
-                step
-            } else {
-                StepKind::ADAM
-            },
-            steps: settings.steps.clone(),
         }
     }
 
-    /// The step that moves the CPU groups.
-    pub fn step_kind(&self) -> StepKind {
-        self.kind
+    /// The step that moves the CPU groups in a run with `settings`: its step where that has
+    /// a CPU path, Adam otherwise.
+    pub fn step_kind(settings: &Settings) -> StepKind {
+        match settings.step.kind().cpu {
+            Some(_) => settings.step,
+            None => StepKind::ADAM,
+        }
     }
 
     /// The group called `name`, if the table has it.
@@ -190,12 +184,11 @@ impl ParamTable {
             .any(|n| self.get(n).is_some_and(|g| g.learning_rate.is_some()))
     }
 
-    /// One step of the group `name` from `grad` at schedule factor `factor`.
-    pub fn step(&mut self, name: &str, grad: &[f32], factor: f32) {
-        let (kind, steps) = (self.kind, &self.steps);
-        let g = self.groups.iter_mut().find(|g| g.name == name);
-        g.unwrap_or_else(|| panic!("no `{name}` group in the parameter table"))
-            .step(kind, steps, grad, factor);
+    /// One step of the group `name` from `grad` at schedule factor `factor`, by the step
+    /// of a run with `settings` ([`ParamTable::step_kind`]) with its options.
+    pub fn step(&mut self, settings: &Settings, name: &str, grad: &[f32], factor: f32) {
+        let kind = ParamTable::step_kind(settings);
+        (self.group_mut(name)).step(kind, &settings.steps, grad, factor);
     }
 
     /// Every group's state, by name, for checkpoints.
@@ -245,14 +238,14 @@ mod tests {
             ..Settings::new(8, 8, vec![0])
         };
         let mut t = ParamTable::new(4, &settings);
-        assert_eq!(t.step_kind(), StepKind::ADAM);
+        assert_eq!(ParamTable::step_kind(&settings), StepKind::ADAM);
         t.group_mut(EXPOSURE).state.values = vec![0.5, 2.0, 1.5, 0.75];
         t.group_mut(EXPOSURE).held = 1;
         let grad = [0.3, -0.2, f32::NAN, 0.4];
         let (mut m1, mut m2) = ([0f32; 4], [0f32; 4]);
         let mut want = [0.5f32, 2.0, 1.5, 0.75];
         for t_ in 1..=3u32 {
-            t.step(EXPOSURE, &grad, 0.5);
+            t.step(&settings, EXPOSURE, &grad, 0.5);
             for k in [1, 3] {
                 let mut l = [want[k].ln()];
                 let o = adam::AdamOptions::default();
@@ -276,7 +269,7 @@ mod tests {
         assert_eq!(g.state.steps, 3);
         assert_eq!((g.state.m1[0], g.state.m1[2]), (0.0, 0.0));
         // The white balances hold: they have no learning rate.
-        t.step(WHITE_BALANCE, &[1.0; 12], 1.0);
+        t.step(&settings, WHITE_BALANCE, &[1.0; 12], 1.0);
         assert_eq!(t.group(WHITE_BALANCE).state, GroupState::new(vec![1.0; 12]));
     }
 
@@ -293,11 +286,11 @@ mod tests {
             ..Settings::new(8, 8, vec![0])
         };
         let mut t = ParamTable::new(1, &settings);
-        assert_eq!(t.step_kind(), toy);
+        assert_eq!(ParamTable::step_kind(&settings), toy);
         let mut env = Group::new(ENVIRONMENT, Space::Values, vec![0.25, 0.5]);
         env.learning_rate = Some(0.1);
         t.insert(env);
-        t.step(ENVIRONMENT, &[1.0, -0.5], 0.5);
+        t.step(&settings, ENVIRONMENT, &[1.0, -0.5], 0.5);
         // 0.25 - 0.1 x 0.5 x 2 x 1, 0.5 + 0.1 x 0.5 x 2 x 0.5.
         let v = &t.group(ENVIRONMENT).state.values;
         assert!(
