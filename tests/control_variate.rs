@@ -193,6 +193,7 @@ fn a_checkpoint_restores_the_control_variate_exactly() {
             metrics: Vec::new(),
         },
         state: state.clone(),
+        kept: None,
     }
     .save(&path)
     .unwrap();

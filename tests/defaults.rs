@@ -96,10 +96,46 @@ fn a_run_whose_loss_does_not_fall_warns_and_says_what_to_try() {
     )
     .unwrap();
     let text = std::fs::read_to_string(dir.path().join("out/metrics.csv")).unwrap();
-    assert_eq!(s.warnings.len(), 1, "{:?}\n{text}", s.warnings);
+    assert_eq!(s.warnings.len(), 2, "{:?}\n{text}", s.warnings);
     let w = &s.warnings[0];
     assert!(
         w.contains("not converging") && w.contains("--step variance"),
         "{w}"
+    );
+    // Every evaluation after the start is worse than the start's: the run hands back the
+    // start, bit for bit, and says so.
+    assert!(
+        s.warnings[1].contains("did not improve on its start"),
+        "{:?}",
+        s.warnings
+    );
+    let h = s.handed_back.as_ref().expect("the start is handed back");
+    assert_eq!(h.iteration, 0);
+    assert!(h.image_relmse < h.last_image_relmse, "{h:?}");
+    assert!(s.set.values.iter().all(|&v| v == 0.5), "{:?}", s.set.values);
+    assert_eq!(s.final_rmse_observed, s.initial_rmse_observed);
+    // With keep_best off the same run writes its last, walked-away state.
+    let t = Task {
+        optimizer: psrestir::task::OptimizerSpec {
+            keep_best: false,
+            ..t.optimizer.clone()
+        },
+        ..t
+    };
+    let s = run(
+        &gpu,
+        &t,
+        &RunOptions {
+            out: Some(dir.path().join("out_last")),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert!(s.handed_back.is_none());
+    assert!(
+        s.final_rmse_observed.unwrap() > s.initial_rmse_observed.unwrap() + 0.01,
+        "{:?} -> {:?}",
+        s.initial_rmse_observed,
+        s.final_rmse_observed
     );
 }

@@ -192,7 +192,16 @@ fn kill_and_resume(method: &str) {
     let observed = |row: &str| -> f64 { row.split(',').nth(4).unwrap().parse().unwrap() };
     let m = std::fs::read_to_string(a.join("metrics.csv")).unwrap();
     let rows: Vec<&str> = m.lines().skip(1).collect();
-    for (got, row) in [(f[1], rows[0]), (f[2], rows[rows.len() - 1])] {
+    // The end is the kept state's (optimizer.keep_best): the row with the lowest evaluation
+    // image error, the earliest of equals, which may come before the last.
+    let image = |row: &&&str| -> f64 {
+        (row.split(',').nth(5).unwrap().parse::<f64>()).unwrap_or(f64::INFINITY)
+    };
+    let kept = rows
+        .iter()
+        .min_by(|x, y| image(x).total_cmp(&image(y)))
+        .unwrap();
+    for (got, row) in [(f[1], rows[0]), (f[2], kept)] {
         let (got, want) = (got.parse::<f64>().unwrap(), observed(row));
         assert!((got - want).abs() <= 1e-6 * want, "{got} vs {want}");
     }
@@ -363,6 +372,18 @@ fn kill_and_resume(method: &str) {
                 x.1
             );
         }
+        // The kept state survives the kills (it travels in the checkpoint): both runs hand
+        // back the same texture error.
+        let handed_back = |dir: &Path| -> f64 {
+            let text = std::fs::read_to_string(dir.join("texture_errors.csv")).unwrap();
+            let line = text.lines().nth(1).unwrap();
+            line.split(',').nth(2).unwrap().parse().unwrap()
+        };
+        let (ka, kb) = (handed_back(&a), handed_back(&b));
+        assert!(
+            (ka - kb).abs() <= tol,
+            "{method}: handed back {kb}, uninterrupted {ka}"
+        );
         return;
     }
     // ReSTIR is not: which candidate takes a reservoir lock first varies, and Adam amplifies

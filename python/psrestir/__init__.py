@@ -97,6 +97,10 @@ class Result:
     #: Why the run ended before its budget because it had converged (the task's
     #: ``stop_on_plateau``), or None.
     plateau: str | None = None
+    #: The iteration whose state the outputs hold where it is not the last: an earlier
+    #: evaluation had a lower image error (the task's ``keep_best``; 0: the start, which the
+    #: run could not improve on), else None.
+    kept_iteration: int | None = None
     #: The recovered environment, float32 (height, width, 3) linear radiance, row 0 at the
     #: zenith, when the task recovers it; else None.
     environment: object = None

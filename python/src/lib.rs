@@ -327,6 +327,10 @@ fn summary_dict<'py>(
     d.set_item("interrupted", summary.interrupted)?;
     d.set_item("warnings", summary.warnings.clone())?;
     d.set_item("plateau", summary.plateau.clone())?;
+    d.set_item(
+        "kept_iteration",
+        summary.handed_back.as_ref().map(|h| h.iteration),
+    )?;
     let textures = PyDict::new(py);
     for (i, t) in summary.set.textures.iter().enumerate() {
         let v = summary.set.values_of(i).to_vec();

@@ -2,6 +2,7 @@
 //! and [`run::run`], the optimization with progress, metrics, checkpoints and outputs. It sits
 //! above [`crate::optim`] (the optimizer knows nothing of task files) and [`crate::task`].
 pub mod export;
+pub mod keep;
 mod metrics;
 mod outputs;
 pub mod plot;

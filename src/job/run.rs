@@ -1,6 +1,7 @@
 //! A whole optimization run from a task file: targets, the iteration loop with progress,
 //! metrics and checkpoints, and the outputs (written by `outputs.rs`, measured by
 //! `metrics.rs`).
+use super::keep::{HandedBack, Keeper};
 pub use super::metrics::{
     evaluate, rmse, write_metrics, write_texture_errors, TextureErrors, METRICS_HEADER,
 };
@@ -13,7 +14,7 @@ pub use super::outputs::{
 use super::watch::{LossWatch, PlateauWatch};
 use super::Problem;
 use crate::gpu::Gpu;
-use crate::optim::checkpoint::{Checkpoint, Header, MetricRow};
+use crate::optim::checkpoint::{Checkpoint, Header, Kept, MetricRow};
 use crate::optim::run_loop::{Clock, Limits, Observer, PassSampler};
 use crate::optim::{FaultCounts, Optimizer, PassTimes, StepStats};
 use crate::render::params::ParamSet;
@@ -92,6 +93,9 @@ pub struct RunSummary {
     /// Why the run ended before its budget because it had converged
     /// (`optimizer.stop_on_plateau`), if it did.
     pub plateau: Option<String>,
+    /// The earlier state the outputs hold, where an evaluation before the last had a lower
+    /// image error (`optimizer.keep_best`); None: the last state.
+    pub handed_back: Option<HandedBack>,
     /// Warnings the run gave (also logged): a loss that did not fall ([`super::watch`]).
     pub warnings: Vec<String>,
     /// Seconds this run spent creating (compiling) GPU pipelines, all before the
@@ -190,9 +194,9 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     if task.max_depth > 1 {
         layout.push_str(&format!(", paths of {} vertices", task.max_depth));
     }
-    let (rows, elapsed_before) = match checkpoint {
+    let (rows, elapsed_before, kept) = match checkpoint {
         Some(c) => resume(&mut opt, c, &ckpt_path, &layout, prep.set.values.len())?,
-        None => (Vec::new(), 0.0),
+        None => (Vec::new(), 0.0, None),
     };
     let saver = Saver {
         layout,
@@ -211,9 +215,29 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         rmse_every: (prep.set.values.len() / (1 << 20)).max(1) as u32,
         seed: task.seed,
     };
-    let session = iterate(&mut opt, task, opts, &metrics, &saver, rows, elapsed_before)?;
+    let keeper = Keeper::new(task.optimizer.keep_best, kept);
+    let mut session = iterate(
+        &mut opt,
+        task,
+        opts,
+        &metrics,
+        &saver,
+        (rows, keeper),
+        elapsed_before,
+    )?;
     let elapsed = elapsed_before + session.seconds;
-    saver.save(&opt, &session.rows, elapsed)?;
+    // The checkpoint holds the last state (what --resume continues), the kept one beside it.
+    saver.save(&opt, &session.rows, elapsed, session.keeper.kept())?;
+    let handed_back = session.keeper.hand_back(&mut opt, session.rows.last())?;
+    if let Some(h) = &handed_back {
+        let message = h.describe(opt.iteration);
+        if h.iteration == 0 {
+            log::warn!("{message}");
+            session.warnings.push(message);
+        } else {
+            log::info!("{message}");
+        }
+    }
     let values = opt.read_params()?;
     let (final_rmse, final_rmse_observed, initial_rmse_observed) = metrics.final_errors(&values);
     let per_texture = metrics.errors_per_texture(&values);
@@ -278,6 +302,7 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         pass_times: session.pass_times,
         interrupted: session.interrupted,
         plateau: session.plateau,
+        handed_back,
         warnings: session.warnings,
         pipeline_s,
         set: ParamSet {
@@ -386,8 +411,14 @@ struct Saver {
 }
 
 impl Saver {
-    /// Write the checkpoint and `metrics.csv` (both atomically).
-    fn save(&self, opt: &Optimizer, rows: &[MetricRow], elapsed: f64) -> Result<()> {
+    /// Write the checkpoint (with the kept state) and `metrics.csv` (both atomically).
+    fn save(
+        &self,
+        opt: &Optimizer,
+        rows: &[MetricRow],
+        elapsed: f64,
+        kept: Option<&Kept>,
+    ) -> Result<()> {
         Checkpoint {
             header: Header {
                 elapsed_s: elapsed,
@@ -395,6 +426,7 @@ impl Saver {
                 metrics: rows.to_vec(),
             },
             state: opt.state()?,
+            kept: kept.cloned(),
         }
         .save(&self.checkpoint)?;
         write_metrics(&self.metrics, rows)
@@ -417,6 +449,8 @@ struct Session {
     /// Why it ended on a plateau, if it did.
     plateau: Option<String>,
     warnings: Vec<String>,
+    /// The state with the lowest evaluation error so far.
+    keeper: Keeper,
 }
 
 /// What watches a run's rows: the loss that does not fall (a warning) and, where asked, the
@@ -455,7 +489,7 @@ fn iterate(
     opts: &RunOptions,
     metrics: &Metrics,
     saver: &Saver,
-    mut rows: Vec<MetricRow>,
+    (mut rows, mut keeper): (Vec<MetricRow>, Keeper),
     elapsed_before: f64,
 ) -> Result<Session> {
     let limits = Limits {
@@ -475,7 +509,9 @@ fn iterate(
     let start_iter = opt.iteration;
     if rows.is_empty() {
         // The start: texture and image errors of the initial textures.
-        rows.push(clock.aside(|| metrics.start_row(opt))?);
+        let start = clock.aside(|| metrics.start_row(opt))?;
+        clock.aside(|| keeper.offer(opt, &start))?;
+        rows.push(start);
     }
     let stop_on_plateau = task
         .optimizer
@@ -493,6 +529,7 @@ fn iterate(
             interrupted: false,
             plateau: None,
             warnings: Vec::new(),
+            keeper,
         },
         watches,
         opts,
@@ -514,6 +551,9 @@ fn iterate(
     }
     // The last row's evaluation render, like every evaluation, is not optimization time.
     clock.aside(|| metrics.complete_last(&mut session.rows, opt))?;
+    if let Some(last) = session.rows.last() {
+        clock.aside(|| session.keeper.offer(opt, last))?;
+    }
     session.seconds = clock.session_seconds();
     session.iterations = opt.iteration - start_iter;
     session.pass_times = sampler.mean();
@@ -573,6 +613,7 @@ impl Observer for JobWatch<'_> {
             .plateau
             .as_mut()
             .and_then(|p| p.observe(row.iteration, stats.loss, row.image_relmse, progress));
+        clock.aside(|| session.keeper.offer(opt, &row))?;
         session.rows.push(row);
         if let Some(b) = &self.bar {
             b.set_position(if self.limits.iterations.is_some() {
@@ -586,7 +627,8 @@ impl Observer for JobWatch<'_> {
         let by_iterations = every > 0 && opt.iteration % every == 0;
         let by_time = every_s > 0.0 && self.last_checkpoint.elapsed().as_secs_f64() >= every_s;
         if by_iterations || by_time {
-            self.saver.save(opt, &session.rows, elapsed)?;
+            self.saver
+                .save(opt, &session.rows, elapsed, session.keeper.kept())?;
             self.last_checkpoint = Instant::now();
         }
         if let Some(why) = converged {
@@ -614,15 +656,15 @@ fn open_checkpoint(out: &Path, ckpt_path: &Path, resume: bool) -> Result<Option<
     Ok(None)
 }
 
-/// Restore `opt` from a checkpoint of the same textures and estimator: the metrics so far and
-/// the seconds of optimization done.
+/// Restore `opt` from a checkpoint of the same textures and estimator: the metrics so far,
+/// the seconds of optimization done and the kept state.
 fn resume(
     opt: &mut Optimizer,
     c: Checkpoint,
     ckpt_path: &Path,
     layout: &str,
     n_params: usize,
-) -> Result<(Vec<MetricRow>, f64)> {
+) -> Result<(Vec<MetricRow>, f64, Option<Kept>)> {
     if c.header.layout != layout || c.state.params.len() != n_params {
         return Err(Error::file(
             ckpt_path,
@@ -642,5 +684,6 @@ fn resume(
         opt.iteration,
         c.header.elapsed_s
     );
-    Ok((rows, c.header.elapsed_s))
+    let kept = c.kept.filter(|k| k.values.iteration <= opt.iteration);
+    Ok((rows, c.header.elapsed_s, kept))
 }

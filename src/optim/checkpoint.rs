@@ -5,7 +5,7 @@
 //! rename.
 use super::environment_fit::EnvFitState;
 use super::param_table::{GroupState, ENVIRONMENT, EXPOSURE, WHITE_BALANCE};
-use super::{ControlVariateSnapshot, EstimatorState, OptimizerState, PreviousState};
+use super::{ControlVariateSnapshot, EstimatorState, OptimizerState, PreviousState, Values};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -78,6 +78,18 @@ struct Stored {
     exposure: Option<LegacyGains>,
     #[serde(default, skip_serializing)]
     environment: Option<LegacyEnvironment>,
+    /// The kept state's iteration, image error and groups' values (its textures, n_params
+    /// floats, come last in the data).
+    #[serde(default)]
+    kept: Option<StoredKept>,
+}
+
+/// [`Kept`] without its textures.
+#[derive(Serialize, Deserialize)]
+struct StoredKept {
+    iteration: u32,
+    image_relmse: f64,
+    groups: BTreeMap<String, Vec<f32>>,
 }
 
 /// The gains' state in checkpoints written before the parameter table.
@@ -161,6 +173,16 @@ struct StoredEstimator {
     arrays: Vec<(String, usize)>,
 }
 
+/// The state a run hands back (`optimizer.keep_best`): the one with the lowest evaluation
+/// image error so far.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Kept {
+    /// Its evaluation image relMSE.
+    pub image_relmse: f64,
+    /// Its textures and groups' values.
+    pub values: Values,
+}
+
 /// A whole checkpoint.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Checkpoint {
@@ -168,6 +190,8 @@ pub struct Checkpoint {
     pub header: Header,
     /// The optimizer's state.
     pub state: OptimizerState,
+    /// The state the run hands back, when it keeps one other than its last.
+    pub kept: Option<Kept>,
 }
 
 impl Checkpoint {
@@ -192,8 +216,17 @@ impl Checkpoint {
             environment_fit: st.environment.clone(),
             exposure: None,
             environment: None,
+            kept: self.kept.as_ref().map(|k| StoredKept {
+                iteration: k.values.iteration,
+                image_relmse: k.image_relmse,
+                groups: k.values.groups.clone(),
+            }),
         };
         if st.m1.len() != st.params.len()
+            || self
+                .kept
+                .as_ref()
+                .is_some_and(|k| k.values.params.len() != st.params.len())
             || st.m2.len() != st.params.len()
             || st
                 .previous
@@ -219,6 +252,9 @@ impl Checkpoint {
         }
         if let Some(c) = &st.control_variate {
             out.extend_from_slice(bytemuck::cast_slice(&c.state));
+        }
+        if let Some(k) = &self.kept {
+            out.extend_from_slice(bytemuck::cast_slice(&k.values.params));
         }
         crate::image_io::write_atomic(path, &out)
     }
@@ -262,6 +298,9 @@ impl Checkpoint {
         if let Some(c) = stored.control_variate_floats {
             sizes.push(Some(c));
         }
+        if stored.kept.is_some() {
+            sizes.push(Some(n));
+        }
         let words = sizes
             .iter()
             .try_fold(0usize, |acc, s| s.and_then(|s| acc.checked_add(s)));
@@ -294,7 +333,16 @@ impl Checkpoint {
                 state: bytemuck::pod_collect_to_vec(take(c)),
                 iterations: stored.control_variate_iterations,
             });
+        let kept = stored.kept.map(|k| Kept {
+            image_relmse: k.image_relmse,
+            values: Values {
+                iteration: k.iteration,
+                params: bytemuck::pod_collect_to_vec(take(n)),
+                groups: k.groups,
+            },
+        });
         Ok(Checkpoint {
+            kept,
             header: stored.header,
             state: OptimizerState {
                 iteration: stored.iteration,
@@ -377,9 +425,18 @@ mod tests {
                     mean_luminance: 1.25,
                 }),
             },
+            kept: Some(Kept {
+                image_relmse: 0.125,
+                values: Values {
+                    iteration: 4,
+                    params: vec![0.5, 0.25, 0.75],
+                    groups: [(EXPOSURE.to_string(), vec![1.25])].into_iter().collect(),
+                },
+            }),
         };
-        // Without reservoirs (the baseline) as well.
+        // Without reservoirs (the baseline) and without a kept state as well.
         let mut base = c.clone();
+        base.kept = None;
         base.state.estimator = EstimatorState::new(crate::optim::Method::BASELINE);
         base.state.previous = None;
         base.state.control_variate = None;

@@ -198,6 +198,40 @@ impl ParamTable {
             .collect()
     }
 
+    /// Every group's values, by name (without its step's state).
+    pub fn values(&self) -> BTreeMap<String, Vec<f32>> {
+        (self.groups.iter())
+            .map(|g| (g.name.to_string(), g.state.values.clone()))
+            .collect()
+    }
+
+    /// Take `values` (from [`ParamTable::values`]) as the named groups' values; their step's
+    /// state stays. A name this table lacks or a size that differs is refused before
+    /// anything changes.
+    pub fn set_values(&mut self, values: &BTreeMap<String, Vec<f32>>) -> Result<()> {
+        for (name, v) in values {
+            match self.get(name) {
+                Some(g) if g.state.values.len() == v.len() => {}
+                Some(g) => {
+                    return Err(Error::Invalid(format!(
+                        "`{name}` has {} values, this task's {}",
+                        v.len(),
+                        g.state.values.len()
+                    )))
+                }
+                None => {
+                    return Err(Error::Invalid(format!(
+                        "`{name}` is not a group this task optimizes"
+                    )))
+                }
+            }
+        }
+        for (name, v) in values {
+            self.group_mut(name).state.values.clone_from(v);
+        }
+        Ok(())
+    }
+
     /// Go on from `states` (a checkpoint's): each group named there takes its state; one this
     /// table lacks or of another size is refused before anything changes.
     pub fn restore(&mut self, states: &BTreeMap<String, GroupState>) -> Result<()> {

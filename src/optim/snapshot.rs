@@ -70,6 +70,20 @@ pub struct OptimizerState {
     pub environment: Option<super::environment_fit::EnvFitState>,
 }
 
+/// What a run hands back of one of its states: the textures and every CPU group's values
+/// (exposures, white balances, the environment's logarithms), without the step's or the
+/// estimator's state ([`Optimizer::values`], [`Optimizer::set_values`]). A run keeps the one
+/// with its lowest evaluation error (`optimizer.keep_best`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Values {
+    /// Iterations done at that state.
+    pub iteration: u32,
+    /// Texture values, laid out like [`ParamSet::values`](crate::render::params::ParamSet::values).
+    pub params: Vec<f32>,
+    /// The parameter table's CPU groups' values, by name.
+    pub groups: BTreeMap<String, Vec<f32>>,
+}
+
 impl Optimizer {
     /// The gradient of the last iteration or estimate, laid out like the parameters.
     pub fn read_gradient(&self) -> Result<Vec<f32>> {
@@ -98,6 +112,36 @@ impl Optimizer {
             .queue
             .write_buffer(&self.params.values, 0, bytemuck::cast_slice(values));
         self.gpu.check("write params")
+    }
+
+    /// The textures and the CPU groups' values now (see [`Values`]).
+    pub fn values(&self) -> Result<Values> {
+        Ok(Values {
+            iteration: self.iteration,
+            params: self.read_params()?,
+            groups: self.table.values(),
+        })
+    }
+
+    /// Take `values` as the textures and the CPU groups' values (the gains and the
+    /// environment uploaded anew); the iteration count, the step's and the estimator's state
+    /// stay. Refused before anything changes where a size or a group does not fit.
+    pub fn set_values(&mut self, values: &Values) -> Result<()> {
+        if values.params.len() != self.set.values.len() {
+            return Err(Error::Invalid(format!(
+                "{} texture values for {} parameters",
+                values.params.len(),
+                self.set.values.len()
+            )));
+        }
+        self.table.set_values(&values.groups)?;
+        self.write_params(&values.params)?;
+        self.gain_prev = self.gains();
+        self.upload_exposure();
+        if self.env_fit.is_some() {
+            self.upload_environment(true)?;
+        }
+        self.gpu.check("set optimizer values")
     }
 
     /// Adam's first and second moments.

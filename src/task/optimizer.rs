@@ -19,6 +19,10 @@ pub struct OptimizerSpec {
     /// iteration count; a task that names its iterations runs them all.
     #[serde(default)]
     pub stop_on_plateau: Option<bool>,
+    /// Write the state with the lowest evaluation image error the run saw (the start's
+    /// included) instead of the last one (`job::keep`); needs `eval_every` > 0.
+    #[serde(default = "super::yes")]
+    pub keep_best: bool,
     /// Samples per pixel of the primal render (independent of the gradient samples).
     #[serde(default = "default_primal_spp")]
     pub primal_spp: u32,
