@@ -307,6 +307,11 @@ pub(crate) struct BenchArgs {
     /// Seeds the gradient error is averaged over.
     #[arg(long, default_value_t = 3)]
     pub(crate) repeats: u32,
+    /// Seeds of the equal-time phase per scene: every contender runs with each (new
+    /// targets' noise, new sampling), paired within a seed; each ratio is then a geometric
+    /// mean with a 90% interval, a difference counting where it excludes 1.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub(crate) seeds: u32,
     /// Gradient samples per pixel of the reference gradient.
     #[arg(long, default_value_t = 256)]
     pub(crate) reference_spp: u32,
@@ -407,12 +412,20 @@ pub(crate) enum Command {
     /// with their defaults (the TOML of its task-file table `[optimizer.<name>]`; `--set`
     /// sets one).
     Estimators,
-    /// Regenerate the bundled scenes (scenes/default and scenes/bench/*).
+    /// Regenerate the bundled scenes (scenes/default and scenes/bench/*), or with
+    /// `--family` write members of the scene family (DIR/<split>/<member>/task.toml).
     #[command(hide = true)]
     MakeScenes {
         /// Output folder.
         #[arg(default_value = "scenes")]
         dir: PathBuf,
+        /// Write the family's `train` split (seeds for choosing rules and constants) or its
+        /// `test` split (seeds only reported) instead of the bundled scenes.
+        #[arg(long, value_parser = psrestir::assets::family::Split::parse)]
+        family: Option<psrestir::assets::family::Split>,
+        /// Members of the split to write (its first seeds).
+        #[arg(long, default_value_t = 6)]
+        count: u32,
     },
 }
 

@@ -74,7 +74,16 @@ fn run(cli: Cli) -> Result<()> {
         Command::Bench(args) => cmd_bench(args)?,
         Command::Estimators => inspect::cmd_estimators(),
         Command::Adapter => inspect::cmd_adapter()?,
-        Command::MakeScenes { dir } => {
+        Command::MakeScenes {
+            dir,
+            family: Some(split),
+            count,
+        } => {
+            for task in assets::family::write_split(&dir, split, count)? {
+                println!("wrote {}", task.display());
+            }
+        }
+        Command::MakeScenes { dir, .. } => {
             assets::bundled::write_default_scene(&dir.join("default"))?;
             println!("wrote {}", dir.join("default").display());
             assets::bench_scenes::write_bench_scenes(&dir.join("bench"))?;
@@ -429,6 +438,7 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         settle,
         successive,
         repeats,
+        seeds,
         reference_spp,
         reference_primal_spp,
         protocol,
@@ -495,6 +505,7 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         settle,
         successive,
         repeats,
+        seeds,
         reference_spp,
         reference_primal_spp,
         protocol: match protocol {

@@ -615,3 +615,50 @@ fn throughput_reports_every_rate_and_pipeline() {
     let md = psrestir::bench::throughput::markdown(&r);
     assert!(md.contains("| baseline: gradient |") && md.contains("## Pipeline creation"));
 }
+
+/// A member of the scene family, benched over two seeds: each seed is a scene of its own
+/// (its seed in bench.json), and `over_seeds` pairs them into intervals over two seeds that
+/// report.md prints.
+#[test]
+fn bench_over_seeds_of_a_family_member_gives_intervals() {
+    let Some(gpu) = common::gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let split = psrestir::assets::family::Split::Train;
+    let tasks =
+        psrestir::assets::family::write_split(&dir.path().join("family"), split, 1).unwrap();
+    let opts = BenchOptions {
+        budget_s: 1.0,
+        scale: 0.25,
+        end_to_end_only: true,
+        seeds: 2,
+        eval_spp: 4,
+        curve_points: 3,
+        contenders: vec![Contender::AUTO],
+        out: dir.path().join("bench"),
+        progress: false,
+        ..Default::default()
+    };
+    let report = bench(&gpu, &tasks, &opts).unwrap();
+    assert_eq!(report.scenes.len(), 2);
+    let (a, b) = (&report.scenes[0], &report.scenes[1]);
+    assert_ne!(a.seed, b.seed);
+    assert!(
+        a.name.ends_with(", seed 0") && b.name.ends_with(", seed 1"),
+        "{}",
+        a.name
+    );
+    assert_eq!(report.over_seeds.len(), 1);
+    let s = &report.over_seeds[0];
+    assert_eq!(s.seeds, 2);
+    assert_eq!(s.runs.len(), 1, "{s:?}");
+    let t = s.runs[0].texture.expect("a texture interval");
+    assert_eq!(t.n, 2);
+    assert!(t.low <= t.mean && t.mean <= t.high && t.low > 0.0, "{t:?}");
+    // The geometric mean of the two seeds' ratios.
+    let ratio = |x: &psrestir::bench::SceneResult| {
+        x.optimization.as_ref().unwrap().runs[1].texture_rmse_observed_ratio
+    };
+    assert!((t.mean - (ratio(a) * ratio(b)).sqrt()).abs() < 1e-9 * t.mean);
+    let md = std::fs::read_to_string(dir.path().join("bench/report.md")).unwrap();
+    assert!(md.contains("## Over 2 seeds"), "{md}");
+}

@@ -149,6 +149,15 @@ impl Contender {
         }
     }
 
+    /// What `auto` chose, from the default configuration's run name (`default (auto: X)`
+    /// gives X); any other name as it is.
+    pub fn chosen(run_name: &str) -> &str {
+        run_name
+            .strip_prefix("default (auto: ")
+            .and_then(|n| n.strip_suffix(')'))
+            .unwrap_or(run_name)
+    }
+
     /// How reports name it, e.g. `recursive, variance-scaled step, filtered moments`, or
     /// `default (auto: baseline, variance-scaled step, filtered moments)`.
     pub fn name(&self) -> String {

@@ -28,6 +28,7 @@ mod gradient;
 mod phases;
 pub mod report;
 mod results;
+pub mod seeds;
 pub mod throughput;
 pub mod tune;
 
@@ -96,6 +97,10 @@ pub struct BenchOptions {
     pub successive: u32,
     /// Seeds the gradient error is averaged over.
     pub repeats: u32,
+    /// Seeds of the equal-time phase per scene (`--seeds`): each renders the targets and
+    /// runs every contender again with another seed ([`seeds`]); the primal and gradient
+    /// phases run with the first only.
+    pub seeds: u32,
     /// Gradient samples per pixel of the reference gradient.
     pub reference_spp: u32,
     /// Samples per pixel of the primal render of the converged adjoint (under which the
@@ -144,6 +149,7 @@ impl Default for BenchOptions {
             settle: 20,
             successive: 10,
             repeats: 3,
+            seeds: 1,
             reference_spp: 256,
             reference_primal_spp: 256,
             protocol: Protocol::Default,
@@ -286,7 +292,13 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         .map(|p| load_task(p, o))
         .collect::<Result<Vec<Task>>>()?;
     std::fs::create_dir_all(&o.out).map_err(|e| Error::file(&o.out, e.to_string()))?;
-    let progress = Progress::new(o.progress, loaded.len() as u64 * steps_per_scene(o));
+    let seeds = o.seeds.max(1);
+    let later_seeds = BenchOptions {
+        end_to_end_only: !o.gradient_only,
+        ..o.clone()
+    };
+    let per_scene = steps_per_scene(o) + (seeds as u64 - 1) * steps_per_scene(&later_seeds);
+    let progress = Progress::new(o.progress, loaded.len() as u64 * per_scene);
     let mut report = BenchReport {
         version: env!("CARGO_PKG_VERSION").into(),
         adapter: gpu.describe(),
@@ -296,6 +308,8 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         warmup: o.warmup,
         settle: o.settle,
         repeats: o.repeats.max(1),
+        seeds: o.seeds.max(1),
+        over_seeds: Vec::new(),
         reference_spp: o.reference_spp,
         reference_primal_spp: o.reference_primal_spp,
         protocol: o.protocol,
@@ -312,46 +326,93 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
     // Every optimizer pass the bench may create compiles on a second device while the first
     // scene's targets render.
     let mut helper = loaded.first().and_then(|task| compile_ahead(gpu, task, o));
-    for task in &loaded {
-        let name = scene_name(task);
-        let dir = o.out.join(crate::image_io::file_safe(&name));
-        std::fs::create_dir_all(&dir).map_err(|e| Error::file(&dir, e.to_string()))?;
-        if let Some(b) = &progress.bar {
-            b.set_prefix(name.clone());
+    for loaded_task in &loaded {
+        let scene = scene_name(loaded_task);
+        for k in 0..seeds {
+            let (task, name) = seeded(loaded_task, &scene, k, seeds);
+            let mut o = o.clone();
+            // The primal and gradient phases with the first seed only.
+            if k > 0 && !o.gradient_only {
+                o.end_to_end_only = true;
+            }
+            // The search, with --tune, once per scene: every seed's runs take its choice.
+            let tune_dir = o.out.join(crate::image_io::file_safe(&scene));
+            let result = measure_scene(gpu, &task, name, &o, &tune_dir, &progress, &mut helper)?;
+            report.scenes.push(result);
+            report.pipelines = first_creations(&gpu.pipeline_times()[pipelines_before..]);
+            if k + 1 == seeds && seeds > 1 {
+                let of_scene: Vec<&SceneResult> = report.scenes
+                    [report.scenes.len() - seeds as usize..]
+                    .iter()
+                    .collect();
+                report.over_seeds.push(seeds::summarize(&scene, &of_scene));
+            }
+            // Written after every scene, so that an interrupted run keeps what it measured.
+            report::write_report(&o.out, &report)?;
         }
-        progress.message(format!("{name}: rendering targets"));
-        let prep = Problem::from_task(gpu, task, &dir, false)?;
-        if let Some(h) = helper.take() {
-            let _ = h.join();
-        }
-        progress.done();
-        let (pp, g) = if o.end_to_end_only {
-            (
-                PrimalPhase::not_measured(),
-                gradient::GradientPhase::not_measured(&prep),
-            )
-        } else {
-            (
-                primal_phase(gpu, task, &prep, o, &progress)?,
-                gradient_phase(gpu, task, &prep, o, &progress)?,
-            )
-        };
-        let (optimization, finals) = if o.gradient_only {
-            (None, None)
-        } else {
-            let tuned = tune_contenders(gpu, task, &prep, o, &dir, &progress)?;
-            let (r, f) = optimization_phases(gpu, task, &prep, o, tuned, &progress)?;
-            (Some(r), Some(f))
-        };
-        let result = scene_result(name, task, &prep, o, &pp, &g, optimization);
-        report::write_scene_files(&dir, &prep, &result, &g.snapshot, finals.as_ref())?;
-        report.scenes.push(result);
-        report.pipelines = first_creations(&gpu.pipeline_times()[pipelines_before..]);
-        // Written after every scene, so that an interrupted run keeps what it measured.
-        report::write_report(&o.out, &report)?;
     }
     progress.finish();
     Ok(report)
+}
+
+/// `task` with its `k`-th of `seeds` seeds, and its name in the report (`vase`, or
+/// `vase, seed 2` over several seeds). Seed 0 is the task's own.
+fn seeded(task: &Task, scene: &str, k: u32, seeds: u32) -> (Task, String) {
+    let mut t = task.clone();
+    t.seed = task.seed.wrapping_add(k.wrapping_mul(1_000_003));
+    let name = if seeds > 1 {
+        format!("{scene}, seed {k}")
+    } else {
+        scene.to_string()
+    };
+    (t, name)
+}
+
+/// One scene (at one seed): its targets, its phases and its files.
+fn measure_scene(
+    gpu: &Gpu,
+    task: &Task,
+    name: String,
+    o: &BenchOptions,
+    tune_dir: &Path,
+    progress: &Progress,
+    helper: &mut Option<std::thread::JoinHandle<()>>,
+) -> Result<SceneResult> {
+    let dir = o.out.join(crate::image_io::file_safe(&name));
+    std::fs::create_dir_all(&dir).map_err(|e| Error::file(&dir, e.to_string()))?;
+    if let Some(b) = &progress.bar {
+        b.set_prefix(name.clone());
+    }
+    progress.message(format!("{name}: rendering targets"));
+    let prep = Problem::from_task(gpu, task, &dir, false)?;
+    if let Some(h) = helper.take() {
+        let _ = h.join();
+    }
+    progress.done();
+    let (pp, g) = if o.end_to_end_only {
+        (
+            PrimalPhase::not_measured(),
+            gradient::GradientPhase::not_measured(&prep),
+        )
+    } else {
+        (
+            primal_phase(gpu, task, &prep, o, progress)?,
+            gradient_phase(gpu, task, &prep, o, progress)?,
+        )
+    };
+    let (optimization, finals) = if o.gradient_only {
+        (None, None)
+    } else {
+        if o.tune {
+            std::fs::create_dir_all(tune_dir).map_err(|e| Error::file(tune_dir, e.to_string()))?;
+        }
+        let tuned = tune_contenders(gpu, task, &prep, o, tune_dir, progress)?;
+        let (r, f) = optimization_phases(gpu, task, &prep, o, tuned, progress)?;
+        (Some(r), Some(f))
+    };
+    let result = scene_result(name, task, &prep, o, &pp, &g, optimization);
+    report::write_scene_files(&dir, &prep, &result, &g.snapshot, finals.as_ref())?;
+    Ok(result)
 }
 
 /// An error naming the option when the bench's options cannot measure anything.
@@ -494,6 +555,7 @@ fn scene_result(
     let primal = settings(prep, task, o.gradient_method, o).primal;
     SceneResult {
         name,
+        seed: task.seed,
         task: task.path.display().to_string(),
         width: task.width,
         height: task.height,

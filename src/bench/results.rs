@@ -32,8 +32,11 @@ pub struct CurvePoint {
 /// The measurements of one scene.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct SceneResult {
-    /// Scene name.
+    /// Scene name (`vase`, or `vase, seed 2` with `--seeds`).
     pub name: String,
+    /// The seed its targets and runs took (the task's own, or its k-th with `--seeds`).
+    #[serde(default)]
+    pub seed: u32,
     /// Task file.
     pub task: String,
     /// Image size (per camera) and number of cameras.
@@ -266,6 +269,10 @@ pub struct RunResult {
     pub curve: Vec<CurvePoint>,
 }
 
+fn one() -> u32 {
+    1
+}
+
 /// The whole benchmark (`bench.json`).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct BenchReport {
@@ -285,6 +292,12 @@ pub struct BenchReport {
     pub settle: u32,
     /// Seeds the gradient error is averaged over.
     pub repeats: u32,
+    /// Seeds of the equal-time phase per scene (`--seeds`).
+    #[serde(default = "one")]
+    pub seeds: u32,
+    /// Each scene over its seeds, with `--seeds` above 1.
+    #[serde(default)]
+    pub over_seeds: Vec<SeededScene>,
     /// Gradient spp of the reference gradient.
     pub reference_spp: u32,
     /// spp of the primal render of the converged adjoint.
@@ -327,6 +340,8 @@ impl BenchReport {
             warmup: 0,
             settle: 0,
             repeats: 0,
+            seeds: 1,
+            over_seeds: Vec::new(),
             reference_spp: 0,
             reference_primal_spp: 0,
             protocol: Protocol::Default,
@@ -362,4 +377,56 @@ pub struct FinalImages {
     pub target: Image,
     /// Each run's after its budget, as (name, image), in the order of the runs.
     pub runs: Vec<(String, Image)>,
+}
+
+/// A geometric mean of per-seed ratios with its 90% interval (`bench --seeds`; see
+/// [`super::seeds`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Interval {
+    /// The geometric mean.
+    pub mean: f64,
+    /// The interval's lower end (equal to `mean` with one seed).
+    pub low: f64,
+    /// Its upper end.
+    pub high: f64,
+    /// Seeds it is over.
+    pub n: u32,
+}
+
+/// One contender over the seeds of a scene.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SeededRun {
+    /// Its name in the runs' tables.
+    pub name: String,
+    /// Its key.
+    pub key: String,
+    /// Observed-texel RMSE at the end over the baseline's (with Adam).
+    pub texture: Option<Interval>,
+    /// Image relMSE at the end over the baseline's.
+    pub image: Option<Interval>,
+    /// How much sooner it reaches the baseline's final observed-texel RMSE: the baseline's
+    /// budget over the time at which this run's curve first gets there (linear between the
+    /// curve's points); over the seeds where it does.
+    pub sooner: Option<Interval>,
+    /// Seeds in which it reaches the baseline's final error at all.
+    pub reached: u32,
+}
+
+/// A scene over its seeds.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SeededScene {
+    /// The scene's name.
+    pub name: String,
+    /// Seeds run.
+    pub seeds: u32,
+    /// Every contender but the baseline with Adam (the reference of the ratios).
+    pub runs: Vec<SeededRun>,
+    /// The default configuration's key, when it ran.
+    pub default_key: Option<String>,
+    /// The contender other than the default with the lowest geometric-mean texture error.
+    pub best: Option<String>,
+    /// The default's observed-texel RMSE over that contender's, paired per seed.
+    pub default_over_best_texture: Option<Interval>,
+    /// The default's image relMSE over that contender's, paired per seed.
+    pub default_over_best_image: Option<Interval>,
 }

@@ -247,6 +247,10 @@ fn reconstruction_markdown(r: &BenchReport) -> String {
 /// Both tables, as `psrestir bench` prints them.
 pub fn table(r: &BenchReport) -> String {
     let mut s = String::new();
+    if !r.over_seeds.is_empty() {
+        s.push_str(&crate::bench::seeds::over_seeds_table(&r.over_seeds));
+        s.push('\n');
+    }
     if r.scenes.iter().any(|x| x.optimization.is_some()) {
         s.push_str(&optimization_table(r));
         s.push('\n');
@@ -366,7 +370,10 @@ pub const HEADLINE_COLUMNS: &str = "| scene | the default (what `auto` chose) | 
 /// and the budget. docs/results.md holds every run.
 pub fn headline_table(r: &BenchReport) -> String {
     let mut s = format!("{HEADLINE_COLUMNS}\n|---|---|---|---|---|\n");
-    for x in &r.scenes {
+    if !r.over_seeds.is_empty() {
+        s = crate::bench::seeds::headline_rows(&r.over_seeds);
+    }
+    for x in r.scenes.iter().filter(|_| r.over_seeds.is_empty()) {
         let Some(o) = &x.optimization else { continue };
         let Some(d) = o.auto.default_run.as_ref() else {
             continue;
@@ -375,11 +382,7 @@ pub fn headline_table(r: &BenchReport) -> String {
         let Some(default) = run(&d.name) else {
             continue;
         };
-        let chose = d
-            .name
-            .strip_prefix("default (auto: ")
-            .and_then(|n| n.strip_suffix(')'))
-            .unwrap_or(&d.name);
+        let chose = crate::bench::Contender::chosen(&d.name);
         let best = run(&d.best).map_or("–".to_string(), |b| {
             format!("{} (**{}**)", b.name, ratio(b.texture_rmse_observed_ratio))
         });
@@ -389,6 +392,14 @@ pub fn headline_table(r: &BenchReport) -> String {
             x.name,
             ratio(default.texture_rmse_observed_ratio),
             ratio(default.image_relmse_ratio),
+        );
+    }
+    if !r.over_seeds.is_empty() {
+        let _ = write!(
+            s,
+            "\nGeometric means over {} seeds per scene, the contenders paired within a seed \
+             (same targets, same start), with 90% intervals; bold where the interval excludes 1.",
+            r.seeds
         );
     }
     let _ = write!(
@@ -514,6 +525,20 @@ pub fn report_markdown(r: &BenchReport) -> String {
         r.budget_s,
         r.eval_spp,
     );
+    if !r.over_seeds.is_empty() {
+        let _ = writeln!(
+            md,
+            "## Over {} seeds\n\nEvery contender ran each scene with {} seeds (new targets' \
+             noise, new sampling), paired within a seed; each ratio is the geometric mean of \
+             the per-seed ratios with its 90% interval (Student's t on their logarithms), bold \
+             where the interval excludes 1. × sooner: the baseline's budget over the time at \
+             which the contender's curve first reaches the baseline's final observed-texel \
+             RMSE, over the seeds where it does.\n",
+            r.seeds, r.seeds
+        );
+        md.push_str(&crate::bench::seeds::over_seeds_table(&r.over_seeds));
+        md.push('\n');
+    }
     if r.scenes.iter().any(|x| x.optimization.is_some()) {
         md.push_str(&reconstruction_markdown(r));
     }
@@ -644,7 +669,13 @@ mod tests {
         let readme = std::fs::read_to_string(format!("{root}/README.md")).unwrap();
         let block = &readme[readme.find(HEADLINE_BEGIN).unwrap() + HEADLINE_BEGIN.len()..];
         let block = &block[..block.find(HEADLINE_END).unwrap()];
-        assert_eq!(block.trim_start().lines().next(), Some(HEADLINE_COLUMNS));
+        let header = block.trim_start().lines().next();
+        assert!(
+            [HEADLINE_COLUMNS, crate::bench::seeds::HEADLINE_COLUMNS]
+                .iter()
+                .any(|h| header == Some(*h)),
+            "{header:?}"
+        );
         // One row per scene, not one per run.
         assert!(
             block.lines().filter(|l| l.starts_with("| ")).count() <= 12,

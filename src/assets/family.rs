@@ -1,0 +1,881 @@
+//! The scene family (`psrestir make-scenes --family train|test`): tasks drawn from seeds,
+//! varied the way users' scenes vary, to choose rules and constants on one range of seeds
+//! ([`TRAIN`]) and to report them on another that is never tuned on ([`TEST`]). A member is
+//! a shape (a sphere, a rounded box, a torus, a relief wall, a room lit through an opening,
+//! a cube with a seamed UV atlas), one optimized slot with a procedural ground truth (base
+//! color, roughness, metallic, or a normal map with relief), lights (point, spot, sun,
+//! emissive area, environment; the room's back wall only by bounced light), a path depth of
+//! 1 to 3, one to four cameras, and sampling from sparse to dense (texture size against
+//! image size and samples per pixel). Everything is a pure function of the seed: a member is
+//! the same files on every machine.
+use super::authoring::GltfBuilder;
+use super::bench_scenes::{area_light, camera, hash};
+use super::bundled::{look_at, srgb8, write_sky};
+use crate::image_io::write_atomic;
+use crate::vocab::Slot;
+use crate::{Error, Result};
+use glam::Vec3;
+use serde_json::json;
+use std::f32::consts::PI;
+use std::path::{Path, PathBuf};
+
+/// Seeds for choosing rules and constants.
+pub const TRAIN: std::ops::Range<u32> = 0..1000;
+/// Seeds only reported, never tuned on.
+pub const TEST: std::ops::Range<u32> = 1000..2000;
+
+/// Which range of seeds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Split {
+    /// [`TRAIN`].
+    Train,
+    /// [`TEST`].
+    Test,
+}
+
+impl Split {
+    /// `train` or `test`.
+    pub fn parse(s: &str) -> std::result::Result<Split, String> {
+        match s {
+            "train" => Ok(Split::Train),
+            "test" => Ok(Split::Test),
+            _ => Err(format!("`{s}` is not a split of the family (train, test)")),
+        }
+    }
+
+    /// Its name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Split::Train => "train",
+            Split::Test => "test",
+        }
+    }
+
+    /// Its seeds.
+    pub fn seeds(self) -> std::ops::Range<u32> {
+        match self {
+            Split::Train => TRAIN,
+            Split::Test => TEST,
+        }
+    }
+}
+
+/// The shape whose texture is optimized.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Shape {
+    /// A UV sphere on a floor.
+    Sphere,
+    /// A superellipsoid close to a box with rounded edges, on a floor.
+    RoundedBox,
+    /// A torus on a floor.
+    Torus,
+    /// A flat wall whose detail is in its texture (and its normal map's relief).
+    Relief,
+    /// The back wall of a closed room lit only through an opening in its side: no light
+    /// reaches the wall but by bounces (depth 3).
+    Room,
+    /// A cube whose six faces share one texture as a 3 x 2 atlas: seams at every edge.
+    SeamedCube,
+}
+
+/// A kind of light.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Light {
+    /// A point light.
+    Point,
+    /// A spot light aimed at the shape.
+    Spot,
+    /// A directional light.
+    Sun,
+    /// An emissive square.
+    Area,
+    /// The sky environment map.
+    Environment,
+}
+
+/// One member of the family: what its seed drew.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Member {
+    /// Its seed.
+    pub seed: u32,
+    /// The shape.
+    pub shape: Shape,
+    /// The optimized slot.
+    pub slot: Slot,
+    /// Its lights.
+    pub lights: Vec<Light>,
+    /// Path vertices (max_depth).
+    pub depth: u32,
+    /// Cameras.
+    pub cameras: u32,
+    /// The optimized texture's side, texels.
+    pub resolution: u32,
+    /// The images' side, pixels.
+    pub image: u32,
+    /// Primal samples per pixel.
+    pub primal_spp: u32,
+    /// Gradient samples per pixel.
+    pub gradient_spp: u32,
+    /// The run's time budget, seconds of optimization.
+    pub budget_s: f64,
+}
+
+/// A deterministic stream of numbers from a seed (SplitMix64).
+struct Draw(u64);
+
+impl Draw {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// In [0, 1).
+    fn unit(&mut self) -> f32 {
+        (self.next() >> 40) as f32 / (1u64 << 24) as f32
+    }
+    fn range(&mut self, a: f32, b: f32) -> f32 {
+        a + (b - a) * self.unit()
+    }
+    fn pick<T: Copy>(&mut self, from: &[T]) -> T {
+        from[(self.next() % from.len() as u64) as usize]
+    }
+}
+
+impl Shape {
+    /// Every shape.
+    pub const ALL: [Shape; 6] = [
+        Shape::Sphere,
+        Shape::RoundedBox,
+        Shape::Torus,
+        Shape::Relief,
+        Shape::Room,
+        Shape::SeamedCube,
+    ];
+}
+
+impl Member {
+    /// What `seed` draws.
+    pub fn draw(seed: u32) -> Member {
+        let mut d = Draw(0x5EED_0000_0000 ^ seed as u64);
+        use Shape::*;
+        let shape = d.pick(&Shape::ALL);
+        let slot = if shape == Room {
+            d.pick(&[Slot::BaseColor, Slot::BaseColor, Slot::Roughness])
+        } else {
+            d.pick(&[
+                Slot::BaseColor,
+                Slot::BaseColor,
+                Slot::Roughness,
+                Slot::Metallic,
+                Slot::Normal,
+                Slot::Normal,
+            ])
+        };
+        let lights = if shape == Room {
+            vec![Light::Sun]
+        } else {
+            use Light::*;
+            let first = d.pick(&[Point, Spot, Sun, Area, Environment]);
+            let second = d.pick(&[Point, Spot, Sun, Area, Environment]);
+            if d.unit() < 0.5 || first == second {
+                vec![first]
+            } else {
+                vec![first, second]
+            }
+        };
+        let depth = if shape == Room {
+            3
+        } else {
+            d.pick(&[1, 1, 2, 3])
+        };
+        let cameras = if shape == Room {
+            d.pick(&[1, 2])
+        } else {
+            d.pick(&[1, 2, 3, 4])
+        };
+        let resolution = d.pick(&[64, 128, 128, 256, 256, 512]);
+        let image = d.pick(&[64, 96, 128]);
+        let primal_spp = d.pick(&[1, 2, 4]);
+        let gradient_spp = d.pick(&[1, 1, 2, 4]);
+        let budget_s =
+            20.0 + if depth == 3 { 10.0 } else { 0.0 } + if resolution == 512 { 10.0 } else { 0.0 };
+        Member {
+            seed,
+            shape,
+            slot,
+            lights,
+            depth,
+            cameras,
+            resolution,
+            image,
+            primal_spp,
+            gradient_spp,
+            budget_s,
+        }
+    }
+
+    /// Its folder's name: the seed and what it drew (`1003-torus-roughness-spot`).
+    pub fn name(&self) -> String {
+        let lights: Vec<&str> = self.lights.iter().map(|l| light_name(*l)).collect();
+        format!(
+            "{}-{}-{}-{}",
+            self.seed,
+            shape_name(self.shape),
+            self.slot.name(),
+            lights.join("+")
+        )
+    }
+}
+
+fn shape_name(s: Shape) -> &'static str {
+    match s {
+        Shape::Sphere => "sphere",
+        Shape::RoundedBox => "rounded_box",
+        Shape::Torus => "torus",
+        Shape::Relief => "relief",
+        Shape::Room => "room",
+        Shape::SeamedCube => "seamed_cube",
+    }
+}
+
+fn light_name(l: Light) -> &'static str {
+    match l {
+        Light::Point => "point",
+        Light::Spot => "spot",
+        Light::Sun => "sun",
+        Light::Area => "area",
+        Light::Environment => "environment",
+    }
+}
+
+/// Write `count` members of `split` (its first seeds) into `dir/<split>/<name>/`; their
+/// task files' paths.
+pub fn write_split(dir: &Path, split: Split, count: u32) -> Result<Vec<PathBuf>> {
+    let seeds = split.seeds();
+    if count == 0 || count > seeds.len() as u32 {
+        return Err(Error::Invalid(format!(
+            "make-scenes --family: --count must be in [1, {}], not {count}",
+            seeds.len()
+        )));
+    }
+    let mut tasks = Vec::new();
+    for seed in seeds.start..seeds.start + count {
+        let m = Member::draw(seed);
+        let d = dir.join(split.name()).join(m.name());
+        write_member(&d, &m)?;
+        tasks.push(d.join("task.toml"));
+    }
+    Ok(tasks)
+}
+
+/// A procedural field in [0, 1] over (u, v): value noise in octaves, stripes warped by noise,
+/// a checker softened by noise, or spots; its frequency and angle drawn from the seed.
+struct Pattern {
+    kind: u32,
+    freq: f32,
+    angle: f32,
+    key: u32,
+}
+
+impl Pattern {
+    fn draw(d: &mut Draw) -> Pattern {
+        Pattern {
+            kind: (d.next() % 4) as u32,
+            freq: d.range(3.0, 9.0),
+            angle: d.range(0.0, PI),
+            key: d.next() as u32,
+        }
+    }
+
+    /// Smooth value noise at frequency f.
+    fn noise(&self, u: f32, v: f32, f: f32, octave: u32) -> f32 {
+        let (x, y) = (u * f, v * f);
+        let (i, j) = (x.floor(), y.floor());
+        let (fx, fy) = (x - i, y - j);
+        let s = |t: f32| t * t * (3.0 - 2.0 * t);
+        let k = self.key.wrapping_add(octave.wrapping_mul(7919));
+        let h = |a: f32, b: f32| hash((a as i32 as u32).wrapping_add(k), (b as i32 as u32) ^ k);
+        let top = h(i, j) + (h(i + 1.0, j) - h(i, j)) * s(fx);
+        let bottom = h(i, j + 1.0) + (h(i + 1.0, j + 1.0) - h(i, j + 1.0)) * s(fx);
+        top + (bottom - top) * s(fy)
+    }
+
+    fn fbm(&self, u: f32, v: f32) -> f32 {
+        let (mut sum, mut amp, mut f) = (0.0, 0.5, self.freq);
+        for o in 0..4 {
+            sum += amp * self.noise(u, v, f, o);
+            amp *= 0.5;
+            f *= 2.0;
+        }
+        sum / 0.9375
+    }
+
+    fn at(&self, u: f32, v: f32) -> f32 {
+        let (c, s) = (self.angle.cos(), self.angle.sin());
+        let along = u * c + v * s;
+        match self.kind {
+            0 => self.fbm(u, v),
+            1 => 0.5 + 0.5 * (2.0 * PI * self.freq * along + 3.0 * self.fbm(u, v)).sin(),
+            2 => {
+                let checker = ((u * self.freq).floor() + (v * self.freq).floor()) as i32 & 1;
+                0.25 + 0.5 * checker as f32 + 0.25 * (self.fbm(u, v) - 0.5)
+            }
+            _ => {
+                let (x, y) = (u * self.freq, v * self.freq);
+                let (cx, cy) = (x.floor(), y.floor());
+                let r = 0.15 + 0.3 * hash(cx as u32 ^ self.key, cy as u32);
+                let dist = ((x - cx - 0.5).powi(2) + (y - cy - 0.5).powi(2)).sqrt();
+                1.0 - smoothstep(r - 0.05, r + 0.05, dist)
+            }
+        }
+        .clamp(0.0, 1.0)
+    }
+}
+
+fn smoothstep(a: f32, b: f32, x: f32) -> f32 {
+    let t = ((x - a) / (b - a)).clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+fn unit8(v: f32) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
+}
+
+/// The ground truth of `slot` as RGBA8 texels (`res` x `res`): base color in sRGB, roughness
+/// in G and metallic in B (glTF's metallicRoughness), or a tangent-space normal map.
+fn truth(slot: Slot, res: u32, d: &mut Draw) -> Vec<[u8; 4]> {
+    let p = Pattern::draw(d);
+    let palette: Vec<[f32; 3]> = (0..3)
+        .map(|_| {
+            [
+                d.range(0.08, 0.85),
+                d.range(0.08, 0.85),
+                d.range(0.08, 0.85),
+            ]
+        })
+        .collect();
+    let strength = d.range(0.02, 0.05);
+    let mut out = Vec::with_capacity((res * res) as usize);
+    let texel = 1.0 / res as f32;
+    for y in 0..res {
+        for x in 0..res {
+            let (u, v) = ((x as f32 + 0.5) * texel, (y as f32 + 0.5) * texel);
+            let t = p.at(u, v);
+            out.push(match slot {
+                Slot::BaseColor => {
+                    let (a, b, w) = if t < 0.5 {
+                        (palette[0], palette[1], 2.0 * t)
+                    } else {
+                        (palette[1], palette[2], 2.0 * t - 1.0)
+                    };
+                    let c = |k: usize| srgb8(a[k] + (b[k] - a[k]) * w);
+                    [c(0), c(1), c(2), 255]
+                }
+                Slot::Roughness => [0, unit8(0.15 + 0.75 * t), 0, 255],
+                Slot::Metallic => [0, unit8(0.45), unit8(smoothstep(0.4, 0.6, t)), 255],
+                Slot::Normal => {
+                    // The relief's slopes by central differences, in height per unit of uv
+                    // over the texture's strength: tangent X along u, Y against v (glTF).
+                    let e = texel;
+                    let du = (p.at(u + e, v) - p.at(u - e, v)) / (2.0 * e);
+                    let dv = (p.at(u, v + e) - p.at(u, v - e)) / (2.0 * e);
+                    let n = Vec3::new(-strength * du, strength * dv, 1.0).normalize();
+                    [
+                        unit8(0.5 + 0.5 * n.x),
+                        unit8(0.5 + 0.5 * n.y),
+                        unit8(0.5 + 0.5 * n.z),
+                        255,
+                    ]
+                }
+            });
+        }
+    }
+    out
+}
+
+/// Positions, normals, uvs and indices of a surface over a (nu x nv) grid of (u, v) in
+/// [0, 1]², each triangle wound counter-clockwise about its vertices' normals and those of
+/// no area (at a pole) left out.
+type Mesh = (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<[f32; 2]>, Vec<u32>);
+
+fn grid_mesh(
+    nu: u32,
+    nv: u32,
+    at: impl Fn(f32, f32) -> (Vec3, Vec3),
+    uv_of: impl Fn(f32, f32) -> [f32; 2],
+) -> Mesh {
+    let (mut p, mut n, mut t, mut idx) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for j in 0..=nv {
+        for i in 0..=nu {
+            let (u, v) = (i as f32 / nu as f32, j as f32 / nv as f32);
+            let (pos, nrm) = at(u, v);
+            p.push(pos.to_array());
+            n.push(nrm.normalize_or(Vec3::Y).to_array());
+            t.push(uv_of(u, v));
+        }
+    }
+    let w = nu + 1;
+    for j in 0..nv {
+        for i in 0..nu {
+            let a = j * w + i;
+            for tri in [[a, a + w, a + 1], [a + 1, a + w, a + w + 1]] {
+                push_wound(&p, &n, &mut idx, tri);
+            }
+        }
+    }
+    (p, n, t, idx)
+}
+
+/// Append `tri` wound counter-clockwise about its vertices' mean normal (none where it has
+/// no area).
+fn push_wound(p: &[[f32; 3]], n: &[[f32; 3]], idx: &mut Vec<u32>, tri: [u32; 3]) {
+    let v = |k: usize| Vec3::from(p[tri[k] as usize]);
+    let face = (v(1) - v(0)).cross(v(2) - v(0));
+    if face.length() < 1e-9 {
+        return;
+    }
+    let mean: Vec3 = tri.iter().map(|&k| Vec3::from(n[k as usize])).sum();
+    if face.dot(mean) < 0.0 {
+        idx.extend_from_slice(&[tri[0], tri[2], tri[1]]);
+    } else {
+        idx.extend_from_slice(&tri);
+    }
+}
+
+/// The shape's mesh, centred at `c`, about a metre across.
+fn shape_mesh(shape: Shape, c: Vec3) -> Mesh {
+    let identity = |u: f32, v: f32| [u, v];
+    match shape {
+        Shape::Sphere => grid_mesh(
+            96,
+            48,
+            |u, v| {
+                let (th, ph) = (v * PI, u * 2.0 * PI);
+                let d = Vec3::new(th.sin() * ph.cos(), th.cos(), -th.sin() * ph.sin());
+                (c + 0.9 * d, d)
+            },
+            identity,
+        ),
+        Shape::RoundedBox => {
+            // |x|^q + |y|^q + |z|^q = 1 with q = 2 / e: the normal is the gradient.
+            let e = 0.3f32;
+            let s = |w: f32, e: f32| w.signum() * w.abs().powf(e);
+            grid_mesh(
+                96,
+                64,
+                move |u, v| {
+                    let (th, ph) = (v * PI, u * 2.0 * PI);
+                    let d = Vec3::new(
+                        s(th.sin(), e) * s(ph.cos(), e),
+                        s(th.cos(), e),
+                        -s(th.sin(), e) * s(ph.sin(), e),
+                    );
+                    let q = 2.0 / e;
+                    let g = Vec3::new(s(d.x, q - 1.0), s(d.y, q - 1.0), s(d.z, q - 1.0));
+                    (c + 0.75 * d, if g.length() > 0.0 { g } else { d })
+                },
+                identity,
+            )
+        }
+        Shape::Torus => grid_mesh(
+            96,
+            48,
+            |u, v| {
+                let (a, b) = (u * 2.0 * PI, v * 2.0 * PI);
+                let ring = Vec3::new(a.cos(), 0.0, -a.sin());
+                let d = ring * b.cos() + Vec3::Y * b.sin();
+                (c + 0.75 * ring + 0.32 * d, d)
+            },
+            identity,
+        ),
+        Shape::Relief => grid_mesh(
+            1,
+            1,
+            |u, v| (c + Vec3::new(2.0 * u - 1.0, 1.0 - 2.0 * v, 0.0), Vec3::Z),
+            identity,
+        ),
+        Shape::SeamedCube => seamed_cube(c, 0.7),
+        Shape::Room => grid_mesh(
+            1,
+            1,
+            |u, v| (Vec3::new(3.6 * u - 1.8, 2.8 - 2.6 * v, -1.98), Vec3::Z),
+            identity,
+        ),
+    }
+}
+
+/// A cube of half-side `h` whose faces are the cells of a 3 x 2 atlas (a small gutter
+/// between cells): every edge is a seam in texture space.
+fn seamed_cube(c: Vec3, h: f32) -> Mesh {
+    let (mut p, mut n, mut t, mut idx) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let faces = [
+        (Vec3::X, Vec3::NEG_Z, Vec3::Y),
+        (Vec3::NEG_X, Vec3::Z, Vec3::Y),
+        (Vec3::Y, Vec3::X, Vec3::NEG_Z),
+        (Vec3::NEG_Y, Vec3::X, Vec3::Z),
+        (Vec3::Z, Vec3::X, Vec3::Y),
+        (Vec3::NEG_Z, Vec3::NEG_X, Vec3::Y),
+    ];
+    for (k, (nrm, right, up)) in faces.into_iter().enumerate() {
+        let (cu, cv) = ((k % 3) as f32 / 3.0, (k / 3) as f32 / 2.0);
+        let base = p.len() as u32;
+        for (a, b) in [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)] {
+            let pos = c + h * (nrm + (2.0 * a - 1.0) * right + (2.0 * b - 1.0) * up);
+            p.push(pos.to_array());
+            n.push(nrm.to_array());
+            let g = 0.02;
+            t.push([
+                cu + (g + a * (1.0 - 2.0 * g)) / 3.0,
+                cv + (g + (1.0 - b) * (1.0 - 2.0 * g)) / 2.0,
+            ]);
+        }
+        for tri in [[base, base + 1, base + 2], [base, base + 2, base + 3]] {
+            push_wound(&p, &n, &mut idx, tri);
+        }
+    }
+    (p, n, t, idx)
+}
+
+/// A plain double-sided material.
+fn plain(b: &mut GltfBuilder, name: &str, color: [f32; 3], roughness: f32) -> usize {
+    b.add_material(json!({
+        "name": name, "doubleSided": true,
+        "pbrMetallicRoughness": {"baseColorFactor": [color[0], color[1], color[2], 1.0],
+            "metallicFactor": 0.0, "roughnessFactor": roughness}
+    }))
+}
+
+/// A flat rectangle with corners `o`, `o + a`, `o + a + b`, `o + b`, facing `nrm`.
+fn panel(b: &mut GltfBuilder, name: &str, (o, a, bb): (Vec3, Vec3, Vec3), mat: usize) -> usize {
+    let p: Vec<[f32; 3]> = [o, o + a, o + a + bb, o + bb]
+        .iter()
+        .map(|v| v.to_array())
+        .collect();
+    let nrm = a.cross(bb).normalize();
+    let n = vec![nrm.to_array(); 4];
+    let mut idx = Vec::new();
+    push_wound(&p, &n, &mut idx, [0, 1, 2]);
+    push_wound(&p, &n, &mut idx, [0, 2, 3]);
+    let mesh = b.add_mesh(name, &p, Some(&n), None, Some(&idx), Some(mat));
+    b.add_node(json!({"name": name, "mesh": mesh}))
+}
+
+/// The closed room around the back wall (4 x 3 x 4 m), its right wall open between 1.2 and
+/// 2.4 m high and ±0.8 m deep; a sun through the opening lights a patch of the floor only.
+fn room_shell(b: &mut GltfBuilder) -> Vec<usize> {
+    let wall = plain(b, "walls", [0.75, 0.73, 0.7], 0.8);
+    let floor = plain(b, "floor", [0.8, 0.78, 0.74], 0.7);
+    let (x, y, z) = (Vec3::X, Vec3::Y, Vec3::Z);
+    let mut nodes = vec![
+        panel(
+            b,
+            "floor",
+            (Vec3::new(-2.0, 0.0, 2.0), 4.0 * x, -4.0 * z),
+            floor,
+        ),
+        panel(
+            b,
+            "ceiling",
+            (Vec3::new(-2.0, 3.0, -2.0), 4.0 * x, 4.0 * z),
+            wall,
+        ),
+        panel(
+            b,
+            "back",
+            (Vec3::new(-2.0, 0.0, -2.0), 4.0 * x, 3.0 * y),
+            wall,
+        ),
+        panel(
+            b,
+            "front",
+            (Vec3::new(2.0, 0.0, 2.0), -4.0 * x, 3.0 * y),
+            wall,
+        ),
+        panel(
+            b,
+            "left",
+            (Vec3::new(-2.0, 0.0, 2.0), -4.0 * z, 3.0 * y),
+            wall,
+        ),
+    ];
+    // The right wall (x = 2) around its opening.
+    let r = Vec3::new(2.0, 0.0, 0.0);
+    for (name, z0, z1, y0, y1) in [
+        ("right_low", -2.0, 2.0, 0.0, 1.2),
+        ("right_high", -2.0, 2.0, 2.4, 3.0),
+        ("right_back", -2.0, -0.8, 1.2, 2.4),
+        ("right_front", 0.8, 2.0, 1.2, 2.4),
+    ] {
+        let o = r + Vec3::new(0.0, y0, z0);
+        nodes.push(panel(b, name, (o, (y1 - y0) * y, (z1 - z0) * z), wall));
+    }
+    nodes
+}
+
+/// Write member `m` into `dir`: `scene.gltf` (the truth's textures in it), its textures,
+/// `sky.exr` where it is lit by the environment, and `task.toml`, which starts the optimized
+/// texture at a constant and leaves every choice to `auto`.
+pub fn write_member(dir: &Path, m: &Member) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::file(dir, e.to_string()))?;
+    let mut d = Draw(0xFA11_0000_0000 ^ m.seed as u64);
+    let mut b = GltfBuilder::new();
+    b.use_extension("KHR_materials_emissive_strength");
+    let c = if m.shape == Shape::Relief || m.shape == Shape::Room {
+        Vec3::new(0.0, 1.3, 0.0)
+    } else {
+        Vec3::new(0.0, 0.95, 0.0)
+    };
+    // The optimized material: the truth in its slot, constants in the others.
+    let texels = truth(m.slot, m.resolution, &mut d);
+    let png = super::authoring::png_bytes(m.resolution, m.resolution, &texels)?;
+    write_atomic(&dir.join("truth.png"), &png)?;
+    let ti = b.add_image_uri("truth", "truth.png");
+    let tex = json!({"index": b.add_texture(ti, None)});
+    let base = [d.range(0.2, 0.8), d.range(0.2, 0.8), d.range(0.2, 0.8)];
+    let mut pbr = json!({"baseColorFactor": [base[0], base[1], base[2], 1.0],
+        "metallicFactor": 0.0, "roughnessFactor": d.range(0.3, 0.7)});
+    let mut mat = json!({"name": "target", "doubleSided": true});
+    match m.slot {
+        Slot::BaseColor => pbr["baseColorTexture"] = tex,
+        Slot::Roughness => {
+            pbr["metallicRoughnessTexture"] = tex;
+            pbr["roughnessFactor"] = json!(1.0);
+        }
+        Slot::Metallic => {
+            pbr["metallicRoughnessTexture"] = tex;
+            pbr["metallicFactor"] = json!(1.0);
+            pbr["roughnessFactor"] = json!(1.0);
+        }
+        Slot::Normal => mat["normalTexture"] = tex,
+    }
+    mat["pbrMetallicRoughness"] = pbr;
+    let target = b.add_material(mat);
+    let (p, n, uv, idx) = shape_mesh(m.shape, c);
+    let mesh = b.add_mesh("target", &p, Some(&n), Some(&uv), Some(&idx), Some(target));
+    let mut nodes = vec![b.add_node(json!({"name": "target", "mesh": mesh}))];
+    let mut environment = false;
+    let cameras_from = d.range(0.0, 2.0 * PI);
+    if m.shape == Shape::Room {
+        nodes.extend(room_shell(&mut b));
+        let sun = b.add_light(
+            json!({"name": "sun", "type": "directional", "color": [1.0, 0.95, 0.85], "intensity": 40.0}),
+        );
+        // Travelling in the plane z = 0 (−x, down): it never reaches the back wall.
+        nodes.push(b.add_node(json!({"name": "sun",
+            "matrix": look_at(Vec3::new(4.0, 4.8, 0.0), Vec3::ZERO, Vec3::Y),
+            "extensions": {"KHR_lights_punctual": {"light": sun}}})));
+    } else {
+        if m.shape != Shape::Relief {
+            let floor = plain(&mut b, "floor", [0.45, 0.45, 0.45], 0.9);
+            let s = 4.0;
+            let (x, z) = (Vec3::X, Vec3::Z);
+            nodes.push(panel(
+                &mut b,
+                "floor",
+                (Vec3::new(-s, 0.0, s), 2.0 * s * x, -2.0 * s * z),
+                floor,
+            ));
+        }
+        for (k, l) in m.lights.iter().enumerate() {
+            // On the side the cameras' ring starts from, so that the first camera sees lit
+            // texels.
+            let az = cameras_from + d.range(-1.2, 1.2);
+            let el = d.range(0.5, 1.2);
+            // In front of the relief wall (+z), anywhere above the others.
+            let az = if m.shape == Shape::Relief {
+                PI / 2.0 + 0.9 * (az / PI - 1.0)
+            } else {
+                az
+            };
+            let dir_to = Vec3::new(el.cos() * az.cos(), el.sin(), el.cos() * az.sin());
+            let name = format!("light{k}");
+            match l {
+                Light::Point | Light::Spot | Light::Sun => {
+                    let (kind, intensity, at) = match l {
+                        Light::Point => ("point", 14.0, c + 3.0 * dir_to),
+                        Light::Spot => ("spot", 40.0, c + 4.0 * dir_to),
+                        _ => ("directional", 2.5, c + 4.0 * dir_to),
+                    };
+                    let mut light = json!({"name": name, "type": kind,
+                        "color": [1.0, d.range(0.85, 1.0), d.range(0.75, 1.0)],
+                        "intensity": intensity});
+                    if kind == "spot" {
+                        light["spot"] = json!({"innerConeAngle": 0.3, "outerConeAngle": 0.6});
+                    }
+                    let li = b.add_light(light);
+                    nodes.push(b.add_node(json!({"name": name,
+                        "matrix": look_at(at, c, if dir_to.y > 0.99 { Vec3::Z } else { Vec3::Y }),
+                        "extensions": {"KHR_lights_punctual": {"light": li}}})));
+                }
+                Light::Area => nodes.push(area_light(
+                    &mut b,
+                    &name,
+                    (c + 3.0 * dir_to).to_array(),
+                    c.to_array(),
+                    0.8,
+                    [1.0, 0.95, 0.9],
+                    30.0,
+                )),
+                Light::Environment => environment = true,
+            }
+        }
+    }
+    // Cameras: inside the room facing the back wall; in front of the relief; else on a
+    // ring around the shape.
+    let mut names = Vec::new();
+    let start = cameras_from;
+    for k in 0..m.cameras {
+        let name = format!("camera{k}");
+        let (eye, look) = match m.shape {
+            Shape::Room => (
+                Vec3::new(d.range(-0.8, 0.8), d.range(1.2, 1.8), 1.8),
+                Vec3::new(0.0, 1.4, -2.0),
+            ),
+            Shape::Relief => {
+                let az = PI / 2.0 + d.range(-0.7, 0.7);
+                let el = d.range(-0.3, 0.5);
+                (
+                    c + 3.3 * Vec3::new(el.cos() * az.cos(), el.sin(), el.cos() * az.sin()),
+                    c,
+                )
+            }
+            _ => {
+                let az = start + k as f32 * 2.0 * PI / m.cameras as f32 + d.range(-0.3, 0.3);
+                let el = d.range(0.15, 0.8);
+                (
+                    c + 3.4 * Vec3::new(el.cos() * az.cos(), el.sin(), el.cos() * az.sin()),
+                    c,
+                )
+            }
+        };
+        let fov = if m.shape == Shape::Room { 1.1 } else { 0.7 };
+        nodes.push(camera(&mut b, &name, fov, eye.to_array(), look.to_array()));
+        names.push(format!("\"{name}\""));
+    }
+    b.set_scene(&nodes);
+    b.write_gltf(&dir.join("scene.gltf"), false)?;
+    if environment {
+        write_sky(&dir.join("sky.exr"))?;
+    }
+    let init = match m.slot {
+        Slot::BaseColor => "[0.5, 0.5, 0.5]",
+        Slot::Roughness | Slot::Metallic => "0.5",
+        Slot::Normal => "[0.5, 0.5, 1.0]",
+    };
+    let lights: Vec<&str> = m.lights.iter().map(|l| light_name(*l)).collect();
+    let text =
+        format!(
+        "# Scene family member {seed} ({split} split): a {shape}, its {slot} recovered, lit by \
+         {lights}; paths of {depth} vertices.\n# Written by `psrestir make-scenes --family`; \
+         paths are relative to this file. Every choice the task leaves out is `auto`'s.\n\
+         scene = \"scene.gltf\"\ncameras = [{cameras}]\nwidth = {image}\nheight = {image}\n\
+         seed = {seed}\nmax_depth = {depth}\n{env}\
+         output = \"out/family/{name}\"\n\n[target]\nscene = \"scene.gltf\"\nspp = 256\n\n\
+         [optimizer]\ntime_budget_s = {budget}\nprimal_spp = {primal}\ngradient_spp = {grad}\n\n\
+         [[textures]]\nmaterial = \"target\"\nslot = \"{slot}\"\nresolution = [{res}, {res}]\n\
+         init = {init}\n",
+        seed = m.seed,
+        split = if TEST.contains(&m.seed) { "test" } else { "train" },
+        shape = shape_name(m.shape).replace('_', " "),
+        slot = m.slot.name(),
+        lights = lights.join(" and "),
+        depth = m.depth,
+        cameras = names.join(", "),
+        image = m.image,
+        env = if environment {
+            "env = \"sky.exr\"\n"
+        } else {
+            "default_environment = false\n"
+        },
+        name = m.name(),
+        budget = m.budget_s,
+        primal = m.primal_spp,
+        grad = m.gradient_spp,
+        res = m.resolution,
+    );
+    write_atomic(&dir.join("task.toml"), text.as_bytes())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A seed draws the same member every time, the splits do not overlap, and the first
+    /// seeds of each split cover every shape, slot and light kind.
+    #[test]
+    fn members_are_deterministic_and_varied() {
+        assert_eq!(Member::draw(1003), Member::draw(1003));
+        assert!(TRAIN.end <= TEST.start);
+        for split in [Split::Train, Split::Test] {
+            let members: Vec<Member> = split.seeds().take(60).map(Member::draw).collect();
+            for shape in Shape::ALL {
+                assert!(
+                    members.iter().any(|m| m.shape == shape),
+                    "{split:?} lacks {shape:?}"
+                );
+            }
+            for slot in [
+                Slot::BaseColor,
+                Slot::Roughness,
+                Slot::Metallic,
+                Slot::Normal,
+            ] {
+                assert!(
+                    members.iter().any(|m| m.slot == slot),
+                    "{split:?} lacks {slot:?}"
+                );
+            }
+            for l in [
+                Light::Point,
+                Light::Spot,
+                Light::Sun,
+                Light::Area,
+                Light::Environment,
+            ] {
+                assert!(
+                    members.iter().any(|m| m.lights.contains(&l)),
+                    "{split:?} lacks {l:?}"
+                );
+            }
+            for depth in 1..=3 {
+                assert!(members.iter().any(|m| m.depth == depth));
+            }
+            assert!(members
+                .iter()
+                .all(|m| m.shape != Shape::Room || m.depth == 3));
+        }
+    }
+
+    /// Every triangle of every shape is wound counter-clockwise about its normals.
+    #[test]
+    fn meshes_are_wound_about_their_normals() {
+        for shape in Shape::ALL {
+            let (p, n, uv, idx) = shape_mesh(shape, Vec3::ONE);
+            assert!(!idx.is_empty() && idx.len() % 3 == 0, "{shape:?}");
+            assert_eq!(p.len(), uv.len());
+            for t in idx.chunks(3) {
+                let v = |k: usize| Vec3::from(p[t[k] as usize]);
+                let face = (v(1) - v(0)).cross(v(2) - v(0));
+                let mean: Vec3 = t.iter().map(|&k| Vec3::from(n[k as usize])).sum();
+                assert!(face.dot(mean) > 0.0, "{shape:?}: {t:?}");
+            }
+        }
+    }
+
+    /// The first members of each split load as tasks whose scene and truth load.
+    #[test]
+    fn members_load_as_tasks() {
+        let dir = tempfile::tempdir().unwrap();
+        for split in [Split::Train, Split::Test] {
+            for task in write_split(dir.path(), split, 8).unwrap() {
+                let t = crate::task::Task::load(&task).unwrap();
+                assert_eq!(t.textures.len(), 1);
+                crate::scene::load(&t.resolve(&t.scene)).unwrap();
+                assert!(task.with_file_name("truth.png").exists());
+            }
+        }
+        assert!(write_split(dir.path(), Split::Test, 0).is_err());
+    }
+}
