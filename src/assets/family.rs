@@ -538,6 +538,10 @@ fn seamed_cube(c: Vec3, h: f32) -> Mesh {
     (p, n, t, idx)
 }
 
+/// How far the lights stand from the shape: beyond the cameras' ring (3.4 m), so that no
+/// light's quad hides the shape from a camera.
+const LIGHT_DISTANCE: f32 = 4.5;
+
 /// A plain double-sided material.
 fn plain(b: &mut GltfBuilder, name: &str, color: [f32; 3], roughness: f32) -> usize {
     b.add_material(json!({
@@ -694,9 +698,9 @@ pub fn write_member(dir: &Path, m: &Member) -> Result<()> {
             match l {
                 Light::Point | Light::Spot | Light::Sun => {
                     let (kind, intensity, at) = match l {
-                        Light::Point => ("point", 14.0, c + 3.0 * dir_to),
-                        Light::Spot => ("spot", 40.0, c + 4.0 * dir_to),
-                        _ => ("directional", 2.5, c + 4.0 * dir_to),
+                        Light::Point => ("point", 30.0, c + LIGHT_DISTANCE * dir_to),
+                        Light::Spot => ("spot", 60.0, c + LIGHT_DISTANCE * dir_to),
+                        _ => ("directional", 2.5, c + LIGHT_DISTANCE * dir_to),
                     };
                     let mut light = json!({"name": name, "type": kind,
                         "color": [1.0, d.range(0.85, 1.0), d.range(0.75, 1.0)],
@@ -712,11 +716,11 @@ pub fn write_member(dir: &Path, m: &Member) -> Result<()> {
                 Light::Area => nodes.push(area_light(
                     &mut b,
                     &name,
-                    (c + 3.0 * dir_to).to_array(),
+                    (c + LIGHT_DISTANCE * dir_to).to_array(),
                     c.to_array(),
-                    0.8,
+                    1.0,
                     [1.0, 0.95, 0.9],
-                    30.0,
+                    45.0,
                 )),
                 Light::Environment => environment = true,
             }

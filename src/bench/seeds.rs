@@ -140,13 +140,15 @@ pub fn summarize(name: &str, seeded: &[&SceneResult]) -> SeededScene {
             .find(|r| r.name == d.name)
             .map(|r| r.key.clone())
     });
+    // The baseline (ratio 1) is a candidate too.
+    let baseline_key = optimized.first().map(|o| o.baseline().key.clone());
     let best = runs
         .iter()
         .filter(|r| Some(&r.key) != default_key.as_ref())
-        .filter_map(|r| r.texture.map(|t| (t.mean, r)))
-        .chain(std::iter::once((1.0, &baseline_run(&optimized))))
+        .filter_map(|r| Some((r.texture?.mean, r.key.clone())))
+        .chain(baseline_key.map(|k| (1.0, k)))
         .min_by(|a, b| a.0.total_cmp(&b.0))
-        .map(|(_, r)| r.key.clone());
+        .map(|(_, k)| k);
     let paired = |f: &dyn Fn(&RunResult) -> f64| -> Option<Interval> {
         let (d, b) = (default_key.as_ref()?, best.as_ref()?);
         let ratios: Vec<f64> = optimized
@@ -166,22 +168,6 @@ pub fn summarize(name: &str, seeded: &[&SceneResult]) -> SeededScene {
         runs,
         default_key,
         best,
-    }
-}
-
-/// A stand-in for the baseline among the candidates for the best (its ratios are 1).
-fn baseline_run(optimized: &[&super::results::OptimizationResult]) -> SeededRun {
-    let (key, name) = optimized
-        .first()
-        .map(|o| (o.baseline().key.clone(), o.baseline().name.clone()))
-        .unwrap_or_default();
-    SeededRun {
-        name,
-        key,
-        texture: None,
-        image: None,
-        sooner: None,
-        reached: 0,
     }
 }
 

@@ -591,17 +591,18 @@ pub fn report_markdown(r: &BenchReport) -> String {
     }
     md.push_str("\n## Per scene\n\n");
     for x in &r.scenes {
+        // The scene's folder (`vase, seed 2` is in `vase__seed_2/`).
+        let dir = crate::image_io::file_safe(&x.name);
         let _ = writeln!(
             md,
-            "- **{}** ({}×{}, {} camera(s), {} texels): `{}/gradients.png`{}",
+            "- **{}** ({}×{}, {} camera(s), {} texels): `{dir}/gradients.png`{}",
             x.name,
             x.width,
             x.height,
             x.cameras,
             x.texels,
-            x.name,
             if x.optimization.is_some() {
-                format!(", `{0}/error_vs_time.png`, `{0}/final.png`", x.name)
+                format!(", `{dir}/error_vs_time.png`, `{dir}/final.png`")
             } else {
                 String::new()
             }
