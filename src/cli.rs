@@ -284,9 +284,10 @@ pub(crate) struct BenchArgs {
     /// gallery, atelier, outdoor), task files, or folders holding task.toml (default: every
     /// bundled benchmark scene).
     pub(crate) scenes: Vec<String>,
-    /// Seconds of optimization per estimator and scene.
-    #[arg(long, default_value_t = 60.0)]
-    pub(crate) budget_s: f64,
+    /// Seconds of optimization per estimator and scene (default: each task's
+    /// `time_budget_s`, 60 where it names none).
+    #[arg(long)]
+    pub(crate) budget_s: Option<f64>,
     /// Output folder.
     #[arg(long, default_value = "out/bench")]
     pub(crate) out: PathBuf,

@@ -499,7 +499,8 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         .map(|n| psrestir::bench::resolve_scene(n))
         .collect::<std::result::Result<Vec<_>, _>>()?;
     let opts = psrestir::bench::BenchOptions {
-        budget_s,
+        budget_s: budget_s.unwrap_or(60.0),
+        task_budgets: budget_s.is_none(),
         scale,
         warmup,
         settle,

@@ -159,9 +159,9 @@ impl Member {
     /// What `seed` draws.
     pub fn draw(seed: u32) -> Member {
         let mut d = Draw(0x5EED_0000_0000 ^ seed as u64);
-        use Shape::*;
         let shape = d.pick(&Shape::ALL);
-        let slot = if shape == Room {
+        let room = shape == Shape::Room;
+        let slot = if room {
             d.pick(&[Slot::BaseColor, Slot::BaseColor, Slot::Roughness])
         } else {
             d.pick(&[
@@ -173,7 +173,7 @@ impl Member {
                 Slot::Normal,
             ])
         };
-        let lights = if shape == Room {
+        let lights = if room {
             vec![Light::Sun]
         } else {
             use Light::*;
@@ -185,12 +185,8 @@ impl Member {
                 vec![first, second]
             }
         };
-        let depth = if shape == Room {
-            3
-        } else {
-            d.pick(&[1, 1, 2, 3])
-        };
-        let cameras = if shape == Room {
+        let depth = if room { 3 } else { d.pick(&[1, 1, 2, 3]) };
+        let cameras = if room {
             d.pick(&[1, 2])
         } else {
             d.pick(&[1, 2, 3, 4])

@@ -80,6 +80,9 @@ pub struct BenchOptions {
     /// Wall-clock seconds each estimator optimizes each scene (step time only: evaluation
     /// renders and readbacks are not counted).
     pub budget_s: f64,
+    /// Each task's own `time_budget_s` instead of `budget_s` (which stays for a task that
+    /// names none): the bench's `--budget-s` left out.
+    pub task_budgets: bool,
     /// Multiplier of image and texture sizes.
     pub scale: f64,
     /// The estimator whose gradient error the gradient phase measures against the
@@ -143,6 +146,7 @@ impl Default for BenchOptions {
     fn default() -> Self {
         BenchOptions {
             budget_s: 60.0,
+            task_budgets: false,
             scale: 1.0,
             gradient_method: Method::RESTIR,
             warmup: 20,
@@ -303,6 +307,7 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         version: env!("CARGO_PKG_VERSION").into(),
         adapter: gpu.describe(),
         budget_s: o.budget_s,
+        task_budgets: o.task_budgets,
         scale: o.scale,
         gradient_method: o.gradient_method.name().into(),
         warmup: o.warmup,
@@ -331,6 +336,9 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         for k in 0..seeds {
             let (task, name) = seeded(loaded_task, &scene, k, seeds);
             let mut o = o.clone();
+            if o.task_budgets {
+                o.budget_s = task.optimizer.time_budget_s.unwrap_or(o.budget_s);
+            }
             // The primal and gradient phases with the first seed only.
             if k > 0 && !o.gradient_only {
                 o.end_to_end_only = true;
@@ -556,6 +564,7 @@ fn scene_result(
     SceneResult {
         name,
         seed: task.seed,
+        budget_s: o.budget_s,
         task: task.path.display().to_string(),
         width: task.width,
         height: task.height,

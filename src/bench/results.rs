@@ -37,6 +37,9 @@ pub struct SceneResult {
     /// The seed its targets and runs took (the task's own, or its k-th with `--seeds`).
     #[serde(default)]
     pub seed: u32,
+    /// Seconds of optimization per run (the bench's budget, or the task's own).
+    #[serde(default)]
+    pub budget_s: f64,
     /// Task file.
     pub task: String,
     /// Image size (per camera) and number of cameras.
@@ -280,8 +283,12 @@ pub struct BenchReport {
     pub version: String,
     /// The adapter, as `psrestir adapter` prints it.
     pub adapter: String,
-    /// Seconds of optimization per estimator and scene.
+    /// Seconds of optimization per estimator and scene (where `task_budgets`, those of a
+    /// task that names none: each scene's is its `budget_s`).
     pub budget_s: f64,
+    /// Each task ran for its own `time_budget_s`.
+    #[serde(default)]
+    pub task_budgets: bool,
     /// Size multiplier.
     pub scale: f64,
     /// The estimator whose gradient error is measured against the baseline's.
@@ -335,6 +342,7 @@ impl BenchReport {
             version: String::new(),
             adapter: String::new(),
             budget_s: 0.0,
+            task_budgets: false,
             scale: 1.0,
             gradient_method: String::new(),
             warmup: 0,

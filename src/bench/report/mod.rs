@@ -173,17 +173,30 @@ pub use tables::{
     primal_table, settings_table, successive_table, texture_table,
 };
 
+/// The seconds of optimization per run: the bench's, or the range of the tasks' own.
+fn budget_text(r: &BenchReport) -> String {
+    let own = r.scenes.iter().map(|x| x.budget_s).filter(|b| *b > 0.0);
+    let (lo, hi) = own.fold((f64::INFINITY, 0.0f64), |(a, b), x| (a.min(x), b.max(x)));
+    if !r.task_budgets || lo > hi {
+        format!("{} s", r.budget_s)
+    } else if lo == hi {
+        format!("{lo} s (the tasks' own budget)")
+    } else {
+        format!("{lo}–{hi} s (each task's own budget)")
+    }
+}
+
 /// The reconstruction at equal time, the headline section of `report.md`.
 fn reconstruction_markdown(r: &BenchReport) -> String {
     let mut md = String::from("## Reconstruction at equal time\n\n");
     md.push_str(&optimization_table(r));
     let _ = writeln!(
         md,
-        "\nEvery estimator optimizes each scene from the same start for {} s of step time \
+        "\nEvery estimator optimizes each scene from the same start for {} of step time \
          (evaluation renders not counted); image relMSE from {}-spp renders of every camera \
          against its target, texture RMSE against the ground truth over the texels a camera \
          sees. Ratios are over the baseline with Adam. {} {}\n",
-        r.budget_s,
+        budget_text(r),
         r.eval_spp,
         if r.no_priors {
             "The tasks' priors (multiscale gradient, smoothness) are off (`--no-priors`)."
@@ -404,11 +417,11 @@ pub fn headline_table(r: &BenchReport) -> String {
     }
     let _ = write!(
         s,
-        "\npsrestir {} on `{}`, {} s of optimization per run and scene, protocol `{:?}`, size \
+        "\npsrestir {} on `{}`, {} of optimization per run and scene, protocol `{:?}`, size \
          scale {}, {}, {}.\n",
         r.version,
         r.adapter,
-        r.budget_s,
+        budget_text(r),
         r.protocol,
         r.scale,
         if r.no_priors {
@@ -509,7 +522,7 @@ pub fn report_markdown(r: &BenchReport) -> String {
         "psrestir {} on `{}`; protocol `{:?}`; size scale {}; gradient error of {} after {} \
          iterations (estimator-only: {} more estimates under the converged adjoint), mean of \
          {} seeds, against a reference of {} gradient spp under a {}-spp converged adjoint; \
-         estimators' options over the tasks': {}; {} s of optimization per estimator and \
+         estimators' options over the tasks': {}; {} of optimization per estimator and \
          scene; image error from {}-spp renders.\n",
         r.version,
         r.adapter,
@@ -522,7 +535,7 @@ pub fn report_markdown(r: &BenchReport) -> String {
         r.reference_spp,
         r.reference_primal_spp,
         r.estimator_options.summary(),
-        r.budget_s,
+        budget_text(r),
         r.eval_spp,
     );
     if !r.over_seeds.is_empty() {

@@ -315,6 +315,12 @@ pub fn curve_table(r: &BenchReport) -> String {
     );
     for x in &r.scenes {
         let Some(o) = &x.optimization else { continue };
+        // The scene's own budget (bench.json of an older psrestir: the report's).
+        let budget = if x.budget_s > 0.0 {
+            x.budget_s
+        } else {
+            r.budget_s
+        };
         let runs = o
             .runs
             .iter()
@@ -323,7 +329,7 @@ pub fn curve_table(r: &BenchReport) -> String {
             let at = |f: f64| {
                 curve
                     .iter()
-                    .take_while(|p| p.seconds <= f * r.budget_s)
+                    .take_while(|p| p.seconds <= f * budget)
                     .last()
                     .map_or(f64::NAN, |p| p.texture_rmse_observed)
             };
