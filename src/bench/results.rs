@@ -15,13 +15,16 @@ pub struct CurvePoint {
     /// Iterations done.
     pub iteration: u32,
     /// Seconds of optimization (step time).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub seconds: f64,
     /// Loss of the iteration's primal render (NaN at the start, written as null).
     #[serde(deserialize_with = "f64_or_nan")]
     pub loss: f64,
     /// Texture RMSE against the ground truth.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub texture_rmse: f64,
     /// Texture RMSE over the observed texels.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub texture_rmse_observed: f64,
     /// The learning-rate schedule's factor in this iteration.
     pub learning_rate_factor: Option<f64>,
@@ -39,6 +42,7 @@ pub struct SceneResult {
     pub seed: u32,
     /// Seconds of optimization per run (the bench's budget, or the task's own).
     #[serde(default)]
+    #[serde(deserialize_with = "f64_or_nan")]
     pub budget_s: f64,
     /// Task file.
     pub task: String,
@@ -60,37 +64,51 @@ pub struct SceneResult {
     /// Gradient spp the baseline gets in the time of one iteration of the estimator
     /// (fractional: the errors at equal time are interpolated in 1/spp between the two whole
     /// spp around it).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub baseline_spp_equal_time: f64,
     /// Total gradient relMSE (under the adjoint of the estimator's task-spp primal render of
     /// the same iteration) of the baseline at equal time (mean over seeds).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub gradient_relmse_baseline: f64,
     /// Total gradient relMSE of the estimator after `warmup` iterations (mean over seeds).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub gradient_relmse_estimator: f64,
     /// estimator / baseline, total, equal time.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub gradient_relmse_ratio: f64,
     /// Total gradient relMSE of the baseline at the task's spp (equal iterations).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub gradient_relmse_baseline_equal_iterations: f64,
     /// estimator / baseline, total, equal iterations.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub gradient_relmse_ratio_equal_iterations: f64,
     /// Estimator-only gradient relMSE (converged adjoint) of the baseline at the task's spp.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub gradient_relmse_estimator_only_baseline: f64,
     /// Estimator-only gradient relMSE of the estimator (its next iteration under the
     /// converged adjoint, from the same state).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub gradient_relmse_estimator_only_estimator: f64,
     /// estimator / baseline, estimator-only, equal iterations.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub gradient_relmse_estimator_only_ratio: f64,
     /// Estimator-only gradient relMSE of the baseline at equal time.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub gradient_relmse_estimator_only_baseline_equal_time: f64,
     /// estimator / baseline, estimator-only, equal time.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub gradient_relmse_estimator_only_ratio_equal_time: f64,
     /// Estimator-only gradient relMSE of the mean of `successive_estimates` independent
     /// baseline estimates (the task's spp).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub gradient_relmse_mean_baseline: f64,
     /// Estimator-only gradient relMSE of the mean of the estimator's next
     /// `successive_estimates` estimates (successive iterations: they may share samples).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub gradient_relmse_mean_estimator: f64,
     /// estimator / baseline of the means: what survives of the single-estimate ratio when an
     /// optimizer adds up successive steps.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub gradient_relmse_mean_ratio: f64,
     /// How many estimates those means average.
     pub successive_estimates: u32,
@@ -100,15 +118,19 @@ pub struct SceneResult {
     pub gradient_relmse_per_texture: Vec<TextureGradientErrors>,
     /// Mean wall-clock ms of an iteration of the estimator over one of the baseline in the
     /// gradient phase (at the task's spp, GPU work finished).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub ms_per_iteration_ratio: f64,
     /// The primal estimator of the gradient and optimization phases.
     pub primal: String,
     /// relMSE of an independent primal render (the task's primal spp) against a converged
     /// render, at the state after `warmup` iterations (mean over seeds and cameras).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub primal_relmse_independent: f64,
     /// relMSE of the control-variate primal image at the same state.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub primal_relmse_control_variate: f64,
     /// control variate / independent.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub primal_relmse_ratio: f64,
     /// GPU ms of the primal passes per iteration: independent, control variate (render with
     /// both states plus the combination pass), when timestamps exist.
@@ -127,16 +149,22 @@ pub struct TextureGradientErrors {
     /// `material_slot`.
     pub texture: String,
     /// Part of `gradient_relmse_estimator_only_baseline`.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub estimator_only_baseline: f64,
     /// Part of `gradient_relmse_estimator_only_estimator`.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub estimator_only_estimator: f64,
     /// estimator / baseline of the two parts.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub estimator_only_ratio: f64,
     /// Part of `gradient_relmse_baseline_equal_iterations`.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub total_baseline_equal_iterations: f64,
     /// Part of `gradient_relmse_estimator`.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub total_estimator: f64,
     /// estimator / baseline of the two parts.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub total_ratio_equal_iterations: f64,
 }
 
@@ -144,13 +172,17 @@ pub struct TextureGradientErrors {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct OptimizationResult {
     /// Image relMSE at the initial textures.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub image_relmse_initial: f64,
     /// Texture RMSE at the initial textures.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub texture_rmse_initial: f64,
     /// Texture RMSE over the observed texels (those a camera sample reaches; the others
     /// keep their initial values) at the start.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub texture_rmse_observed_initial: f64,
     /// Fraction of the texels that are observed.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub observed_fraction: f64,
     /// Texels that the cameras observe.
     pub observed_texels: u64,
@@ -178,6 +210,7 @@ pub struct AutoResult {
     /// Why.
     pub reason: String,
     /// Gradient samples per optimized texel per iteration (what the rule reads first).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub samples_per_texel: f64,
     /// Optimized texels.
     pub texels: u64,
@@ -196,16 +229,20 @@ pub struct DefaultResult {
     /// Its run's name (what `auto` chose).
     pub name: String,
     /// Its observed-texel RMSE at the end.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub texture_rmse_observed: f64,
     /// That over the start's.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub over_start: f64,
     /// The run of the others that ended with the lowest observed-texel RMSE.
     pub best: String,
     /// Its observed-texel RMSE over that run's.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub over_best: f64,
     /// The run of the others that ended with the lowest image relMSE.
     pub best_image: String,
     /// Its image relMSE over that run's.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub image_over_best: f64,
 }
 
@@ -226,22 +263,30 @@ pub struct RunResult {
     /// The gradient estimator's name.
     pub method: String,
     /// Image relMSE after its budget.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub image_relmse: f64,
     /// Over the baseline's (with Adam).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub image_relmse_ratio: f64,
     /// Texture RMSE after its budget.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub texture_rmse: f64,
     /// Texture RMSE over the observed texels after its budget.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub texture_rmse_observed: f64,
     /// Over the baseline's (with Adam).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub texture_rmse_observed_ratio: f64,
     /// ... at a third of the budget.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub texture_rmse_observed_third: f64,
     /// Lowest observed-texel RMSE of the run (a run that ends well above it drifted).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub texture_rmse_observed_min: f64,
     /// Per texture (as [`OptimizationResult::textures`]), its observed-texel RMSE at the end.
     pub texture_rmse_observed_per_texture: Vec<f64>,
     /// Mean wall-clock milliseconds per iteration (GPU work finished).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub ms_per_iteration: f64,
     /// Iterations run within the budget.
     pub iterations: u32,
@@ -253,6 +298,7 @@ pub struct RunResult {
     pub diagnostics_per_iteration: Vec<(String, f64)>,
     /// Bytes of GPU state per texel (textures, gradient, the step's state, and the
     /// estimator's).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub state_bytes_per_texel: f64,
     /// Its settings in this run (tuned by `--tune`, else the task's).
     pub settings: String,
@@ -285,11 +331,13 @@ pub struct BenchReport {
     pub adapter: String,
     /// Seconds of optimization per estimator and scene (where `task_budgets`, those of a
     /// task that names none: each scene's is its `budget_s`).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub budget_s: f64,
     /// Each task ran for its own `time_budget_s`.
     #[serde(default)]
     pub task_budgets: bool,
     /// Size multiplier.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub scale: f64,
     /// The estimator whose gradient error is measured against the baseline's.
     pub gradient_method: String,
@@ -392,10 +440,13 @@ pub struct FinalImages {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Interval {
     /// The geometric mean.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub mean: f64,
     /// The interval's lower end (equal to `mean` with one seed).
+    #[serde(deserialize_with = "f64_or_nan")]
     pub low: f64,
     /// Its upper end.
+    #[serde(deserialize_with = "f64_or_nan")]
     pub high: f64,
     /// Seeds it is over.
     pub n: u32,

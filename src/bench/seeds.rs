@@ -217,7 +217,13 @@ pub fn headline_rows(scenes: &[SeededScene]) -> String {
             continue;
         };
         let chose = super::Contender::chosen(&d.name);
-        let best = x.best.as_deref().unwrap_or("–");
+        // The best is a run of the table, or else the baseline with Adam (ratio 1).
+        let best = match &x.best {
+            Some(k) => {
+                (x.runs.iter().find(|r| &r.key == k)).map_or("baseline, Adam", |r| r.name.as_str())
+            }
+            None => "–",
+        };
         let _ = writeln!(
             s,
             "| {} | {chose} | {} | {} | {} ({best}) | {} | {} ({}/{}) |",
