@@ -1,4 +1,4 @@
-//! A run never hands back something worse than what it saw: [`Keeper`] follows the
+//! A run never hands back something worse than what it saw: the job's keeper follows the
 //! evaluation image error (the rows of `metrics.csv` that have one, the start's included)
 //! and keeps the textures and light of the lowest; at the end the run writes that state
 //! (`optimizer.keep_best`, on by default), as early stopping on a validation measure does.
