@@ -56,25 +56,36 @@ impl Keeper {
         Ok(())
     }
 
-    /// At the end, `last` the run's last row (its evaluation done): put the kept state into
-    /// `opt` where it is lower than the last, and say so; None where the last state stands.
+    /// At the end, `rows` the run's (the last one's evaluation done): put the kept state into
+    /// `opt` where it is lower than the last and log it (a warning, added to `warnings`,
+    /// where it is the start); None where the last state stands.
     pub(super) fn hand_back(
         &self,
         opt: &mut Optimizer,
-        last: Option<&MetricRow>,
+        rows: &[MetricRow],
+        warnings: &mut Vec<String>,
     ) -> Result<Option<HandedBack>> {
-        let (Some(k), Some(last_e)) = (&self.kept, last.and_then(|r| r.image_relmse)) else {
+        let last = rows.last().and_then(|r| r.image_relmse);
+        let (Some(k), Some(last_e)) = (&self.kept, last) else {
             return Ok(None);
         };
         if k.values.iteration == opt.iteration || !(k.image_relmse < last_e) {
             return Ok(None);
         }
         opt.set_values(&k.values)?;
-        Ok(Some(HandedBack {
+        let h = HandedBack {
             iteration: k.values.iteration,
             image_relmse: k.image_relmse,
             last_image_relmse: last_e,
-        }))
+        };
+        let message = h.describe(opt.iteration);
+        if h.iteration == 0 {
+            log::warn!("{message}");
+            warnings.push(message);
+        } else {
+            log::info!("{message}");
+        }
+        Ok(Some(h))
     }
 }
 

@@ -215,29 +215,10 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         rmse_every: (prep.set.values.len() / (1 << 20)).max(1) as u32,
         seed: task.seed,
     };
-    let keeper = Keeper::new(task.optimizer.keep_best, kept);
-    let mut session = iterate(
-        &mut opt,
-        task,
-        opts,
-        &metrics,
-        &saver,
-        (rows, keeper),
-        elapsed_before,
-    )?;
+    let start = (rows, kept, elapsed_before);
+    let mut session = iterate(&mut opt, task, opts, &metrics, &saver, start)?;
     let elapsed = elapsed_before + session.seconds;
-    // The checkpoint holds the last state (what --resume continues), the kept one beside it.
-    saver.save(&opt, &session.rows, elapsed, session.keeper.kept())?;
-    let handed_back = session.keeper.hand_back(&mut opt, session.rows.last())?;
-    if let Some(h) = &handed_back {
-        let message = h.describe(opt.iteration);
-        if h.iteration == 0 {
-            log::warn!("{message}");
-            session.warnings.push(message);
-        } else {
-            log::info!("{message}");
-        }
-    }
+    let handed_back = saver.close(&mut opt, &mut session, elapsed)?;
     let values = opt.read_params()?;
     let (final_rmse, final_rmse_observed, initial_rmse_observed) = metrics.final_errors(&values);
     let per_texture = metrics.errors_per_texture(&values);
@@ -411,6 +392,19 @@ struct Saver {
 }
 
 impl Saver {
+    /// At a run's end: the checkpoint with the last state (what --resume continues) and the
+    /// kept one beside it, then the kept state put into `opt` for the outputs, where it is not
+    /// the last ([`Keeper::hand_back`]).
+    fn close(
+        &self,
+        opt: &mut Optimizer,
+        session: &mut Session,
+        elapsed: f64,
+    ) -> Result<Option<HandedBack>> {
+        self.save(opt, &session.rows, elapsed, session.keeper.kept())?;
+        (session.keeper).hand_back(opt, &session.rows, &mut session.warnings)
+    }
+
     /// Write the checkpoint (with the kept state) and `metrics.csv` (both atomically).
     fn save(
         &self,
@@ -489,9 +483,9 @@ fn iterate(
     opts: &RunOptions,
     metrics: &Metrics,
     saver: &Saver,
-    (mut rows, mut keeper): (Vec<MetricRow>, Keeper),
-    elapsed_before: f64,
+    (mut rows, kept, elapsed_before): (Vec<MetricRow>, Option<Kept>, f64),
 ) -> Result<Session> {
+    let mut keeper = Keeper::new(task.optimizer.keep_best, kept);
     let limits = Limits {
         first: 0,
         iterations: opts.iterations.or(task.optimizer.iterations),

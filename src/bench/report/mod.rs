@@ -167,24 +167,11 @@ fn write_gradients(dir: &Path, prep: &Problem, g: &GradientSnapshot) -> Result<(
 }
 
 mod tables;
-use tables::ratio;
 pub use tables::{
     auto_table, curve_table, default_table, gradient_table, optimization_table, per_texture_table,
     primal_table, settings_table, successive_table, texture_table,
 };
-
-/// The seconds of optimization per run: the bench's, or the range of the tasks' own.
-fn budget_text(r: &BenchReport) -> String {
-    let own = r.scenes.iter().map(|x| x.budget_s).filter(|b| *b > 0.0);
-    let (lo, hi) = own.fold((f64::INFINITY, 0.0f64), |(a, b), x| (a.min(x), b.max(x)));
-    if !r.task_budgets || lo > hi {
-        format!("{} s", r.budget_s)
-    } else if lo == hi {
-        format!("{lo} s (the tasks' own budget)")
-    } else {
-        format!("{lo}–{hi} s (each task's own budget)")
-    }
-}
+use tables::{budget_text, ratio};
 
 /// The reconstruction at equal time, the headline section of `report.md`.
 fn reconstruction_markdown(r: &BenchReport) -> String {

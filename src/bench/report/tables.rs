@@ -349,3 +349,16 @@ pub fn curve_table(r: &BenchReport) -> String {
     }
     s
 }
+
+/// The seconds of optimization per run: the bench's, or the range of the tasks' own.
+pub(super) fn budget_text(r: &BenchReport) -> String {
+    let own = r.scenes.iter().map(|x| x.budget_s).filter(|b| *b > 0.0);
+    let (lo, hi) = own.fold((f64::INFINITY, 0.0f64), |(a, b), x| (a.min(x), b.max(x)));
+    if !r.task_budgets || lo > hi {
+        format!("{} s", r.budget_s)
+    } else if lo == hi {
+        format!("{lo} s (the tasks' own budget)")
+    } else {
+        format!("{lo}–{hi} s (each task's own budget)")
+    }
+}

@@ -8,16 +8,21 @@
 //! 1 to 3, one to four cameras, and sampling from sparse to dense (texture size against
 //! image size and samples per pixel). Everything is a pure function of the seed: a member is
 //! the same files on every machine.
+mod geometry;
+mod truth;
+
 use super::authoring::GltfBuilder;
-use super::bench_scenes::{area_light, camera, hash};
-use super::bundled::{look_at, srgb8, write_sky};
+use super::bench_scenes::{area_light, camera};
+use super::bundled::{look_at, write_sky};
 use crate::image_io::write_atomic;
 use crate::vocab::Slot;
 use crate::{Error, Result};
+use geometry::{panel, plain, room_shell, shape_mesh};
 use glam::Vec3;
 use serde_json::json;
 use std::f32::consts::PI;
 use std::path::{Path, PathBuf};
+use truth::truth;
 
 /// Seeds for choosing rules and constants.
 pub const TRAIN: std::ops::Range<u32> = 0..1000;
@@ -266,353 +271,9 @@ pub fn write_split(dir: &Path, split: Split, count: u32) -> Result<Vec<PathBuf>>
     Ok(tasks)
 }
 
-/// A procedural field in [0, 1] over (u, v): value noise in octaves, stripes warped by noise,
-/// a checker softened by noise, or spots; its frequency and angle drawn from the seed.
-struct Pattern {
-    kind: u32,
-    freq: f32,
-    angle: f32,
-    key: u32,
-}
-
-impl Pattern {
-    fn draw(d: &mut Draw) -> Pattern {
-        Pattern {
-            kind: (d.next() % 4) as u32,
-            freq: d.range(3.0, 9.0),
-            angle: d.range(0.0, PI),
-            key: d.next() as u32,
-        }
-    }
-
-    /// Smooth value noise at frequency f.
-    fn noise(&self, u: f32, v: f32, f: f32, octave: u32) -> f32 {
-        let (x, y) = (u * f, v * f);
-        let (i, j) = (x.floor(), y.floor());
-        let (fx, fy) = (x - i, y - j);
-        let s = |t: f32| t * t * (3.0 - 2.0 * t);
-        let k = self.key.wrapping_add(octave.wrapping_mul(7919));
-        let h = |a: f32, b: f32| hash((a as i32 as u32).wrapping_add(k), (b as i32 as u32) ^ k);
-        let top = h(i, j) + (h(i + 1.0, j) - h(i, j)) * s(fx);
-        let bottom = h(i, j + 1.0) + (h(i + 1.0, j + 1.0) - h(i, j + 1.0)) * s(fx);
-        top + (bottom - top) * s(fy)
-    }
-
-    fn fbm(&self, u: f32, v: f32) -> f32 {
-        let (mut sum, mut amp, mut f) = (0.0, 0.5, self.freq);
-        for o in 0..4 {
-            sum += amp * self.noise(u, v, f, o);
-            amp *= 0.5;
-            f *= 2.0;
-        }
-        sum / 0.9375
-    }
-
-    fn at(&self, u: f32, v: f32) -> f32 {
-        let (c, s) = (self.angle.cos(), self.angle.sin());
-        let along = u * c + v * s;
-        match self.kind {
-            0 => self.fbm(u, v),
-            1 => 0.5 + 0.5 * (2.0 * PI * self.freq * along + 3.0 * self.fbm(u, v)).sin(),
-            2 => {
-                let checker = ((u * self.freq).floor() + (v * self.freq).floor()) as i32 & 1;
-                0.25 + 0.5 * checker as f32 + 0.25 * (self.fbm(u, v) - 0.5)
-            }
-            _ => {
-                let (x, y) = (u * self.freq, v * self.freq);
-                let (cx, cy) = (x.floor(), y.floor());
-                let r = 0.15 + 0.3 * hash(cx as u32 ^ self.key, cy as u32);
-                let dist = ((x - cx - 0.5).powi(2) + (y - cy - 0.5).powi(2)).sqrt();
-                1.0 - smoothstep(r - 0.05, r + 0.05, dist)
-            }
-        }
-        .clamp(0.0, 1.0)
-    }
-}
-
-fn smoothstep(a: f32, b: f32, x: f32) -> f32 {
-    let t = ((x - a) / (b - a)).clamp(0.0, 1.0);
-    t * t * (3.0 - 2.0 * t)
-}
-
-fn unit8(v: f32) -> u8 {
-    (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
-}
-
-/// The ground truth of `slot` as RGBA8 texels (`res` x `res`): base color in sRGB, roughness
-/// in G and metallic in B (glTF's metallicRoughness), or a tangent-space normal map.
-fn truth(slot: Slot, res: u32, d: &mut Draw) -> Vec<[u8; 4]> {
-    let p = Pattern::draw(d);
-    let palette: Vec<[f32; 3]> = (0..3)
-        .map(|_| {
-            [
-                d.range(0.08, 0.85),
-                d.range(0.08, 0.85),
-                d.range(0.08, 0.85),
-            ]
-        })
-        .collect();
-    let strength = d.range(0.02, 0.05);
-    let mut out = Vec::with_capacity((res * res) as usize);
-    let texel = 1.0 / res as f32;
-    for y in 0..res {
-        for x in 0..res {
-            let (u, v) = ((x as f32 + 0.5) * texel, (y as f32 + 0.5) * texel);
-            let t = p.at(u, v);
-            out.push(match slot {
-                Slot::BaseColor => {
-                    let (a, b, w) = if t < 0.5 {
-                        (palette[0], palette[1], 2.0 * t)
-                    } else {
-                        (palette[1], palette[2], 2.0 * t - 1.0)
-                    };
-                    let c = |k: usize| srgb8(a[k] + (b[k] - a[k]) * w);
-                    [c(0), c(1), c(2), 255]
-                }
-                Slot::Roughness => [0, unit8(0.15 + 0.75 * t), 0, 255],
-                Slot::Metallic => [0, unit8(0.45), unit8(smoothstep(0.4, 0.6, t)), 255],
-                Slot::Normal => {
-                    // The relief's slopes by central differences, in height per unit of uv
-                    // over the texture's strength: tangent X along u, Y against v (glTF).
-                    let e = texel;
-                    let du = (p.at(u + e, v) - p.at(u - e, v)) / (2.0 * e);
-                    let dv = (p.at(u, v + e) - p.at(u, v - e)) / (2.0 * e);
-                    let n = Vec3::new(-strength * du, strength * dv, 1.0).normalize();
-                    [
-                        unit8(0.5 + 0.5 * n.x),
-                        unit8(0.5 + 0.5 * n.y),
-                        unit8(0.5 + 0.5 * n.z),
-                        255,
-                    ]
-                }
-            });
-        }
-    }
-    out
-}
-
-/// Positions, normals, uvs and indices of a surface over a (nu x nv) grid of (u, v) in
-/// [0, 1]², each triangle wound counter-clockwise about its vertices' normals and those of
-/// no area (at a pole) left out.
-type Mesh = (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<[f32; 2]>, Vec<u32>);
-
-fn grid_mesh(
-    nu: u32,
-    nv: u32,
-    at: impl Fn(f32, f32) -> (Vec3, Vec3),
-    uv_of: impl Fn(f32, f32) -> [f32; 2],
-) -> Mesh {
-    let (mut p, mut n, mut t, mut idx) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    for j in 0..=nv {
-        for i in 0..=nu {
-            let (u, v) = (i as f32 / nu as f32, j as f32 / nv as f32);
-            let (pos, nrm) = at(u, v);
-            p.push(pos.to_array());
-            n.push(nrm.normalize_or(Vec3::Y).to_array());
-            t.push(uv_of(u, v));
-        }
-    }
-    let w = nu + 1;
-    for j in 0..nv {
-        for i in 0..nu {
-            let a = j * w + i;
-            for tri in [[a, a + w, a + 1], [a + 1, a + w, a + w + 1]] {
-                push_wound(&p, &n, &mut idx, tri);
-            }
-        }
-    }
-    (p, n, t, idx)
-}
-
-/// Append `tri` wound counter-clockwise about its vertices' mean normal (none where it has
-/// no area).
-fn push_wound(p: &[[f32; 3]], n: &[[f32; 3]], idx: &mut Vec<u32>, tri: [u32; 3]) {
-    let v = |k: usize| Vec3::from(p[tri[k] as usize]);
-    let face = (v(1) - v(0)).cross(v(2) - v(0));
-    if face.length() < 1e-9 {
-        return;
-    }
-    let mean: Vec3 = tri.iter().map(|&k| Vec3::from(n[k as usize])).sum();
-    if face.dot(mean) < 0.0 {
-        idx.extend_from_slice(&[tri[0], tri[2], tri[1]]);
-    } else {
-        idx.extend_from_slice(&tri);
-    }
-}
-
-/// The shape's mesh, centred at `c`, about a metre across.
-fn shape_mesh(shape: Shape, c: Vec3) -> Mesh {
-    let identity = |u: f32, v: f32| [u, v];
-    match shape {
-        Shape::Sphere => grid_mesh(
-            96,
-            48,
-            |u, v| {
-                let (th, ph) = (v * PI, u * 2.0 * PI);
-                let d = Vec3::new(th.sin() * ph.cos(), th.cos(), -th.sin() * ph.sin());
-                (c + 0.9 * d, d)
-            },
-            identity,
-        ),
-        Shape::RoundedBox => {
-            // |x|^q + |y|^q + |z|^q = 1 with q = 2 / e: the normal is the gradient.
-            let e = 0.3f32;
-            let s = |w: f32, e: f32| w.signum() * w.abs().powf(e);
-            grid_mesh(
-                96,
-                64,
-                move |u, v| {
-                    let (th, ph) = (v * PI, u * 2.0 * PI);
-                    let d = Vec3::new(
-                        s(th.sin(), e) * s(ph.cos(), e),
-                        s(th.cos(), e),
-                        -s(th.sin(), e) * s(ph.sin(), e),
-                    );
-                    let q = 2.0 / e;
-                    let g = Vec3::new(s(d.x, q - 1.0), s(d.y, q - 1.0), s(d.z, q - 1.0));
-                    (c + 0.75 * d, if g.length() > 0.0 { g } else { d })
-                },
-                identity,
-            )
-        }
-        Shape::Torus => grid_mesh(
-            96,
-            48,
-            |u, v| {
-                let (a, b) = (u * 2.0 * PI, v * 2.0 * PI);
-                let ring = Vec3::new(a.cos(), 0.0, -a.sin());
-                let d = ring * b.cos() + Vec3::Y * b.sin();
-                (c + 0.75 * ring + 0.32 * d, d)
-            },
-            identity,
-        ),
-        Shape::Relief => grid_mesh(
-            1,
-            1,
-            |u, v| (c + Vec3::new(2.0 * u - 1.0, 1.0 - 2.0 * v, 0.0), Vec3::Z),
-            identity,
-        ),
-        Shape::SeamedCube => seamed_cube(c, 0.7),
-        Shape::Room => grid_mesh(
-            1,
-            1,
-            |u, v| (Vec3::new(3.6 * u - 1.8, 2.8 - 2.6 * v, -1.98), Vec3::Z),
-            identity,
-        ),
-    }
-}
-
-/// A cube of half-side `h` whose faces are the cells of a 3 x 2 atlas (a small gutter
-/// between cells): every edge is a seam in texture space.
-fn seamed_cube(c: Vec3, h: f32) -> Mesh {
-    let (mut p, mut n, mut t, mut idx) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let faces = [
-        (Vec3::X, Vec3::NEG_Z, Vec3::Y),
-        (Vec3::NEG_X, Vec3::Z, Vec3::Y),
-        (Vec3::Y, Vec3::X, Vec3::NEG_Z),
-        (Vec3::NEG_Y, Vec3::X, Vec3::Z),
-        (Vec3::Z, Vec3::X, Vec3::Y),
-        (Vec3::NEG_Z, Vec3::NEG_X, Vec3::Y),
-    ];
-    for (k, (nrm, right, up)) in faces.into_iter().enumerate() {
-        let (cu, cv) = ((k % 3) as f32 / 3.0, (k / 3) as f32 / 2.0);
-        let base = p.len() as u32;
-        for (a, b) in [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)] {
-            let pos = c + h * (nrm + (2.0 * a - 1.0) * right + (2.0 * b - 1.0) * up);
-            p.push(pos.to_array());
-            n.push(nrm.to_array());
-            let g = 0.02;
-            t.push([
-                cu + (g + a * (1.0 - 2.0 * g)) / 3.0,
-                cv + (g + (1.0 - b) * (1.0 - 2.0 * g)) / 2.0,
-            ]);
-        }
-        for tri in [[base, base + 1, base + 2], [base, base + 2, base + 3]] {
-            push_wound(&p, &n, &mut idx, tri);
-        }
-    }
-    (p, n, t, idx)
-}
-
 /// How far the lights stand from the shape: beyond the cameras' ring (3.4 m), so that no
 /// light's quad hides the shape from a camera.
 const LIGHT_DISTANCE: f32 = 4.5;
-
-/// A plain double-sided material.
-fn plain(b: &mut GltfBuilder, name: &str, color: [f32; 3], roughness: f32) -> usize {
-    b.add_material(json!({
-        "name": name, "doubleSided": true,
-        "pbrMetallicRoughness": {"baseColorFactor": [color[0], color[1], color[2], 1.0],
-            "metallicFactor": 0.0, "roughnessFactor": roughness}
-    }))
-}
-
-/// A flat rectangle with corners `o`, `o + a`, `o + a + b`, `o + b`, facing `nrm`.
-fn panel(b: &mut GltfBuilder, name: &str, (o, a, bb): (Vec3, Vec3, Vec3), mat: usize) -> usize {
-    let p: Vec<[f32; 3]> = [o, o + a, o + a + bb, o + bb]
-        .iter()
-        .map(|v| v.to_array())
-        .collect();
-    let nrm = a.cross(bb).normalize();
-    let n = vec![nrm.to_array(); 4];
-    let mut idx = Vec::new();
-    push_wound(&p, &n, &mut idx, [0, 1, 2]);
-    push_wound(&p, &n, &mut idx, [0, 2, 3]);
-    let mesh = b.add_mesh(name, &p, Some(&n), None, Some(&idx), Some(mat));
-    b.add_node(json!({"name": name, "mesh": mesh}))
-}
-
-/// The closed room around the back wall (4 x 3 x 4 m), its right wall open between 1.2 and
-/// 2.4 m high and ±0.8 m deep; a sun through the opening lights a patch of the floor only.
-fn room_shell(b: &mut GltfBuilder) -> Vec<usize> {
-    let wall = plain(b, "walls", [0.75, 0.73, 0.7], 0.8);
-    let floor = plain(b, "floor", [0.8, 0.78, 0.74], 0.7);
-    let (x, y, z) = (Vec3::X, Vec3::Y, Vec3::Z);
-    let mut nodes = vec![
-        panel(
-            b,
-            "floor",
-            (Vec3::new(-2.0, 0.0, 2.0), 4.0 * x, -4.0 * z),
-            floor,
-        ),
-        panel(
-            b,
-            "ceiling",
-            (Vec3::new(-2.0, 3.0, -2.0), 4.0 * x, 4.0 * z),
-            wall,
-        ),
-        panel(
-            b,
-            "back",
-            (Vec3::new(-2.0, 0.0, -2.0), 4.0 * x, 3.0 * y),
-            wall,
-        ),
-        panel(
-            b,
-            "front",
-            (Vec3::new(2.0, 0.0, 2.0), -4.0 * x, 3.0 * y),
-            wall,
-        ),
-        panel(
-            b,
-            "left",
-            (Vec3::new(-2.0, 0.0, 2.0), -4.0 * z, 3.0 * y),
-            wall,
-        ),
-    ];
-    // The right wall (x = 2) around its opening.
-    let r = Vec3::new(2.0, 0.0, 0.0);
-    for (name, z0, z1, y0, y1) in [
-        ("right_low", -2.0, 2.0, 0.0, 1.2),
-        ("right_high", -2.0, 2.0, 2.4, 3.0),
-        ("right_back", -2.0, -0.8, 1.2, 2.4),
-        ("right_front", 0.8, 2.0, 1.2, 2.4),
-    ] {
-        let o = r + Vec3::new(0.0, y0, z0);
-        nodes.push(panel(b, name, (o, (y1 - y0) * y, (z1 - z0) * z), wall));
-    }
-    nodes
-}
 
 /// Write member `m` into `dir`: `scene.gltf` (the truth's textures in it), its textures,
 /// `sky.exr` where it is lit by the environment, and `task.toml`, which starts the optimized
@@ -627,8 +288,28 @@ pub fn write_member(dir: &Path, m: &Member) -> Result<()> {
     } else {
         Vec3::new(0.0, 0.95, 0.0)
     };
-    // The optimized material: the truth in its slot, constants in the others.
-    let texels = truth(m.slot, m.resolution, &mut d);
+    let target = target_material(&mut b, m, &mut d, dir)?;
+    let (p, n, uv, idx) = shape_mesh(m.shape, c);
+    let mesh = b.add_mesh("target", &p, Some(&n), Some(&uv), Some(&idx), Some(target));
+    let mut nodes = vec![b.add_node(json!({"name": "target", "mesh": mesh}))];
+    let cameras_from = d.range(0.0, 2.0 * PI);
+    let environment = add_lights(&mut b, m, &mut d, (c, cameras_from), &mut nodes);
+    let names = add_cameras(&mut b, m, &mut d, (c, cameras_from), &mut nodes);
+    b.set_scene(&nodes);
+    b.write_gltf(&dir.join("scene.gltf"), false)?;
+    if environment {
+        write_sky(&dir.join("sky.exr"))?;
+    }
+    write_atomic(
+        &dir.join("task.toml"),
+        task_text(m, &names, environment).as_bytes(),
+    )
+}
+
+/// The optimized material: the truth (written to `truth.png`) in its slot, constants drawn
+/// from `d` in the others.
+fn target_material(b: &mut GltfBuilder, m: &Member, d: &mut Draw, dir: &Path) -> Result<usize> {
+    let texels = truth(m.slot, m.resolution, d);
     let png = super::authoring::png_bytes(m.resolution, m.resolution, &texels)?;
     write_atomic(&dir.join("truth.png"), &png)?;
     let ti = b.add_image_uri("truth", "truth.png");
@@ -651,14 +332,22 @@ pub fn write_member(dir: &Path, m: &Member) -> Result<()> {
         Slot::Normal => mat["normalTexture"] = tex,
     }
     mat["pbrMetallicRoughness"] = pbr;
-    let target = b.add_material(mat);
-    let (p, n, uv, idx) = shape_mesh(m.shape, c);
-    let mesh = b.add_mesh("target", &p, Some(&n), Some(&uv), Some(&idx), Some(target));
-    let mut nodes = vec![b.add_node(json!({"name": "target", "mesh": mesh}))];
+    Ok(b.add_material(mat))
+}
+
+/// The member's lights (and the room's shell, or the floor) into `nodes`, around the
+/// shape's centre `c`, on the side `cameras_from` of the cameras' ring; whether it is lit by
+/// the sky.
+fn add_lights(
+    b: &mut GltfBuilder,
+    m: &Member,
+    d: &mut Draw,
+    (c, cameras_from): (Vec3, f32),
+    nodes: &mut Vec<usize>,
+) -> bool {
     let mut environment = false;
-    let cameras_from = d.range(0.0, 2.0 * PI);
     if m.shape == Shape::Room {
-        nodes.extend(room_shell(&mut b));
+        nodes.extend(room_shell(b));
         let sun = b.add_light(
             json!({"name": "sun", "type": "directional", "color": [1.0, 0.95, 0.85], "intensity": 40.0}),
         );
@@ -668,11 +357,11 @@ pub fn write_member(dir: &Path, m: &Member) -> Result<()> {
             "extensions": {"KHR_lights_punctual": {"light": sun}}})));
     } else {
         if m.shape != Shape::Relief {
-            let floor = plain(&mut b, "floor", [0.45, 0.45, 0.45], 0.9);
+            let floor = plain(b, "floor", [0.45, 0.45, 0.45], 0.9);
             let s = 4.0;
             let (x, z) = (Vec3::X, Vec3::Z);
             nodes.push(panel(
-                &mut b,
+                b,
                 "floor",
                 (Vec3::new(-s, 0.0, s), 2.0 * s * x, -2.0 * s * z),
                 floor,
@@ -710,7 +399,7 @@ pub fn write_member(dir: &Path, m: &Member) -> Result<()> {
                         "extensions": {"KHR_lights_punctual": {"light": li}}})));
                 }
                 Light::Area => nodes.push(area_light(
-                    &mut b,
+                    b,
                     &name,
                     (c + LIGHT_DISTANCE * dir_to).to_array(),
                     c.to_array(),
@@ -722,10 +411,20 @@ pub fn write_member(dir: &Path, m: &Member) -> Result<()> {
             }
         }
     }
-    // Cameras: inside the room facing the back wall; in front of the relief; else on a
-    // ring around the shape.
+    environment
+}
+
+/// The member's cameras into `nodes`: inside the room facing the back wall; in front of the
+/// relief; else on a ring around the shape's centre `c` from `cameras_from`. Their names,
+/// quoted for the task file.
+fn add_cameras(
+    b: &mut GltfBuilder,
+    m: &Member,
+    d: &mut Draw,
+    (c, start): (Vec3, f32),
+    nodes: &mut Vec<usize>,
+) -> Vec<String> {
     let mut names = Vec::new();
-    let start = cameras_from;
     for k in 0..m.cameras {
         let name = format!("camera{k}");
         let (eye, look) = match m.shape {
@@ -751,22 +450,22 @@ pub fn write_member(dir: &Path, m: &Member) -> Result<()> {
             }
         };
         let fov = if m.shape == Shape::Room { 1.1 } else { 0.7 };
-        nodes.push(camera(&mut b, &name, fov, eye.to_array(), look.to_array()));
+        nodes.push(camera(b, &name, fov, eye.to_array(), look.to_array()));
         names.push(format!("\"{name}\""));
     }
-    b.set_scene(&nodes);
-    b.write_gltf(&dir.join("scene.gltf"), false)?;
-    if environment {
-        write_sky(&dir.join("sky.exr"))?;
-    }
+    names
+}
+
+/// `task.toml` of member `m` with its cameras' `names`: the scene, sampling and budget, the
+/// texture from a constant, nothing else (every other choice `auto`'s).
+fn task_text(m: &Member, names: &[String], environment: bool) -> String {
     let init = match m.slot {
         Slot::BaseColor => "[0.5, 0.5, 0.5]",
         Slot::Roughness | Slot::Metallic => "0.5",
         Slot::Normal => "[0.5, 0.5, 1.0]",
     };
     let lights: Vec<&str> = m.lights.iter().map(|l| light_name(*l)).collect();
-    let text =
-        format!(
+    format!(
         "# Scene family member {seed} ({split} split): a {shape}, its {slot} recovered, lit by \
          {lights}; paths of {depth} vertices.\n# Written by `psrestir make-scenes --family`; \
          paths are relative to this file. Every choice the task leaves out is `auto`'s.\n\
@@ -777,7 +476,11 @@ pub fn write_member(dir: &Path, m: &Member) -> Result<()> {
          [[textures]]\nmaterial = \"target\"\nslot = \"{slot}\"\nresolution = [{res}, {res}]\n\
          init = {init}\n",
         seed = m.seed,
-        split = if TEST.contains(&m.seed) { "test" } else { "train" },
+        split = if TEST.contains(&m.seed) {
+            "test"
+        } else {
+            "train"
+        },
         shape = shape_name(m.shape).replace('_', " "),
         slot = m.slot.name(),
         lights = lights.join(" and "),
@@ -794,8 +497,7 @@ pub fn write_member(dir: &Path, m: &Member) -> Result<()> {
         primal = m.primal_spp,
         grad = m.gradient_spp,
         res = m.resolution,
-    );
-    write_atomic(&dir.join("task.toml"), text.as_bytes())
+    )
 }
 
 #[cfg(test)]
