@@ -207,12 +207,25 @@ fn contender_optimizer(
         t.apply_learning_rate(&mut opt, prep);
     }
     if who.auto {
-        // The rates `auto` gives textures that name none.
+        // The rates `auto` gives textures that name none, as a run of the bare task gets
+        // them (`Problem::load`). None here would be the step's own rate, which is not
+        // `auto`'s where the rule differs from it (the variance step with indirect light).
+        let config = auto_configuration(task, prep);
         for t in &mut opt.set.textures {
-            t.learning_rate = None;
+            t.learning_rate = Some(config.rate(t.slot));
         }
     }
     Ok(opt)
+}
+
+/// What `auto` chooses for the bare task (what a task file naming only its scene, cameras,
+/// targets, textures and sampling gets, [`super::contender::bare`]) seen by `prep`'s cameras.
+fn auto_configuration(task: &Task, prep: &Problem) -> crate::optim::auto::Configuration {
+    crate::task::task_configuration(
+        &super::contender::bare(task),
+        crate::optim::MethodChoice::Auto,
+        prep.cameras.len(),
+    )
 }
 
 /// The estimator's counters over a run, sampled every few iterations: the first sampled
@@ -550,11 +563,12 @@ fn describe_run(
         return d;
     }
     // The rates and schedule `auto` gave, which the scale above multiplies.
+    let config = auto_configuration(task, prep);
     let rates: Vec<String> = prep
         .set
         .textures
         .iter()
-        .map(|t| format!("{}", crate::optim::auto::texture_rate(t, s.step)))
+        .map(|t| format!("{}", config.rate(t.slot)))
         .collect();
     format!(
         "{d}; auto's rates {}, {}, smoothness {}",
