@@ -234,25 +234,11 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     } else {
         None
     };
-    let mut light_direction_error_deg = None;
     let environment = opt.environment();
-    if let Some(env) = &environment {
-        // The recovered environment, lat-long with row 0 at the zenith like the inputs.
-        let img = crate::image_io::Image {
-            width: env.width,
-            height: env.height,
-            rgb: env.rgb.clone(),
-        };
-        img.save(&out.join("environment.exr"))?;
-        if let Some(truth) = prep.truth.as_ref().and_then(|t| t.env.as_ref()) {
-            let e = super::relight::direction_error_deg(env, truth);
-            log::info!(
-                "the recovered environment's strongest emission is {e:.1} degrees from the \
-                 truth's"
-            );
-            light_direction_error_deg = Some(e);
-        }
-    }
+    let light_direction_error_deg = match &environment {
+        Some(env) => save_environment(&out, &prep, env)?,
+        None => None,
+    };
     let relit = relight_outputs(gpu, task, &prep, &values, &out)?;
     if task.optimizer.optimize_exposure
         || task.optimizer.optimize_white_balance
@@ -301,6 +287,24 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
             .zip(opt.white_balance().iter().copied())
             .collect(),
     })
+}
+
+/// Write the recovered environment `env` to `environment.exr` (lat-long, row 0 at the
+/// zenith like the inputs); where the truth has one, the angle in degrees between their
+/// strongest emissions, logged.
+fn save_environment(out: &Path, prep: &Problem, env: &crate::scene::EnvMap) -> Result<Option<f64>> {
+    let img = crate::image_io::Image {
+        width: env.width,
+        height: env.height,
+        rgb: env.rgb.clone(),
+    };
+    img.save(&out.join("environment.exr"))?;
+    let Some(truth) = prep.truth.as_ref().and_then(|t| t.env.as_ref()) else {
+        return Ok(None);
+    };
+    let e = super::relight::direction_error_deg(env, truth);
+    log::info!("the recovered environment's strongest emission is {e:.1} degrees from the truth's");
+    Ok(Some(e))
 }
 
 /// The relit errors under the task's `relight` environments, written to `relight.csv` (none
