@@ -12,16 +12,12 @@ const SLOTS: u32 = 4u;
 // Whether normal maps may be optimized (false in shared/normal_map_off).
 const NORMAL_MAPS: bool = true;
 
-// An optimized normal map's normal that the viewer sees at a smaller cosine than this is bent
-// towards the viewer to it (optimized_normal).
-const NORMAL_BEND: f32 = 0.01;
-
 // The shading normal that sf's optimized normal map gives under the current or (prev) the
 // previous iteration's textures, and its derivative with respect to the map's filtered RGB
 // (columns: d n / d R, G, B): n = normalize(tbn (2 RGB - 1)), Z floored at NORMAL_Z_FLOOR,
 // turned with the face (the back of a double-sided surface), and bent back towards a viewer
-// it faces away from (NORMAL_BEND). Where it is degenerate it is the geometric normal,
-// derivative zero. The directions are held fixed: the derivative of a value that depends on
+// it faces away from (NORMAL_BEND, shared/surface: as a file's normal map is). Where it is
+// degenerate it is the geometric normal, derivative zero. The directions are held fixed: the derivative of a value that depends on
 // the normal is its gradient in n through this matrix.
 struct MappedNormal {
     n: vec3f,

@@ -25,6 +25,27 @@ struct Surface {
 // NORMAL_Z_FLOOR in src/vocab.rs): a lower Z reads as this one.
 const NORMAL_Z_FLOOR: f32 = 0.1;
 
+// A mapped normal (the file's normal map or an optimized one) that the viewer sees at a
+// smaller cosine than this is bent towards the viewer to it (bent_to_viewer). Both kinds of
+// map read their texels the same way, so that an optimized map equal to a file's renders
+// as the file's does: targets rendered from a scene's own normal map are then matched
+// exactly by the true map, not by a map that makes up for a difference between two readings.
+const NORMAL_BEND: f32 = 0.01;
+
+// n (unit) bent towards the viewer wo until n.wo = NORMAL_BEND (before normalizing) where it
+// is less: continuous where a falling back to the geometric normal would jump, and so
+// differentiable (shared/normal_map, optimized_normal, takes its derivative). Zero where
+// the bent vector is degenerate.
+fn bent_to_viewer(n: vec3f, wo: vec3f) -> vec3f {
+    let c = dot(n, wo);
+    if c >= NORMAL_BEND {
+        return n;
+    }
+    let nb = n + (NORMAL_BEND - c) * wo;
+    let lb = length(nb);
+    return select(vec3f(0.0), nb / lb, lb > 0.0);
+}
+
 // Geometry at the point (hit.b1, hit.b2) of triangle hit.tri seen from o, normals turned
 // towards the viewer for double-sided materials. The point is interpolated from the
 // triangle's vertices (not o + t d), so that the same (o, triangle, barycentrics) always give
@@ -50,11 +71,13 @@ fn surface_at(o: vec3f, hit: Hit) -> Surface {
     out.uv = b0 * s.uv01.xy + hit.b1 * s.uv01.zw + hit.b2 * s.uv2;
     out.material = s.material;
     let tangents = s.t0 != 0u && s.t1 != 0u && s.t2 != 0u;
+    var mapped = false;
     out.tbn = mat3x3f();
     if m.param_normal != NONE {
         out.tbn = tangent_frame(ns, vec3f(b0, hit.b1, hit.b2), s, tangents);
     } else if m.normal_tex.offset != NONE && tangents {
         ns = normal_mapped(m, out.uv, ns, vec3f(b0, hit.b1, hit.b2), s);
+        mapped = true;
     }
     out.front = front;
     out.wo = -d;
@@ -66,6 +89,13 @@ fn surface_at(o: vec3f, hit: Hit) -> Surface {
     out.ng = ng;
     if m.param_normal != NONE {
         out.frame = onb(optimized_normal(out, false).n);
+        return out;
+    }
+    if mapped {
+        // The file's normal map, read as an optimized one is (bent, not dropped).
+        let len = length(ns);
+        let nb = select(vec3f(0.0), bent_to_viewer(ns / len, out.wo), len > 0.0);
+        out.frame = onb(select(ng, nb, length(nb) > 0.0));
         return out;
     }
     let len = length(ns);
@@ -119,15 +149,16 @@ fn tangent_at(w: u32) -> vec4f {
 // The normal n (interpolated, of the front face) perturbed by material m's tangent-space
 // normal map at uv: the interpolated tangent of triangle s at barycentrics b, made
 // orthogonal to n, the bitangent cross(n, t) x w, and the map's normal (2 x texel - 1, X and
-// Y times normal_scale) in that frame. The back face of a double-sided surface flips the
-// result with the rest of its shading frame.
+// Y times normal_scale, Z floored at NORMAL_Z_FLOOR as an optimized map's) in that frame. The
+// back face of a double-sided surface flips the result with the rest of its shading frame,
+// and surface_at bends it towards the viewer (bent_to_viewer).
 fn normal_mapped(m: Material, uv: vec2f, n: vec3f, b: vec3f, s: TriShading) -> vec3f {
     let t0 = tangent_at(s.t0);
     var t = b.x * t0.xyz + b.y * tangent_at(s.t1).xyz + b.z * tangent_at(s.t2).xyz;
     let nn = normalize(n);
     t -= nn * dot(nn, t);
     let tn = sample_texture(m.normal_tex, transform_uv(m, 3u, uv)).xyz * 2.0 - 1.0;
-    let v = vec3f(tn.xy * m.normal_scale, tn.z);
+    let v = vec3f(tn.xy * m.normal_scale, max(tn.z, NORMAL_Z_FLOOR));
     if !(length(t) > 0.0) || !(length(v) > 0.0) || !all(nn == nn) {
         return n;
     }
