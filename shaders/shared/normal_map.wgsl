@@ -17,8 +17,9 @@ const NORMAL_MAPS: bool = true;
 // (columns: d n / d R, G, B): n = normalize(tbn (2 RGB - 1)), Z floored at NORMAL_Z_FLOOR,
 // turned with the face (the back of a double-sided surface), and bent back towards a viewer
 // it faces away from (NORMAL_BEND, shared/surface: as a file's normal map is). Where it is
-// degenerate it is the geometric normal, derivative zero. The directions are held fixed: the derivative of a value that depends on
-// the normal is its gradient in n through this matrix.
+// degenerate it is the geometric normal, derivative zero. The directions are held fixed:
+// the derivative of a value that depends on the normal is its gradient in n through this
+// matrix.
 struct MappedNormal {
     n: vec3f,
     d: mat3x3f,
