@@ -502,7 +502,7 @@ impl Optimizer {
             );
         }
         let factor = self.settings.schedule.factor(iteration, self.progress);
-        // While the environment warms up the textures hold (light.rs).
+        // While the environment warms up the textures hold (environment_fit.rs).
         let texture_factor = if self.environment_warming_up() {
             0.0
         } else {
@@ -622,7 +622,7 @@ impl Optimizer {
             ..Default::default()
         };
         self.estimator.faults(&self.gpu, &mut f)?;
-        // The environment's gradient updates lost or dropped (light.rs).
+        // The environment's gradient updates lost or dropped (environment_fit.rs).
         f.lost_updates += self.env_faults;
         Ok(f)
     }
