@@ -132,13 +132,7 @@ fn a_normal_map_tilts_the_shading_normal_by_its_angle() {
     let tilted = (Vec3::X * v.x + Vec3::Z * v.y + Vec3::Y * v.z).normalize();
     assert!(tilted.dot(Vec3::Y) < 0.95, "{tilted}");
     let mut mat = material(base.to_array(), metallic, roughness);
-    mat.normal_texture = Some(psrestir::scene::TextureSlot {
-        image: 0,
-        wrap_s: Wrap::Repeat,
-        wrap_t: Wrap::Repeat,
-        nearest: true,
-        transform: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
-    });
+    mat.normal_texture = Some(texture_slot(0, true));
     mat.normal_scale = scale;
     let mut scene = plane_scene(mat, 5.0);
     scene.images.push(psrestir::scene::Image8 {
@@ -486,13 +480,7 @@ fn a_files_normal_map_renders_as_the_optimized_map_of_its_texels() {
         .collect();
     let mut mat = material([0.6, 0.5, 0.4], 0.0, 0.4);
     mat.name = "plane".into();
-    mat.normal_texture = Some(psrestir::scene::TextureSlot {
-        image: 0,
-        wrap_s: Wrap::Repeat,
-        wrap_t: Wrap::Repeat,
-        nearest: true,
-        transform: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
-    });
+    mat.normal_texture = Some(texture_slot(0, true));
     let mut scene = plane_scene(mat, 2.0);
     scene.cameras = vec![look_at(
         Vec3::new(0.0, 0.55, 3.1),

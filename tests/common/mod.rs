@@ -251,14 +251,20 @@ pub fn with_normal_map(s: &mut Scene) {
         height: 4,
         rgba,
     });
-    s.materials[0].normal_texture = Some(psrestir::scene::TextureSlot {
-        image: s.images.len() - 1,
+    s.materials[0].normal_texture = Some(texture_slot(s.images.len() - 1, false));
+    s.materials[0].normal_scale = 1.2;
+}
+
+/// A texture slot reading scene image `image`, repeating, untransformed; nearest lookups or
+/// bilinear ones.
+pub fn texture_slot(image: usize, nearest: bool) -> psrestir::scene::TextureSlot {
+    psrestir::scene::TextureSlot {
+        image,
         wrap_s: psrestir::scene::Wrap::Repeat,
         wrap_t: psrestir::scene::Wrap::Repeat,
-        nearest: false,
+        nearest,
         transform: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
-    });
-    s.materials[0].normal_scale = 1.2;
+    }
 }
 
 pub fn shadow_scene() -> Scene {
