@@ -346,6 +346,15 @@ pub(crate) struct BenchArgs {
     /// Switch off the tasks' priors (multiscale gradient, smoothness prior).
     #[arg(long)]
     pub(crate) no_priors: bool,
+    /// Other renderers raced on every scene at equal time, scored as psrestir's runs:
+    /// `mitsuba` (Mitsuba 3's `prb` with Adam, and with psrestir's smoothness prior; needs
+    /// `pip install mitsuba` and LLVM 15 or newer; without them the bench says how to get
+    /// them and runs the rest).
+    #[arg(long, value_delimiter = ',', value_parser = ["mitsuba"])]
+    pub(crate) peers: Vec<String>,
+    /// The Python that runs the peers' scripts.
+    #[arg(long, default_value = "python3")]
+    pub(crate) peer_python: String,
     /// Vertices of a camera path: 1 is direct light only, each more one bounce of indirect
     /// light (overrides every task's `max_depth`).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=psrestir::scene::MaxDepth::LIMIT as i64))]

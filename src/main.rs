@@ -446,6 +446,8 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         end_to_end_only,
         contenders,
         no_priors,
+        peers,
+        peer_python,
         max_depth,
         throughput,
         tune,
@@ -532,6 +534,16 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
         ..Default::default()
     };
+    let mut opts = opts;
+    if peers.iter().any(|p| p == "mitsuba") {
+        match psrestir::bench::peer::check_mitsuba(&peer_python) {
+            Ok(v) => {
+                eprintln!("racing Mitsuba {v} (llvm_ad_rgb) too");
+                opts.mitsuba = Some(peer_python);
+            }
+            Err(why) => eprintln!("warning: no Mitsuba 3 rows: {why}"),
+        }
+    }
     let gpu = Gpu::new()?;
     let report = psrestir::bench::bench(&gpu, &tasks, &opts)?;
     println!("{}", psrestir::bench::report::table(&report));

@@ -25,6 +25,7 @@
 //! [`report`].
 mod contender;
 mod gradient;
+pub mod peer;
 mod phases;
 pub mod report;
 mod results;
@@ -140,6 +141,8 @@ pub struct BenchOptions {
     /// The estimators and steps optimized in the equal-time phase after the baseline with
     /// Adam, each tuned like it with `tune`.
     pub contenders: Vec<Contender>,
+    /// Race Mitsuba 3 too (`--peers mitsuba`), with this Python ([`peer`]); None: no peer.
+    pub mitsuba: Option<String>,
 }
 
 impl Default for BenchOptions {
@@ -171,6 +174,7 @@ impl Default for BenchOptions {
             tune_budget_s: None,
             end_to_end_only: false,
             contenders: Contender::DEFAULT.to_vec(),
+            mitsuba: None,
         }
     }
 }
@@ -415,7 +419,7 @@ fn measure_scene(
             std::fs::create_dir_all(tune_dir).map_err(|e| Error::file(tune_dir, e.to_string()))?;
         }
         let tuned = tune_contenders(gpu, task, &prep, o, tune_dir, progress)?;
-        let (r, f) = optimization_phases(gpu, task, &prep, o, tuned, progress)?;
+        let (r, f) = optimization_phases(gpu, task, &prep, o, &dir, tuned, progress)?;
         (Some(r), Some(f))
     };
     let result = scene_result(name, task, &prep, o, &pp, &g, optimization);

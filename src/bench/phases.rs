@@ -587,6 +587,7 @@ pub(super) fn optimization_phases(
     task: &Task,
     prep: &Problem,
     o: &BenchOptions,
+    dir: &Path,
     mut tuned: Vec<Option<tune::Tuned>>,
     progress: &Progress,
 ) -> Result<(OptimizationResult, FinalImages)> {
@@ -614,6 +615,13 @@ pub(super) fn optimization_phases(
         runs.push(result);
         finals.runs.push((who.name(), image));
     }
+    let mut peer_forward = Vec::new();
+    if let Some(python) = &o.mitsuba {
+        let (peer_runs, forward) =
+            mitsuba_runs(dir, task, prep, o, python, &start.observed, &runs[0]);
+        runs.extend(peer_runs);
+        peer_forward = forward;
+    }
     let observed = &start.observed;
     let result = OptimizationResult {
         image_relmse_initial: start.image,
@@ -637,8 +645,39 @@ pub(super) fn optimization_phases(
         },
         auto: auto_result(task, prep.cameras.len(), &runs, start.texture_observed),
         runs,
+        peer_forward,
     };
     Ok((result, finals))
+}
+
+/// Mitsuba 3's rows on this scene and seed ([`super::peer`]); none, with a warning that says
+/// why, where the scene does not convert or the race fails.
+fn mitsuba_runs(
+    dir: &Path,
+    task: &Task,
+    prep: &Problem,
+    o: &BenchOptions,
+    python: &str,
+    observed: &[bool],
+    baseline: &RunResult,
+) -> (Vec<RunResult>, Vec<super::PeerForward>) {
+    let exchange = dir.join("mitsuba").join("exchange");
+    let s = settings(prep, task, Method::BASELINE, o);
+    let raced =
+        super::peer::exchange::write(&exchange, task, prep, &s, observed, o.budget_s, o.eval_spp)
+            .and_then(|()| {
+                super::peer::race_mitsuba(&super::peer::RaceInput {
+                    dir,
+                    python,
+                    tune: o.tune,
+                    tune_budget_s: o.tune_budget_s,
+                    baseline,
+                })
+            });
+    raced.unwrap_or_else(|e| {
+        eprintln!("warning: no Mitsuba 3 rows for {}: {e}", dir.display());
+        (Vec::new(), Vec::new())
+    })
 }
 
 /// What `auto` picks for `task` and how the run of its pick (with Adam, unfiltered) compares
@@ -674,7 +713,7 @@ fn default_result(runs: &[RunResult], start: f64) -> Option<DefaultResult> {
     let d = runs.iter().find(|r| r.key == Contender::AUTO.key())?;
     let lowest = |f: fn(&RunResult) -> f64| {
         runs.iter()
-            .filter(|r| r.key != d.key)
+            .filter(|r| r.key != d.key && r.method != super::peer::MITSUBA)
             .min_by(|a, b| f(a).total_cmp(&f(b)))
     };
     let best = lowest(|r| r.texture_rmse_observed)?;

@@ -198,6 +198,26 @@ pub struct OptimizationResult {
     /// What `method = "auto"` picks for this scene's sampling, and how the run of its pick
     /// compares with the better of the fixed methods it picks between.
     pub auto: AutoResult,
+    /// A peer's forward check, per camera (`--peers`): its targets' mean over psrestir's.
+    #[serde(default)]
+    pub peer_forward: Vec<PeerForward>,
+}
+
+/// One camera's forward check of a peer renderer: the mean of its target (the ground truth
+/// rendered at the task's target spp) over the mean of psrestir's.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct PeerForward {
+    /// The peer (`mitsuba`).
+    pub peer: String,
+    /// The camera.
+    pub camera: String,
+    /// Its target's mean over psrestir's (all pixels and channels).
+    #[serde(deserialize_with = "f64_or_nan")]
+    pub mean_ratio: f64,
+    /// Image relMSE of its target against psrestir's (both renderers' noise and their
+    /// models' differences).
+    #[serde(deserialize_with = "f64_or_nan")]
+    pub relmse: f64,
 }
 
 /// `method = "auto"` on one scene: its pick among the baseline and ReSTIR (both with Adam,
@@ -488,4 +508,25 @@ pub struct SeededScene {
     pub default_over_best_texture: Option<Interval>,
     /// The default's image relMSE over that contender's, paired per seed.
     pub default_over_best_image: Option<Interval>,
+    /// The default against Mitsuba 3's best row, where it raced (`--peers mitsuba`).
+    #[serde(default)]
+    pub mitsuba: Option<PeerOverSeeds>,
+}
+
+/// The default configuration against a peer's best row (the one with the lowest
+/// geometric-mean texture error over the seeds), paired per seed.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PeerOverSeeds {
+    /// The peer's row.
+    pub best: String,
+    /// The default's observed-texel RMSE over that row's.
+    pub texture: Option<Interval>,
+    /// The default's image relMSE (against psrestir's targets) over that row's (against its
+    /// own targets).
+    pub image: Option<Interval>,
+    /// How much sooner the default reaches that row's final observed-texel RMSE: the budget
+    /// over the time its curve first gets there, over the seeds where it does.
+    pub sooner: Option<Interval>,
+    /// Seeds in which the default reaches it at all.
+    pub reached: u32,
 }

@@ -71,7 +71,7 @@ impl Interval {
 
 /// When `run`'s curve first reaches `target` observed-texel RMSE (seconds, linear between
 /// points), if it does.
-fn time_to(run: &RunResult, target: f64) -> Option<f64> {
+pub(crate) fn time_to(run: &RunResult, target: f64) -> Option<f64> {
     let mut prev: Option<(f64, f64)> = None;
     for p in &run.curve {
         let (t, e) = (p.seconds, p.texture_rmse_observed);
@@ -144,7 +144,7 @@ pub fn summarize(name: &str, seeded: &[&SceneResult]) -> SeededScene {
     let baseline_key = optimized.first().map(|o| o.baseline().key.clone());
     let best = runs
         .iter()
-        .filter(|r| Some(&r.key) != default_key.as_ref())
+        .filter(|r| Some(&r.key) != default_key.as_ref() && !super::peer::is_peer_key(&r.key))
         .filter_map(|r| Some((r.texture?.mean, r.key.clone())))
         .chain(baseline_key.map(|k| (1.0, k)))
         .min_by(|a, b| a.0.total_cmp(&b.0))
@@ -165,6 +165,9 @@ pub fn summarize(name: &str, seeded: &[&SceneResult]) -> SeededScene {
         seeds: seeded.len() as u32,
         default_over_best_texture: paired(&|r| r.texture_rmse_observed),
         default_over_best_image: paired(&|r| r.image_relmse),
+        mitsuba: default_key
+            .as_deref()
+            .and_then(|d| super::peer::report::over_seeds(&optimized, d)),
         runs,
         default_key,
         best,
@@ -202,11 +205,24 @@ pub const HEADLINE_COLUMNS: &str = "| scene | the default (what `auto` chose) | 
                                     best other contender's | image relMSE ÷ its | × sooner to \
                                     the baseline's final texture RMSE |";
 
+/// The columns the headline gains where Mitsuba 3 raced.
+pub const HEADLINE_MITSUBA_COLUMNS: &str = " texture RMSE ÷ Mitsuba 3's best | image relMSE \
+                                            ÷ its | × sooner to its final texture RMSE |";
+
 /// The headline over seeds: per scene the default configuration's ratios over the baseline
 /// and over the contender with the lowest geometric-mean texture error, each with its 90%
 /// interval (bold where it excludes 1).
+///
+/// Where Mitsuba 3 raced (`--peers mitsuba`), three columns more
+/// ([`HEADLINE_MITSUBA_COLUMNS`]): the default's errors over Mitsuba's best row and how much
+/// sooner it reaches that row's final texture error.
 pub fn headline_rows(scenes: &[SeededScene]) -> String {
-    let mut s = format!("{HEADLINE_COLUMNS}\n|---|---|---|---|---|---|---|\n");
+    let peer = scenes.iter().any(|x| x.mitsuba.is_some());
+    let mut s = if peer {
+        format!("{HEADLINE_COLUMNS}{HEADLINE_MITSUBA_COLUMNS}\n|---|---|---|---|---|---|---|---|---|---|\n")
+    } else {
+        format!("{HEADLINE_COLUMNS}\n|---|---|---|---|---|---|---|\n")
+    };
     let show = |i: &Option<Interval>| i.map_or("–".to_string(), |i| i.show());
     for x in scenes {
         let Some(d) = x
@@ -224,7 +240,7 @@ pub fn headline_rows(scenes: &[SeededScene]) -> String {
             }
             None => "–",
         };
-        let _ = writeln!(
+        let _ = write!(
             s,
             "| {} | {chose} | {} | {} | {} ({best}) | {} | {} ({}/{}) |",
             x.name,
@@ -236,6 +252,23 @@ pub fn headline_rows(scenes: &[SeededScene]) -> String {
             d.reached,
             x.seeds,
         );
+        match (&x.mitsuba, peer) {
+            (Some(m), _) => {
+                let _ = write!(
+                    s,
+                    " {} ({}) | {} | {} ({}/{}) |",
+                    show(&m.texture),
+                    m.best,
+                    show(&m.image),
+                    show(&m.sooner),
+                    m.reached,
+                    x.seeds
+                );
+            }
+            (None, true) => s.push_str(" – | – | – |"),
+            (None, false) => {}
+        }
+        s.push('\n');
     }
     s
 }

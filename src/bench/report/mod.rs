@@ -167,6 +167,7 @@ fn write_gradients(dir: &Path, prep: &Problem, g: &GradientSnapshot) -> Result<(
 }
 
 mod tables;
+pub(crate) use tables::pipeline_markdown;
 pub use tables::{
     auto_table, curve_table, default_table, gradient_table, optimization_table, per_texture_table,
     primal_table, settings_table, successive_table, texture_table,
@@ -235,6 +236,7 @@ fn reconstruction_markdown(r: &BenchReport) -> String {
         );
         md.push_str(&defaults);
     }
+    md.push_str(&crate::bench::peer::report::markdown(r));
     md.push_str("\n### Observed-texel RMSE along the run\n\n");
     md.push_str(&curve_table(r));
     md.push_str(
@@ -611,31 +613,6 @@ pub fn report_markdown(r: &BenchReport) -> String {
     md
 }
 
-/// The pipeline-creation section: each pass's first creation in the run, slowest first.
-pub(crate) fn pipeline_markdown(pipelines: &[crate::gpu::PipelineTime]) -> String {
-    let mut rows = pipelines.to_vec();
-    rows.sort_by(|a, b| b.seconds.total_cmp(&a.seconds));
-    let total: f64 = rows.iter().map(|p| p.seconds).sum();
-    let mut md =
-        String::from("\n## Pipeline creation\n\n| pass | seconds | where |\n|---|---:|---|\n");
-    for p in &rows {
-        let place = if p.ahead {
-            "second device, ahead"
-        } else {
-            "this device"
-        };
-        let _ = writeln!(md, "| {} | {:.2} | {place} |", p.pass, p.seconds);
-    }
-    let _ = writeln!(
-        md,
-        "| total | {total:.2} | |\n\nEach pass the first time this run created it, shader \
-         compilation included (a load instead where the driver's shader cache held it); passes \
-         compiled ahead on a second device ran beside the first device's work, so the total \
-         is work, not waiting. All of it happens before the clocks above start."
-    );
-    md
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -672,9 +649,17 @@ mod tests {
         let block = &block[..block.find(HEADLINE_END).unwrap()];
         let header = block.trim_start().lines().next();
         assert!(
-            [HEADLINE_COLUMNS, crate::bench::seeds::HEADLINE_COLUMNS]
-                .iter()
-                .any(|h| header == Some(*h)),
+            [
+                HEADLINE_COLUMNS.to_string(),
+                crate::bench::seeds::HEADLINE_COLUMNS.to_string(),
+                format!(
+                    "{}{}",
+                    crate::bench::seeds::HEADLINE_COLUMNS,
+                    crate::bench::seeds::HEADLINE_MITSUBA_COLUMNS
+                ),
+            ]
+            .iter()
+            .any(|h| header == Some(h.as_str())),
             "{header:?}"
         );
         // One row per scene, not one per run.

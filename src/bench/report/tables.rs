@@ -362,3 +362,28 @@ pub(super) fn budget_text(r: &BenchReport) -> String {
         format!("{lo}–{hi} s (each task's own budget)")
     }
 }
+
+/// The pipeline-creation section: each pass's first creation in the run, slowest first.
+pub(crate) fn pipeline_markdown(pipelines: &[crate::gpu::PipelineTime]) -> String {
+    let mut rows = pipelines.to_vec();
+    rows.sort_by(|a, b| b.seconds.total_cmp(&a.seconds));
+    let total: f64 = rows.iter().map(|p| p.seconds).sum();
+    let mut md =
+        String::from("\n## Pipeline creation\n\n| pass | seconds | where |\n|---|---:|---|\n");
+    for p in &rows {
+        let place = if p.ahead {
+            "second device, ahead"
+        } else {
+            "this device"
+        };
+        let _ = writeln!(md, "| {} | {:.2} | {place} |", p.pass, p.seconds);
+    }
+    let _ = writeln!(
+        md,
+        "| total | {total:.2} | |\n\nEach pass the first time this run created it, shader \
+         compilation included (a load instead where the driver's shader cache held it); passes \
+         compiled ahead on a second device ran beside the first device's work, so the total \
+         is work, not waiting. All of it happens before the clocks above start."
+    );
+    md
+}
