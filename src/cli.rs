@@ -352,6 +352,11 @@ pub(crate) struct BenchArgs {
     /// them and runs the rest).
     #[arg(long, value_delimiter = ',', value_parser = ["mitsuba"])]
     pub(crate) peers: Vec<String>,
+    /// Choose the peers' learning rate (×1/3, ×1, ×3 the task's) and spp (4, 16) by a
+    /// search on another seed, once per scene, each trial a third of the budget (also with
+    /// --tune).
+    #[arg(long)]
+    pub(crate) tune_peers: bool,
     /// The Python that runs the peers' scripts.
     #[arg(long, default_value = "python3")]
     pub(crate) peer_python: String,

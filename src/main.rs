@@ -448,6 +448,7 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         no_priors,
         peers,
         peer_python,
+        tune_peers,
         max_depth,
         throughput,
         tune,
@@ -535,6 +536,7 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         ..Default::default()
     };
     let mut opts = opts;
+    opts.tune_peers = tune_peers;
     if peers.iter().any(|p| p == "mitsuba") {
         match psrestir::bench::peer::check_mitsuba(&peer_python) {
             Ok(v) => {

@@ -173,6 +173,7 @@ fn a_missing_or_failing_peer_says_what_to_do() {
         python: "false",
         tune: false,
         tune_budget_s: None,
+        tuned_file: None,
         baseline: &baseline,
     };
     let err = peer::race_mitsuba(&input).unwrap_err().to_string();

@@ -143,6 +143,9 @@ pub struct BenchOptions {
     pub contenders: Vec<Contender>,
     /// Race Mitsuba 3 too (`--peers mitsuba`), with this Python ([`peer`]); None: no peer.
     pub mitsuba: Option<String>,
+    /// The peers' learning rate and spp chosen by a search on another seed, once per scene
+    /// (also with `tune`).
+    pub tune_peers: bool,
 }
 
 impl Default for BenchOptions {
@@ -175,6 +178,7 @@ impl Default for BenchOptions {
             end_to_end_only: false,
             contenders: Contender::DEFAULT.to_vec(),
             mitsuba: None,
+            tune_peers: false,
         }
     }
 }
@@ -419,7 +423,7 @@ fn measure_scene(
             std::fs::create_dir_all(tune_dir).map_err(|e| Error::file(tune_dir, e.to_string()))?;
         }
         let tuned = tune_contenders(gpu, task, &prep, o, tune_dir, progress)?;
-        let (r, f) = optimization_phases(gpu, task, &prep, o, &dir, tuned, progress)?;
+        let (r, f) = optimization_phases(gpu, task, &prep, o, (&dir, tune_dir), tuned, progress)?;
         (Some(r), Some(f))
     };
     let result = scene_result(name, task, &prep, o, &pp, &g, optimization);

@@ -587,7 +587,7 @@ pub(super) fn optimization_phases(
     task: &Task,
     prep: &Problem,
     o: &BenchOptions,
-    dir: &Path,
+    (dir, tune_dir): (&Path, &Path),
     mut tuned: Vec<Option<tune::Tuned>>,
     progress: &Progress,
 ) -> Result<(OptimizationResult, FinalImages)> {
@@ -617,8 +617,15 @@ pub(super) fn optimization_phases(
     }
     let mut peer_forward = Vec::new();
     if let Some(python) = &o.mitsuba {
-        let (peer_runs, forward) =
-            mitsuba_runs(dir, task, prep, o, python, &start.observed, &runs[0]);
+        let (peer_runs, forward) = mitsuba_runs(
+            (dir, tune_dir),
+            task,
+            prep,
+            o,
+            python,
+            &start.observed,
+            &runs[0],
+        );
         runs.extend(peer_runs);
         peer_forward = forward;
     }
@@ -653,7 +660,7 @@ pub(super) fn optimization_phases(
 /// Mitsuba 3's rows on this scene and seed ([`super::peer`]); none, with a warning that says
 /// why, where the scene does not convert or the race fails.
 fn mitsuba_runs(
-    dir: &Path,
+    (dir, tune_dir): (&Path, &Path),
     task: &Task,
     prep: &Problem,
     o: &BenchOptions,
@@ -663,14 +670,16 @@ fn mitsuba_runs(
 ) -> (Vec<RunResult>, Vec<super::PeerForward>) {
     let exchange = dir.join("mitsuba").join("exchange");
     let s = settings(prep, task, Method::BASELINE, o);
+    let tuned_file = tune_dir.join("mitsuba_tuned.json");
     let raced =
         super::peer::exchange::write(&exchange, task, prep, &s, observed, o.budget_s, o.eval_spp)
             .and_then(|()| {
                 super::peer::race_mitsuba(&super::peer::RaceInput {
                     dir,
                     python,
-                    tune: o.tune,
+                    tune: o.tune || o.tune_peers,
                     tune_budget_s: o.tune_budget_s,
+                    tuned_file: Some(&tuned_file),
                     baseline,
                 })
             });

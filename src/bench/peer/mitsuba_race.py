@@ -12,7 +12,7 @@ texels psrestir's cameras observe against psrestir's ground truth, and image rel
 (two untimed iterations before it starts), as psrestir's pipeline creation is.
 
 Run by `psrestir bench --peers mitsuba`:
-    python3 mitsuba_race.py EXCHANGE_DIR OUT_DIR [--tune] [--threads N]
+    python3 mitsuba_race.py EXCHANGE_DIR OUT_DIR [--tune [--tuned FILE]] [--threads N]
 writes OUT_DIR/result.json (atomically) and prints its progress.
 """
 import argparse
@@ -55,6 +55,9 @@ def parse_args(argv=None):
     p.add_argument("out", help="folder for result.json")
     p.add_argument("--tune", action="store_true",
                    help="choose the learning rate and spp by a search on another seed")
+    p.add_argument("--tuned", default=None,
+                   help="with --tune: a JSON file of earlier searches (per row) to reuse, "
+                        "and where this one's choice is kept")
     p.add_argument("--tune-budget-s", type=float, default=None,
                    help="seconds of each trial of the search (default: a third of the budget)")
     p.add_argument("--threads", type=int, default=0, help="Dr.Jit threads (0: all cores)")
@@ -422,11 +425,11 @@ class Race:
 
 
 def tune(race, smoothness, budget_s, seed, spp):
-    """The learning rate (x1/3, x1, x3 the task's Adam rate) and spp (spp/2, spp x 2) by the
+    """The learning rate (x1/3, x1, x3 the task's Adam rate) and spp (spp, spp x 4) by the
     lowest observed-texel RMSE after `budget_s` on another seed's targets."""
     targets = race.targets(seed)
     trials = []
-    for s in sorted({max(1, spp // 2), spp * 2}):
+    for s in (spp, spp * 4):
         for scale in (1 / 3, 1.0, 3.0):
             r = race.run(targets, scale, s, smoothness, budget_s, seed, curve_points=2)
             trials.append({"learning_rate_scale": scale, "spp": s,
@@ -466,7 +469,14 @@ def main(argv=None):
     for name, smoothness in rows:
         scale, spp, trials = 1.0, args.spp, None
         if args.tune:
-            best, trials = tune(race, smoothness, args.tune_budget_s or budget / 3, seed + 7919, args.spp)
+            kept = load_tuned(args.tuned)
+            if name in kept:
+                best, trials = kept[name]["best"], kept[name]["trials"]
+                print(f"mitsuba_race: {name}: the search's choice from {args.tuned}", flush=True)
+            else:
+                best, trials = tune(race, smoothness, args.tune_budget_s or budget / 3, seed + 7919, args.spp)
+                kept[name] = {"best": best, "trials": trials}
+                save_json(args.tuned, kept)
             scale, spp = best["learning_rate_scale"], best["spp"]
         r = race.run(targets, scale, spp, smoothness, budget, seed)
         r["row"] = name
@@ -478,10 +488,28 @@ def main(argv=None):
     result = {"version": EXCHANGE_VERSION, "mitsuba": mi.__version__, "variant": mi.variant(),
               "threads": dr.thread_count(), "targets_s": targets_s, "forward": forward, "rows": out}
     os.makedirs(args.out, exist_ok=True)
-    tmp = os.path.join(args.out, "result.json.tmp")
+    save_json(os.path.join(args.out, "result.json"), result)
+
+
+def load_tuned(path):
+    """Earlier searches kept in `path` (per row), or none."""
+    if path is None or not os.path.exists(path):
+        return {}
+    try:
+        with open(path) as f:
+            return json.load(f)
+    except (OSError, ValueError) as e:
+        fail(f"{path}: {e}")
+
+
+def save_json(path, value):
+    """`value` as JSON in `path`, atomically (NaN written as null)."""
+    if path is None:
+        return
+    tmp = path + ".tmp"
     with open(tmp, "w") as f:
-        json.dump(finite_or_none(result), f, indent=1, allow_nan=False)
-    os.replace(tmp, os.path.join(args.out, "result.json"))
+        json.dump(finite_or_none(value), f, indent=1, allow_nan=False)
+    os.replace(tmp, path)
 
 
 if __name__ == "__main__":

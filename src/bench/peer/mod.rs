@@ -121,6 +121,8 @@ pub struct RaceInput<'a> {
     pub tune: bool,
     /// Seconds of each trial of that search.
     pub tune_budget_s: Option<f64>,
+    /// Where the search's choice is kept for the scene's other seeds (one search per scene).
+    pub tuned_file: Option<&'a Path>,
     /// The baseline's run (the reference of every ratio).
     pub baseline: &'a RunResult,
 }
@@ -138,6 +140,9 @@ pub fn race_mitsuba(input: &RaceInput) -> Result<(Vec<RunResult>, Vec<PeerForwar
         cmd.arg("--tune");
         if let Some(t) = input.tune_budget_s {
             cmd.args(["--tune-budget-s", &t.to_string()]);
+        }
+        if let Some(f) = input.tuned_file {
+            cmd.arg("--tuned").arg(f);
         }
     }
     let log = dir.join("race.log");
