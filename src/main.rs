@@ -464,12 +464,7 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
     for a in &options {
         estimator_options.assign(a)?;
     }
-    let contenders = contenders
-        .iter()
-        .filter(|c| c.as_str() != "none")
-        .map(|c| psrestir::bench::Contender::parse(c))
-        .collect::<std::result::Result<Vec<_>, _>>()
-        .map_err(|m| anyhow::anyhow!("--contenders: {m}"))?;
+    let contenders = parse_contenders(&contenders)?;
     if let Some(b) = tune_budget {
         if !(b.is_finite() && b > 0.0) {
             bail!("--tune-budget must be a positive number of seconds");
@@ -522,6 +517,8 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         no_priors,
         tune,
         tune_budget_s: tune_budget,
+        tune_peers,
+        mitsuba: mitsuba_python(&peers, peer_python),
         primal: primal.map(PrimalArg::mode),
         max_depth,
         eval_spp,
@@ -535,17 +532,6 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
         ..Default::default()
     };
-    let mut opts = opts;
-    opts.tune_peers = tune_peers;
-    if peers.iter().any(|p| p == "mitsuba") {
-        match psrestir::bench::peer::check_mitsuba(&peer_python) {
-            Ok(v) => {
-                eprintln!("racing Mitsuba {v} (llvm_ad_rgb) too");
-                opts.mitsuba = Some(peer_python);
-            }
-            Err(why) => eprintln!("warning: no Mitsuba 3 rows: {why}"),
-        }
-    }
     let gpu = Gpu::new()?;
     let report = psrestir::bench::bench(&gpu, &tasks, &opts)?;
     println!("{}", psrestir::bench::report::table(&report));
@@ -560,6 +546,33 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         println!("wrote docs/results.md and the headline table in README.md");
     }
     Ok(())
+}
+
+/// `--contenders`: the bench's contenders (`none` for none).
+fn parse_contenders(list: &[String]) -> Result<Vec<psrestir::bench::Contender>> {
+    list.iter()
+        .filter(|c| c.as_str() != "none")
+        .map(|c| psrestir::bench::Contender::parse(c))
+        .collect::<std::result::Result<Vec<_>, _>>()
+        .map_err(|m| anyhow::anyhow!("--contenders: {m}"))
+}
+
+/// With `mitsuba` among `peers`, `python` when it can run Mitsuba 3's race; else a warning
+/// that says how to get it, and None: the bench runs without it.
+fn mitsuba_python(peers: &[String], python: String) -> Option<String> {
+    if !peers.iter().any(|p| p == "mitsuba") {
+        return None;
+    }
+    match psrestir::bench::peer::check_mitsuba(&python) {
+        Ok(v) => {
+            eprintln!("racing Mitsuba {v} (llvm_ad_rgb) too");
+            Some(python)
+        }
+        Err(why) => {
+            eprintln!("warning: no Mitsuba 3 rows: {why}");
+            None
+        }
+    }
 }
 
 /// `bench --report-from`: docs/results.md and README.md's headline written from an earlier

@@ -142,6 +142,10 @@ fn a_peers_rows_join_the_report_scored_from_the_same_start() {
     );
     let md = std::fs::read_to_string(dir.path().join("bench/report.md")).unwrap();
     assert!(md.contains("### Against Mitsuba 3"), "{md}");
+    assert!(
+        md.contains("The default against Mitsuba 3's best row"),
+        "{md}"
+    );
     let json: Value =
         serde_json::from_slice(&std::fs::read(dir.path().join("bench/bench.json")).unwrap())
             .unwrap();

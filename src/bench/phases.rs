@@ -615,20 +615,8 @@ pub(super) fn optimization_phases(
         runs.push(result);
         finals.runs.push((who.name(), image));
     }
-    let mut peer_forward = Vec::new();
-    if let Some(python) = &o.mitsuba {
-        let (peer_runs, forward) = mitsuba_runs(
-            (dir, tune_dir),
-            task,
-            prep,
-            o,
-            python,
-            &start.observed,
-            &runs[0],
-        );
-        runs.extend(peer_runs);
-        peer_forward = forward;
-    }
+    let peer_forward =
+        super::peer::race((dir, tune_dir), task, prep, o, &start.observed, &mut runs);
     let observed = &start.observed;
     let result = OptimizationResult {
         image_relmse_initial: start.image,
@@ -655,38 +643,6 @@ pub(super) fn optimization_phases(
         peer_forward,
     };
     Ok((result, finals))
-}
-
-/// Mitsuba 3's rows on this scene and seed ([`super::peer`]); none, with a warning that says
-/// why, where the scene does not convert or the race fails.
-fn mitsuba_runs(
-    (dir, tune_dir): (&Path, &Path),
-    task: &Task,
-    prep: &Problem,
-    o: &BenchOptions,
-    python: &str,
-    observed: &[bool],
-    baseline: &RunResult,
-) -> (Vec<RunResult>, Vec<super::PeerForward>) {
-    let exchange = dir.join("mitsuba").join("exchange");
-    let s = settings(prep, task, Method::BASELINE, o);
-    let tuned_file = tune_dir.join("mitsuba_tuned.json");
-    let raced =
-        super::peer::exchange::write(&exchange, task, prep, &s, observed, o.budget_s, o.eval_spp)
-            .and_then(|()| {
-                super::peer::race_mitsuba(&super::peer::RaceInput {
-                    dir,
-                    python,
-                    tune: o.tune || o.tune_peers,
-                    tune_budget_s: o.tune_budget_s,
-                    tuned_file: Some(&tuned_file),
-                    baseline,
-                })
-            });
-    raced.unwrap_or_else(|e| {
-        eprintln!("warning: no Mitsuba 3 rows for {}: {e}", dir.display());
-        (Vec::new(), Vec::new())
-    })
 }
 
 /// What `auto` picks for `task` and how the run of its pick (with Adam, unfiltered) compares

@@ -9,6 +9,7 @@ import os
 import shutil
 import subprocess
 import sys
+import types
 
 import numpy as np
 import pytest
@@ -41,8 +42,10 @@ def test_the_schedule_is_psrestirs():
 class Fake:
     """A Race's state without Mitsuba: two textures with observed masks and a truth."""
 
-    def __init__(self, race_mod, rng):
+    def __init__(self, race_mod, rng, slots=("base_color", "roughness")):
         self.np = np
+        self.opt = [{"slot": s} for s in slots]
+        self.as_seen = types.MethodType(race_mod.Race.as_seen, self)
         self.observed = [rng.random((5, 7)) < 0.7, rng.random((4, 3)) < 0.5]
         self.truth = [rng.random((5, 7, 3)), rng.random((4, 3, 1))]
 
@@ -93,6 +96,26 @@ def test_the_score_is_the_rmse_over_observed_texels_and_channels():
     n0 = fake.observed[0].sum() * 3
     n1 = fake.observed[1].sum()
     assert race.Race.errors(fake, values)[0] == pytest.approx(math.sqrt(0.01 * n0 / (n0 + n1)))
+
+
+def test_a_normal_map_is_scored_by_the_directions_its_texels_stand_for():
+    """As psrestir's ParamSet::as_seen: normalize(2 rgb - 1), Z floored at 0.1; a texel's
+    length does not count, its direction does."""
+    race = load_script()
+    rng = np.random.default_rng(6)
+    fake = Fake(race, rng, slots=("normal", "roughness"))
+    n = rng.normal(size=(5, 7, 3))
+    n[..., 2] = np.abs(n[..., 2]) + 0.2
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    fake.truth[0] = fake.as_seen(fake.opt[0], 0.5 + 0.5 * n)
+    shorter = 0.5 + 0.5 * n * 0.6
+    assert race.Race.errors(fake, [shorter, fake.truth[1]])[0] == pytest.approx(0.0, abs=1e-12)
+    # A texel below the floor reads with Z at 0.1: (0, 0, -1) stands for (0, 0, 1).
+    down = np.array([0.5, 0.5, 0.0])
+    assert fake.as_seen(fake.opt[0], down) == pytest.approx([0.5, 0.5, 1.0])
+    tilted = shorter.copy()
+    tilted[0, 0] = [1.0, 0.5, 0.5]  # (1, 0, 0): Z floored, almost along X
+    assert race.Race.errors(fake, [tilted, fake.truth[1]])[0] > 0
 
 
 def test_a_missing_or_stale_exchange_is_a_clear_error(tmp_path):

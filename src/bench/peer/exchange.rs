@@ -75,6 +75,9 @@ pub struct CameraOut {
     pub world: [f32; 16],
     /// Vertical field of view (radians).
     pub yfov: f32,
+    /// The punctual lights on in its capture (indices into `lights`); None: all of them.
+    /// Emitting surfaces and the environment light every camera.
+    pub lights: Option<Vec<usize>>,
 }
 
 /// A punctual light.
@@ -147,8 +150,13 @@ pub struct MaterialOut {
     pub emissive: [f32; 3],
     /// Emissive texture (sRGB).
     pub emissive_texture: Option<TextureOut>,
-    /// Whether it has a normal map (the peer script refuses those).
-    pub normal_map: bool,
+    /// Its normal map (linear, tangent space).
+    pub normal_texture: Option<TextureOut>,
+    /// The normal map's X and Y scale.
+    pub normal_scale: f32,
+    /// The handedness of its triangles' tangent frames (the bitangent is cross(n, t) times
+    /// it): 1 or -1 where every vertex agrees, 0 where they differ or have no tangent.
+    pub tangent_sign: f32,
     /// Seen and emitting from both sides.
     pub double_sided: bool,
 }
@@ -304,11 +312,40 @@ fn lights(scene: &Scene) -> Vec<LightOut> {
         .collect()
 }
 
-fn materials(scene: &Scene) -> Vec<MaterialOut> {
-    scene
+/// The handedness of material `m`'s tangent frames in `scene` (see
+/// [`MaterialOut::tangent_sign`]).
+fn tangent_sign(scene: &Scene, m: usize) -> f32 {
+    let mut signs = scene
+        .triangles
+        .iter()
+        .filter(|t| t.material as usize == m)
+        .flat_map(|t| {
+            t.t.iter().map(|v| {
+                if v.truncate() == glam::Vec3::ZERO {
+                    0.0
+                } else {
+                    v.w.signum()
+                }
+            })
+        });
+    let Some(first) = signs.next() else {
+        return 0.0;
+    };
+    if signs.all(|s| s == first) {
+        first
+    } else {
+        0.0
+    }
+}
+
+/// The materials of `truth`, the tangent frames those of `scene` (the optimized scene: it
+/// has tangents where a normal map is optimized, the truth where its file has one).
+fn materials(truth: &Scene, scene: &Scene) -> Vec<MaterialOut> {
+    truth
         .materials
         .iter()
-        .map(|m| MaterialOut {
+        .enumerate()
+        .map(|(i, m)| MaterialOut {
             name: m.name.clone(),
             base_color: m.base_color.to_array(),
             base_color_texture: texture(&m.base_color_texture),
@@ -317,7 +354,12 @@ fn materials(scene: &Scene) -> Vec<MaterialOut> {
             metallic_roughness_texture: texture(&m.metallic_roughness_texture),
             emissive: m.emissive.to_array(),
             emissive_texture: texture(&m.emissive_texture),
-            normal_map: m.normal_texture.is_some(),
+            normal_texture: texture(&m.normal_texture),
+            normal_scale: m.normal_scale,
+            tangent_sign: match tangent_sign(scene, i) {
+                0.0 => tangent_sign(truth, i),
+                s => s,
+            },
             double_sided: m.double_sided,
         })
         .collect()
@@ -458,12 +500,13 @@ pub fn write(
                     name: cam.name.clone(),
                     world: cam.world.to_cols_array(),
                     yfov: cam.yfov,
+                    lights: cam.lights.clone(),
                 }
             })
             .collect(),
         lights: lights(truth),
         environment,
-        materials: materials(truth),
+        materials: materials(truth, &prep.scene),
         images,
         meshes,
         optimized: optimized(dir, prep, observed, |t| {

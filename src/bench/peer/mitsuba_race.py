@@ -23,7 +23,13 @@ import sys
 import time
 
 EXCHANGE_VERSION = 1
-SLOTS = ("base_color", "roughness", "metallic")
+SLOTS = ("base_color", "roughness", "metallic", "normal")
+# The principled BSDF's inputs, and the parameter each optimized slot is in Mitsuba.
+PRINCIPLED = ("base_color", "roughness", "metallic")
+PARAMETER = {"base_color": "base_color", "roughness": "roughness", "metallic": "metallic",
+             "normal": "normalmap"}
+# psrestir reads a normal-map texel as normalize(2 rgb - 1) with Z at least this.
+NORMAL_Z_FLOOR = 0.1
 # Relative epsilon of image relMSE, psrestir's REL_EPS.
 REL_EPS = 0.01
 
@@ -79,20 +85,19 @@ class Exchange:
         if self.j.get("version") != EXCHANGE_VERSION:
             fail(f"{path}: exchange version {self.j.get('version')}, this script reads "
                  f"{EXCHANGE_VERSION}")
-        for m in self.j["materials"]:
-            if m["normal_map"] and self._has_mesh(m):
-                fail(f"{path}: material `{m['name']}` has a normal map, which this race does "
-                     "not convert (psrestir bends mapped normals that face away from the viewer; "
-                     "Mitsuba's normalmap does not)")
         for o in self.j["optimized"]:
             if o["slot"] not in SLOTS:
                 fail(f"{path}: an optimized `{o['slot']}` texture is not converted "
                      f"(only {', '.join(SLOTS)})")
+        mapped = {o["material"] for o in self.j["optimized"] if o["slot"] == "normal"}
+        for i, m in enumerate(self.j["materials"]):
+            if (m["normal_texture"] or i in mapped) and self._has_mesh(i) and m["tangent_sign"] == 0:
+                fail(f"{path}: material `{m['name']}` has a normal map over tangent frames of both "
+                     "handednesses, which Mitsuba's normalmap (one frame from dp/du) cannot follow")
         if self.j["loss"] not in ("l2", "relmse"):
             fail(f"{path}: loss `{self.j['loss']}` is not re-implemented here (l2, relmse)")
 
-    def _has_mesh(self, m):
-        idx = self.j["materials"].index(m)
+    def _has_mesh(self, idx):
         return any(s["material"] == idx for s in self.j["meshes"])
 
     def array(self, a):
@@ -163,11 +168,23 @@ class SceneBuilder:
                   file=sys.stderr)
         return self.bitmap(v, t["nearest"], t["wrap"][0], t["transform"])
 
+    def file_normal_map(self, m):
+        """A material's own normal map for Mitsuba's normalmap: X and Y times its scale, Z
+        floored as psrestir floors it, green flipped where the tangent frames are
+        left-handed (Mitsuba's bitangent is always cross(n, dp/du))."""
+        import numpy as np
+        t = m["normal_texture"]
+        v = self.image(t["image"])[..., :3] * 2 - 1
+        v = np.stack([v[..., 0] * m["normal_scale"], v[..., 1] * m["normal_scale"] * m["tangent_sign"],
+                      np.maximum(v[..., 2], NORMAL_Z_FLOOR)], -1)
+        return self.bitmap(0.5 + 0.5 * v, t["nearest"], t["wrap"][0], t["transform"])
+
     def material(self, idx, replaced):
-        """Material `idx`'s principled BSDF; `replaced`: slot -> array (an optimized texture)."""
+        """Material `idx`'s principled BSDF (under its normal map, where it has one);
+        `replaced`: slot -> (array, nearest), an optimized texture in Mitsuba's convention."""
         m = self.ex["materials"][idx]
         bsdf = {"type": "principled", "specular": 0.5}
-        for slot in SLOTS:
+        for slot in PRINCIPLED:
             if slot in replaced:
                 arr, nearest = replaced[slot]
                 bsdf[slot] = self.bitmap(arr, nearest)
@@ -180,6 +197,11 @@ class SceneBuilder:
                 t = m["metallic_roughness_texture"]
                 ch = slice(1, 2) if slot == "roughness" else slice(2, 3)
                 bsdf[slot] = self.texture(t, False, ch, [m[slot]]) if t else float(m[slot])
+        if "normal" in replaced:
+            arr, nearest = replaced["normal"]
+            bsdf = {"type": "normalmap", "normalmap": self.bitmap(arr, nearest), "bsdf": bsdf}
+        elif m["normal_texture"]:
+            bsdf = {"type": "normalmap", "normalmap": self.file_normal_map(m), "bsdf": bsdf}
         bsdf["id"] = f"bsdf_{idx}"
         if m["double_sided"]:
             return {"type": "twosided", "id": f"bsdf_{idx}", "material": {**bsdf, "id": f"inner_{idx}"}}
@@ -234,8 +256,10 @@ class SceneBuilder:
                 "film": {"type": "hdrfilm", "width": self.ex["width"], "height": self.ex["height"],
                          "rfilter": {"type": "box"}, "pixel_format": "rgb", "sample_border": False}}
 
-    def scene(self, replaced, spp):
-        """`replaced`: material index -> {slot: (array, nearest)}."""
+    def scene(self, replaced, spp, lights=None):
+        """`replaced`: material index -> {slot: (array, nearest)}; `lights`: the punctual
+        lights that are on (indices; None: all). Emitting surfaces and the environment light
+        every camera, as in psrestir's captures."""
         ex = self.ex
         d = {"type": "scene",
              "integrator": {"type": "prb", "max_depth": ex["max_depth"] + 1, "hide_emitters": False}}
@@ -251,7 +275,8 @@ class SceneBuilder:
                 shape["emitter"] = {"type": "area", "radiance": rad}
             d[f"mesh_{idx}"] = shape
         for k, L in enumerate(ex["lights"]):
-            d[f"light_{k}"] = self.light(L)
+            if lights is None or k in lights:
+                d[f"light_{k}"] = self.light(L)
         env = self.environment()
         if env is not None:
             d["environment"] = env
@@ -268,18 +293,42 @@ class Race:
         self.builder = SceneBuilder(mi, ex)
         self.opt = ex["optimized"]
         self.init = [ex.array(o["init"]) for o in self.opt]
-        self.truth = [ex.array(o["truth"]) for o in self.opt]
+        self.truth = [self.as_seen(o, ex.array(o["truth"])) for o in self.opt]
         self.observed = [ex.array(o["observed"]).astype(bool) for o in self.opt]
         self.n_pixels = len(ex["cameras"]) * ex["width"] * ex["height"]
+        # Cameras grouped by the punctual lights on in their captures: one Mitsuba scene each.
+        self.groups = {}
+        for k, cam in enumerate(ex["cameras"]):
+            key = None if cam.get("lights") is None else tuple(sorted(cam["lights"]))
+            self.groups.setdefault(key, []).append(k)
+
+    def as_seen(self, o, v):
+        """Texture `o`'s values as psrestir scores them: a normal map's texels re-encoded from
+        the unit normal each stands for (Z floored), other slots as they are."""
+        np = self.np
+        if o["slot"] != "normal":
+            return v
+        n = v.astype(np.float64) * 2 - 1
+        n[..., 2] = np.maximum(n[..., 2], NORMAL_Z_FLOOR)
+        return 0.5 + 0.5 * n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+    def mitsuba_values(self, o, v):
+        """psrestir's texture values in Mitsuba's convention and back (an involution): a
+        normal map's green flipped where the tangent frames are left-handed."""
+        if o["slot"] == "normal" and self.ex["materials"][o["material"]]["tangent_sign"] < 0:
+            v = v.copy()
+            v[..., 1] = 1 - v[..., 1]
+        return v
 
     def targets(self, seed):
         """Mitsuba's targets of the ground truth at the task's target spp."""
         mi, dr = self.mi, self.dr
-        scene = self.builder.scene({}, self.ex["target_spp"])
-        out = []
-        for k in range(len(self.ex["cameras"])):
-            img = mi.render(scene, sensor=k, spp=self.ex["target_spp"], seed=seed32(seed * 7919 + k))
-            out.append(self.np.array(img, dtype="float32"))
+        out = [None] * len(self.ex["cameras"])
+        for lights, cams in self.groups.items():
+            scene = self.builder.scene({}, self.ex["target_spp"], lights)
+            for k in cams:
+                img = mi.render(scene, sensor=k, spp=self.ex["target_spp"], seed=seed32(seed * 7919 + k))
+                out[k] = self.np.array(img, dtype="float32")
         dr.sync_thread()
         return out
 
@@ -299,8 +348,8 @@ class Race:
         np = self.np
         s = n = s_all = n_all = 0.0
         per = []
-        for v, t, m in zip(values, self.truth, self.observed):
-            d = (v.astype(np.float64) - t) ** 2
+        for o, v, t, m in zip(self.opt, values, self.truth, self.observed):
+            d = (self.as_seen(o, v.astype(np.float64)) - t) ** 2
             ts, tn = float(d[m].sum()), int(m.sum()) * d.shape[2]
             s, n = s + ts, n + tn
             s_all, n_all = s_all + float(d.sum()), n_all + d.size
@@ -328,21 +377,26 @@ class Race:
             out.append((g * m[..., None]).astype(np.float32))
         return out
 
-    def optimized_scene(self, values, spp):
+    def optimized_scenes(self, values, spp):
+        """Per group of cameras, (scene, its parameters, the cameras), and the optimized
+        textures' keys (the same in every scene)."""
         replaced = {}
         for o, v in zip(self.opt, values):
-            replaced.setdefault(o["material"], {})[o["slot"]] = (v, o["nearest"])
-        scene = self.builder.scene(replaced, spp)
-        params = self.mi.traverse(scene)
-        keys = []
-        for o in self.opt:
-            want = [k for k in params.keys()
-                    if k.startswith(f"mesh_{o['material']}.bsdf.") and k.endswith(f".{o['slot']}.data")]
-            if len(want) != 1:
-                fail(f"no single parameter for {o['slot']} of material {o['material']}: {want}")
-            keys.append(want[0])
-        params.keep(keys)
-        return scene, params, keys
+            replaced.setdefault(o["material"], {})[o["slot"]] = (self.mitsuba_values(o, v), o["nearest"])
+        groups, keys = [], []
+        for lights, cams in self.groups.items():
+            scene = self.builder.scene(replaced, spp, lights)
+            params = self.mi.traverse(scene)
+            keys = []
+            for o in self.opt:
+                want = [k for k in params.keys() if k.startswith(f"mesh_{o['material']}.bsdf.")
+                        and k.endswith(f".{PARAMETER[o['slot']]}.data")]
+                if len(want) != 1:
+                    fail(f"no single parameter for {o['slot']} of material {o['material']}: {want}")
+                keys.append(want[0])
+            params.keep(keys)
+            groups.append((scene, params, cams))
+        return groups, keys
 
     def loss(self, img, ref):
         dr = self.dr
@@ -354,25 +408,29 @@ class Race:
     def run(self, targets, lr_scale, spp, smoothness, budget_s, seed, curve_points=11):
         """Adam from psrestir's start for `budget_s` seconds of step time."""
         mi, dr, np = self.mi, self.dr, self.np
-        scene, params, keys = self.optimized_scene(self.init, spp)
+        groups, keys = self.optimized_scenes(self.init, spp)
         refs = [mi.TensorXf(t) for t in targets]
         rates = [o["learning_rate"] * lr_scale for o in self.opt]
 
         def fresh():
-            for key, v in zip(keys, self.init):
-                params[key] = mi.TensorXf(v)
-            params.update()
-            opt = mi.ad.Adam(lr=rates[0], params={k: params[k] for k in keys})
-            params.update(opt)
+            for _, params, _ in groups:
+                for key, o, v in zip(keys, self.opt, self.init):
+                    params[key] = mi.TensorXf(self.mitsuba_values(o, v))
+                params.update()
+            opt = mi.ad.Adam(lr=rates[0], params={k: groups[0][1][k] for k in keys})
+            for _, params, _ in groups:
+                params.update(opt)
             return opt
 
         def step(opt, it, factor):
             for key, r in zip(keys, rates):
                 opt.set_learning_rate({key: r * factor})
             loss = 0
-            for k in range(len(refs)):
-                img = mi.render(scene, params, sensor=k, spp=spp, seed=seed32(seed * 1_000_003 + it * len(refs) + k))
-                loss = loss + self.loss(img, refs[k])
+            for scene, params, cams in groups:
+                for k in cams:
+                    img = mi.render(scene, params, sensor=k, spp=spp,
+                                    seed=seed32(seed * 1_000_003 + it * len(refs) + k))
+                    loss = loss + self.loss(img, refs[k])
             dr.backward(loss)
             if smoothness > 0:
                 values = [np.array(opt[key]) for key in keys]
@@ -381,7 +439,8 @@ class Race:
             opt.step()
             for key in keys:
                 opt[key] = dr.clip(opt[key], 0.0, 1.0)
-            params.update(opt)
+            for _, params, _ in groups:
+                params.update(opt)
             dr.eval(loss)
             dr.sync_thread()
             return float(loss.array[0])
@@ -393,8 +452,11 @@ class Race:
         warmup = time.perf_counter() - t0
         opt = fresh()
 
+        def values():
+            return [self.mitsuba_values(o, np.array(opt[k])) for o, k in zip(self.opt, keys)]
+
         def point(it, seconds, loss):
-            obs, all_, _ = self.errors([np.array(opt[k]) for k in keys])
+            obs, all_, _ = self.errors(values())
             return {"iteration": it, "seconds": seconds, "loss": loss, "texture_rmse": all_,
                     "texture_rmse_observed": obs}
 
@@ -409,13 +471,15 @@ class Race:
             if elapsed >= next_eval or elapsed >= budget_s:
                 curve.append(point(it, elapsed, loss))
                 next_eval += budget_s / (curve_points - 1)
-        values = [np.array(opt[k]) for k in keys]
-        obs, all_, per = self.errors(values)
+        obs, all_, per = self.errors(values())
         # Image error: an eval_spp render of the result against Mitsuba's own targets.
         rel = []
-        for k, t in enumerate(targets):
-            img = np.array(mi.render(scene, params, sensor=k, spp=self.ex["eval_spp"], seed=seed32(seed + 99_991 + k)))
-            rel.append(float(np.mean((img - t) ** 2 / (t * t + REL_EPS))))
+        for scene, params, cams in groups:
+            for k in cams:
+                t = targets[k]
+                img = np.array(mi.render(scene, params, sensor=k, spp=self.ex["eval_spp"],
+                                         seed=seed32(seed + 99_991 + k)))
+                rel.append(float(np.mean((img - t) ** 2 / (t * t + REL_EPS))))
         return {"learning_rate_scale": lr_scale, "learning_rates": rates, "spp": spp,
                 "smoothness": smoothness, "iterations": it, "seconds": elapsed,
                 "ms_per_iteration": 1e3 * elapsed / max(it, 1), "warmup_s": warmup,
@@ -506,6 +570,7 @@ def save_json(path, value):
     """`value` as JSON in `path`, atomically (NaN written as null)."""
     if path is None:
         return
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     tmp = path + ".tmp"
     with open(tmp, "w") as f:
         json.dump(finite_or_none(value), f, indent=1, allow_nan=False)

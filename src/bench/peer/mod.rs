@@ -259,3 +259,43 @@ fn run_of(r: &RaceResult, row: &Row, input: &RaceInput) -> RunResult {
         curve,
     }
 }
+
+/// The peers' rows on this scene and seed, added to `runs` (the baseline first), and their
+/// forward checks: Mitsuba 3's where `o.mitsuba` names its Python; none, with a warning that
+/// says why, where the scene does not convert or the race fails.
+pub(super) fn race(
+    (dir, tune_dir): (&Path, &Path),
+    task: &crate::task::Task,
+    prep: &crate::job::Problem,
+    o: &super::BenchOptions,
+    observed: &[bool],
+    runs: &mut Vec<RunResult>,
+) -> Vec<PeerForward> {
+    let Some(python) = &o.mitsuba else {
+        return Vec::new();
+    };
+    let exchange = dir.join("mitsuba").join("exchange");
+    let s = super::settings(prep, task, crate::optim::Method::BASELINE, o);
+    let tuned_file = tune_dir.join("mitsuba_tuned.json");
+    let raced = exchange::write(&exchange, task, prep, &s, observed, o.budget_s, o.eval_spp)
+        .and_then(|()| {
+            race_mitsuba(&RaceInput {
+                dir,
+                python,
+                tune: o.tune || o.tune_peers,
+                tune_budget_s: o.tune_budget_s,
+                tuned_file: Some(&tuned_file),
+                baseline: &runs[0],
+            })
+        });
+    match raced {
+        Ok((rows, forward)) => {
+            runs.extend(rows);
+            forward
+        }
+        Err(e) => {
+            eprintln!("warning: no Mitsuba 3 rows for {}: {e}", dir.display());
+            Vec::new()
+        }
+    }
+}

@@ -1,7 +1,9 @@
 //! The peers' part of the bench report: the default configuration against each peer row,
 //! per scene and seed and over seeds, and the peers' forward checks.
 use crate::bench::seeds::time_to;
-use crate::bench::{BenchReport, Interval, OptimizationResult, PeerOverSeeds, RunResult};
+use crate::bench::{
+    BenchReport, Interval, OptimizationResult, PeerOverSeeds, RunResult, SeededScene,
+};
 use std::fmt::Write as _;
 
 /// How much sooner `d` reaches `peer`'s final observed-texel RMSE than the budget: the
@@ -46,6 +48,36 @@ pub fn over_seeds(optimized: &[&OptimizationResult], default_key: &str) -> Optio
         sooner: Interval::of(&reached),
         reached: reached.len() as u32,
     })
+}
+
+/// Over seeds, per scene where Mitsuba raced: the default against Mitsuba's best row
+/// (markdown; empty where it did not race).
+pub fn over_seeds_markdown(scenes: &[SeededScene]) -> String {
+    let show = |i: &Option<Interval>| i.map_or("–".to_string(), |i| i.show());
+    let mut rows = String::new();
+    for x in scenes {
+        let Some(m) = &x.mitsuba else { continue };
+        let _ = writeln!(
+            rows,
+            "| {} | {} | {} | {} | {} ({}/{}) |",
+            x.name,
+            m.best,
+            show(&m.texture),
+            show(&m.image),
+            show(&m.sooner),
+            m.reached,
+            x.seeds
+        );
+    }
+    if rows.is_empty() {
+        return rows;
+    }
+    format!(
+        "\nThe default against Mitsuba 3's best row (the lower geometric-mean texture error of \
+         its two), paired per seed:\n\n| scene | Mitsuba's best row | the default's texture \
+         RMSE ÷ its | image relMSE ÷ its | × sooner to its final texture RMSE (seeds) |\n\
+         |---|---|---|---|---|\n{rows}"
+    )
 }
 
 /// The section of `report.md` on the peers; empty where none raced.

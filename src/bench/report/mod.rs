@@ -539,6 +539,9 @@ pub fn report_markdown(r: &BenchReport) -> String {
             r.seeds, r.seeds
         );
         md.push_str(&crate::bench::seeds::over_seeds_table(&r.over_seeds));
+        md.push_str(&crate::bench::peer::report::over_seeds_markdown(
+            &r.over_seeds,
+        ));
         md.push('\n');
     }
     if r.scenes.iter().any(|x| x.optimization.is_some()) {
