@@ -338,6 +338,28 @@ pub struct RunResult {
     pub curve: Vec<CurvePoint>,
 }
 
+impl RunResult {
+    /// When the curve first reaches `target` observed-texel RMSE (seconds, linear between
+    /// points), if it does.
+    pub fn time_to(&self, target: f64) -> Option<f64> {
+        let mut prev: Option<(f64, f64)> = None;
+        for p in &self.curve {
+            let (t, e) = (p.seconds, p.texture_rmse_observed);
+            if !e.is_finite() {
+                continue;
+            }
+            if e <= target {
+                return Some(match prev {
+                    Some((t0, e0)) if e0 > e => t0 + (t - t0) * (e0 - target) / (e0 - e),
+                    _ => t,
+                });
+            }
+            prev = Some((t, e));
+        }
+        None
+    }
+}
+
 fn one() -> u32 {
     1
 }

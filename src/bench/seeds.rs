@@ -69,26 +69,6 @@ impl Interval {
     }
 }
 
-/// When `run`'s curve first reaches `target` observed-texel RMSE (seconds, linear between
-/// points), if it does.
-pub(crate) fn time_to(run: &RunResult, target: f64) -> Option<f64> {
-    let mut prev: Option<(f64, f64)> = None;
-    for p in &run.curve {
-        let (t, e) = (p.seconds, p.texture_rmse_observed);
-        if !e.is_finite() {
-            continue;
-        }
-        if e <= target {
-            return Some(match prev {
-                Some((t0, e0)) if e0 > e => t0 + (t - t0) * (e0 - target) / (e0 - e),
-                _ => t,
-            });
-        }
-        prev = Some((t, e));
-    }
-    None
-}
-
 /// The scene `name` over its seeds' results `seeded` (one [`SceneResult`] per seed, with
 /// the same contenders).
 pub fn summarize(name: &str, seeded: &[&SceneResult]) -> SeededScene {
@@ -120,7 +100,7 @@ pub fn summarize(name: &str, seeded: &[&SceneResult]) -> SeededScene {
         .map(|(key, name)| {
             let sooner = per_seed(key, &|r, b| {
                 let budget = b.curve.last().map(|p| p.seconds)?;
-                let t = time_to(r, b.texture_rmse_observed)?;
+                let t = r.time_to(b.texture_rmse_observed)?;
                 Some(budget / t.max(1e-3))
             });
             SeededRun {
@@ -325,8 +305,8 @@ mod tests {
                 image_relmse: None,
             });
         }
-        assert!((time_to(&run, 0.3).unwrap() - 5.0).abs() < 1e-9);
-        assert_eq!(time_to(&run, 0.1), Some(20.0));
-        assert_eq!(time_to(&run, 0.05), None);
+        assert!((run.time_to(0.3).unwrap() - 5.0).abs() < 1e-9);
+        assert_eq!(run.time_to(0.1), Some(20.0));
+        assert_eq!(run.time_to(0.05), None);
     }
 }

@@ -1,6 +1,5 @@
 //! The peers' part of the bench report: the default configuration against each peer row,
 //! per scene and seed and over seeds, and the peers' forward checks.
-use crate::bench::seeds::time_to;
 use crate::bench::{
     BenchReport, Interval, OptimizationResult, PeerOverSeeds, RunResult, SeededScene,
 };
@@ -10,7 +9,7 @@ use std::fmt::Write as _;
 /// budget over the time `d`'s curve first gets there; None where it does not.
 fn sooner(d: &RunResult, peer: &RunResult) -> Option<f64> {
     let budget = d.curve.last().map(|p| p.seconds)?;
-    let t = time_to(d, peer.texture_rmse_observed)?;
+    let t = d.time_to(peer.texture_rmse_observed)?;
     Some(budget / t.max(1e-3))
 }
 
