@@ -69,7 +69,7 @@ fn check_gradient_on(
         method: psrestir::optim::Method::BASELINE,
         estimator_options: Default::default(),
         schedule: Default::default(),
-        adam_mask: false,
+        sparse_steps: false,
         priors: Default::default(),
         exposure_learning_rate: None,
         moment_filter: Default::default(),

@@ -79,7 +79,7 @@ fn setup_with(
         method: psrestir::optim::Method::BASELINE,
         estimator_options: Default::default(),
         schedule: Default::default(),
-        adam_mask: false,
+        sparse_steps: false,
         priors: Default::default(),
         exposure_learning_rate: None,
         moment_filter: Default::default(),
@@ -192,7 +192,7 @@ fn scheduled_masked_adam_steps_equal_the_rust_reference() {
         Filter::Nearest,
         |s| {
             s.schedule = schedule.clone();
-            s.adam_mask = true;
+            s.sparse_steps = true;
             s.gradient_spp = 1;
         },
     );

@@ -74,8 +74,9 @@ pub mod stat {
     pub const GRADIENT_DROPPED: u32 = 2;
     /// `loss.wgsl`: non-finite pixels dropped.
     pub const LOSS_DROPPED: u32 = 0;
-    /// `adam.wgsl`: non-finite gradients, whose parameter was left unchanged.
-    pub const ADAM_SKIPPED: u32 = 0;
+    /// The step passes (`adam.wgsl`, `variance_step.wgsl`): non-finite gradients, whose
+    /// parameter was left unchanged.
+    pub const STEP_SKIPPED: u32 = 0;
 }
 
 /// Every constant above, as (WGSL name, value).
@@ -102,7 +103,7 @@ pub const CONSTANTS: &[(&str, u32)] = &[
     ("GRADIENT_STAT_LOST", stat::GRADIENT_LOST),
     ("GRADIENT_STAT_DROPPED", stat::GRADIENT_DROPPED),
     ("LOSS_STAT_DROPPED", stat::LOSS_DROPPED),
-    ("ADAM_STAT_SKIPPED", stat::ADAM_SKIPPED),
+    ("STEP_STAT_SKIPPED", stat::STEP_SKIPPED),
 ];
 
 /// The WGSL of `gen/abi`.

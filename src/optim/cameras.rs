@@ -43,7 +43,7 @@ impl CameraPasses {
 /// Counters of the passes the optimizer runs itself.
 pub(super) struct Stats {
     pub(super) primal: wgpu::Buffer,
-    pub(super) adam: wgpu::Buffer,
+    pub(super) step: wgpu::Buffer,
 }
 
 /// The settings in range, one target per camera, each of the settings' size, and no more

@@ -1,5 +1,5 @@
 //! Checkpoints: everything needed to continue a run exactly where it stopped (iteration,
-//! elapsed time, textures, Adam moments, the ReSTIR reservoirs with the textures they were
+//! elapsed time, textures, the step's moments, the ReSTIR reservoirs with the textures they were
 //! drawn at, the metrics so far; the random numbers are a pure function of seed and
 //! iteration, so the iteration is the RNG state). Written atomically: a temporary file, then a
 //! rename.
@@ -31,7 +31,7 @@ pub struct MetricRow {
     /// iterations that have one.
     #[serde(default)]
     pub image_relmse: Option<f64>,
-    /// Learning rate of the first texture in this iteration's Adam step.
+    /// Learning rate of the first texture in this iteration's step.
     #[serde(default)]
     pub learning_rate: Option<f64>,
 }

@@ -15,7 +15,7 @@ impl Optimizer {
 
     /// Forget what the gradient estimator carries over from earlier iterations (ReSTIR's
     /// reservoirs, the recursive estimator's running estimate and variances): the next
-    /// iteration starts it afresh, as the first one did. The textures, Adam's moments and the
+    /// iteration starts it afresh, as the first one did. The textures, the step's moments and the
     /// previous iteration's textures and adjoint are left as they are.
     pub fn reset_estimator(&mut self) -> Result<()> {
         self.estimator.restore(&self.gpu, None, self.iteration)

@@ -149,9 +149,9 @@ pub struct Optimizer {
     priors: Option<Vec<(&'static prior::Kind, Box<dyn prior::Prior>)>>,
     /// Fraction of the run done, for the learning-rate schedule.
     progress: f64,
-    /// Learning rate of each texture in the last Adam step.
+    /// Learning rate of each texture in the last step.
     last_learning_rates: Vec<f32>,
-    /// Iterations done (Adam steps taken).
+    /// Iterations done (steps taken).
     pub iteration: u32,
 }
 
@@ -170,12 +170,12 @@ fn iteration_buffers(
     ];
     let grad = gpu.storage_zeroed("gradient", n_params * 4);
     let moments = [
-        gpu.storage_zeroed("adam moment1", n_params * 4),
-        gpu.storage_zeroed("adam moment2", n_params * 4),
+        gpu.storage_zeroed("step moment1", n_params * 4),
+        gpu.storage_zeroed("step moment2", n_params * 4),
     ];
     let stats = Stats {
         primal: gpu.storage_zeroed("primal stats", 16),
-        adam: gpu.storage_zeroed("adam stats", 16),
+        step: gpu.storage_zeroed("step stats", 16),
     };
     (adjoint, grad, moments, stats)
 }
@@ -285,7 +285,7 @@ impl Optimizer {
                 variance: estimator
                     .variance()
                     .filter(|_| settings.priors.keep_variance()),
-                stats: &stats.adam,
+                stats: &stats.step,
             },
         )?;
         let timer = pass_timer(gpu, n_cams, set.textures.len(), step.as_ref());
@@ -613,10 +613,10 @@ impl Optimizer {
     /// Dropped and lost values so far.
     pub fn faults(&self) -> Result<FaultCounts> {
         let p: Vec<u32> = self.gpu.read_pod(&self.stats.primal)?;
-        let a: Vec<u32> = self.gpu.read_pod(&self.stats.adam)?;
+        let a: Vec<u32> = self.gpu.read_pod(&self.stats.step)?;
         let l: Vec<u32> = self.gpu.read_pod(&self.loss.stats)?;
         let mut f = FaultCounts {
-            skipped_adam: a[stat::ADAM_SKIPPED as usize],
+            skipped_step: a[stat::STEP_SKIPPED as usize],
             dropped_primal: p[stat::RENDER_DROPPED as usize],
             dropped_pixels: l[stat::LOSS_DROPPED as usize],
             ..Default::default()

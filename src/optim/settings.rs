@@ -42,7 +42,7 @@ pub struct Settings {
     pub schedule: Schedule,
     /// Masked (sparse) steps: entries whose gradient is exactly zero in an iteration keep
     /// their value and moments, as Mitsuba 3's `mask_updates` (either step).
-    pub adam_mask: bool,
+    pub sparse_steps: bool,
     /// The moment filter (off unless `levels` > 0; see [`super::moment_filter`]): the pair the
     /// step divides (Adam's moments, or the variance step's estimate and variance) smoothed
     /// in texture space, across the texture's edges only where they are weak.
@@ -75,7 +75,7 @@ impl Settings {
             step: StepKind::default(),
             steps: Steps::default(),
             schedule: Schedule::constant(),
-            adam_mask: false,
+            sparse_steps: false,
             moment_filter: Default::default(),
             priors: Default::default(),
             exposure_learning_rate: None,

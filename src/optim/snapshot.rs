@@ -19,8 +19,8 @@ pub struct FaultCounts {
     pub lost_updates: u32,
     /// Non-finite values dropped by the gradient or candidate pass.
     pub dropped_gradient: u32,
-    /// Non-finite gradients skipped by Adam.
-    pub skipped_adam: u32,
+    /// Non-finite gradients the step skipped (their parameter left unchanged).
+    pub skipped_step: u32,
     /// Non-finite primal samples dropped.
     pub dropped_primal: u32,
     /// Pixels whose loss or adjoint was not finite (e.g. a NaN in the target), counted once
@@ -52,9 +52,9 @@ pub struct OptimizerState {
     pub iteration: u32,
     /// Texture values, laid out like [`ParamSet::values`](crate::render::params::ParamSet::values).
     pub params: Vec<f32>,
-    /// Adam first moments.
+    /// The step's first moments (Adam's; the variance step's running mean of the gradient).
     pub m1: Vec<f32>,
-    /// Adam second moments.
+    /// The step's second moments.
     pub m2: Vec<f32>,
     /// The last iteration's textures and adjoint, when the estimator or the primal uses
     /// them.
@@ -144,7 +144,7 @@ impl Optimizer {
         self.gpu.check("set optimizer values")
     }
 
-    /// Adam's first and second moments.
+    /// The step's first and second moments (both steps keep two).
     pub fn read_moments(&self) -> Result<[Vec<f32>; 2]> {
         let n = self.set.values.len();
         let mut a: Vec<f32> = self.gpu.read_pod(&self.moments[0])?;
@@ -154,12 +154,12 @@ impl Optimizer {
         Ok([a, b])
     }
 
-    /// Restore Adam's moments.
+    /// Restore the step's moments.
     pub fn write_moments(&self, m: &[Vec<f32>; 2]) -> Result<()> {
         for (buf, v) in self.moments.iter().zip(m) {
             if v.len() != self.set.values.len() {
                 return Err(Error::Invalid(
-                    "Adam moments do not match the parameters".into(),
+                    "the step's moments do not match the parameters".into(),
                 ));
             }
             self.gpu.queue.write_buffer(buf, 0, bytemuck::cast_slice(v));
@@ -180,7 +180,7 @@ impl Optimizer {
     }
 
     /// Everything a later run needs to continue exactly where this one stands: iteration,
-    /// textures, Adam moments and, for ReSTIR, the kept reservoirs with the textures and
+    /// textures, the step's moments and, for ReSTIR, the kept reservoirs with the textures and
     /// adjoint they were drawn at. Restore it with [`Optimizer::restore`].
     pub fn state(&self) -> Result<OptimizerState> {
         let [m1, m2] = self.read_moments()?;
@@ -263,7 +263,7 @@ impl Optimizer {
     }
 
     /// Bytes of GPU memory the optimizer keeps per optimized texel: the textures (current and
-    /// previous), gradient and Adam moments, plus ReSTIR's reservoirs, headers, compaction
+    /// previous), gradient and the step's moments, plus ReSTIR's reservoirs, headers, compaction
     /// map and moving moments. Buffers that scale with the image (targets, adjoints, ReSTIR's
     /// claim log) are not counted.
     pub fn state_bytes_per_texel(&self) -> f64 {
@@ -276,7 +276,7 @@ impl Optimizer {
     }
 
     /// The textures of the last iteration (those its primal and gradient were drawn at;
-    /// [`Optimizer::read_params`] has them after the Adam step).
+    /// [`Optimizer::read_params`] has them after the step).
     pub fn read_params_prev(&self) -> Result<Vec<f32>> {
         let mut v: Vec<f32> = self.gpu.read_pod(&self.params.previous)?;
         v.truncate(self.set.values.len());

@@ -27,7 +27,7 @@
 //! loss = "l2"                     # or "relmse"
 //! filter = "bilinear"             # or "nearest"
 //! checkpoint_every = 25
-//! adam_mask = true                # sparse Adam: zero-gradient entries keep value and moments
+//! sparse_steps = true             # either step: zero-gradient entries keep value and moments
 //! multiscale_levels = 4           # short for [optimizer.multiscale] levels = 4
 //! smoothness = 0.1                # short for [optimizer.smoothness] weight = 0.1
 //! eval_every = 10                 # low-noise image error every N iterations (0: never)

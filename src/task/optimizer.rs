@@ -74,9 +74,10 @@ pub struct OptimizerSpec {
     /// Learning-rate schedule over the run (None: `auto`'s, a cosine decay).
     #[serde(default)]
     pub schedule: Option<crate::optim::Schedule>,
-    /// Sparse steps: entries with an exactly zero gradient keep their value and moments.
-    #[serde(default)]
-    pub adam_mask: bool,
+    /// Sparse steps: entries with an exactly zero gradient keep their value and moments
+    /// (either step; `adam_mask`, its earlier name, is read too).
+    #[serde(default, alias = "adam_mask")]
+    pub sparse_steps: bool,
     /// The moment filter (`[optimizer.moment_filter]`: `levels` (0: off), `sigma`,
     /// `log_space`, `own_weight`, `write_back`; None: `auto`'s for the step).
     #[serde(default)]
@@ -354,7 +355,7 @@ pub fn task_settings(
         step: config.step,
         steps: task.optimizer.step_options().unwrap_or_default(),
         schedule: config.schedule,
-        adam_mask: task.optimizer.adam_mask,
+        sparse_steps: task.optimizer.sparse_steps,
         priors: {
             let mut priors = task.optimizer.prior_options().unwrap_or_default();
             priors.put(&SmoothnessOptions {

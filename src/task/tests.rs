@@ -261,3 +261,19 @@ fn prior_tables_and_shorthands_reach_the_settings() {
         "{e}"
     );
 }
+
+/// Sparse steps apply to either step; the key's earlier, Adam-named spelling still reads.
+#[test]
+fn sparse_steps_read_under_both_names() {
+    for key in ["sparse_steps", "adam_mask"] {
+        let text = GOOD.replace("iterations = 10", &format!("iterations = 10\n{key} = true"));
+        let t = Task::parse(&text, Path::new("t.toml")).unwrap();
+        assert!(t.optimizer.sparse_steps, "{key}");
+    }
+    assert!(
+        !Task::parse(GOOD, Path::new("t.toml"))
+            .unwrap()
+            .optimizer
+            .sparse_steps
+    );
+}

@@ -371,7 +371,7 @@ pub(crate) fn build(
         gpu,
         set,
         steps: &settings.steps,
-        mask: settings.adam_mask,
+        mask: settings.sparse_steps,
         filter,
         buffers: b,
     })

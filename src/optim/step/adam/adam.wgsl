@@ -38,7 +38,7 @@ struct AdamParams {
 @group(0) @binding(2) var<storage, read_write> params: array<f32>;
 @group(0) @binding(3) var<storage, read_write> moment1: array<f32>;
 @group(0) @binding(4) var<storage, read_write> moment2: array<f32>;
-@group(0) @binding(5) var<storage, read_write> adam_stats: array<atomic<u32>, 4>;
+@group(0) @binding(5) var<storage, read_write> step_stats: array<atomic<u32>, 4>;
 // The moment filter's pair (a small unused buffer in phase STEP_PHASE_FUSED).
 @group(0) @binding(6) var<storage, read_write> pair_first: array<f32>;
 @group(0) @binding(7) var<storage, read_write> pair_second: array<f32>;
@@ -83,7 +83,7 @@ fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) grou
         return;
     }
     if !(abs(g_in) < 3.0e38) {
-        atomicAdd(&adam_stats[ADAM_STAT_SKIPPED], 1u);
+        atomicAdd(&step_stats[STEP_STAT_SKIPPED], 1u);
         write_pair(k, moment1[i], moment2[i]);
         return;
     }

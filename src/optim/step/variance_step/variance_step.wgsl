@@ -106,7 +106,7 @@ fn main(@builtin(global_invocation_id) gid: vec3u, @builtin(num_workgroups) grou
         return;
     }
     if !(abs(g_in) < 3.0e38) {
-        atomicAdd(&step_stats[ADAM_STAT_SKIPPED], 1u);
+        atomicAdd(&step_stats[STEP_STAT_SKIPPED], 1u);
         write_pair(k, 0.0, standing_variance(i));
         return;
     }
