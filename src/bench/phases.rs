@@ -418,7 +418,7 @@ fn curve_point(
     let truth = prep.reference.as_deref();
     let factor = match (opt.last_learning_rates().first(), prep.set.textures.first()) {
         (Some(&l), Some(t)) => {
-            let rate = crate::optim::auto::texture_rate(t, opt.settings().step);
+            let rate = opt.settings().step.texture_rate(t);
             (rate > 0.0).then(|| l as f64 / rate as f64)
         }
         _ => None,

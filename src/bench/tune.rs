@@ -98,7 +98,7 @@ impl Tunable {
     pub fn apply_learning_rate(&self, opt: &mut Optimizer, prep: &Problem) {
         for (t, p) in opt.set.textures.iter_mut().zip(&prep.set.textures) {
             t.learning_rate =
-                Some(crate::optim::auto::texture_rate(p, self.step) * self.learning_rate_scale);
+                Some(self.step.texture_rate(p) * self.learning_rate_scale);
         }
     }
 

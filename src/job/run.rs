@@ -147,7 +147,7 @@ fn log_configuration(
             .map(|t| format!(
                 "{} {}",
                 t.name(),
-                crate::optim::auto::texture_rate(t, settings.step)
+                settings.step.texture_rate(t)
             ))
             .collect::<Vec<_>>()
             .join(", "),

@@ -98,12 +98,6 @@ pub fn learning_rate_for(step: StepKind, slot: Slot, regime: &Regime) -> f32 {
     }
 }
 
-/// The learning rate of texture `tex` under `step`: its own, or the step's default.
-pub fn texture_rate(tex: &crate::render::params::ParamTexture, step: StepKind) -> f32 {
-    tex.learning_rate
-        .unwrap_or_else(|| step.learning_rate(tex.slot))
-}
-
 /// The moment filter where a task sets none, for `step` over textures of `slots`: with the
 /// variance-scaled step over base color textures only, [`SUGGESTED_LEVELS`] levels of 3 x 3
 /// taps with the filter's other defaults; otherwise off. With Adam the filter, untuned, ended

@@ -510,7 +510,7 @@ pub fn write(
         images,
         meshes,
         optimized: optimized(dir, prep, observed, |t| {
-            crate::optim::auto::texture_rate(t, step)
+            step.texture_rate(t)
         })?,
         targets,
         target_spp: task.target.spp,

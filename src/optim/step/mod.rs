@@ -180,6 +180,13 @@ impl StepKind {
     pub fn learning_rate(self, slot: Slot) -> f32 {
         (self.0.learning_rate)(slot)
     }
+
+    /// The learning rate of texture `tex` under this step: its own, or the step's default
+    /// for its slot.
+    pub fn texture_rate(self, tex: &crate::render::params::ParamTexture) -> f32 {
+        tex.learning_rate
+            .unwrap_or_else(|| self.learning_rate(tex.slot))
+    }
 }
 
 impl Default for StepKind {
@@ -471,7 +478,7 @@ impl<P: bytemuck::Pod> TextureSteps<P> {
         let max_dim = gpu.device.limits().max_compute_workgroups_per_dimension;
         let mut rates = Vec::with_capacity(self.textures.len());
         for (k, (dispatches, tex)) in self.textures.iter_mut().zip(&set.textures).enumerate() {
-            let lr = crate::optim::auto::texture_rate(tex, self.step) * factor;
+            let lr = self.step.texture_rate(tex) * factor;
             rates.push(lr);
             for (j, (u, g, p)) in dispatches.iter_mut().enumerate() {
                 let count = prepare(p, lr);

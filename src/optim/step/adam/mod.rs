@@ -213,7 +213,7 @@ impl AdamPass {
             AdamParams {
                 offset: t.offset,
                 count: t.len() as u32,
-                lr: crate::optim::auto::texture_rate(t, StepKind::ADAM),
+                lr: StepKind::ADAM.texture_rate(t),
                 beta1: options.beta1,
                 beta2: options.beta2,
                 eps: options.eps,

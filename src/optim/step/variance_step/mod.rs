@@ -221,7 +221,7 @@ impl VarianceStepPass {
             VarianceStepParams {
                 offset: t.offset,
                 count: t.len() as u32,
-                lr: crate::optim::auto::texture_rate(t, StepKind::VARIANCE),
+                lr: StepKind::VARIANCE.texture_rate(t),
                 clip: options.clip,
                 beta: options.beta,
                 eps: options.eps,
