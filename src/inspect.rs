@@ -74,7 +74,7 @@ pub(crate) fn cmd_estimators() {
             k.name,
             &format!("{}{cpu}", k.summary),
             k.table,
-            &table_text((k.options.defaults)()),
+            &table_text(k.options.defaults()),
         );
     }
     println!("Priors (each off at these defaults)\n");
@@ -83,12 +83,7 @@ pub(crate) fn cmd_estimators() {
         if let Some((short, option)) = k.shorthand {
             summary += &format!(" (`{short} = ...` sets `{option}`)");
         }
-        print_kind(
-            k.name,
-            &summary,
-            k.name,
-            &table_text((k.options.defaults)()),
-        );
+        print_kind(k.name, &summary, k.name, &table_text(k.options.defaults()));
     }
     println!(
         "Set one with --set optimizer.TABLE.OPTION=VALUE (for an estimator, also with \

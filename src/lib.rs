@@ -38,7 +38,7 @@
 //!     slot: Slot::BaseColor,
 //!     resolution: [8, 8],
 //!     init: Init::Vector(vec![0.5; 3]),
-//!     learning_rate: Some(0.03), // None: the step's default (optim::auto)
+//!     learning_rate: Some(0.03), // None: the step's default
 //! };
 //! let mut problem = Problem::new(scene.clone(), vec![0], &[texture], Default::default())?;
 //! let mut truth = scene;
@@ -69,6 +69,7 @@
 #![warn(missing_docs)]
 
 pub mod assets;
+pub mod auto;
 pub mod bench;
 #[cfg(test)]
 mod contract_tests;

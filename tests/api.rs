@@ -765,7 +765,7 @@ fn invalid_restir_options_are_refused_by_name() {
         (8.0, f32::NAN, "target_smoothing"),
     ] {
         let s = Settings {
-            estimator_options: psrestir::EstimatorOptions::with(
+            estimator_options: psrestir::EstimatorOptions::default().with(
                 &psrestir::optim::estimator::restir::RestirOptions {
                     m_cap,
                     target_smoothing: Some(target_smoothing),

@@ -40,7 +40,7 @@ fn a_bare_task_takes_autos_configuration_and_ends_below_its_start() {
     let c = psrestir::task::task_configuration(&t, t.optimizer.method, 1);
     assert_eq!(c.step, psrestir::optim::StepKind::VARIANCE);
     assert!(c.moment_filter.enabled());
-    assert_eq!(c.schedule, psrestir::optim::auto::schedule());
+    assert_eq!(c.schedule, psrestir::auto::schedule());
     assert!(
         c.reasons.iter().any(|r| r.contains("learning rate 0.01")),
         "{:?}",

@@ -141,7 +141,7 @@ fn optimizer_textures(
         loss: Loss::L2,
         seed,
         method,
-        estimator_options: EstimatorOptions::with(&restir),
+        estimator_options: EstimatorOptions::default().with(&restir),
         schedule: Default::default(),
         sparse_steps: false,
         priors: Default::default(),
@@ -226,7 +226,7 @@ fn restir_without_reuse_equals_the_baseline(
             loss: Loss::L2,
             seed: 11,
             method: Method::BASELINE,
-            estimator_options: EstimatorOptions::with(&opts),
+            estimator_options: EstimatorOptions::default().with(&opts),
             schedule: Default::default(),
             sparse_steps: false,
             priors: Default::default(),
@@ -1116,7 +1116,7 @@ fn without_priors_at_tuned_settings_neither_estimator_drifts() {
                     &task,
                     &prep.cameras,
                     method,
-                    &EstimatorOptions::with(&restir),
+                    &EstimatorOptions::default().with(&restir),
                 )
             };
             let mut opt =
@@ -1322,7 +1322,7 @@ fn restirs_fresh_moments_are_those_of_independent_estimates() {
     };
     let settings = Settings {
         gradient_spp: 2,
-        estimator_options: EstimatorOptions::with(&opts),
+        estimator_options: EstimatorOptions::default().with(&opts),
         ..Settings::new(W, W, vec![0])
     };
     let make = |method, target: &[Image]| {
@@ -1400,7 +1400,7 @@ fn restir_without_its_own_variance_keeps_no_moments() {
     let with = |own_variance| Settings {
         method: Method::RESTIR,
         gradient_spp: 2,
-        estimator_options: EstimatorOptions::with(&RestirOptions {
+        estimator_options: EstimatorOptions::default().with(&RestirOptions {
             own_variance,
             ..Default::default()
         }),

@@ -25,7 +25,7 @@ pub struct Contender {
 
 /// `task` as a task file that names only its scene, cameras, targets, textures, sampling and
 /// budget gives it: the estimator, step, moment filter, learning rates, schedule and
-/// smoothness prior left to `auto` ([`crate::optim::auto`]), no multiscale gradient.
+/// smoothness prior left to `auto` ([`crate::auto`]), no multiscale gradient.
 pub fn bare(task: &Task) -> Task {
     let mut t = task.clone();
     let o = &mut t.optimizer;

@@ -2,7 +2,8 @@
 //! under study ([`BenchOptions::gradient_method`], ReSTIR by default; "the estimator" below),
 //! the equal-time baseline spp, the reference gradient, and the total, estimator-only and
 //! successive-estimate errors of the estimator and the baseline.
-use super::phases::{settings, time_steps};
+use super::phases::time_steps;
+use super::settings;
 use super::*;
 
 /// The mean of `spp` gradient samples per pixel under `adjoint`, at `r`'s textures (`r` is a

@@ -35,7 +35,7 @@ pub mod tune;
 
 pub use contender::{bare, Contender};
 use gradient::gradient_phase;
-use phases::{optimization_phases, primal_phase, settings, PrimalPhase};
+use phases::{optimization_phases, primal_phase, PrimalPhase};
 pub use results::*;
 
 use crate::gpu::Gpu;
@@ -50,6 +50,16 @@ use crate::{Error, Result};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+/// The settings of `method` on `task` as the bench runs it: the task's, with the bench's
+/// estimator options and primal.
+fn settings(prep: &Problem, task: &Task, method: Method, o: &BenchOptions) -> Settings {
+    let mut s = task_settings(task, &prep.cameras, method, &o.estimator_options);
+    if let Some(p) = o.primal {
+        s.primal = p;
+    }
+    s
+}
 
 /// Which sampling settings the benchmark runs the scenes with.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, serde::Deserialize)]

@@ -2,14 +2,6 @@
 //! equal-time optimization with its cost; the gradient error is in `gradient.rs`.
 use super::*;
 
-pub(super) fn settings(prep: &Problem, task: &Task, method: Method, o: &BenchOptions) -> Settings {
-    let mut s = task_settings(task, &prep.cameras, method, &o.estimator_options);
-    if let Some(p) = o.primal {
-        s.primal = p;
-    }
-    s
-}
-
 /// The primal estimators' image error and cost (issue: recursive control variates): per
 /// seed, an optimizer with each primal mode runs `warmup` iterations, then one more estimate
 /// with the textures held; its primal image is compared with a converged render of the same
@@ -220,7 +212,7 @@ fn contender_optimizer(
 
 /// What `auto` chooses for the bare task (what a task file naming only its scene, cameras,
 /// targets, textures and sampling gets, [`super::contender::bare`]) seen by `prep`'s cameras.
-fn auto_configuration(task: &Task, prep: &Problem) -> crate::optim::auto::Configuration {
+fn auto_configuration(task: &Task, prep: &Problem) -> crate::auto::Configuration {
     crate::task::task_configuration(
         &super::contender::bare(task),
         crate::optim::MethodChoice::Auto,

@@ -69,7 +69,7 @@ impl Tunable {
         Tunable {
             learning_rate_scale: 1.0,
             adam: settings.steps.of(),
-            estimator: settings.estimator_options.table(settings.method),
+            estimator: settings.estimator_options.table(settings.method.table()),
             step: settings.step,
             variance_clip: variance.clip,
             variance_threshold: variance.threshold,
@@ -83,7 +83,7 @@ impl Tunable {
         let method = settings.method;
         settings
             .estimator_options
-            .set_table(method, self.estimator.clone());
+            .set_table(method.table(), self.estimator.clone());
         settings.step = self.step;
         let variance = settings.steps.of::<VarianceStepOptions>();
         settings.steps.put(&VarianceStepOptions {
@@ -97,8 +97,7 @@ impl Tunable {
     /// Scale the learning rates of `opt`'s textures (made from `prep`).
     pub fn apply_learning_rate(&self, opt: &mut Optimizer, prep: &Problem) {
         for (t, p) in opt.set.textures.iter_mut().zip(&prep.set.textures) {
-            t.learning_rate =
-                Some(self.step.texture_rate(p) * self.learning_rate_scale);
+            t.learning_rate = Some(self.step.texture_rate(p) * self.learning_rate_scale);
         }
     }
 
@@ -130,7 +129,7 @@ impl Tunable {
             );
         }
         let mut o = EstimatorOptions::default();
-        o.set_table(method, self.estimator.clone());
+        o.set_table(method.table(), self.estimator.clone());
         let own = o.describe(method);
         if !own.is_empty() {
             let _ = write!(s, ", {own}");

@@ -1,7 +1,8 @@
 //! Bind groups by name: each pass's layouts reflected from its WGSL by naga
 //! ([`Gpu::pass_layout_in`]), the groups declared beside the code that drives a pass
 //! ([`GroupDecl`]) and bound by WGSL name ([`Gpu::bind`]).
-use super::{shaders::Library, Gpu};
+use super::shaders::{Binding, Library};
+use super::Gpu;
 use crate::Result;
 
 impl Gpu {
@@ -170,19 +171,4 @@ pub struct GroupDecl {
     pub group: u32,
     /// Variable names in binding order.
     pub names: &'static [&'static str],
-}
-
-/// Kind of a binding in a pass layout (`Gpu::layout`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Binding {
-    /// `var<uniform>`.
-    Uniform,
-    /// `var<storage, read>`.
-    Storage,
-    /// `var<storage, read_write>`.
-    StorageRw,
-    /// `var: acceleration_structure` (the scene's, with ray queries).
-    AccelerationStructure,
-    /// `var: texture_storage_2d<rgba32float, write>` (what the export pass writes).
-    StorageTextureRgba32FloatWrite,
 }

@@ -7,8 +7,9 @@ pub mod abi;
 mod binding;
 mod prepare;
 pub mod shaders;
-pub use binding::{Binding, GroupDecl};
+pub use binding::GroupDecl;
 pub use prepare::PipelineTime;
+pub use shaders::Binding;
 pub use shaders::Tracer;
 
 use crate::{Error, Result};

@@ -205,7 +205,7 @@ impl Library {
     /// The bindings of group `group` of a pass, reflected from its composed WGSL by naga:
     /// (variable name, kind) in binding order. Bind group layouts are built from this, so they
     /// cannot disagree with the shader; the bindings must be numbered 0, 1, 2, ... without gaps.
-    pub fn bindings(&self, pass: &str, group: u32) -> Result<Vec<(String, super::Binding)>> {
+    pub fn bindings(&self, pass: &str, group: u32) -> Result<Vec<(String, Binding)>> {
         self.bindings_for(pass, group, Tracer::Software)
     }
 
@@ -215,23 +215,23 @@ impl Library {
         pass: &str,
         group: u32,
         tracer: Tracer,
-    ) -> Result<Vec<(String, super::Binding)>> {
+    ) -> Result<Vec<(String, Binding)>> {
         let module = self.validate_for(pass, tracer)?;
-        let mut found: Vec<(u32, String, super::Binding)> = Vec::new();
+        let mut found: Vec<(u32, String, Binding)> = Vec::new();
         for (_, var) in module.global_variables.iter() {
             let Some(rb) = &var.binding else { continue };
             if rb.group != group {
                 continue;
             }
             let kind = match var.space {
-                naga::AddressSpace::Uniform => super::Binding::Uniform,
+                naga::AddressSpace::Uniform => Binding::Uniform,
                 naga::AddressSpace::Handle
                     if matches!(
                         module.types[var.ty].inner,
                         naga::TypeInner::AccelerationStructure { .. }
                     ) =>
                 {
-                    super::Binding::AccelerationStructure
+                    Binding::AccelerationStructure
                 }
                 naga::AddressSpace::Handle
                     if matches!(
@@ -246,13 +246,13 @@ impl Library {
                         }
                     ) =>
                 {
-                    super::Binding::StorageTextureRgba32FloatWrite
+                    Binding::StorageTextureRgba32FloatWrite
                 }
                 naga::AddressSpace::Storage { access } => {
                     if access.contains(naga::StorageAccess::STORE) {
-                        super::Binding::StorageRw
+                        Binding::StorageRw
                     } else {
-                        super::Binding::Storage
+                        Binding::Storage
                     }
                 }
                 other => {
@@ -280,6 +280,21 @@ impl Library {
         }
         Ok(found.into_iter().map(|(_, n, k)| (n, k)).collect())
     }
+}
+
+/// Kind of a binding in a pass layout (`Gpu::layout`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Binding {
+    /// `var<uniform>`.
+    Uniform,
+    /// `var<storage, read>`.
+    Storage,
+    /// `var<storage, read_write>`.
+    StorageRw,
+    /// `var: acceleration_structure` (the scene's, with ray queries).
+    AccelerationStructure,
+    /// `var: texture_storage_2d<rgba32float, write>` (what the export pass writes).
+    StorageTextureRgba32FloatWrite,
 }
 
 #[cfg(test)]

@@ -120,7 +120,7 @@ pub struct RunSummary {
 
 /// Log the configuration a run takes, then each choice `auto` made with its reason.
 fn log_configuration(
-    config: &crate::optim::auto::Configuration,
+    config: &crate::auto::Configuration,
     settings: &crate::optim::Settings,
     set: &ParamSet,
 ) {
@@ -144,15 +144,11 @@ fn log_configuration(
         },
         set.textures
             .iter()
-            .map(|t| format!(
-                "{} {}",
-                t.name(),
-                settings.step.texture_rate(t)
-            ))
+            .map(|t| format!("{} {}", t.name(), settings.step.texture_rate(t)))
             .collect::<Vec<_>>()
             .join(", "),
         settings.schedule.describe(),
-        settings.priors.describe(),
+        settings.priors.describe_active(),
     );
     for reason in &config.reasons {
         log::info!("auto: {reason}");

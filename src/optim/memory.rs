@@ -1,20 +1,10 @@
 //! The buffers an optimizer allocates, before it allocates them.
 
+pub use super::estimator::Scale;
 use super::{estimator, primal, PrimalMode, Settings};
 use crate::gpu::Gpu;
 use crate::render::params::ParamSet;
 use crate::{Error, Result};
-
-/// What a buffer's size scales with.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Scale {
-    /// Every texel of the optimized textures.
-    Texel,
-    /// The texels that a camera observes (ReSTIR's reservoirs).
-    ObservedTexel,
-    /// Every pixel of every camera.
-    Pixel,
-}
 
 /// The buffers an optimizer allocates besides the scene's, by label and size in bytes.
 #[derive(Clone, Debug, PartialEq)]

@@ -3,41 +3,6 @@
 //! ([`prior`]) and a step ([`step`]: Adam or the variance-scaled step, with or without
 //! filtered moments), as one submission per iteration.
 
-/// Declares the folders of a registry (the estimators', the priors') and lists each one's
-/// `KIND` in the module's `REGISTRY` of `&Kind`, documented by the string given first.
-macro_rules! registry {
-    ($doc:literal, $($(#[$attr:meta])* $folder:ident),* $(,)?) => {
-        $($(#[$attr])* pub mod $folder;)*
-        #[doc = $doc]
-        pub const REGISTRY: &[&Kind] = &[$($(#[$attr])* &$folder::KIND),*];
-    };
-}
-use registry;
-
-/// A kind's options as the TOML table they serialize to (the tables of
-/// [`EstimatorOptions`], [`step::Steps`] and [`Priors`]), by way of their text, so that an `f32` reads as written (0.9, not
-/// 0.8999999761581421) where the table is shown.
-pub(crate) fn as_table<T: serde::Serialize>(options: &T) -> toml::Table {
-    toml::to_string(options)
-        .ok()
-        .and_then(|text| toml::from_str(&text).ok())
-        .expect("a kind's options serialize to a table")
-}
-
-/// The options in the task file's `[optimizer.<name>]` table (None: every option at its
-/// default); an error names that table and what is wrong with it.
-pub(crate) fn parse_table<T: serde::de::DeserializeOwned>(
-    name: &str,
-    table: Option<&toml::Table>,
-) -> std::result::Result<T, (String, String)> {
-    let table = table.cloned().unwrap_or_default();
-    T::deserialize(toml::Value::Table(table)).map_err(|e| {
-        let msg = e.to_string().trim().replace('\n', " ");
-        (format!("optimizer.{name}"), msg)
-    })
-}
-
-pub mod auto;
 mod cameras;
 pub mod checkpoint;
 mod diff_render;
@@ -49,6 +14,7 @@ pub mod param_table;
 pub mod primal;
 pub mod prior;
 mod problem;
+pub mod registry;
 pub mod run_loop;
 pub mod schedule;
 pub mod step;
@@ -250,7 +216,12 @@ impl Optimizer {
             gpu,
             scene: &renderer.scene,
             set: &set,
-            settings: &settings,
+            method: settings.method,
+            options: &settings.estimator_options,
+            gradient_spp: settings.gradient_spp,
+            width: settings.width,
+            height: settings.height,
+            primal: settings.primal,
             cameras: &camera_infos,
             adjoint: &adjoint,
             grad: &grad,
@@ -273,7 +244,12 @@ impl Optimizer {
         let step = step::build(
             gpu,
             &set,
-            &settings,
+            &step::StepChoice {
+                kind: settings.step,
+                steps: &settings.steps,
+                sparse: settings.sparse_steps,
+                moment_filter: &settings.moment_filter,
+            },
             &observed.1,
             &step::StepBuffers {
                 grad: &grad,

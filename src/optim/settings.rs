@@ -242,7 +242,10 @@ mod tests {
             ),
             (
                 "optimizer.restir.m_cap",
-                Box::new(|s| s.estimator_options.set(Method::RESTIR, "m_cap", 0.0.into())),
+                Box::new(|s| {
+                    s.estimator_options
+                        .set(Method::RESTIR.table(), "m_cap", 0.0.into())
+                }),
             ),
             (
                 "optimizer.restir",
@@ -267,7 +270,10 @@ mod tests {
             ),
             (
                 "optimizer.baseline.m_cap",
-                Box::new(|s| s.estimator_options.set(Method::BASELINE, "m_cap", 8.into())),
+                Box::new(|s| {
+                    s.estimator_options
+                        .set(Method::BASELINE.table(), "m_cap", 8.into())
+                }),
             ),
             (
                 "optimizer.variance_step.clip",

@@ -1,4 +1,5 @@
-//! GPU time per kind of pass, from timestamp queries.
+//! What the optimizer measures of its own work: GPU time per kind of pass, from timestamp
+//! queries, and the values its passes dropped or lost.
 
 use crate::gpu::Gpu;
 use crate::Result;
@@ -150,4 +151,27 @@ impl PassTimer {
         }
         Ok(Some(t))
     }
+}
+
+/// Counters of dropped or lost values since the optimizer was created.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FaultCounts {
+    /// Gradient additions that exhausted the compare-and-swap bound.
+    pub lost_updates: u32,
+    /// Non-finite values dropped by the gradient or candidate pass.
+    pub dropped_gradient: u32,
+    /// Non-finite gradients the step skipped (their parameter left unchanged).
+    pub skipped_step: u32,
+    /// Non-finite primal samples dropped.
+    pub dropped_primal: u32,
+    /// Pixels whose loss or adjoint was not finite (e.g. a NaN in the target), counted once
+    /// per iteration and camera, and left out of the loss and the gradient.
+    pub dropped_pixels: u32,
+    /// Samples an estimator could not keep because an atomic update ran out of tries
+    /// (ReSTIR's candidates whose weight was not added to a reservoir's sum; gradient
+    /// additions the candidate pass gave up on).
+    pub lost_kept: u32,
+    /// Non-finite values of kept samples an estimator dropped when it used them again
+    /// (ReSTIR's stored paths in the merge).
+    pub dropped_kept: u32,
 }

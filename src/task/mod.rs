@@ -16,7 +16,7 @@
 //!
 //! [optimizer]
 //! iterations = 300                # and/or time_budget_s
-//! # Every key of [optimizer] that is absent is chosen by `auto` (optim::auto): the estimator,
+//! # Every key of [optimizer] that is absent is chosen by `auto` (the `auto` module): the estimator,
 //! # the step, its moment filter, the learning rates, their schedule and the smoothness prior.
 //! method = "baseline"             # gradient estimator: or "restir", "recursive", "auto"
 //! step = "adam"                   # or "variance" (auto's): the variance-scaled step

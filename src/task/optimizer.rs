@@ -1,8 +1,9 @@
 //! The `[optimizer]` table of a task file and the optimizer settings a task asks for.
 use super::{Filter, Loss, Task};
-use crate::optim::auto::Configuration;
+use crate::auto::Configuration;
 use crate::optim::estimator::Regime;
 use crate::optim::prior::{self, smoothness, smoothness::SmoothnessOptions, Priors};
+use crate::optim::registry::Family;
 use crate::optim::step::{self, Steps};
 use crate::optim::{Choice, EstimatorOptions, Method, MethodChoice};
 use serde::Deserialize;
@@ -40,7 +41,7 @@ pub struct OptimizerSpec {
     #[serde(default)]
     pub method: MethodChoice,
     /// The step taken with each gradient: "adam" or "variance" (None: `auto`'s,
-    /// [`crate::optim::auto`]); its options are its table (`[optimizer.adam]`,
+    /// [`crate::auto`]); its options are its table (`[optimizer.adam]`,
     /// `[optimizer.variance_step]`).
     #[serde(default)]
     pub step: Option<crate::optim::StepKind>,
@@ -116,7 +117,7 @@ impl TableKey {
             .iter()
             .find_map(|k| k.shorthand.filter(|s| s.0 == name).map(|s| (*k, s.1)));
         let (method, prior) = (Method::by_name(name), prior::Kind::by_name(name));
-        let step = step::Kind::by_table(name);
+        let step = <step::StepFamily as Family>::by_table(name);
         let found = match (value.is_table(), method, step, prior, shorthand) {
             (true, Some(m), ..) => TableKey::Estimator(m),
             (true, None, Some(k), ..) => TableKey::Step(k),
@@ -138,7 +139,7 @@ impl TableKey {
                         "unknown key (nor the options of an estimator: {}; of a step: {}; of a \
                          prior: {})",
                         Method::names().join(", "),
-                        step::Kind::tables().join(", "),
+                        <step::StepFamily as Family>::tables().join(", "),
                         prior::Kind::names().join(", ")
                     ),
                 ));
@@ -157,7 +158,7 @@ impl OptimizerSpec {
             if let (TableKey::Estimator(method), toml::Value::Table(t)) =
                 (TableKey::of(name, value)?, value)
             {
-                o.set_table(method, t.clone());
+                o.set_table(method.table(), t.clone());
             }
         }
         Ok(o)
@@ -236,7 +237,7 @@ impl OptimizerSpec {
             )
         });
         for kind in prior::REGISTRY {
-            let defaults = (kind.options.defaults)();
+            let defaults = kind.options.defaults();
             self.tables
                 .insert(kind.name.to_string(), toml::Value::Table(defaults));
         }

@@ -228,7 +228,10 @@ fn prior_tables_and_shorthands_reach_the_settings() {
     ));
     assert_eq!(s.priors.of::<MultiscaleOptions>().levels, 2);
     assert_eq!(s.priors.of::<SmoothnessOptions>().weight, 0.5);
-    assert_eq!(s.priors.describe(), "smoothness 0.5, multiscale 2 levels");
+    assert_eq!(
+        s.priors.describe_active(),
+        "smoothness 0.5, multiscale 2 levels"
+    );
     // Absent, the smoothness weight is auto's and the multiscale gradient off.
     let s = settings(GOOD);
     assert!(s.priors.of::<SmoothnessOptions>().weight > 0.0);
@@ -237,7 +240,7 @@ fn prior_tables_and_shorthands_reach_the_settings() {
     let mut t = Task::parse(&with("multiscale_levels = 3"), Path::new("t.toml")).unwrap();
     t.optimizer.priors_off();
     let s = task_settings(&t, &[0], Method::BASELINE, &Default::default());
-    assert_eq!(s.priors.describe(), "none");
+    assert_eq!(s.priors.describe_active(), "none");
     let e = err(&with(
         "multiscale_levels = 3\n[optimizer.multiscale]\nlevels = 2",
     ));

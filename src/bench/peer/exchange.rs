@@ -509,9 +509,7 @@ pub fn write(
         materials: materials(truth, &prep.scene),
         images,
         meshes,
-        optimized: optimized(dir, prep, observed, |t| {
-            step.texture_rate(t)
-        })?,
+        optimized: optimized(dir, prep, observed, |t| step.texture_rate(t))?,
         targets,
         target_spp: task.target.spp,
         eval_spp,

@@ -20,14 +20,16 @@ mod choice;
 mod options;
 mod state;
 
+pub use super::registry::{Options, TuningAxis, TypedAxis};
 pub use choice::{
     rule as auto_rule, Choice, MethodChoice, Regime, DENSE_SAMPLES_PER_TEXEL,
     RESTIR_MAX_TEXELS_CHEAP_PRIMAL, RESTIR_PRIMAL_RATIO,
 };
-pub use options::{EstimatorOptions, Options, OptionsKind, TuningAxis, TypedAxis};
+pub use options::{EstimatorOptions, OptionsKind};
 pub use state::EstimatorState;
 
-use super::{FaultCounts, PassTimer, Scale, Settings};
+use super::registry::{self, Family, Handle};
+use super::{FaultCounts, PassTimer};
 use crate::gpu::shaders::Generator;
 use crate::gpu::{Gpu, GroupDecl};
 use crate::render::layout::GpuCameraInfo;
@@ -36,7 +38,7 @@ use crate::Result;
 
 // A new estimator: its folder, exporting `KIND`, and its name here. The toy (tests only)
 // is the registry's own test: it is nothing but its folder and this entry.
-super::registry!(
+registry::registry!(
     "Every estimator, in the order reports list them: the one place that names each \
      folder. The first is the baseline, the reference of every comparison.",
     baseline,
@@ -74,6 +76,17 @@ pub struct Kind {
     /// than the observed ones only (a path can reach any texel after a bounce).
     pub every_texel: fn(u32) -> bool,
     pub(crate) build: fn(&Setup) -> Result<Box<dyn Estimator>>,
+}
+
+/// What a buffer's size scales with (in an estimator's memory plan and the optimizer's).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Scale {
+    /// Every texel of the optimized textures.
+    Texel,
+    /// The texels that a camera observes (ReSTIR's reservoirs).
+    ObservedTexel,
+    /// Every pixel of every camera.
+    Pixel,
 }
 
 /// The sizes an estimator's memory plan scales with.
@@ -132,112 +145,41 @@ pub fn no_warnings(_: &Conditions) -> Vec<String> {
     Vec::new()
 }
 
+/// The estimators as the generic registry sees them.
+pub struct EstimatorFamily;
+
+impl Family for EstimatorFamily {
+    const WHAT: &'static str = "gradient estimator";
+    type Kind = Kind;
+    fn registry() -> &'static [&'static Kind] {
+        REGISTRY
+    }
+    fn name(kind: &'static Kind) -> &'static str {
+        kind.name
+    }
+    fn options(kind: &'static Kind) -> OptionsKind {
+        kind.options
+    }
+}
+
 /// The gradient estimator: a handle on its [`Kind`] in the [`REGISTRY`]. The library's
 /// default is the one that ends lower on the bundled default task at equal time, each at its
 /// own best settings (docs/studies.md, "Which estimator is the default"): on the machines
 /// measured so far, the baseline. Task files and the command line default to
 /// [`MethodChoice::Auto`], which picks one by the task's regime.
-#[derive(Clone, Copy)]
-pub struct Method(&'static Kind);
+pub type Method = Handle<EstimatorFamily>;
 
 impl Method {
     /// Plain Monte Carlo: every candidate adds its value to the texels it touches.
-    pub const BASELINE: Method = Method(&baseline::KIND);
+    pub const BASELINE: Method = Handle::of(&baseline::KIND);
     /// Parameter-space ReSTIR.
-    pub const RESTIR: Method = Method(&restir::KIND);
+    pub const RESTIR: Method = Handle::of(&restir::KIND);
     /// The recursive control variate on the gradient.
-    pub const RECURSIVE: Method = Method(&recursive::KIND);
-
-    /// The estimator whose folder exports `kind`.
-    pub const fn of(kind: &'static Kind) -> Method {
-        Method(kind)
-    }
-
-    /// Every estimator, in the order reports list them.
-    pub fn all() -> impl Iterator<Item = Method> {
-        REGISTRY.iter().map(|k| Method(k))
-    }
-
-    /// The name used on the command line, in task files and in reports.
-    pub fn name(self) -> &'static str {
-        self.0.name
-    }
+    pub const RECURSIVE: Method = Handle::of(&recursive::KIND);
 
     /// What it does, in one line.
     pub fn summary(self) -> &'static str {
-        self.0.summary
-    }
-
-    /// Everything the registry knows of it.
-    pub fn kind(self) -> &'static Kind {
-        self.0
-    }
-
-    /// Every estimator's name.
-    pub fn names() -> Vec<&'static str> {
-        Method::all().map(|m| m.name()).collect()
-    }
-
-    /// The estimator called `name`.
-    pub fn by_name(name: &str) -> Option<Method> {
-        Method::all().find(|m| m.name() == name)
-    }
-}
-
-impl Default for Method {
-    fn default() -> Method {
-        Method::BASELINE
-    }
-}
-
-impl PartialEq for Method {
-    fn eq(&self, other: &Method) -> bool {
-        self.name() == other.name()
-    }
-}
-
-impl Eq for Method {}
-
-impl std::hash::Hash for Method {
-    fn hash<H: std::hash::Hasher>(&self, h: &mut H) {
-        self.name().hash(h)
-    }
-}
-
-impl std::fmt::Debug for Method {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl serde::Serialize for Method {
-    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
-        s.serialize_str(self.name())
-    }
-}
-
-impl<'de> serde::Deserialize<'de> for Method {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Method, D::Error> {
-        let name = String::deserialize(d)?;
-        name.parse().map_err(serde::de::Error::custom)
-    }
-}
-
-impl std::str::FromStr for Method {
-    type Err = crate::Error;
-    fn from_str(s: &str) -> Result<Method> {
-        Method::by_name(s).ok_or_else(|| {
-            crate::Error::Invalid(format!(
-                "unknown gradient estimator `{s}` (one of: {})",
-                Method::names().join(", ")
-            ))
-        })
-    }
-}
-
-impl std::fmt::Display for Method {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
+        self.kind().summary
     }
 }
 
@@ -250,7 +192,16 @@ pub(crate) struct Setup<'a> {
     pub gpu: &'a Gpu,
     pub scene: &'a GpuScene,
     pub set: &'a crate::render::params::ParamSet,
-    pub settings: &'a Settings,
+    /// The estimator to build, and every estimator's options.
+    pub method: Method,
+    pub options: &'a EstimatorOptions,
+    /// Camera samples per pixel and iteration.
+    pub gradient_spp: u32,
+    /// Each camera's image size.
+    pub width: u32,
+    pub height: u32,
+    /// How the primal render draws its samples (ReSTIR's target smoothing follows it).
+    pub primal: crate::optim::primal::PrimalMode,
     /// Camera constants of the task's cameras, in task order, at the task's image size.
     pub cameras: &'a [GpuCameraInfo],
     /// The adjoint images of all cameras, one after another; iteration t writes buffer t % 2
@@ -337,7 +288,7 @@ pub(crate) trait Estimator: Send {
 
 /// The estimator of `settings.method`.
 pub(crate) fn build(setup: &Setup) -> Result<Box<dyn Estimator>> {
-    (setup.settings.method.kind().build)(setup)
+    (setup.method.kind().build)(setup)
 }
 
 /// Every estimator's WGSL files (for the shader library).

@@ -10,7 +10,7 @@ mod options_tests {
             let toml = EstimatorOptions::defaults_toml(m);
             let table: toml::Table = toml::from_str(&toml).unwrap();
             let mut o = EstimatorOptions::default();
-            o.set_table(m, table.clone());
+            o.set_table(m.table(), table.clone());
             assert_eq!(o.check(), Ok(()), "{m}: {toml}");
             // Each optional key, commented out in the listing, is an option of its own.
             for line in toml.lines().filter_map(|l| l.strip_prefix("# ")) {
@@ -20,7 +20,7 @@ mod options_tests {
                     .into_iter()
                     .any(|v| {
                         let mut o = o.clone();
-                        o.set(m, key, v);
+                        o.set(m.table(), key, v);
                         o.check().is_ok()
                     });
                 assert!(valid, "{m}.{key}");
@@ -49,7 +49,10 @@ mod options_tests {
             ("restir.m_capp=3", "m_capp"),
             ("restir.m_cap=-1", "optimizer.restir.m_cap"),
             ("recursive.min_weight=2", "optimizer.recursive.min_weight"),
-            ("baseline.m_cap=2", "the baseline estimator has none"),
+            (
+                "baseline.m_cap=2",
+                "the baseline gradient estimator has none",
+            ),
         ] {
             let e = EstimatorOptions::default()
                 .assign(bad)
@@ -58,7 +61,9 @@ mod options_tests {
             assert!(e.contains(says) && e.contains(bad), "{bad}: {e}");
         }
         let mut unknown = EstimatorOptions::default();
-        unknown.tables.insert("sgd".into(), toml::Table::new());
+        unknown
+            .tables_mut()
+            .insert("sgd".into(), toml::Table::new());
         assert_eq!(unknown.check().unwrap_err().0, "optimizer.sgd");
     }
 }

@@ -12,15 +12,16 @@
 //!
 //! The optimizer drives a prior through the `Prior` trait once per iteration, after the
 //! estimator and before the step.
+pub use super::registry::Options;
+use super::registry::{self, Family, Tables};
 use super::timing::PassTimer;
 use crate::gpu::{Gpu, GroupDecl};
 use crate::render::params::ParamSet;
 use crate::Result;
-use std::collections::BTreeMap;
 
 // A new prior: its folder, exporting `KIND`, and its name here, where it is to apply. The
 // toy (tests only) is the registry's own test: it is nothing but its folder and this entry.
-super::registry!(
+registry::registry!(
     "Every prior, in the order they apply: the one place that names each folder.",
     smoothness,
     multiscale,
@@ -64,129 +65,43 @@ impl Kind {
     }
 }
 
-/// A prior's options as its folder defines them: read from and written to its table in
-/// [`Priors`] (missing keys take their defaults, which leave the prior off).
-pub trait Options:
-    Clone + Default + serde::Serialize + serde::de::DeserializeOwned + std::fmt::Debug
-{
-    /// The prior they belong to.
-    const KIND: &'static Kind;
-    /// An error naming the option (its key in the table) and what is wrong.
-    fn check(&self) -> std::result::Result<(), (String, String)>;
-    /// Whether the prior acts at all with these options.
-    fn on(&self) -> bool;
-    /// A short description for reports, e.g. `smoothness 0.03`.
-    fn describe(&self) -> String;
-}
+/// The priors as the generic registry sees them.
+pub struct PriorFamily;
 
-/// What the registry knows of a prior's options without their type: functions of the
-/// tables in [`Priors`], made from an [`Options`] type by [`OptionsKind::of`].
-#[derive(Clone, Copy)]
-pub struct OptionsKind {
-    check: fn(&Priors) -> std::result::Result<(), (String, String)>,
-    on: fn(&Priors) -> bool,
-    describe: fn(&Priors) -> String,
-    /// The options at their defaults, as a table (which leaves the prior off).
-    pub defaults: fn() -> toml::Table,
-}
-
-impl OptionsKind {
-    /// The options `T` defines.
-    pub const fn of<T: Options + 'static>() -> OptionsKind {
-        OptionsKind {
-            check: |p| p.get::<T>().map(|_| ()),
-            on: |p| p.get::<T>().is_ok_and(|t| t.on()),
-            describe: |p| p.get::<T>().map(|t| t.describe()).unwrap_or_default(),
-            defaults: || super::as_table(&T::default()),
-        }
+impl Family for PriorFamily {
+    const WHAT: &'static str = "prior";
+    type Kind = Kind;
+    fn registry() -> &'static [&'static Kind] {
+        REGISTRY
+    }
+    fn name(kind: &'static Kind) -> &'static str {
+        kind.name
+    }
+    fn options(kind: &'static Kind) -> OptionsKind {
+        kind.options
     }
 }
 
-/// Every prior's options, one table of TOML values per prior name: the task file's
-/// `[optimizer.<name>]` tables (and shorthands). Each prior reads its own ([`Options`]).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(transparent)]
-pub struct Priors {
-    tables: BTreeMap<String, toml::Table>,
-}
+/// What the registry knows of a prior's options without their type (its options' defaults
+/// leave it off).
+pub type OptionsKind = registry::OptionsKind<PriorFamily>;
+
+/// Every prior's options, one table per prior name: the task file's `[optimizer.<name>]`
+/// tables (and shorthands). Each prior reads its own ([`Options`]).
+pub type Priors = Tables<PriorFamily>;
 
 impl Priors {
-    /// These priors with `options` in place of their prior's table:
-    /// `Priors::default().with(&SmoothnessOptions { weight: 0.01 })`.
-    pub fn with<T: Options>(mut self, options: &T) -> Priors {
-        self.put(options);
-        self
-    }
-
-    /// The options of `T`'s prior, parsed from its table and checked: an error names the
-    /// task-file key and what is wrong.
-    pub fn get<T: Options>(&self) -> std::result::Result<T, (String, String)> {
-        let name = T::KIND.name;
-        let o: T = super::parse_table(name, self.tables.get(name))?;
-        o.check()
-            .map_err(|(k, m)| (format!("optimizer.{name}.{k}"), m))?;
-        Ok(o)
-    }
-
-    /// The options of `T`'s prior, at their defaults where the table is not valid (settings
-    /// are checked before an optimizer reads them).
-    pub fn of<T: Options>(&self) -> T {
-        self.get().unwrap_or_default()
-    }
-
-    /// Replace the table of `T`'s prior by `options`.
-    pub fn put<T: Options>(&mut self, options: &T) {
-        self.tables
-            .insert(T::KIND.name.to_string(), super::as_table(options));
-    }
-
-    /// `name`'s table (empty: every option at its default).
-    pub fn table(&self, name: &str) -> toml::Table {
-        self.tables.get(name).cloned().unwrap_or_default()
-    }
-
-    /// Set one option of the prior `name` (checked by [`Priors::check`]).
-    pub fn set(&mut self, name: &str, key: &str, value: toml::Value) {
-        self.tables
-            .entry(name.to_string())
-            .or_default()
-            .insert(key.to_string(), value);
-    }
-
-    /// Check every table: an error names the task-file key and what is wrong.
-    pub fn check(&self) -> std::result::Result<(), (String, String)> {
-        for name in self.tables.keys() {
-            let kind = Kind::by_name(name).ok_or_else(|| {
-                (
-                    format!("optimizer.{name}"),
-                    format!("is no prior ({})", Kind::names().join(", ")),
-                )
-            })?;
-            (kind.options.check)(self)?;
-        }
-        Ok(())
-    }
-
-    /// The priors that act, in the order they apply.
-    pub fn active(&self) -> Vec<&'static Kind> {
-        REGISTRY
-            .iter()
-            .copied()
-            .filter(|k| (k.options.on)(self))
-            .collect()
-    }
-
     /// Whether every prior that acts keeps each entry's variance ([`Kind::keeps_variance`]).
     pub fn keep_variance(&self) -> bool {
         self.active().iter().all(|k| k.keeps_variance)
     }
 
     /// The priors that act, described for reports (`none` without any).
-    pub fn describe(&self) -> String {
+    pub fn describe_active(&self) -> String {
         let on: Vec<String> = self
             .active()
-            .iter()
-            .map(|k| (k.options.describe)(self))
+            .into_iter()
+            .map(|k| self.describe(k))
             .collect();
         if on.is_empty() {
             "none".into()
@@ -259,13 +174,13 @@ mod tests {
     #[test]
     fn prior_names_are_their_own_and_every_prior_is_off_by_default() {
         let mut names: Vec<&str> = crate::optim::Method::names();
-        names.extend(crate::optim::step::Kind::tables());
+        names.extend(<crate::optim::step::StepFamily as Family>::tables());
         for k in REGISTRY {
             names.push(k.name);
             // A shorthand may be its prior's own name (`smoothness = 0.03`).
             names.extend(k.shorthand.map(|s| s.0).filter(|s| *s != k.name));
             let mut p = Priors::default();
-            p.tables.insert(k.name.into(), (k.options.defaults)());
+            p.set_table(k.name, k.options.defaults());
             assert!(p.active().is_empty(), "{} is on at its defaults", k.name);
             assert_eq!(p.check(), Ok(()));
             assert_eq!(Kind::by_name(k.name).unwrap().pass, k.pass);

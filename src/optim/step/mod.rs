@@ -18,17 +18,18 @@ pub mod moment_filter;
 
 use crate::gpu::abi::step_phase;
 use crate::gpu::{encode_timed_pass, grid_2d, Gpu, GroupDecl};
-use crate::optim::{PassKind, PassTimer, Settings};
+pub use crate::optim::registry::Options;
+use crate::optim::registry::{self, Family, Handle, Tables};
+use crate::optim::timing::{PassKind, PassTimer};
 use crate::render::params::{ParamSet, ParamTexture};
 use crate::render::WORKGROUP;
 use crate::vocab::Slot;
 use crate::Result;
 use moment_filter::MomentFilter;
-use std::collections::BTreeMap;
 
 // A new step: its folder, exporting `KIND`, and its name here. The toy (tests only) is the
 // registry's own test: it is nothing but its folder and this entry.
-super::registry!(
+registry::registry!(
     "Every step, in the order reports list them: the one place that names each folder. \
      The first is the library's default.",
     adam,
@@ -97,214 +98,57 @@ pub struct CpuGroup<'a> {
     pub range: (f32, f32),
 }
 
-impl Kind {
-    /// The step whose options' table is `table`.
-    pub fn by_table(table: &str) -> Option<&'static Kind> {
-        REGISTRY.iter().copied().find(|k| k.table == table)
+/// The steps as the generic registry sees them.
+pub struct StepFamily;
+
+impl Family for StepFamily {
+    const WHAT: &'static str = "step";
+    type Kind = Kind;
+    fn registry() -> &'static [&'static Kind] {
+        REGISTRY
     }
-
-    /// Every step's table name.
-    pub fn tables() -> Vec<&'static str> {
-        REGISTRY.iter().map(|k| k.table).collect()
+    fn name(kind: &'static Kind) -> &'static str {
+        kind.name
     }
-}
-
-/// What the registry knows of a step's options without their type: functions of the
-/// tables in [`Steps`], made from an [`Options`] type by [`OptionsKind::of`].
-#[derive(Clone, Copy)]
-pub struct OptionsKind {
-    check: fn(&Steps) -> std::result::Result<(), (String, String)>,
-    /// The options at their defaults, as a table.
-    pub defaults: fn() -> toml::Table,
-}
-
-impl OptionsKind {
-    /// The options `T` defines.
-    pub const fn of<T: Options + 'static>() -> OptionsKind {
-        OptionsKind {
-            check: |s| s.get::<T>().map(|_| ()),
-            defaults: || super::as_table(&T::default()),
-        }
+    fn table(kind: &'static Kind) -> &'static str {
+        kind.table
+    }
+    fn options(kind: &'static Kind) -> OptionsKind {
+        kind.options
     }
 }
 
-/// A step's options as its folder defines them: read from and written to its table in
-/// [`Steps`] (missing keys take their defaults).
-pub trait Options:
-    Clone + Default + serde::Serialize + serde::de::DeserializeOwned + std::fmt::Debug
-{
-    /// The step they belong to.
-    const KIND: &'static Kind;
-    /// An error naming the option (its key in the table) and what is wrong.
-    fn check(&self) -> std::result::Result<(), (String, String)>;
-}
+/// What the registry knows of a step's options without their type.
+pub type OptionsKind = registry::OptionsKind<StepFamily>;
 
 /// Which step the optimizer takes with the gradient estimate (the task file's
 /// `optimizer.step`, the command line's `--step`): a handle on its [`Kind`] in the
 /// [`REGISTRY`]. The default is the registry's first, Adam.
-#[derive(Clone, Copy)]
-pub struct StepKind(&'static Kind);
+pub type StepKind = Handle<StepFamily>;
 
 impl StepKind {
     /// Adam (first and second moments).
-    pub const ADAM: StepKind = StepKind(&adam::KIND);
+    pub const ADAM: StepKind = Handle::of(&adam::KIND);
     /// The variance-scaled step: no first moment, the estimate's variance in the denominator.
-    pub const VARIANCE: StepKind = StepKind(&variance_step::KIND);
-
-    /// Every step, in the order reports list them.
-    pub fn all() -> impl Iterator<Item = StepKind> {
-        REGISTRY.iter().map(|k| StepKind(k))
-    }
-
-    /// The name used on the command line and in reports.
-    pub fn name(self) -> &'static str {
-        self.0.name
-    }
-
-    /// Everything the registry knows of it.
-    pub fn kind(self) -> &'static Kind {
-        self.0
-    }
-
-    /// Every step's name.
-    pub fn names() -> Vec<&'static str> {
-        StepKind::all().map(|s| s.name()).collect()
-    }
-
-    /// The step called `name`.
-    pub fn by_name(name: &str) -> Option<StepKind> {
-        StepKind::all().find(|s| s.name() == name)
-    }
+    pub const VARIANCE: StepKind = Handle::of(&variance_step::KIND);
 
     /// The learning rate of a texture of `slot` that names none.
     pub fn learning_rate(self, slot: Slot) -> f32 {
-        (self.0.learning_rate)(slot)
+        (self.kind().learning_rate)(slot)
     }
 
     /// The learning rate of texture `tex` under this step: its own, or the step's default
     /// for its slot.
-    pub fn texture_rate(self, tex: &crate::render::params::ParamTexture) -> f32 {
+    pub fn texture_rate(self, tex: &ParamTexture) -> f32 {
         tex.learning_rate
             .unwrap_or_else(|| self.learning_rate(tex.slot))
     }
 }
 
-impl Default for StepKind {
-    fn default() -> StepKind {
-        StepKind(REGISTRY[0])
-    }
-}
-
-impl PartialEq for StepKind {
-    fn eq(&self, other: &StepKind) -> bool {
-        self.name() == other.name()
-    }
-}
-
-impl Eq for StepKind {}
-
-impl std::fmt::Debug for StepKind {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl std::fmt::Display for StepKind {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl std::str::FromStr for StepKind {
-    type Err = crate::Error;
-    fn from_str(s: &str) -> Result<StepKind> {
-        StepKind::by_name(s).ok_or_else(|| {
-            crate::Error::Invalid(format!(
-                "unknown step `{s}` (one of: {})",
-                StepKind::names().join(", ")
-            ))
-        })
-    }
-}
-
-impl serde::Serialize for StepKind {
-    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
-        s.serialize_str(self.name())
-    }
-}
-
-impl<'de> serde::Deserialize<'de> for StepKind {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<StepKind, D::Error> {
-        let name = String::deserialize(d)?;
-        name.parse().map_err(serde::de::Error::custom)
-    }
-}
-
-/// Every step's options, one table of TOML values per step's table name: the task file's
+/// Every step's options, one table per step's table name: the task file's
 /// `[optimizer.adam]`, `[optimizer.variance_step]`, ... Each step reads its own
 /// ([`Options`]); the tables of the steps not chosen are checked all the same.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(transparent)]
-pub struct Steps {
-    tables: BTreeMap<String, toml::Table>,
-}
-
-impl Steps {
-    /// These tables with `options` in place of their step's table.
-    pub fn with<T: Options>(mut self, options: &T) -> Steps {
-        self.put(options);
-        self
-    }
-
-    /// The options of `T`'s step, parsed from its table and checked: an error names the
-    /// task-file key and what is wrong.
-    pub fn get<T: Options>(&self) -> std::result::Result<T, (String, String)> {
-        let table = T::KIND.table;
-        let o: T = super::parse_table(table, self.tables.get(table))?;
-        o.check()
-            .map_err(|(k, m)| (format!("optimizer.{table}.{k}"), m))?;
-        Ok(o)
-    }
-
-    /// The options of `T`'s step, at their defaults where the table is not valid (settings
-    /// are checked before an optimizer reads them).
-    pub fn of<T: Options>(&self) -> T {
-        self.get().unwrap_or_default()
-    }
-
-    /// Replace the table of `T`'s step by `options`.
-    pub fn put<T: Options>(&mut self, options: &T) {
-        let table = super::as_table(options);
-        self.tables.insert(T::KIND.table.to_string(), table);
-    }
-
-    /// The table called `table` (empty: every option at its default).
-    pub fn table(&self, table: &str) -> toml::Table {
-        self.tables.get(table).cloned().unwrap_or_default()
-    }
-
-    /// Set one option of the table `table` (checked by [`Steps::check`]).
-    pub fn set(&mut self, table: &str, key: &str, value: toml::Value) {
-        self.tables
-            .entry(table.to_string())
-            .or_default()
-            .insert(key.to_string(), value);
-    }
-
-    /// Check every table: an error names the task-file key and what is wrong.
-    pub fn check(&self) -> std::result::Result<(), (String, String)> {
-        for table in self.tables.keys() {
-            let kind = Kind::by_table(table).ok_or_else(|| {
-                (
-                    format!("optimizer.{table}"),
-                    format!("is no step's table ({})", Kind::tables().join(", ")),
-                )
-            })?;
-            (kind.options.check)(self)?;
-        }
-        Ok(())
-    }
-}
+pub type Steps = Tables<StepFamily>;
 
 /// A step as the optimizer drives it, once per iteration after the gradient.
 pub(crate) trait Step: Send {
@@ -352,16 +196,25 @@ pub(crate) struct Setup<'a> {
     pub buffers: &'a StepBuffers<'a>,
 }
 
-/// The step `settings.step` with the moment filter `settings.moment_filter` asks for.
+/// What a run chooses of its step: which, every step's options, whether an entry whose
+/// gradient is exactly zero keeps its value and state, and the moment filter.
+pub(crate) struct StepChoice<'a> {
+    pub kind: StepKind,
+    pub steps: &'a Steps,
+    pub sparse: bool,
+    pub moment_filter: &'a moment_filter::MomentFilterOptions,
+}
+
+/// The step `choice` names, with its moment filter when that is on.
 pub(crate) fn build(
     gpu: &Gpu,
     set: &ParamSet,
-    settings: &Settings,
+    choice: &StepChoice,
     observed_map: &wgpu::Buffer,
     b: &StepBuffers,
 ) -> Result<Box<dyn Step>> {
-    let mf = &settings.moment_filter;
-    let kind = settings.step.kind();
+    let mf = choice.moment_filter;
+    let kind = choice.kind.kind();
     let filter = if mf.enabled() {
         let of_mean = kind.divides_by_variance;
         Some(MomentFilter::new(
@@ -377,8 +230,8 @@ pub(crate) fn build(
     (kind.build)(Setup {
         gpu,
         set,
-        steps: &settings.steps,
-        mask: settings.sparse_steps,
+        steps: choice.steps,
+        mask: choice.sparse,
         filter,
         buffers: b,
     })

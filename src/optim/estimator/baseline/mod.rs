@@ -79,7 +79,7 @@ impl Baseline {
         let layout = gpu.pass_layout("gradient", 1)?;
         let pipeline = s.scene.pipeline(gpu, "gradient", &[&s.scene.layout, &layout])?;
         let stats = gpu.storage_zeroed("gradient stats", 16);
-        let n_pixels = s.settings.width * s.settings.height;
+        let n_pixels = s.width * s.height;
         let cameras = s
             .cameras
             .iter()
@@ -87,10 +87,10 @@ impl Baseline {
             .map(|(k, &camera)| {
                 let params = GradientParams {
                     camera,
-                    spp: s.settings.gradient_spp,
+                    spp: s.gradient_spp,
                     techniques: Techniques::Mis.bits(),
                     stride: s.grid.0 * WORKGROUP,
-                    inv_spp: 1.0 / s.settings.gradient_spp as f32,
+                    inv_spp: 1.0 / s.gradient_spp as f32,
                     adjoint_offset: k as u32 * n_pixels,
                     ..Default::default()
                 };

@@ -98,8 +98,8 @@ impl Default for RecursiveOptions {
     }
 }
 
-impl crate::optim::estimator::Options for RecursiveOptions {
-    const METHOD: crate::optim::Method = crate::optim::Method::RECURSIVE;
+impl crate::optim::estimator::Options<crate::optim::estimator::EstimatorFamily> for RecursiveOptions {
+    const KIND: &'static crate::optim::estimator::Kind = &KIND;
     const OPTIONAL: &'static [&'static str] = &["weight"];
 
     fn check(&self) -> std::result::Result<(), (String, String)> {
@@ -257,8 +257,8 @@ impl Recursive {
     pub(crate) fn new(s: &Setup) -> Result<Recursive> {
         let gpu = s.gpu;
         let options: RecursiveOptions = s
-            .settings
-            .estimator_options
+            
+            .options
             .get()
             .map_err(|(key, msg)| crate::Error::Invalid(format!("{key} {msg}")))?;
         let layout = gpu.pass_layout("recursive_gradient", 1)?;
@@ -272,7 +272,7 @@ impl Recursive {
             .iter()
             .map(|l| gpu.storage_zeroed(&format!("recursive {l}"), 4 * n_params))
             .collect();
-        let n_pixels = s.settings.width * s.settings.height;
+        let n_pixels = s.width * s.height;
         let cameras = s
             .cameras
             .iter()
@@ -280,9 +280,9 @@ impl Recursive {
             .map(|(k, &camera)| {
                 let params = RecursiveGradientParams {
                     camera,
-                    spp: s.settings.gradient_spp,
+                    spp: s.gradient_spp,
                     stride: s.grid.0 * WORKGROUP,
-                    inv_spp: 1.0 / s.settings.gradient_spp as f32,
+                    inv_spp: 1.0 / s.gradient_spp as f32,
                     adjoint_offset: k as u32 * n_pixels,
                     ..Default::default()
                 };

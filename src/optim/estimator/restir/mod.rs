@@ -212,7 +212,7 @@ impl Restir {
                 "ReSTIR handles at most {MAX_CAMERAS} cameras, the task has {n_cams}"
             )));
         }
-        let n_pixels = s.settings.width * s.settings.height;
+        let n_pixels = s.width * s.height;
         if u64::from(n_pixels) > u64::from(reservoir::PIXEL_MASK) + 1 {
             return Err(Error::Invalid(format!(
                 "ReSTIR handles images of at most 2^{} pixels, the task has {n_pixels}",
@@ -234,11 +234,11 @@ impl Restir {
         Self::check_setup(s)?;
         let gpu = s.gpu;
         let o: RestirOptions = s
-            .settings
-            .estimator_options
+            
+            .options
             .get()
             .map_err(|(key, msg)| Error::Invalid(format!("{key} {msg}")))?;
-        let smoothing = o.target_smoothing_for(s.settings.primal);
+        let smoothing = o.target_smoothing_for(s.primal);
         let candidate_layout = gpu.pass_layout("restir_candidates", 1)?;
         let merge_layout = gpu.pass_layout("restir_merge", 1)?;
         let candidate_pipeline =

@@ -86,8 +86,8 @@ impl Default for RestirOptions {
     }
 }
 
-impl crate::optim::estimator::Options for RestirOptions {
-    const METHOD: crate::optim::Method = crate::optim::Method::RESTIR;
+impl crate::optim::estimator::Options<crate::optim::estimator::EstimatorFamily> for RestirOptions {
+    const KIND: &'static crate::optim::estimator::Kind = &super::KIND;
     const OPTIONAL: &'static [&'static str] = &["target_smoothing", "claim_entries"];
 
     fn check(&self) -> std::result::Result<(), (String, String)> {

@@ -286,7 +286,7 @@ impl Buffers {
 fn offers_of(s: &Setup, n_pixels: u64) -> u64 {
     let (slots, footprint) = super::super::Sizes::lookups(s.set);
     max_offers(
-        n_pixels * u64::from(s.settings.gradient_spp),
+        n_pixels * u64::from(s.gradient_spp),
         s.scene.info.max_depth,
         slots,
         footprint,
@@ -309,14 +309,14 @@ pub(super) fn variance_factor(m_fresh: f32, m_kept: f32) -> f32 {
 
 /// The merge's uniform before the first iteration.
 pub(super) fn merge_params(s: &Setup, o: &RestirOptions, n_observed: u32, grid: (u32, u32)) -> MergeParams {
-    let spp = s.settings.gradient_spp;
+    let spp = s.gradient_spp;
     let mut origins = [[0.0; 4]; MAX_CAMERAS];
     for (o, c) in origins.iter_mut().zip(s.cameras) {
         *o = [c.origin[0], c.origin[1], c.origin[2], 0.0];
     }
     MergeParams {
         n_observed,
-        n_pixels: s.settings.width * s.settings.height,
+        n_pixels: s.width * s.height,
         seed: 0,
         flags: 0,
         m_fresh: match o.confidence {
@@ -346,7 +346,7 @@ pub(super) fn candidate_camera(
     layout: &wgpu::BindGroupLayout,
     b: &Buffers,
 ) -> Camera {
-    let spp = s.settings.gradient_spp;
+    let spp = s.gradient_spp;
     let params = CandidateParams {
         camera: s.cameras[k],
         seed: 0,
@@ -354,7 +354,7 @@ pub(super) fn candidate_camera(
         stride: s.grid.0 * WORKGROUP,
         inv_spp: 1.0 / spp as f32,
         camera_index: k as u32,
-        adjoint_offset: k as u32 * s.settings.width * s.settings.height,
+        adjoint_offset: k as u32 * s.width * s.height,
         positivize: o.positivization as u32,
         prev_targets: 0,
         smoothing: 0.0,

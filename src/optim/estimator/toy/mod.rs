@@ -52,8 +52,8 @@ impl Default for ToyOptions {
     }
 }
 
-impl Options for ToyOptions {
-    const METHOD: Method = Method::of(&KIND);
+impl Options<super::EstimatorFamily> for ToyOptions {
+    const KIND: &'static Kind = &KIND;
 
     fn check(&self) -> std::result::Result<(), (String, String)> {
         if !(0.0..=1.0).contains(&self.target) {
@@ -90,8 +90,8 @@ impl Toy {
     fn new(s: &Setup) -> Result<Toy> {
         let gpu = s.gpu;
         let options: ToyOptions = s
-            .settings
-            .estimator_options
+            
+            .options
             .get()
             .map_err(|(k, m)| crate::Error::Invalid(format!("{k} {m}")))?;
         let layout = gpu.pass_layout("toy_gradient", 1)?;

@@ -41,7 +41,7 @@ pub struct MultiscaleOptions {
     pub levels: u32,
 }
 
-impl Options for MultiscaleOptions {
+impl Options<super::PriorFamily> for MultiscaleOptions {
     const KIND: &'static Kind = &KIND;
 
     fn check(&self) -> std::result::Result<(), (String, String)> {

@@ -41,7 +41,7 @@ pub struct SmoothnessOptions {
     pub weight: f32,
 }
 
-impl Options for SmoothnessOptions {
+impl Options<super::PriorFamily> for SmoothnessOptions {
     const KIND: &'static Kind = &KIND;
 
     fn check(&self) -> std::result::Result<(), (String, String)> {

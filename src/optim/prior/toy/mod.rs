@@ -38,7 +38,7 @@ pub struct ToyPriorOptions {
     pub weight: f32,
 }
 
-impl Options for ToyPriorOptions {
+impl Options<super::PriorFamily> for ToyPriorOptions {
     const KIND: &'static Kind = &KIND;
 
     fn check(&self) -> std::result::Result<(), (String, String)> {
@@ -150,7 +150,7 @@ mod tests {
         let priors = spec("[toy_prior]\ntarget = 0.625\nweight = 1.0")
             .prior_options()
             .unwrap();
-        assert!(priors.describe().contains("toy prior toward 0.625"));
+        assert!(priors.describe_active().contains("toy prior toward 0.625"));
         let values = run_on_plane(120, |settings| {
             settings.method = "toy".parse::<Method>().unwrap();
             settings

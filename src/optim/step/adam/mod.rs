@@ -80,7 +80,7 @@ impl Default for AdamOptions {
     }
 }
 
-impl Options for AdamOptions {
+impl Options<super::StepFamily> for AdamOptions {
     const KIND: &'static Kind = &KIND;
 
     /// An error naming the field (`beta1`, `beta2`, `eps`) that is out of range.

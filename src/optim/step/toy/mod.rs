@@ -57,7 +57,7 @@ impl Default for ToyStepOptions {
     }
 }
 
-impl Options for ToyStepOptions {
+impl Options<super::StepFamily> for ToyStepOptions {
     const KIND: &'static Kind = &KIND;
 
     fn check(&self) -> std::result::Result<(), (String, String)> {

@@ -84,7 +84,7 @@ impl Default for VarianceStepOptions {
     }
 }
 
-impl Options for VarianceStepOptions {
+impl Options<super::StepFamily> for VarianceStepOptions {
     const KIND: &'static Kind = &KIND;
 
     /// An error naming the field that is out of range.

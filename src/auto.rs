@@ -34,10 +34,10 @@
 //! - **The smoothness prior** at 0.03 with sparse sampling, 0.01 with dense ([`smoothness`]):
 //!   with few samples per texel the images leave texels free that only a prior ties to their
 //!   neighbours. The multiscale gradient stays off.
-use super::estimator::Regime;
-use super::estimator::DENSE_SAMPLES_PER_TEXEL;
-use super::moment_filter::{MomentFilterOptions, SUGGESTED_LEVELS};
-use super::{Choice, MethodChoice, Schedule, ScheduleKind, StepKind};
+use crate::optim::estimator::Regime;
+use crate::optim::estimator::DENSE_SAMPLES_PER_TEXEL;
+use crate::optim::moment_filter::{MomentFilterOptions, SUGGESTED_LEVELS};
+use crate::optim::{Choice, MethodChoice, Schedule, ScheduleKind, StepKind};
 use crate::vocab::Slot;
 
 /// The step where a task in `regime` names none: Adam with direct light and fewer than
@@ -269,15 +269,17 @@ impl Configuration {
     }
 
     /// Put the estimator, step, moment filter and schedule into `settings` (the library's
-    /// way to the task files' defaults: [`Settings::new`](super::Settings::new) keeps the
+    /// way to the task files' defaults: [`Settings::new`](crate::optim::Settings::new) keeps the
     /// plain ones, Adam without a filter or schedule; textures whose learning rate is None
     /// take the step's, [`StepKind::learning_rate`]).
-    pub fn apply(&self, settings: &mut super::Settings) {
+    pub fn apply(&self, settings: &mut crate::optim::Settings) {
         settings.method = self.estimator.method;
         settings.step = self.step;
         settings.moment_filter = self.moment_filter;
         settings.schedule = self.schedule.clone();
-        let mut smoothness = settings.priors.of::<super::smoothness::SmoothnessOptions>();
+        let mut smoothness = settings
+            .priors
+            .of::<crate::optim::smoothness::SmoothnessOptions>();
         smoothness.weight = self.smoothness;
         settings.priors.put(&smoothness);
     }
