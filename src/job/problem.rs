@@ -1,7 +1,7 @@
 //! A task file's optimization problem ([`Problem::from_task`], [`Problem::load`]): its scene
 //! with what the task adds, its cameras, textures and targets (rendered from its ground truth
 //! and cached, or its photos with their masks and exposures). The [`Problem`] itself, and
-//! what an application builds one with, are the optimizer's (`optim/problem.rs`).
+//! what an application builds one with, are the optimizer's (`optim/api/problem.rs`).
 pub use crate::optim::Problem;
 
 use crate::gpu::Gpu;

@@ -1,40 +1,36 @@
-//! Texture optimization on the GPU: primal render, loss and adjoint, a gradient estimator
-//! ([`estimator`]: the baseline, ReSTIR or the recursive control variate), the priors
-//! ([`prior`]) and a step ([`step`]: Adam or the variance-scaled step, with or without
-//! filtered moments), as one submission per iteration.
+//! Texture optimization on the GPU. At this folder's root the engine, [`Optimizer`]: primal
+//! render ([`primal`]), loss and adjoint ([`loss`]), a gradient estimator ([`estimator`]:
+//! the baseline, ReSTIR or the recursive control variate), the priors ([`prior`]) and a
+//! step ([`step`]: Adam or the variance-scaled step, with or without filtered moments), as
+//! one submission per iteration; the three kinds of plugin share one shape ([`registry`]).
+//! Around it, a room per role: the run (`run/`: loop, schedule, seeds, checkpoints), the fit
+//! of the light and the cameras' response (`fit/`) and what the optimizer offers outside its
+//! iteration (`api/`: `DiffRender`, the problem, export, uncertainty, measurements).
 
+mod api;
 mod cameras;
-pub mod checkpoint;
-mod diff_render;
-pub mod environment_fit;
 pub mod estimator;
+mod fit;
 pub mod loss;
-pub mod observed;
-pub mod param_table;
-pub mod primal;
-pub mod prior;
-mod problem;
-pub mod registry;
-pub mod run_loop;
-pub mod schedule;
-pub mod step;
-pub mod texture_export;
-pub mod uncertainty;
-
-mod gains;
-mod measure;
 mod memory;
+pub mod observed;
 #[cfg(test)]
 mod plane_tests;
-mod seeds;
+pub mod primal;
+pub mod prior;
+pub mod registry;
+mod run;
 mod settings;
-mod snapshot;
+pub mod step;
 mod timing;
-pub use diff_render::{DiffRender, Gradients};
+pub use api::diff_render::{DiffRender, Gradients};
+pub use api::{texture_export, uncertainty};
+pub use fit::{environment_fit, param_table};
 pub use memory::*;
-pub use seeds::*;
+pub use run::seeds::*;
+pub use run::snapshot::*;
+pub use run::{checkpoint, run_loop, schedule};
 pub use settings::*;
-pub use snapshot::*;
 pub use timing::*;
 
 use crate::gpu::abi::stat;
@@ -52,15 +48,16 @@ pub use prior::{multiscale, smoothness, Priors};
 /// The optimizer's own passes besides the steps', priors' and estimators' (a pass is named
 /// after its file, which lies beside its driver in this folder).
 pub(crate) const WGSL: &[(&str, &str)] = &[
-    ("loss", include_str!("loss.wgsl")),
-    ("primal_cv", include_str!("primal_cv.wgsl")),
-    ("observed_texels", include_str!("observed_texels.wgsl")),
-    ("texture_export", include_str!("texture_export.wgsl")),
+    ("loss", include_str!("loss/loss.wgsl")),
+    ("primal_cv", include_str!("primal/primal_cv.wgsl")),
+    (
+        "observed_texels",
+        include_str!("observed/observed_texels.wgsl"),
+    ),
+    ("texture_export", include_str!("api/texture_export.wgsl")),
 ];
 
-#[cfg(feature = "test-hooks")]
-mod hooks;
-pub use problem::{EnvironmentFit, Problem};
+pub use api::problem::{EnvironmentFit, Problem};
 pub use schedule::{Schedule, ScheduleKind};
 pub use step::variance_step::VarianceStepOptions;
 pub use step::{adam, moment_filter, variance_step, StepKind, Steps};

@@ -1,6 +1,6 @@
 //! The one shape of the optimizer's three kinds of plugin: gradient estimators, steps and
 //! priors. A kind lives in its own folder and exports one value, its `Kind`; its family's
-//! `REGISTRY` lists the kinds ([`registry!`], the one line to add for a new one). A
+//! `REGISTRY` lists the kinds (`registry!`, the one line to add for a new one). A
 //! [`Handle`] names a kind (`Method`, `StepKind`); each kind's options are its own type
 //! ([`Options`]), read from its table under the task file's `[optimizer]`, which [`Tables`]
 //! holds for the whole family (`EstimatorOptions`, `Steps`, `Priors`). [`Family`] is what

@@ -117,7 +117,7 @@ def srgb_to_linear(c):
 
 
 def schedule_factor(s, progress):
-    """psrestir's learning-rate schedule (src/optim/schedule.rs) at progress in [0, 1]."""
+    """psrestir's learning-rate schedule (src/optim/run/schedule.rs) at progress in [0, 1]."""
     p = min(max(progress, 0.0), 1.0)
     kind, final = s.get("kind", "constant"), s.get("final", 0.05)
     if kind == "cosine":

@@ -96,7 +96,7 @@ pub struct MultiscaleParams {
 /// The tile-grid shift of `iteration` in a run seeded with `seed`: pseudo-random, so that
 /// block edges move every iteration (and a resumed run repeats them).
 pub fn shift(seed: u32, iteration: u32) -> (u32, u32) {
-    use crate::optim::seeds::{pass_seed, Seeds};
+    use crate::optim::{pass_seed, Seeds};
     let h = pass_seed(seed, iteration, 0, Seeds::MULTISCALE);
     (h % TILE, (h / TILE) % TILE)
 }

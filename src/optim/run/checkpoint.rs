@@ -3,9 +3,9 @@
 //! drawn at, the metrics so far; the random numbers are a pure function of seed and
 //! iteration, so the iteration is the RNG state). Written atomically: a temporary file, then a
 //! rename.
-use super::environment_fit::EnvFitState;
-use super::param_table::{GroupState, ENVIRONMENT, EXPOSURE, WHITE_BALANCE};
-use super::{ControlVariateSnapshot, EstimatorState, OptimizerState, PreviousState, Values};
+use crate::optim::environment_fit::EnvFitState;
+use crate::optim::param_table::{GroupState, ENVIRONMENT, EXPOSURE, WHITE_BALANCE};
+use crate::optim::{ControlVariateSnapshot, EstimatorState, OptimizerState, PreviousState, Values};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;

@@ -1,7 +1,7 @@
 //! Gradients measured outside an optimization step (the bench's error protocol and the
 //! tests): an estimate under this iteration's or a given adjoint, and a converged adjoint.
 
-use super::{pass_seed, Optimizer, Seeds};
+use crate::optim::{pass_seed, Optimizer, Seeds};
 use crate::{Error, Result};
 
 impl Optimizer {

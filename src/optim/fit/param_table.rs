@@ -2,12 +2,12 @@
 //! are its GPU groups: [`ParamSet`](crate::render::params::ParamSet) lays them out on the GPU
 //! and the chosen step's pass moves them. The environment's texels and the cameras' exposures
 //! and white balances are its CPU groups, held here with their step's state and moved by the
-//! same step's CPU path ([`step::Kind::cpu`](super::step::Kind::cpu)): there is one Adam,
+//! same step's CPU path ([`step::Kind::cpu`](crate::optim::step::Kind::cpu)): there is one Adam,
 //! with one set of options, for everything a run optimizes. A step without a CPU path (the
 //! variance-scaled step divides by an estimator's variance, which the CPU groups lack) leaves
 //! them to Adam.
-use super::step::{CpuGroup, StepKind, Steps};
-use super::Settings;
+use crate::optim::step::{CpuGroup, StepKind, Steps};
+use crate::optim::Settings;
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;

@@ -5,9 +5,9 @@
 //! [`DiffRender`] wraps the two with the checks an application needs (one backward per
 //! render, textures in range); the Python package is built on it.
 
-use super::{pass_seed, Optimizer, PrimalMode, Seeds, Settings};
 use crate::gpu::Gpu;
 use crate::image_io::Image;
+use crate::optim::{pass_seed, Optimizer, PrimalMode, Seeds, Settings};
 use crate::render::params::{ParamSet, ParamTexture};
 use crate::scene::Scene;
 use crate::{Error, Result};
@@ -18,7 +18,7 @@ impl Optimizer {
     /// submission unless the samples need chunks (2^20 per dispatch), and read the images
     /// back: the forward half of a differentiable render. With `primal` the control variate
     /// (which the optimizer must have), each sample is also evaluated under the previous
-    /// textures and the images are the control variate's `I_t` (src/optim/primal.rs), whose
+    /// textures and the images are the control variate's `I_t` (src/optim/primal/), whose
     /// state advances once; otherwise no state changes. No loss, adjoint or estimator state
     /// changes either way.
     pub fn render_cameras(
@@ -220,7 +220,7 @@ impl DiffRender {
         // stays, and the control variate is added beside it.
         if opt.control_variate.is_none() {
             let (w, h) = (opt.settings.width, opt.settings.height);
-            opt.control_variate = Some(super::primal::ControlVariate::new(
+            opt.control_variate = Some(crate::optim::primal::ControlVariate::new(
                 gpu,
                 (w, h),
                 opt.cams.len(),
@@ -539,7 +539,7 @@ impl DiffRender {
                     ));
                 };
                 let gains = self.opt.gains();
-                super::gains::log_gain_gradients(d, &gains)
+                crate::optim::fit::gains::log_gain_gradients(d, &gains)
             }
         };
         self.gain_gradient = None;

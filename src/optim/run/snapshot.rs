@@ -1,7 +1,7 @@
 //! What an iteration reports, and the optimizer's state as checkpoints save it.
 
-use super::param_table::GroupState;
-use super::{ControlVariateSnapshot, EstimatorState, Optimizer};
+use crate::optim::param_table::GroupState;
+use crate::optim::{ControlVariateSnapshot, EstimatorState, Optimizer};
 use crate::{Error, Result};
 use std::collections::BTreeMap;
 
@@ -44,7 +44,7 @@ pub struct OptimizerState {
     /// logarithms when it is optimized), by name, with their step's state.
     pub groups: BTreeMap<String, GroupState>,
     /// What the environment's fit keeps besides its group, when it is optimized.
-    pub environment: Option<super::environment_fit::EnvFitState>,
+    pub environment: Option<crate::optim::environment_fit::EnvFitState>,
 }
 
 /// What a run hands back of one of its states: the textures and every CPU group's values

@@ -2,9 +2,9 @@
 //! target image per camera, and the optimizer made for it ([`Optimizer::for_problem`]). An
 //! application builds one from data it already holds ([`Problem::new`]); a task file
 //! describes one (`Problem::from_task`, in `job`).
-use super::{pass_seed, Optimizer, Settings};
 use crate::gpu::Gpu;
 use crate::image_io::Image;
+use crate::optim::{pass_seed, Optimizer, Settings};
 use crate::render::params::ParamSet;
 use crate::render::{RenderSettings, Renderer, Techniques};
 use crate::scene::Scene;
@@ -50,7 +50,7 @@ pub struct EnvironmentFit {
     /// The starting environment.
     pub start: crate::scene::EnvMap,
     /// How it is stepped.
-    pub options: super::environment_fit::EnvFitOptions,
+    pub options: crate::optim::environment_fit::EnvFitOptions,
 }
 
 impl Problem {
@@ -107,7 +107,7 @@ impl Problem {
     pub fn recover_environment(
         &mut self,
         start: crate::scene::EnvMap,
-        options: super::environment_fit::EnvFitOptions,
+        options: crate::optim::environment_fit::EnvFitOptions,
     ) -> Result<()> {
         options
             .check()
@@ -221,11 +221,11 @@ impl Optimizer {
 
 impl Problem {
     /// The RMSE of `values` (laid out like `set.values`) against the ground truth over every
-    /// texel, normal maps as the renderer reads them ([`super::observed::texture_rmse`]);
+    /// texel, normal maps as the renderer reads them ([`crate::optim::observed::texture_rmse`]);
     /// None without a ground truth.
     pub fn texture_rmse(&self, values: &[f32]) -> Option<f64> {
         let r = self.reference.as_ref()?;
-        Some(super::observed::texture_rmse(&self.set, values, r))
+        Some(crate::optim::observed::texture_rmse(&self.set, values, r))
     }
 
     /// Give `opt` the problem's cameras' exposures, the environment's fit and the white

@@ -5,7 +5,7 @@
 //! callback ([`Optimizer::run`]), and [`PassSampler`], the passes' mean times. The time an
 //! observer sets aside ([`Clock::aside`]: evaluation renders, metrics) is not optimization
 //! time: budgets, progress and the schedule read [`Clock::seconds`].
-use super::{Optimizer, PassTimes, StepStats};
+use crate::optim::{Optimizer, PassTimes, StepStats};
 use crate::Result;
 use std::ops::ControlFlow;
 use std::time::Instant;

@@ -12,8 +12,8 @@
 //! means pulled together). Albedo and light share a scale that images do not fix: the
 //! gauge `mean` holds the environment's mean luminance at its start after every step;
 //! `none` leaves the scale free (docs/guide.md, "Unknown light").
-use super::param_table::{Group, Space, ENVIRONMENT, EXPOSURE, WHITE_BALANCE};
-use super::Optimizer;
+use crate::optim::param_table::{Group, Space, ENVIRONMENT, EXPOSURE, WHITE_BALANCE};
+use crate::optim::Optimizer;
 use crate::scene::EnvMap;
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
@@ -109,7 +109,7 @@ pub struct EnvFitState {
     pub mean_luminance: f64,
 }
 
-pub(super) struct EnvFit {
+pub(in crate::optim) struct EnvFit {
     pub opts: EnvFitOptions,
     pub state: EnvFitState,
 }
@@ -280,7 +280,7 @@ impl Optimizer {
     }
 
     /// Upload the recovered environment, and its sampling tables with `tables`.
-    pub(super) fn upload_environment(&mut self, tables: bool) -> Result<()> {
+    pub(in crate::optim) fn upload_environment(&mut self, tables: bool) -> Result<()> {
         let fit = self.env_fit.as_ref().expect("the environment is recovered");
         let env = fit.state.env(self.environment_log());
         self.renderer
@@ -290,7 +290,7 @@ impl Optimizer {
 
     /// Whether the textures hold this iteration: the environment's warm-up
     /// ([`EnvFitOptions::warmup_iterations`]) is not over.
-    pub(super) fn environment_warming_up(&self) -> bool {
+    pub(in crate::optim) fn environment_warming_up(&self) -> bool {
         self.env_fit
             .as_ref()
             .is_some_and(|f| self.table.group(ENVIRONMENT).state.steps < f.opts.warmup_iterations)
@@ -345,7 +345,7 @@ impl Optimizer {
 
     /// Go on from a checkpoint's environment state (of the same size; its logarithms are
     /// the table's `environment` group, restored with the table).
-    pub(super) fn restore_environment(&mut self, state: &EnvFitState) -> Result<()> {
+    pub(in crate::optim) fn restore_environment(&mut self, state: &EnvFitState) -> Result<()> {
         let Some(fit) = &mut self.env_fit else {
             return Err(Error::Invalid(
                 "the checkpoint has an environment state, the task does not optimize the \
@@ -373,7 +373,7 @@ impl Optimizer {
         Ok((g, raw[n] + raw[n + 1]))
     }
 
-    pub(super) fn clear_environment_gradient(&self, enc: &mut wgpu::CommandEncoder) {
+    pub(in crate::optim) fn clear_environment_gradient(&self, enc: &mut wgpu::CommandEncoder) {
         if self.env_fit.is_some() {
             enc.clear_buffer(&self.env_grad, 0, None);
         }
@@ -381,7 +381,7 @@ impl Optimizer {
 
     /// One step of the environment from this iteration's gradient (schedule factor
     /// `factor`), and its upload; the sampling tables when they are due.
-    pub(super) fn step_environment(&mut self, factor: f32) -> Result<()> {
+    pub(in crate::optim) fn step_environment(&mut self, factor: f32) -> Result<()> {
         if self.env_fit.is_none() {
             return Ok(());
         }
@@ -400,7 +400,7 @@ impl Optimizer {
 
 /// The buffer the gradient passes scatter the environment's derivative into: 3 floats per
 /// texel of the scene's environment, then two counters (shared/env_gradient.wgsl).
-pub(super) fn env_gradient_buffer(
+pub(in crate::optim) fn env_gradient_buffer(
     gpu: &crate::gpu::Gpu,
     scene: &crate::scene::Scene,
 ) -> wgpu::Buffer {

@@ -1,15 +1,15 @@
 //! Test hooks (feature `test-hooks`, which the crate's own tests turn on): one pass of the
 //! optimizer run on given data and read back, so that a test can check the GPU pass
 //! against its CPU twin. Not part of the library's interface.
-use super::Optimizer;
+use crate::optim::Optimizer;
 use crate::{Error, Result};
 
 impl Optimizer {
     /// The loss pass on the GPU applied to `images` (one per camera, as renders before the
     /// gains): each written where the primal render leaves its image, the pass run for
     /// iteration 0, and the loss and the adjoint images read back (RGB per pixel, the cameras
-    /// one after another). For tests against [`super::loss::loss`] and
-    /// [`super::loss::adjoint`].
+    /// one after another). For tests against [`crate::optim::loss::loss`] and
+    /// [`crate::optim::loss::adjoint`].
     pub fn apply_loss(
         &mut self,
         images: &[crate::image_io::Image],
@@ -95,13 +95,13 @@ impl Optimizer {
     }
 
     /// The multiscale pass of `iteration` applied to `grad` ([`Optimizer::apply_prior`]),
-    /// for tests against [`super::multiscale::reference`].
+    /// for tests against [`crate::optim::multiscale::reference`].
     pub fn apply_multiscale(&mut self, grad: &[f32], iteration: u32) -> Result<Vec<f32>> {
         self.apply_prior("multiscale", grad, iteration)
     }
 
     /// The gradient `grad` plus the smoothness prior's derivative at the current parameters
-    /// ([`Optimizer::apply_prior`]), for tests against [`super::smoothness::reference`].
+    /// ([`Optimizer::apply_prior`]), for tests against [`crate::optim::smoothness::reference`].
     pub fn apply_smoothness(&mut self, grad: &[f32]) -> Result<Vec<f32>> {
         let it = self.iteration;
         self.apply_prior("smoothness", grad, it)
@@ -109,7 +109,7 @@ impl Optimizer {
 
     /// The moment filter on the GPU applied to `pair` (two arrays laid out like the
     /// parameters), guided by the current textures: texture by texture, the pair is written to
-    /// the filter's input, filtered and read back. For tests against [`super::moment_filter::reference`]; an error
+    /// the filter's input, filtered and read back. For tests against [`crate::optim::moment_filter::reference`]; an error
     /// when the settings have no moment filter. The optimizer's moments are not touched.
     pub fn apply_moment_filter(&mut self, pair: [&[f32]; 2]) -> Result<[Vec<f32>; 2]> {
         let n = self.set.values.len();

@@ -1,9 +1,9 @@
 //! The targets' per-pixel masks and the per-camera gains: exposures (optimized on their
-//! logarithms when [`super::Settings::exposure_learning_rate`] is set) and white balances
+//! logarithms when [`crate::optim::Settings::exposure_learning_rate`] is set) and white balances
 //! (per-channel factors, [`Optimizer::optimize_white_balance`]), both groups of the
 //! parameter table.
-use super::param_table::{EXPOSURE, WHITE_BALANCE};
-use super::Optimizer;
+use crate::optim::param_table::{EXPOSURE, WHITE_BALANCE};
+use crate::optim::Optimizer;
 use crate::{Error, Result};
 
 impl Optimizer {
@@ -125,14 +125,14 @@ impl Optimizer {
         Ok(())
     }
 
-    pub(super) fn upload_exposure(&mut self) {
+    pub(in crate::optim) fn upload_exposure(&mut self) {
         let gains = self.gains();
         self.loss.set_gains(&self.gpu, &gains, &self.gain_prev);
     }
 
     /// One Adam step of the exposures' and the white balances' logarithms (those optimized)
     /// from this iteration's dL/d(gain), at schedule factor `factor`.
-    pub(super) fn step_gains(&mut self, factor: f32) -> Result<()> {
+    pub(in crate::optim) fn step_gains(&mut self, factor: f32) -> Result<()> {
         if !self.gains_optimized() {
             return Ok(());
         }
@@ -143,14 +143,18 @@ impl Optimizer {
     }
 
     /// Whether the exposures or the white balances are optimized.
-    pub(super) fn gains_optimized(&self) -> bool {
+    pub(in crate::optim) fn gains_optimized(&self) -> bool {
         self.table.optimizes(&[EXPOSURE, WHITE_BALANCE])
     }
 
     /// One step of the optimized gains' logarithms from `(d_exposure, d_white_balance)`,
     /// the derivatives with respect to the logarithms of each camera's exposure and white
     /// balance, at schedule factor `factor`, and their upload.
-    pub(super) fn step_log_gains(&mut self, factor: f32, (d_e, d_wb): &(Vec<f32>, Vec<[f32; 3]>)) {
+    pub(in crate::optim) fn step_log_gains(
+        &mut self,
+        factor: f32,
+        (d_e, d_wb): &(Vec<f32>, Vec<[f32; 3]>),
+    ) {
         let gains = self.gains();
         let settings = &self.settings;
         self.table.step(settings, EXPOSURE, d_e, factor);
@@ -166,7 +170,10 @@ impl Optimizer {
 /// d/d(log exposure) and d/d(log white balance) per camera from dL/d(gain) `d` at `gains`
 /// (exposure times white balance): gain times dL/d(gain), summed over the channels for the
 /// exposure.
-pub(super) fn log_gain_gradients(d: &[[f64; 3]], gains: &[[f32; 3]]) -> (Vec<f32>, Vec<[f32; 3]>) {
+pub(in crate::optim) fn log_gain_gradients(
+    d: &[[f64; 3]],
+    gains: &[[f32; 3]],
+) -> (Vec<f32>, Vec<[f32; 3]>) {
     d.iter()
         .zip(gains)
         .map(|(d, g)| {

@@ -1,7 +1,7 @@
 //! The `texture_export` pass (src/optim/texture_export.wgsl): one optimized texture copied into
 //! an `Rgba32Float` GPU texture that an application can bind ([`Optimizer::create_texture`]).
-use super::Optimizer;
 use crate::gpu::grid_2d;
+use crate::optim::Optimizer;
 use crate::render::WORKGROUP;
 use crate::{Error, Result};
 use bytemuck::{Pod, Zeroable};

@@ -16,7 +16,7 @@
 //! dominates: a ranking and a scale, not a calibrated interval. Computed once, from the moments
 //! the step keeps (Adam's second moment, the variance-scaled step's moving second moment, or
 //! the estimator's own variance where the step uses it): no pass and no memory per iteration.
-use super::Optimizer;
+use crate::optim::Optimizer;
 use crate::{Error, Result};
 
 /// The value [`Optimizer::uncertainty`] gives a texel the images tell nothing of: one no

@@ -1,0 +1,9 @@
+//! The run: the loop that steps the engine for a number of iterations or a time budget
+//! ([`run_loop`]), the learning-rate schedule ([`schedule`]), the seeds each pass draws from,
+//! what an iteration reports and the state a checkpoint saves ([`checkpoint`]).
+
+pub mod checkpoint;
+pub mod run_loop;
+pub mod schedule;
+pub(in crate::optim) mod seeds;
+pub(in crate::optim) mod snapshot;
