@@ -473,13 +473,9 @@ class Step:
         self.time_budget = time_budget
         self._start = None
 
-    def _progress(self, steps, elapsed):
-        p = 0.0
-        if self.iterations:
-            p = steps / self.iterations
-        if self.time_budget:
-            p = max(p, elapsed / self.time_budget)
-        return min(p, 1.0)
+    def _progress(self):
+        # The run loop's own measure of the run's progress (psrestir's Limits::progress).
+        return self.op._op.run_progress(self.iterations, self.time_budget, self.elapsed_s)
 
     @property
     def steps(self):
@@ -494,7 +490,7 @@ class Step:
     @property
     def done(self):
         """Whether the iterations or the time budget are spent."""
-        return self._progress(self.steps, self.elapsed_s) >= 1.0
+        return self._progress() >= 1.0
 
     def __call__(self, grads=None):
         """Update the parameters from the last :meth:`DiffRender.backward`'s gradient
@@ -504,10 +500,10 @@ class Step:
         :class:`InvalidArgument`."""
         if self._start is None:
             self._start = _time.monotonic()
-        self.op._op.set_progress(self._progress(self.steps, self.elapsed_s))
+        self.op._op.set_progress(self._progress())
         self.op._op.step(grads)
         # The next backward's estimator reads the schedule too.
-        self.op._op.set_progress(self._progress(self.steps, self.elapsed_s))
+        self.op._op.set_progress(self._progress())
 
     def step(self, grads=None):
         """The same as calling the step."""

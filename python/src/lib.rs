@@ -706,6 +706,19 @@ impl DiffRender {
         self.lock().set_progress(fraction);
     }
 
+    /// How far a run of `iterations` steps or `time_budget` seconds is after the steps
+    /// taken and `elapsed` seconds, by the run loop's own measure (the larger share, at
+    /// most 1), so that `Step` follows the schedule as `psrestir optimize` does.
+    #[pyo3(signature = (iterations, time_budget, elapsed))]
+    fn run_progress(&self, iterations: Option<u32>, time_budget: Option<f64>, elapsed: f64) -> f64 {
+        let limits = psrestir::optim::run_loop::Limits {
+            first: 0,
+            iterations,
+            seconds: time_budget,
+        };
+        limits.progress(self.lock().steps(), elapsed).min(1.0)
+    }
+
     /// Each texture's learning rate in the last step, by name.
     fn learning_rates<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);

@@ -71,51 +71,68 @@ pub struct Optimizer {
     /// Layout and learning rates of the optimized textures (values as at creation).
     pub set: ParamSet,
     settings: Settings,
-    cams: Vec<CameraPasses>,
+    /// The buffers one iteration's passes hand each other.
+    bufs: Buffers,
+    /// The passes the engine runs itself, per camera and once.
+    passes: Passes,
+    /// The gradient estimator, the step and the priors.
+    plugins: Plugins,
+    /// The targets and the texels they observe.
+    inputs: Inputs,
+    /// The fit of the light and the cameras' response.
+    fit: fit::Fit,
+    /// Where the run stands, for the schedule and the log.
+    run: run::RunState,
+    /// Iterations done (steps taken).
+    pub iteration: u32,
+}
+
+/// The buffers an iteration's passes hand each other.
+struct Buffers {
+    /// The gradient, laid out like the parameters.
     grad: wgpu::Buffer,
     /// Adjoint images of all cameras; iteration t writes buffer t % 2.
     adjoint: [wgpu::Buffer; 2],
+    /// The step's two per-parameter moments.
     moments: [wgpu::Buffer; 2],
-    stats: Stats,
-    loss: loss::LossPass,
-    /// The targets (CPU copies, for re-uploading them with masks).
-    targets: Vec<Image>,
-    /// The parameter table's CPU groups (exposures, white balances, the environment when it
-    /// is optimized) with their step's state.
-    table: param_table::ParamTable,
-    /// The gains the last adjoint was written with.
-    gain_prev: Vec<[f32; 3]>,
-    /// The environment's gradient (environment_fit.rs), and the environment's fit when it
-    /// is optimized, with the gradient updates its passes lost or dropped.
-    env_grad: wgpu::Buffer,
-    env_fit: Option<environment_fit::EnvFit>,
-    env_faults: u32,
-    grid: (u32, u32),
-    step: Box<dyn step::Step>,
+    /// The primal samples of this iteration, and under the previous textures (control
+    /// variate).
     accum: wgpu::Buffer,
-    /// The primal samples under the previous textures (control variate).
     accum_prev: wgpu::Buffer,
+    stats: Stats,
+}
+
+/// The passes the engine runs itself, and the GPU objects made on first use.
+struct Passes {
+    cams: Vec<CameraPasses>,
+    loss: loss::LossPass,
+    grid: (u32, u32),
     /// The control-variate primal, when `settings.primal` asks for it.
     control_variate: Option<primal::ControlVariate>,
     timer: PassTimer,
-    estimator: Box<dyn Estimator>,
     /// The texture_export pipeline, built on first use.
     export_pipeline: std::sync::OnceLock<wgpu::ComputePipeline>,
     /// The images [`Optimizer::render_cameras`] reads back, made at its first call.
     camera_images: std::sync::OnceLock<wgpu::Buffer>,
+}
+
+/// The plugins an iteration calls: the gradient estimator, the step and the priors.
+struct Plugins {
+    estimator: Box<dyn Estimator>,
+    step: Box<dyn step::Step>,
+    /// The priors the settings ask for, in the order they apply, built by
+    /// [`Optimizer::prepare`] (the first step's, or the caller's before it).
+    priors: Option<Vec<(&'static prior::Kind, Box<dyn prior::Prior>)>>,
+}
+
+/// What the optimizer fits the textures to.
+struct Inputs {
+    /// The targets (CPU copies, for re-uploading them with masks).
+    targets: Vec<Image>,
     /// The observed-texel mask, computed when the optimizer is made: its flags, and the GPU
     /// buffer they were read from (one word per texel, nonzero: observed), which the
     /// priors bind.
     observed: (Vec<bool>, wgpu::Buffer),
-    /// The priors the settings ask for, in the order they apply, built by
-    /// [`Optimizer::prepare`] (the first step's, or the caller's before it).
-    priors: Option<Vec<(&'static prior::Kind, Box<dyn prior::Prior>)>>,
-    /// Fraction of the run done, for the learning-rate schedule.
-    progress: f64,
-    /// Learning rate of each texture in the last step.
-    last_learning_rates: Vec<f32>,
-    /// Iterations done (steps taken).
-    pub iteration: u32,
 }
 
 /// The buffers an iteration passes from one pass to the next: the adjoints of both parities
@@ -270,31 +287,43 @@ impl Optimizer {
             params,
             set,
             settings,
-            cams,
-            grad,
-            adjoint,
-            moments,
-            stats,
-            loss,
-            targets: targets.to_vec(),
-            table,
-            gain_prev: vec![[1.0; 3]; targets.len()],
-            env_grad,
-            env_fit: None,
-            env_faults: 0,
-            grid,
-            step,
-            accum,
-            accum_prev,
-            control_variate,
-            timer,
-            estimator,
-            export_pipeline: std::sync::OnceLock::new(),
-            camera_images: std::sync::OnceLock::new(),
-            observed,
-            priors: None,
-            progress: 0.0,
-            last_learning_rates: Vec::new(),
+            bufs: Buffers {
+                grad,
+                adjoint,
+                moments,
+                accum,
+                accum_prev,
+                stats,
+            },
+            passes: Passes {
+                cams,
+                loss,
+                grid,
+                control_variate,
+                timer,
+                export_pipeline: std::sync::OnceLock::new(),
+                camera_images: std::sync::OnceLock::new(),
+            },
+            plugins: Plugins {
+                estimator,
+                step,
+                priors: None,
+            },
+            fit: fit::Fit {
+                table,
+                gain_prev: vec![[1.0; 3]; targets.len()],
+                env_grad,
+                env_fit: None,
+                env_faults: 0,
+            },
+            inputs: Inputs {
+                targets: targets.to_vec(),
+                observed,
+            },
+            run: run::RunState {
+                progress: 0.0,
+                last_learning_rates: Vec::new(),
+            },
             iteration: 0,
         })
     }
@@ -315,29 +344,29 @@ impl Optimizer {
     /// [`Optimizer::converged_adjoint`]).
     fn encode_primal(&mut self, enc: &mut wgpu::CommandEncoder, iteration: u32) {
         let parity = (iteration % 2) as usize;
-        for (k, cam) in self.cams.iter_mut().enumerate() {
+        for (k, cam) in self.passes.cams.iter_mut().enumerate() {
             cam.render_params.seed =
                 pass_seed(self.settings.seed, iteration, k as u32, Seeds::PRIMAL);
             cam.render_params.sample_offset = 0;
             cam.render_params.spp = self.settings.primal_spp;
-            cam.render_params.two_states = self.control_variate.is_some() as u32;
+            cam.render_params.two_states = self.passes.control_variate.is_some() as u32;
             self.gpu.queue.write_buffer(
                 &cam.render_uniform,
                 0,
                 bytemuck::bytes_of(&cam.render_params),
             );
-            enc.clear_buffer(&self.accum, 0, None);
-            if self.control_variate.is_some() {
-                enc.clear_buffer(&self.accum_prev, 0, None);
+            enc.clear_buffer(&self.bufs.accum, 0, None);
+            if self.passes.control_variate.is_some() {
+                enc.clear_buffer(&self.bufs.accum_prev, 0, None);
             }
-            let t = self.timer.next(PassKind::Primal);
+            let t = self.passes.timer.next(PassKind::Primal);
             self.renderer
-                .encode_render(enc, "primal", &cam.render_group, self.grid, t);
-            if let Some(cv) = &mut self.control_variate {
-                cv.encode(enc, k, &mut self.timer);
+                .encode_render(enc, "primal", &cam.render_group, self.passes.grid, t);
+            if let Some(cv) = &mut self.passes.control_variate {
+                cv.encode(enc, k, &mut self.passes.timer);
             }
-            let t = self.timer.next(PassKind::Loss);
-            self.loss.encode(enc, k, parity, t);
+            let t = self.passes.timer.next(PassKind::Loss);
+            self.passes.loss.encode(enc, k, parity, t);
         }
     }
 
@@ -356,7 +385,7 @@ impl Optimizer {
         primal: bool,
         seed: u32,
     ) {
-        self.timer.begin();
+        self.passes.timer.begin();
         self.clear_environment_gradient(enc);
         if primal {
             self.encode_primal(enc, iteration);
@@ -365,9 +394,11 @@ impl Optimizer {
             iteration,
             seed,
             scene_group: &self.renderer.scene.bind_group,
-            schedule_factor: self.settings.schedule.factor(iteration, self.progress),
+            schedule_factor: self.settings.schedule.factor(iteration, self.run.progress),
         };
-        self.estimator.encode(enc, &frame, &mut self.timer);
+        self.plugins
+            .estimator
+            .encode(enc, &frame, &mut self.passes.timer);
         if self.uses_previous_state() {
             self.params.encode_copy_to_previous(enc);
         }
@@ -376,21 +407,21 @@ impl Optimizer {
     /// Whether the next iteration needs this one's textures (ReSTIR's merge, the recursive
     /// estimator, the control variate).
     fn uses_previous_state(&self) -> bool {
-        self.estimator.uses_previous_state() || self.control_variate.is_some()
+        self.plugins.estimator.uses_previous_state() || self.passes.control_variate.is_some()
     }
 
     /// Bookkeeping once an iteration's work is submitted.
     fn finish_iteration(&mut self, primal: bool) {
-        self.estimator.finish_iteration();
+        self.plugins.estimator.finish_iteration();
         if primal {
-            if let Some(cv) = &mut self.control_variate {
+            if let Some(cv) = &mut self.passes.control_variate {
                 cv.finish_iteration();
             }
         }
     }
 
     fn read_loss(&self) -> Result<f64> {
-        self.loss.read_loss(&self.gpu)
+        self.passes.loss.read_loss(&self.gpu)
     }
 
     /// The passes (WGSL files) that an optimizer with `settings` creates, its estimator's
@@ -417,16 +448,16 @@ impl Optimizer {
     /// priors', which need the observed texels), so that no pipeline is compiled inside a
     /// timed iteration. `step` calls it too; calling it first only moves the work.
     pub fn prepare(&mut self) -> Result<()> {
-        if self.priors.is_none() {
+        if self.plugins.priors.is_none() {
             let setup = prior::Setup {
                 gpu: &self.gpu,
                 set: &self.set,
-                grad: &self.grad,
+                grad: &self.bufs.grad,
                 params: &self.params.values,
-                observed: &self.observed,
+                observed: &self.inputs.observed,
             };
-            self.priors = Some(prior::build(&setup, &self.settings.priors)?);
-            for (kind, _) in self.priors.iter().flatten() {
+            self.plugins.priors = Some(prior::build(&setup, &self.settings.priors)?);
+            for (kind, _) in self.plugins.priors.iter().flatten() {
                 log::debug!("prior `{}` ready", kind.name);
             }
         }
@@ -445,7 +476,7 @@ impl Optimizer {
         self.encode_gradient(&mut enc, self.iteration, true);
         let t = self.iteration + 1;
         let factor = self.encode_update(&mut enc, self.iteration, t);
-        self.timer.resolve(&mut enc);
+        self.passes.timer.resolve(&mut enc);
         self.gpu.queue.submit([enc.finish()]);
         self.finish_iteration(true);
         self.iteration = t;
@@ -465,29 +496,29 @@ impl Optimizer {
         iteration: u32,
         t: u32,
     ) -> f32 {
-        for (_, p) in self.priors.iter_mut().flatten() {
+        for (_, p) in self.plugins.priors.iter_mut().flatten() {
             p.encode(
                 &self.gpu,
                 enc,
                 self.settings.seed,
                 iteration,
-                &mut self.timer,
+                &mut self.passes.timer,
             );
         }
-        let factor = self.settings.schedule.factor(iteration, self.progress);
+        let factor = self.settings.schedule.factor(iteration, self.run.progress);
         // While the environment warms up the textures hold (environment_fit.rs).
         let texture_factor = if self.environment_warming_up() {
             0.0
         } else {
             factor
         };
-        self.last_learning_rates = self.step.encode(
+        self.run.last_learning_rates = self.plugins.step.encode(
             &self.gpu,
             enc,
             &self.set,
             texture_factor,
             t,
-            &mut self.timer,
+            &mut self.passes.timer,
         );
         factor
     }
@@ -497,7 +528,7 @@ impl Optimizer {
     /// fraction). [`Optimizer::run`] sets it from its [`Stop`]. Without a schedule it has no
     /// effect.
     pub fn set_progress(&mut self, fraction: f64) {
-        self.progress = if fraction.is_finite() {
+        self.run.progress = if fraction.is_finite() {
             fraction.clamp(0.0, 1.0)
         } else {
             0.0
@@ -507,13 +538,13 @@ impl Optimizer {
     /// The learning rate of each texture in the last [`Optimizer::step`] (the schedule's
     /// factor times the texture's rate); empty before the first.
     pub fn last_learning_rates(&self) -> &[f32] {
-        &self.last_learning_rates
+        &self.run.last_learning_rates
     }
 
     /// GPU time per kind of pass in the last [`Optimizer::step`], when the adapter has
     /// timestamp queries.
     pub fn pass_times(&self) -> Result<Option<PassTimes>> {
-        self.timer.read(&self.gpu)
+        self.passes.timer.read(&self.gpu)
     }
 
     /// Run iterations until `stop`, calling `on_iteration` after each; the callback returns
@@ -585,18 +616,18 @@ impl Optimizer {
 
     /// Dropped and lost values so far.
     pub fn faults(&self) -> Result<FaultCounts> {
-        let p: Vec<u32> = self.gpu.read_pod(&self.stats.primal)?;
-        let a: Vec<u32> = self.gpu.read_pod(&self.stats.step)?;
-        let l: Vec<u32> = self.gpu.read_pod(&self.loss.stats)?;
+        let p: Vec<u32> = self.gpu.read_pod(&self.bufs.stats.primal)?;
+        let a: Vec<u32> = self.gpu.read_pod(&self.bufs.stats.step)?;
+        let l: Vec<u32> = self.gpu.read_pod(&self.passes.loss.stats)?;
         let mut f = FaultCounts {
             skipped_step: a[stat::STEP_SKIPPED as usize],
             dropped_primal: p[stat::RENDER_DROPPED as usize],
             dropped_pixels: l[stat::LOSS_DROPPED as usize],
             ..Default::default()
         };
-        self.estimator.faults(&self.gpu, &mut f)?;
+        self.plugins.estimator.faults(&self.gpu, &mut f)?;
         // The environment's gradient updates lost or dropped (environment_fit.rs).
-        f.lost_updates += self.env_faults;
+        f.lost_updates += self.fit.env_faults;
         Ok(f)
     }
 
@@ -604,7 +635,7 @@ impl Optimizer {
     /// estimate (the image its loss and adjoint used, at the textures of that iteration);
     /// None for the independent primal.
     pub fn control_variate_image(&self, k: usize) -> Result<Option<Image>> {
-        let Some(cv) = &self.control_variate else {
+        let Some(cv) = &self.passes.control_variate else {
             return Ok(None);
         };
         let (w, h) = (self.settings.width, self.settings.height);
@@ -618,18 +649,18 @@ impl Optimizer {
     /// What the gradient estimator counted since the optimizer was made, by name (each
     /// estimator documents its names).
     pub fn estimator_diagnostics(&self) -> Result<estimator::Diagnostics> {
-        self.estimator.diagnostics(&self.gpu)
+        self.plugins.estimator.diagnostics(&self.gpu)
     }
 
     /// The estimator's [`estimator_diagnostics`](Self::estimator_diagnostics) that are
     /// counters (a rate per iteration means something), with their values.
     pub fn estimator_counters(&self) -> Result<estimator::Diagnostics> {
-        let names = self.estimator.counters();
+        let names = self.plugins.estimator.counters();
         if names.is_empty() {
             // No readback for an estimator that counts nothing per iteration.
             return Ok(Vec::new());
         }
-        let mut d = self.estimator.diagnostics(&self.gpu)?;
+        let mut d = self.plugins.estimator.diagnostics(&self.gpu)?;
         d.retain(|(n, _)| names.contains(n));
         Ok(d)
     }

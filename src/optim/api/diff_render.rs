@@ -33,7 +33,7 @@ impl Optimizer {
             )));
         }
         let two_states = primal == PrimalMode::ControlVariate;
-        if two_states && self.control_variate.is_none() {
+        if two_states && self.passes.control_variate.is_none() {
             return Err(Error::Invalid(
                 "this render has no control-variate primal (the optimizer was made with the \
                  independent one)"
@@ -43,9 +43,10 @@ impl Optimizer {
         let (w, h) = (self.settings.width, self.settings.height);
         let n_pixels = w * h;
         let bytes = n_pixels as u64 * 16;
-        let n_cams = self.cams.len() as u64;
+        let n_cams = self.passes.cams.len() as u64;
         let gpu = &self.gpu;
         let images = self
+            .passes
             .camera_images
             .get_or_init(|| gpu.storage_zeroed("render_cameras images", bytes * n_cams))
             .clone();
@@ -56,12 +57,12 @@ impl Optimizer {
                     label: Some("render_cameras"),
                 })
         };
-        self.timer.begin();
+        self.passes.timer.begin();
         let mut enc = new_encoder(&self.gpu);
-        for k in 0..self.cams.len() {
+        for k in 0..self.passes.cams.len() {
             let mut done = 0;
             while done < spp {
-                let cam = &mut self.cams[k];
+                let cam = &mut self.passes.cams[k];
                 let n = cam.set_samples(
                     &self.gpu.queue,
                     pass_seed(seed, 0, k as u32, Seeds::PRIMAL),
@@ -70,13 +71,18 @@ impl Optimizer {
                     two_states,
                 );
                 if done == 0 {
-                    enc.clear_buffer(&self.accum, 0, None);
+                    enc.clear_buffer(&self.bufs.accum, 0, None);
                     if two_states {
-                        enc.clear_buffer(&self.accum_prev, 0, None);
+                        enc.clear_buffer(&self.bufs.accum_prev, 0, None);
                     }
                 }
-                self.renderer
-                    .encode_render(&mut enc, "primal", &cam.render_group, self.grid, None);
+                self.renderer.encode_render(
+                    &mut enc,
+                    "primal",
+                    &cam.render_group,
+                    self.passes.grid,
+                    None,
+                );
                 done += n;
                 if done < spp {
                     // The next chunk writes this camera's uniform again: submit this one first.
@@ -84,22 +90,22 @@ impl Optimizer {
                     enc = new_encoder(&self.gpu);
                 }
             }
-            if let Some(cv) = self.control_variate.as_mut().filter(|_| two_states) {
+            if let Some(cv) = self.passes.control_variate.as_mut().filter(|_| two_states) {
                 // I_t replaces the render in accum.
-                cv.encode(&mut enc, k, &mut self.timer);
+                cv.encode(&mut enc, k, &mut self.passes.timer);
             }
-            enc.copy_buffer_to_buffer(&self.accum, 0, &images, k as u64 * bytes, bytes);
+            enc.copy_buffer_to_buffer(&self.bufs.accum, 0, &images, k as u64 * bytes, bytes);
         }
         self.gpu.queue.submit([enc.finish()]);
         if two_states {
-            if let Some(cv) = &mut self.control_variate {
+            if let Some(cv) = &mut self.passes.control_variate {
                 cv.finish_iteration();
             }
         }
         let sums: Vec<[f32; 4]> = self.gpu.read_pod(&images)?;
         Ok(sums
             .chunks(n_pixels as usize)
-            .take(self.cams.len())
+            .take(self.passes.cams.len())
             .map(|c| crate::render::accum_image(w, h, c))
             .collect())
     }
@@ -113,12 +119,12 @@ impl Optimizer {
     /// textures do not change. Unbiased when the adjoint comes from a render whose random
     /// numbers are independent of the gradient's (another seed, or another stream of one).
     pub fn backward(&mut self, adjoint: &[[f32; 3]], seed: u32) -> Result<Vec<f32>> {
-        let n = (self.settings.width * self.settings.height) as usize * self.cams.len();
+        let n = (self.settings.width * self.settings.height) as usize * self.passes.cams.len();
         if adjoint.len() != n {
             return Err(Error::Invalid(format!(
                 "the adjoint has {} pixels, the cameras' images have {n} ({} cameras of {}x{})",
                 adjoint.len(),
-                self.cams.len(),
+                self.passes.cams.len(),
                 self.settings.width,
                 self.settings.height
             )));
@@ -136,7 +142,7 @@ impl Optimizer {
         let rgba: Vec<[f32; 4]> = adjoint.iter().map(|a| [a[0], a[1], a[2], 0.0]).collect();
         let t = self.iteration;
         self.gpu.queue.write_buffer(
-            &self.adjoint[(t % 2) as usize],
+            &self.bufs.adjoint[(t % 2) as usize],
             0,
             bytemuck::cast_slice(&rgba),
         );
@@ -218,14 +224,14 @@ impl DiffRender {
         let mut opt = Optimizer::new(gpu, scene, set, settings, &targets)?;
         // The settings' primal also picks estimator options (ReSTIR's target smoothing): it
         // stays, and the control variate is added beside it.
-        if opt.control_variate.is_none() {
+        if opt.passes.control_variate.is_none() {
             let (w, h) = (opt.settings.width, opt.settings.height);
-            opt.control_variate = Some(crate::optim::primal::ControlVariate::new(
+            opt.passes.control_variate = Some(crate::optim::primal::ControlVariate::new(
                 gpu,
                 (w, h),
-                opt.cams.len(),
-                &opt.accum,
-                &opt.accum_prev,
+                opt.passes.cams.len(),
+                &opt.bufs.accum,
+                &opt.bufs.accum_prev,
                 opt.settings.cv_max_weight,
             )?);
         }
@@ -411,11 +417,11 @@ impl DiffRender {
             ));
         };
         let (w, h) = self.image_size();
-        if adjoint.len() != self.opt.cams.len() {
+        if adjoint.len() != self.opt.passes.cams.len() {
             return Err(Error::Invalid(format!(
                 "{} adjoint images for {} cameras",
                 adjoint.len(),
-                self.opt.cams.len()
+                self.opt.passes.cams.len()
             )));
         }
         if let Some(k) = adjoint
@@ -456,7 +462,7 @@ impl DiffRender {
         let g = self.opt.backward(&flat, seed)?;
         self.rendered = None;
         // The updates the pass lost or dropped are counted when a step reads the gradient.
-        let environment = if self.opt.env_fit.is_some() {
+        let environment = if self.opt.fit.env_fit.is_some() {
             Some(self.opt.read_environment_gradient()?.0)
         } else {
             None
@@ -496,7 +502,7 @@ impl DiffRender {
     /// The variance of each texel's last gradient estimate, where the estimator tracks one
     /// (the recursive estimator; ReSTIR with `own_variance`); None otherwise.
     pub fn gradient_variance(&self) -> Result<Option<Vec<Vec<f32>>>> {
-        let Some(buf) = self.opt.estimator.variance() else {
+        let Some(buf) = self.opt.plugins.estimator.variance() else {
             return Ok(None);
         };
         let v: Vec<f32> = self.opt.gpu.read_pod(buf)?;
@@ -551,7 +557,7 @@ impl DiffRender {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("step"),
             });
-        self.opt.timer.begin();
+        self.opt.passes.timer.begin();
         let iteration = self.steps;
         let factor = self.opt.encode_update(&mut enc, iteration, iteration + 1);
         self.opt.gpu.queue.submit([enc.finish()]);
@@ -583,15 +589,15 @@ impl DiffRender {
         self.opt
             .gpu
             .queue
-            .write_buffer(&self.opt.grad, 0, bytemuck::cast_slice(&all));
-        match (&self.opt.env_fit, &g.environment) {
+            .write_buffer(&self.opt.bufs.grad, 0, bytemuck::cast_slice(&all));
+        match (&self.opt.fit.env_fit, &g.environment) {
             (Some(f), Some(e)) => {
                 let [w, h] = f.state.size;
                 check_gradient("the environment", e, 3 * (w * h) as usize)?;
                 let mut words: Vec<u32> = e.iter().map(|v| v.to_bits()).collect();
                 words.extend([0, 0]);
                 self.opt.gpu.queue.write_buffer(
-                    &self.opt.env_grad,
+                    &self.opt.fit.env_grad,
                     0,
                     bytemuck::cast_slice(&words),
                 );
@@ -610,7 +616,7 @@ impl DiffRender {
             }
             (None, None) => {}
         }
-        let n = self.opt.cams.len();
+        let n = self.opt.passes.cams.len();
         if !self.opt.gains_optimized() {
             return Ok((vec![0.0; n], vec![[0.0; 3]; n]));
         }

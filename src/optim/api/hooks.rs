@@ -14,25 +14,25 @@ impl Optimizer {
         &mut self,
         images: &[crate::image_io::Image],
     ) -> Result<(f64, Vec<[f32; 3]>)> {
-        if images.len() != self.cams.len() {
+        if images.len() != self.passes.cams.len() {
             return Err(Error::Invalid(format!(
                 "apply_loss: {} images for {} cameras",
                 images.len(),
-                self.cams.len()
+                self.passes.cams.len()
             )));
         }
         for (k, img) in images.iter().enumerate() {
             let rgba: Vec<[f32; 4]> = img.rgb.iter().map(|p| [p[0], p[1], p[2], 1.0]).collect();
             self.gpu
                 .queue
-                .write_buffer(&self.accum, 0, bytemuck::cast_slice(&rgba));
+                .write_buffer(&self.bufs.accum, 0, bytemuck::cast_slice(&rgba));
             let mut enc = self
                 .gpu
                 .device
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("apply_loss"),
                 });
-            self.loss.encode(&mut enc, k, 0, None);
+            self.passes.loss.encode(&mut enc, k, 0, None);
             self.gpu.queue.submit([enc.finish()]);
         }
         let loss = self.read_loss()?;
@@ -59,12 +59,12 @@ impl Optimizer {
         }
         self.gpu
             .queue
-            .write_buffer(&self.grad, 0, bytemuck::cast_slice(grad));
+            .write_buffer(&self.bufs.grad, 0, bytemuck::cast_slice(grad));
         let mut enc = self
             .gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(what) });
-        self.timer.begin();
+        self.passes.timer.begin();
         encode(self, &mut enc);
         self.gpu.queue.submit([enc.finish()]);
         self.read_gradient()
@@ -78,19 +78,19 @@ impl Optimizer {
         let what = format!("apply_prior({name})");
         self.prepare()?;
         // Taken out for the call, which borrows the optimizer, and put back after.
-        let mut priors = self.priors.take().unwrap_or_default();
+        let mut priors = self.plugins.priors.take().unwrap_or_default();
         let seed = self.settings.seed;
         let result = match priors.iter().position(|(k, _)| k.name == name) {
             Some(k) => self.transform_gradient(&what, grad, |opt, enc| {
                 priors[k]
                     .1
-                    .encode(&opt.gpu, enc, seed, iteration, &mut opt.timer)
+                    .encode(&opt.gpu, enc, seed, iteration, &mut opt.passes.timer)
             }),
             None => Err(Error::Invalid(format!(
                 "{what}: the settings do not ask for this prior"
             ))),
         };
-        self.priors = Some(priors);
+        self.plugins.priors = Some(priors);
         result
     }
 
@@ -118,7 +118,7 @@ impl Optimizer {
                 "apply_moment_filter: the pair must have {n} values each"
             )));
         }
-        let filter = self.step.filter();
+        let filter = self.plugins.step.filter();
         let f = filter.ok_or_else(|| {
             crate::Error::Invalid("apply_moment_filter: the settings have no moment filter".into())
         })?;
@@ -135,8 +135,8 @@ impl Optimizer {
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("apply_moment_filter"),
                 });
-            self.timer.begin();
-            f.encode(&mut enc, k, &mut self.timer);
+            self.passes.timer.begin();
+            f.encode(&mut enc, k, &mut self.passes.timer);
             self.gpu.queue.submit([enc.finish()]);
             for (o, buf) in out.iter_mut().zip(f.output()) {
                 let filtered: Vec<f32> = self.gpu.read_pod(buf)?;

@@ -10,7 +10,7 @@ impl Optimizer {
     /// diagnostic for the tests, which check that the techniques agree in expectation. The
     /// baseline estimator only; the others refuse.
     pub fn set_gradient_techniques(&mut self, techniques: crate::render::Techniques) -> Result<()> {
-        self.estimator.set_techniques(techniques)
+        self.plugins.estimator.set_techniques(techniques)
     }
 
     /// Forget what the gradient estimator carries over from earlier iterations (ReSTIR's
@@ -18,7 +18,9 @@ impl Optimizer {
     /// iteration starts it afresh, as the first one did. The textures, the step's moments and the
     /// previous iteration's textures and adjoint are left as they are.
     pub fn reset_estimator(&mut self) -> Result<()> {
-        self.estimator.restore(&self.gpu, None, self.iteration)
+        self.plugins
+            .estimator
+            .restore(&self.gpu, None, self.iteration)
     }
 
     /// One gradient estimate at the current textures, as iteration `iteration` would draw it,
@@ -43,7 +45,8 @@ impl Optimizer {
     /// right after [`Optimizer::estimate_gradient`] for that iteration, the adjoint its
     /// gradient was estimated under.
     pub fn read_adjoint(&self, iteration: u32) -> Result<Vec<f32>> {
-        self.gpu.read_pod(&self.adjoint[(iteration % 2) as usize])
+        self.gpu
+            .read_pod(&self.bufs.adjoint[(iteration % 2) as usize])
     }
 
     /// [`Optimizer::estimate_gradient`] with a given adjoint (RGBA per pixel, the cameras one
@@ -55,7 +58,7 @@ impl Optimizer {
         iteration: u32,
         adjoint: &[f32],
     ) -> Result<Vec<f32>> {
-        let buf = &self.adjoint[(iteration % 2) as usize];
+        let buf = &self.bufs.adjoint[(iteration % 2) as usize];
         if adjoint.len() as u64 * 4 != buf.size() {
             return Err(Error::Invalid(format!(
                 "the adjoint has {} floats, the optimizer's images need {}",
@@ -92,10 +95,10 @@ impl Optimizer {
         let parity = (self.iteration % 2) as usize;
         let n_pixels = self.settings.width * self.settings.height;
         let chunk = ((1u32 << 20) / n_pixels).clamp(1, 64);
-        for k in 0..self.cams.len() {
+        for k in 0..self.passes.cams.len() {
             let mut done = 0;
             while done < spp {
-                let cam = &mut self.cams[k];
+                let cam = &mut self.passes.cams[k];
                 let n = cam.set_samples(
                     &self.gpu.queue,
                     pass_seed(seed, u32::MAX - 3, k as u32, Seeds::PRIMAL),
@@ -110,19 +113,24 @@ impl Optimizer {
                             label: Some("converged primal"),
                         });
                 if done == 0 {
-                    enc.clear_buffer(&self.accum, 0, None);
+                    enc.clear_buffer(&self.bufs.accum, 0, None);
                 }
-                self.renderer
-                    .encode_render(&mut enc, "primal", &cam.render_group, self.grid, None);
+                self.renderer.encode_render(
+                    &mut enc,
+                    "primal",
+                    &cam.render_group,
+                    self.passes.grid,
+                    None,
+                );
                 done += n;
                 if done >= spp {
-                    self.loss.encode(&mut enc, k, parity, None);
+                    self.passes.loss.encode(&mut enc, k, parity, None);
                 }
                 self.gpu.queue.submit([enc.finish()]);
                 self.gpu.wait("converged primal")?;
             }
         }
-        let adjoint = self.gpu.read_pod(&self.adjoint[parity])?;
+        let adjoint = self.gpu.read_pod(&self.bufs.adjoint[parity])?;
         Ok((adjoint, self.read_loss()?))
     }
 }

@@ -62,11 +62,11 @@ impl Optimizer {
                 | wgpu::TextureUsages::COPY_SRC,
             view_formats: &[],
         });
-        let pipeline = match self.export_pipeline.get() {
+        let pipeline = match self.passes.export_pipeline.get() {
             Some(p) => p,
             None => {
                 let p = pipeline(gpu)?;
-                self.export_pipeline.get_or_init(|| p)
+                self.passes.export_pipeline.get_or_init(|| p)
             }
         };
         let params = ExportParams {

@@ -31,6 +31,7 @@ impl Optimizer {
     pub fn uncertainty(&self, loss: f64) -> Result<Vec<f32>> {
         let n_values = self.set.values.len();
         let own = self
+            .plugins
             .estimator
             .variance()
             .filter(|_| self.settings.step.kind().divides_by_variance)
@@ -51,13 +52,13 @@ impl Optimizer {
                 })?;
                 // The moving moment's bias correction after the steps taken.
                 let bias = 1.0 - (beta as f64).powi(self.iteration.max(1) as i32);
-                let mut m2: Vec<f32> = self.gpu.read_pod(&self.moments[1])?;
+                let mut m2: Vec<f32> = self.gpu.read_pod(&self.bufs.moments[1])?;
                 m2.truncate(n_values);
                 m2.iter().map(|&m| (m as f64 / bias) as f32).collect()
             }
         };
-        let pixel_channels = 1.0 / self.loss.norm() as f64;
-        let observed = &self.observed.0;
+        let pixel_channels = 1.0 / self.passes.loss.norm() as f64;
+        let observed = &self.inputs.observed.0;
         let mut out = vec![UNOBSERVED; n_values];
         let mut texel = 0;
         for t in &self.set.textures {

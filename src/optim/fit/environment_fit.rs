@@ -265,23 +265,27 @@ impl Optimizer {
         let (log, state) = logarithms(start);
         let mut group = Group::new(ENVIRONMENT, Space::Values, log);
         group.learning_rate = Some(opts.learning_rate);
-        self.table.insert(group);
+        self.fit.table.insert(group);
         // The reference camera keeps its response while the light is recovered.
-        self.table.group_mut(EXPOSURE).held = 1;
-        self.table.group_mut(WHITE_BALANCE).held = 3;
-        self.env_fit = Some(EnvFit { opts, state });
+        self.fit.table.group_mut(EXPOSURE).held = 1;
+        self.fit.table.group_mut(WHITE_BALANCE).held = 3;
+        self.fit.env_fit = Some(EnvFit { opts, state });
         self.upload_environment(true)?;
         self.gpu.check("optimize environment")
     }
 
     /// The recovered environment's logarithms (the table's `environment` group).
     fn environment_log(&self) -> &[f32] {
-        &self.table.group(ENVIRONMENT).state.values
+        &self.fit.table.group(ENVIRONMENT).state.values
     }
 
     /// Upload the recovered environment, and its sampling tables with `tables`.
     pub(in crate::optim) fn upload_environment(&mut self, tables: bool) -> Result<()> {
-        let fit = self.env_fit.as_ref().expect("the environment is recovered");
+        let fit = self
+            .fit
+            .env_fit
+            .as_ref()
+            .expect("the environment is recovered");
         let env = fit.state.env(self.environment_log());
         self.renderer
             .scene
@@ -291,21 +295,21 @@ impl Optimizer {
     /// Whether the textures hold this iteration: the environment's warm-up
     /// ([`EnvFitOptions::warmup_iterations`]) is not over.
     pub(in crate::optim) fn environment_warming_up(&self) -> bool {
-        self.env_fit
-            .as_ref()
-            .is_some_and(|f| self.table.group(ENVIRONMENT).state.steps < f.opts.warmup_iterations)
+        self.fit.env_fit.as_ref().is_some_and(|f| {
+            self.fit.table.group(ENVIRONMENT).state.steps < f.opts.warmup_iterations
+        })
     }
 
     /// The environment as recovered so far (None unless it is optimized).
     pub fn environment(&self) -> Option<EnvMap> {
-        (self.env_fit.as_ref()).map(|f| f.state.env(self.environment_log()))
+        (self.fit.env_fit.as_ref()).map(|f| f.state.env(self.environment_log()))
     }
 
     /// Replace the recovered environment's radiance (`width * height` RGB texels, each
     /// finite and positive, row 0 at the zenith), keeping its step's state; the `mean` gauge
     /// then holds this environment's mean luminance. The sampling tables are rebuilt.
     pub fn set_environment(&mut self, rgb: &[[f32; 3]]) -> Result<()> {
-        let Some(fit) = &mut self.env_fit else {
+        let Some(fit) = &mut self.fit.env_fit else {
             return Err(Error::Invalid(
                 "the environment is not a parameter (the task's [environment] does not \
                  optimize it)"
@@ -333,20 +337,20 @@ impl Optimizer {
             .map(|v| v.ln().clamp(-20.0, 20.0))
             .collect();
         fit.state.mean_luminance = luminance(channel_means(&fit.state.env(&log)));
-        self.table.group_mut(ENVIRONMENT).state.values = log;
+        self.fit.table.group_mut(ENVIRONMENT).state.values = log;
         self.upload_environment(true)?;
         self.gpu.check("set environment")
     }
 
     /// What the environment's fit keeps besides its group in the table, for checkpoints.
     pub fn environment_state(&self) -> Option<&EnvFitState> {
-        self.env_fit.as_ref().map(|f| &f.state)
+        self.fit.env_fit.as_ref().map(|f| &f.state)
     }
 
     /// Go on from a checkpoint's environment state (of the same size; its logarithms are
     /// the table's `environment` group, restored with the table).
     pub(in crate::optim) fn restore_environment(&mut self, state: &EnvFitState) -> Result<()> {
-        let Some(fit) = &mut self.env_fit else {
+        let Some(fit) = &mut self.fit.env_fit else {
             return Err(Error::Invalid(
                 "the checkpoint has an environment state, the task does not optimize the \
                  environment"
@@ -366,7 +370,7 @@ impl Optimizer {
     /// This iteration's dL/d(radiance) of the environment's texels (3 per texel), as the
     /// gradient pass left it, and the updates it lost or dropped.
     pub fn read_environment_gradient(&self) -> Result<(Vec<f32>, u32)> {
-        let raw: Vec<u32> = self.gpu.read_pod(&self.env_grad)?;
+        let raw: Vec<u32> = self.gpu.read_pod(&self.fit.env_grad)?;
         let info = self.renderer.scene.info;
         let n = 3 * (info.env_width * info.env_height) as usize;
         let g = raw[..n].iter().map(|&b| f32::from_bits(b)).collect();
@@ -374,24 +378,24 @@ impl Optimizer {
     }
 
     pub(in crate::optim) fn clear_environment_gradient(&self, enc: &mut wgpu::CommandEncoder) {
-        if self.env_fit.is_some() {
-            enc.clear_buffer(&self.env_grad, 0, None);
+        if self.fit.env_fit.is_some() {
+            enc.clear_buffer(&self.fit.env_grad, 0, None);
         }
     }
 
     /// One step of the environment from this iteration's gradient (schedule factor
     /// `factor`), and its upload; the sampling tables when they are due.
     pub(in crate::optim) fn step_environment(&mut self, factor: f32) -> Result<()> {
-        if self.env_fit.is_none() {
+        if self.fit.env_fit.is_none() {
             return Ok(());
         }
         let (d_radiance, faults) = self.read_environment_gradient()?;
-        self.env_faults += faults;
-        let fit = self.env_fit.as_ref().expect("checked above");
-        let log = &self.table.group(ENVIRONMENT).state.values;
+        self.fit.env_faults += faults;
+        let fit = self.fit.env_fit.as_ref().expect("checked above");
+        let log = &self.fit.table.group(ENVIRONMENT).state.values;
         let g = fit.state.log_gradient(&fit.opts, log, &d_radiance);
-        self.table.step(&self.settings, ENVIRONMENT, &g, factor);
-        let group = self.table.group_mut(ENVIRONMENT);
+        self.fit.table.step(&self.settings, ENVIRONMENT, &g, factor);
+        let group = self.fit.table.group_mut(ENVIRONMENT);
         fit.state.hold_gauge(&fit.opts, &mut group.state.values);
         let tables = group.state.steps % fit.opts.rebuild_every == 0;
         self.upload_environment(tables)

@@ -12,11 +12,11 @@ impl Optimizer {
     /// masked pixels.
     pub fn set_masks(&mut self, masks: &[Option<Vec<f32>>]) -> Result<()> {
         let n_pixels = (self.settings.width * self.settings.height) as usize;
-        if masks.len() != self.cams.len() {
+        if masks.len() != self.passes.cams.len() {
             return Err(Error::Invalid(format!(
                 "{} masks for {} cameras",
                 masks.len(),
-                self.cams.len()
+                self.passes.cams.len()
             )));
         }
         let mut total = 0f64;
@@ -28,21 +28,21 @@ impl Optimizer {
                             "the mask of camera {k} needs {n_pixels} finite weights >= 0"
                         )));
                     }
-                    self.targets[k]
+                    self.inputs.targets[k]
                         .rgb
                         .iter()
                         .zip(m)
                         .map(|(p, &w)| [p[0], p[1], p[2], w])
                         .collect()
                 }
-                None => self.targets[k]
+                None => self.inputs.targets[k]
                     .rgb
                     .iter()
                     .map(|p| [p[0], p[1], p[2], 1.0])
                     .collect(),
             };
             total += data.iter().map(|p| p[3] as f64).sum::<f64>();
-            self.loss.write_target(&self.gpu, k, &data);
+            self.passes.loss.write_target(&self.gpu, k, &data);
         }
         // Also catches a NaN total.
         #[allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -50,7 +50,7 @@ impl Optimizer {
             return Err(Error::Invalid("the masks leave no pixel to compare".into()));
         }
         let norm = (1.0 / (3.0 * total)) as f32;
-        self.loss.set_norm(&self.gpu, norm);
+        self.passes.loss.set_norm(&self.gpu, norm);
         self.gpu.check("set masks")
     }
 
@@ -58,33 +58,35 @@ impl Optimizer {
     /// target (photos have their own exposure). With `Settings::exposure_learning_rate` the
     /// optimizer goes on from these values.
     pub fn set_exposure(&mut self, values: &[f32]) -> Result<()> {
-        if values.len() != self.cams.len() || values.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+        if values.len() != self.passes.cams.len()
+            || values.iter().any(|v| !(v.is_finite() && *v > 0.0))
+        {
             return Err(Error::Invalid(format!(
                 "{} exposures for {} cameras (each positive)",
                 values.len(),
-                self.cams.len()
+                self.passes.cams.len()
             )));
         }
-        self.table.group_mut(EXPOSURE).state.values = values.to_vec();
-        self.gain_prev = self.gains();
+        self.fit.table.group_mut(EXPOSURE).state.values = values.to_vec();
+        self.fit.gain_prev = self.gains();
         self.upload_exposure();
         self.gpu.check("set exposure")
     }
 
     /// The current per-camera exposures.
     pub fn exposure(&self) -> &[f32] {
-        &self.table.group(EXPOSURE).state.values
+        &self.fit.table.group(EXPOSURE).state.values
     }
 
     /// The current per-camera white balances (per-channel factors on top of the exposure).
     pub fn white_balance(&self) -> &[[f32; 3]] {
-        bytemuck::cast_slice(&self.table.group(WHITE_BALANCE).state.values)
+        bytemuck::cast_slice(&self.fit.table.group(WHITE_BALANCE).state.values)
     }
 
     /// Set each camera's white balance (per-channel factors over its exposure, positive).
     /// With the white balances optimized the optimizer goes on from these values.
     pub fn set_white_balance(&mut self, values: &[[f32; 3]]) -> Result<()> {
-        if values.len() != self.cams.len()
+        if values.len() != self.passes.cams.len()
             || values
                 .iter()
                 .flatten()
@@ -93,11 +95,11 @@ impl Optimizer {
             return Err(Error::Invalid(format!(
                 "{} white balances for {} cameras (each three positive factors)",
                 values.len(),
-                self.cams.len()
+                self.passes.cams.len()
             )));
         }
-        self.table.group_mut(WHITE_BALANCE).state.values = values.concat();
-        self.gain_prev = self.gains();
+        self.fit.table.group_mut(WHITE_BALANCE).state.values = values.concat();
+        self.fit.gain_prev = self.gains();
         self.upload_exposure();
         self.gpu.check("set white balance")
     }
@@ -121,13 +123,15 @@ impl Optimizer {
                 "optimizer.white_balance_learning_rate: must be a number in (0, 10], not {lr}"
             )));
         }
-        self.table.group_mut(WHITE_BALANCE).learning_rate = Some(lr);
+        self.fit.table.group_mut(WHITE_BALANCE).learning_rate = Some(lr);
         Ok(())
     }
 
     pub(in crate::optim) fn upload_exposure(&mut self) {
         let gains = self.gains();
-        self.loss.set_gains(&self.gpu, &gains, &self.gain_prev);
+        self.passes
+            .loss
+            .set_gains(&self.gpu, &gains, &self.fit.gain_prev);
     }
 
     /// One Adam step of the exposures' and the white balances' logarithms (those optimized)
@@ -136,7 +140,7 @@ impl Optimizer {
         if !self.gains_optimized() {
             return Ok(());
         }
-        let d = self.loss.read_gain_gradients(&self.gpu)?;
+        let d = self.passes.loss.read_gain_gradients(&self.gpu)?;
         let g = log_gain_gradients(&d, &self.gains());
         self.step_log_gains(factor, &g);
         Ok(())
@@ -144,7 +148,7 @@ impl Optimizer {
 
     /// Whether the exposures or the white balances are optimized.
     pub(in crate::optim) fn gains_optimized(&self) -> bool {
-        self.table.optimizes(&[EXPOSURE, WHITE_BALANCE])
+        self.fit.table.optimizes(&[EXPOSURE, WHITE_BALANCE])
     }
 
     /// One step of the optimized gains' logarithms from `(d_exposure, d_white_balance)`,
@@ -157,12 +161,13 @@ impl Optimizer {
     ) {
         let gains = self.gains();
         let settings = &self.settings;
-        self.table.step(settings, EXPOSURE, d_e, factor);
-        self.table
+        self.fit.table.step(settings, EXPOSURE, d_e, factor);
+        self.fit
+            .table
             .step(settings, WHITE_BALANCE, &d_wb.concat(), factor);
         // The next loss pass pairs its render with this iteration's adjoint, written with
         // the gains before this step.
-        self.gain_prev = gains;
+        self.fit.gain_prev = gains;
         self.upload_exposure();
     }
 }

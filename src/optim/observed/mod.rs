@@ -38,7 +38,7 @@ impl Optimizer {
     /// weight: 4 x 4 rays per pixel and camera, computed on the GPU when the optimizer is made
     /// (ReSTIR gives reservoirs to these texels only).
     pub fn observed_texels(&self) -> Result<&[bool]> {
-        Ok(&self.observed.0)
+        Ok(&self.inputs.observed.0)
     }
 }
 

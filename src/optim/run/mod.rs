@@ -7,3 +7,11 @@ pub mod run_loop;
 pub mod schedule;
 pub(in crate::optim) mod seeds;
 pub(in crate::optim) mod snapshot;
+
+/// Where a run stands, for the schedule and the log.
+pub(in crate::optim) struct RunState {
+    /// Fraction of the run done, for the learning-rate schedule.
+    pub(in crate::optim) progress: f64,
+    /// Learning rate of each texture in the last step.
+    pub(in crate::optim) last_learning_rates: Vec<f32>,
+}

@@ -64,7 +64,7 @@ pub struct Values {
 impl Optimizer {
     /// The gradient of the last iteration or estimate, laid out like the parameters.
     pub fn read_gradient(&self) -> Result<Vec<f32>> {
-        let mut g: Vec<f32> = self.gpu.read_pod(&self.grad)?;
+        let mut g: Vec<f32> = self.gpu.read_pod(&self.bufs.grad)?;
         g.truncate(self.set.values.len());
         Ok(g)
     }
@@ -96,7 +96,7 @@ impl Optimizer {
         Ok(Values {
             iteration: self.iteration,
             params: self.read_params()?,
-            groups: self.table.values(),
+            groups: self.fit.table.values(),
         })
     }
 
@@ -111,11 +111,11 @@ impl Optimizer {
                 self.set.values.len()
             )));
         }
-        self.table.set_values(&values.groups)?;
+        self.fit.table.set_values(&values.groups)?;
         self.write_params(&values.params)?;
-        self.gain_prev = self.gains();
+        self.fit.gain_prev = self.gains();
         self.upload_exposure();
-        if self.env_fit.is_some() {
+        if self.fit.env_fit.is_some() {
             self.upload_environment(true)?;
         }
         self.gpu.check("set optimizer values")
@@ -124,8 +124,8 @@ impl Optimizer {
     /// The step's first and second moments (both steps keep two).
     pub fn read_moments(&self) -> Result<[Vec<f32>; 2]> {
         let n = self.set.values.len();
-        let mut a: Vec<f32> = self.gpu.read_pod(&self.moments[0])?;
-        let mut b: Vec<f32> = self.gpu.read_pod(&self.moments[1])?;
+        let mut a: Vec<f32> = self.gpu.read_pod(&self.bufs.moments[0])?;
+        let mut b: Vec<f32> = self.gpu.read_pod(&self.bufs.moments[1])?;
         a.truncate(n);
         b.truncate(n);
         Ok([a, b])
@@ -133,7 +133,7 @@ impl Optimizer {
 
     /// Restore the step's moments.
     pub fn write_moments(&self, m: &[Vec<f32>; 2]) -> Result<()> {
-        for (buf, v) in self.moments.iter().zip(m) {
+        for (buf, v) in self.bufs.moments.iter().zip(m) {
             if v.len() != self.set.values.len() {
                 return Err(Error::Invalid(
                     "the step's moments do not match the parameters".into(),
@@ -167,7 +167,7 @@ impl Optimizer {
             params.truncate(self.set.values.len());
             Some(PreviousState {
                 params,
-                adjoint: self.gpu.read_pod(&self.adjoint[last])?,
+                adjoint: self.gpu.read_pod(&self.bufs.adjoint[last])?,
             })
         } else {
             None
@@ -178,12 +178,12 @@ impl Optimizer {
             m1,
             m2,
             previous,
-            estimator: self.estimator.snapshot(&self.gpu, self.iteration)?,
-            control_variate: match &self.control_variate {
+            estimator: self.plugins.estimator.snapshot(&self.gpu, self.iteration)?,
+            control_variate: match &self.passes.control_variate {
                 Some(cv) => Some(cv.snapshot(&self.gpu)?),
                 None => None,
             },
-            groups: self.table.states(),
+            groups: self.fit.table.states(),
             environment: self.environment_state().cloned(),
         })
     }
@@ -201,7 +201,7 @@ impl Optimizer {
         let mut cv_snapshot = state.control_variate.as_ref();
         match &state.previous {
             Some(p) => {
-                if p.adjoint.len() as u64 * 4 != self.adjoint[last].size()
+                if p.adjoint.len() as u64 * 4 != self.bufs.adjoint[last].size()
                     || p.params.len() != self.set.values.len()
                 {
                     return Err(Error::Invalid(
@@ -210,7 +210,11 @@ impl Optimizer {
                     ));
                 }
                 let q = &self.gpu.queue;
-                q.write_buffer(&self.adjoint[last], 0, bytemuck::cast_slice(&p.adjoint));
+                q.write_buffer(
+                    &self.bufs.adjoint[last],
+                    0,
+                    bytemuck::cast_slice(&p.adjoint),
+                );
                 let prev = &self.params.previous;
                 q.write_buffer(prev, 0, bytemuck::cast_slice(&p.params));
             }
@@ -221,18 +225,19 @@ impl Optimizer {
                 cv_snapshot = None;
             }
         }
-        self.estimator
+        self.plugins
+            .estimator
             .restore(&self.gpu, snapshot, state.iteration)?;
-        if let Some(cv) = &mut self.control_variate {
+        if let Some(cv) = &mut self.passes.control_variate {
             cv.restore(&self.gpu, cv_snapshot)?;
         }
         if let Some(env) = &state.environment {
             self.restore_environment(env)?;
         }
-        self.table.restore(&state.groups)?;
-        self.gain_prev = self.gains();
+        self.fit.table.restore(&state.groups)?;
+        self.fit.gain_prev = self.gains();
         self.upload_exposure();
-        if self.env_fit.is_some() {
+        if self.fit.env_fit.is_some() {
             self.upload_environment(true)?;
         }
         self.iteration = state.iteration;
@@ -246,9 +251,9 @@ impl Optimizer {
     pub fn state_bytes_per_texel(&self) -> f64 {
         let bytes = self.params.values.size()
             + self.params.previous.size()
-            + self.grad.size()
-            + self.moments.iter().map(|b| b.size()).sum::<u64>()
-            + self.estimator.state_bytes();
+            + self.bufs.grad.size()
+            + self.bufs.moments.iter().map(|b| b.size()).sum::<u64>()
+            + self.plugins.estimator.state_bytes();
         bytes as f64 / self.renderer.scene.n_texels.max(1) as f64
     }
 
