@@ -14,6 +14,7 @@ mod fit;
 pub mod loss;
 mod memory;
 pub mod observed;
+mod parts;
 #[cfg(test)]
 mod plane_tests;
 pub mod primal;
@@ -40,9 +41,9 @@ use crate::render::params::{ParamBuffers, ParamSet};
 use crate::render::{Renderer, Techniques};
 use crate::scene::Scene;
 use crate::{Error, Result};
-use cameras::{camera_passes, check_inputs, CameraPasses, CameraSetup, Stats};
-use estimator::Estimator;
+use cameras::{camera_passes, check_inputs, CameraSetup};
 pub use estimator::{Choice, EstimatorOptions, EstimatorState, Method, MethodChoice};
+use parts::{build_step, pass_timer, Inputs, IterationBuffers, Passes, Plugins};
 pub use primal::{ControlVariateSnapshot, PrimalMode};
 pub use prior::{multiscale, smoothness, Priors};
 /// The optimizer's own passes besides the steps', priors' and estimators' (a pass is named
@@ -72,7 +73,7 @@ pub struct Optimizer {
     pub set: ParamSet,
     settings: Settings,
     /// The buffers one iteration's passes hand each other.
-    bufs: Buffers,
+    bufs: IterationBuffers,
     /// The passes the engine runs itself, per camera and once.
     passes: Passes,
     /// The gradient estimator, the step and the priors.
@@ -87,79 +88,6 @@ pub struct Optimizer {
     pub iteration: u32,
 }
 
-/// The buffers an iteration's passes hand each other.
-struct Buffers {
-    /// The gradient, laid out like the parameters.
-    grad: wgpu::Buffer,
-    /// Adjoint images of all cameras; iteration t writes buffer t % 2.
-    adjoint: [wgpu::Buffer; 2],
-    /// The step's two per-parameter moments.
-    moments: [wgpu::Buffer; 2],
-    /// The primal samples of this iteration, and under the previous textures (control
-    /// variate).
-    accum: wgpu::Buffer,
-    accum_prev: wgpu::Buffer,
-    stats: Stats,
-}
-
-/// The passes the engine runs itself, and the GPU objects made on first use.
-struct Passes {
-    cams: Vec<CameraPasses>,
-    loss: loss::LossPass,
-    grid: (u32, u32),
-    /// The control-variate primal, when `settings.primal` asks for it.
-    control_variate: Option<primal::ControlVariate>,
-    timer: PassTimer,
-    /// The texture_export pipeline, built on first use.
-    export_pipeline: std::sync::OnceLock<wgpu::ComputePipeline>,
-    /// The images [`Optimizer::render_cameras`] reads back, made at its first call.
-    camera_images: std::sync::OnceLock<wgpu::Buffer>,
-}
-
-/// The plugins an iteration calls: the gradient estimator, the step and the priors.
-struct Plugins {
-    estimator: Box<dyn Estimator>,
-    step: Box<dyn step::Step>,
-    /// The priors the settings ask for, in the order they apply, built by
-    /// [`Optimizer::prepare`] (the first step's, or the caller's before it).
-    priors: Option<Vec<(&'static prior::Kind, Box<dyn prior::Prior>)>>,
-}
-
-/// What the optimizer fits the textures to.
-struct Inputs {
-    /// The targets (CPU copies, for re-uploading them with masks).
-    targets: Vec<Image>,
-    /// The observed-texel mask, computed when the optimizer is made: its flags, and the GPU
-    /// buffer they were read from (one word per texel, nonzero: observed), which the
-    /// priors bind.
-    observed: (Vec<bool>, wgpu::Buffer),
-}
-
-/// The buffers an iteration passes from one pass to the next: the adjoints of both parities
-/// (RGBA per pixel of all cameras), the gradient, the step's two moments and the
-/// statistics, for `n_pixels` pixels and `n_params` parameter scalars.
-fn iteration_buffers(
-    gpu: &Gpu,
-    n_pixels: u32,
-    n_params: u64,
-) -> ([wgpu::Buffer; 2], wgpu::Buffer, [wgpu::Buffer; 2], Stats) {
-    let adjoint_size = n_pixels as u64 * 16;
-    let adjoint = [
-        gpu.storage_zeroed("adjoint even", adjoint_size),
-        gpu.storage_zeroed("adjoint odd", adjoint_size),
-    ];
-    let grad = gpu.storage_zeroed("gradient", n_params * 4);
-    let moments = [
-        gpu.storage_zeroed("step moment1", n_params * 4),
-        gpu.storage_zeroed("step moment2", n_params * 4),
-    ];
-    let stats = Stats {
-        primal: gpu.storage_zeroed("primal stats", 16),
-        step: gpu.storage_zeroed("step stats", 16),
-    };
-    (adjoint, grad, moments, stats)
-}
-
 /// The constants of the settings' cameras at the settings' image size, each with the
 /// lights of its capture.
 fn camera_infos(
@@ -171,16 +99,6 @@ fn camera_infos(
         .iter()
         .map(|&cam| scene.camera_info(cam, settings.width, settings.height))
         .collect()
-}
-
-/// A timer with a slot for every pass of an iteration: primal, control variate and loss per
-/// camera, the estimator's passes (at most three per camera and two more), smoothness,
-/// multiscale and the step (two dispatches with the moment filter) per texture, and the
-/// filter's levels.
-fn pass_timer(gpu: &Gpu, n_cams: u32, n_textures: usize, step: &dyn step::Step) -> PassTimer {
-    let filter_dispatches = step.filter().map_or(0, |f| f.dispatches());
-    let per_texture = 4 * n_textures as u32;
-    PassTimer::new(gpu, 6 * n_cams + 4 + per_texture + filter_dispatches)
 }
 
 impl Optimizer {
@@ -207,24 +125,26 @@ impl Optimizer {
         plan.check(gpu)?;
         log::info!("{}", plan.summary());
         let n_cams = targets.len() as u32;
-        let (accum, accum_prev) = (
-            gpu.storage_zeroed("primal accum", (w * h) as u64 * 16),
-            gpu.storage_zeroed("primal accum_prev", (w * h) as u64 * 16),
-        );
+        let bufs = IterationBuffers::new(gpu, (w, h), n_cams, set.values.len() as u64);
         let control_variate = match settings.primal {
             PrimalMode::ControlVariate => Some(primal::ControlVariate::new(
                 gpu,
                 (w, h),
                 targets.len(),
-                &accum,
-                &accum_prev,
+                &bufs.accum,
+                &bufs.accum_prev,
                 settings.cv_max_weight,
             )?),
             PrimalMode::Independent => None,
         };
-        let (adjoint, grad, moments, stats) =
-            iteration_buffers(gpu, w * h * n_cams, set.values.len() as u64);
-        let loss = loss::LossPass::new(gpu, settings.loss, (w, h), targets, &accum, &adjoint)?;
+        let loss = loss::LossPass::new(
+            gpu,
+            settings.loss,
+            (w, h),
+            targets,
+            &bufs.accum,
+            &bufs.adjoint,
+        )?;
         let env_grad = environment_fit::env_gradient_buffer(gpu, scene);
         let estimator = estimator::build(&estimator::Setup {
             gpu,
@@ -237,8 +157,8 @@ impl Optimizer {
             height: settings.height,
             primal: settings.primal,
             cameras: &camera_infos,
-            adjoint: &adjoint,
-            grad: &grad,
+            adjoint: &bufs.adjoint,
+            grad: &bufs.grad,
             env_grad: &env_grad,
             grid,
             observed: &observed.0,
@@ -251,32 +171,17 @@ impl Optimizer {
             camera_infos: &camera_infos,
             grid,
             two_states: control_variate.is_some(),
-            accum: &accum,
-            accum_prev: &accum_prev,
-            stats: &stats,
+            accum: &bufs.accum,
+            accum_prev: &bufs.accum_prev,
+            stats: &bufs.stats,
         });
-        let step = step::build(
+        let step = build_step(
             gpu,
-            &set,
-            &step::StepChoice {
-                kind: settings.step,
-                steps: &settings.steps,
-                sparse: settings.sparse_steps,
-                moment_filter: &settings.moment_filter,
-            },
+            (&set, &params),
+            &settings,
             &observed.1,
-            &step::StepBuffers {
-                grad: &grad,
-                params: &params.values,
-                moments: &moments,
-                // The estimator's variance is that of its own estimate; a prior that mixes
-                // texels (the multiscale gradient) changes it, so the step then tracks the
-                // variance of what it is given.
-                variance: estimator
-                    .variance()
-                    .filter(|_| settings.priors.keep_variance()),
-                stats: &stats.step,
-            },
+            &bufs,
+            estimator.as_ref(),
         )?;
         let timer = pass_timer(gpu, n_cams, set.textures.len(), step.as_ref());
         gpu.check("optimizer setup")?;
@@ -287,14 +192,7 @@ impl Optimizer {
             params,
             set,
             settings,
-            bufs: Buffers {
-                grad,
-                adjoint,
-                moments,
-                accum,
-                accum_prev,
-                stats,
-            },
+            bufs,
             passes: Passes {
                 cams,
                 loss,
@@ -320,10 +218,7 @@ impl Optimizer {
                 targets: targets.to_vec(),
                 observed,
             },
-            run: run::RunState {
-                progress: 0.0,
-                last_learning_rates: Vec::new(),
-            },
+            run: run::RunState::default(),
             iteration: 0,
         })
     }

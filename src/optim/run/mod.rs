@@ -9,6 +9,7 @@ pub(in crate::optim) mod seeds;
 pub(in crate::optim) mod snapshot;
 
 /// Where a run stands, for the schedule and the log.
+#[derive(Default)]
 pub(in crate::optim) struct RunState {
     /// Fraction of the run done, for the learning-rate schedule.
     pub(in crate::optim) progress: f64,
