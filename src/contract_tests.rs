@@ -13,6 +13,8 @@ fn every_bind_group_declaration_names_its_wgsl_bindings() {
         crate::render::TRACE_RAYS_GROUP,
         crate::optim::loss::LOSS_GROUP,
         crate::optim::primal::PRIMAL_CV_GROUP,
+        crate::optim::primal::path_cache::PRIMAL_CACHED_GROUP,
+        crate::optim::primal::path_cache::PRIMAL_CACHE_TRACE_GROUP,
         crate::optim::observed::OBSERVED_GROUP,
         crate::render::gpu_scene::TEXTURE_WRAP_TEST_GROUP,
         crate::optim::texture_export::TEXTURE_EXPORT_GROUP,
@@ -343,6 +345,22 @@ fn pass_uniform_mirrors_match_wgsl_field_by_field() {
             width,
             height,
             max_weight
+        ]
+    );
+    mirror!(
+        "primal_cached",
+        "PrimalCachedParams",
+        crate::optim::primal::path_cache::PrimalCachedParams,
+        [
+            camera,
+            seed,
+            spp,
+            techniques,
+            stride,
+            two_states,
+            refresh_first,
+            refresh_count,
+            vertices
         ]
     );
     mirror!(

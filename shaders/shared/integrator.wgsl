@@ -24,14 +24,16 @@ struct Arrival {
     wi: vec3f,
     radiance: vec3f,
     scale: f32,
+    // Whether the radiance is the environment's along wi (which an environment fit changes).
+    env: bool,
 }
 
 var<private> arrivals: array<Arrival, 6>;
 var<private> n_arrivals: u32 = 0u;
 
-fn record_arrival(opts: PathOptions, n: u32, wi: vec3f, radiance: vec3f, scale: f32) {
+fn record_arrival(opts: PathOptions, n: u32, wi: vec3f, radiance: vec3f, scale: f32, env: bool) {
     if opts.record_paths && n <= PATH_RECORD_VERTICES && n_arrivals < 6u {
-        arrivals[n_arrivals] = Arrival(n, wi, radiance, scale);
+        arrivals[n_arrivals] = Arrival(n, wi, radiance, scale, env);
         n_arrivals += 1u;
     }
 }
@@ -408,7 +410,7 @@ fn path_arrival(st: ptr<function, PathState>, sp: ptr<function, PathStep>) {
         }
         let w = mis_bsdf(st.opts.techniques, st.bsdf_pdf, p_light);
         if !(all(le == vec3f(0.0)) || w <= 0.0) {
-            record_arrival(st.opts, st.depth, st.ray_d, le, st.path_scale * w / st.bsdf_pdf);
+            record_arrival(st.opts, st.depth, st.ray_d, le, st.path_scale * w / st.bsdf_pdf, sp.hit.tri == NONE);
             if st.depth == 1u {
                 st.out.bsdf = DirectSample(st.ray_d, le, w / st.bsdf_pdf);
                 st.first_e = le * w;
@@ -494,7 +496,7 @@ fn path_arrival(st: ptr<function, PathState>, sp: ptr<function, PathStep>) {
 // A light sample that reached its light (its shadow ray unblocked): its arrival recorded,
 // and the first vertex's light sample, or the direction a later vertex is evaluated in.
 fn path_light_arrives(st: ptr<function, PathState>, sp: ptr<function, PathStep>) {
-    record_arrival(st.opts, st.depth, st.ls.wi, st.ls.radiance, st.path_scale * st.nee_weight / st.ls.pdf);
+    record_arrival(st.opts, st.depth, st.ls.wi, st.ls.radiance, st.path_scale * st.nee_weight / st.ls.pdf, st.ls.env);
     if st.opts.env_gradients && st.ls.env {
         st.env_dir = st.ls.wi;
         st.env_factor = st.nee_weight / st.ls.pdf;

@@ -128,6 +128,12 @@ pub fn memory_plan(
                 .map(|(l, b)| (l, b, Scale::Texel)),
         );
     }
+    if settings.path_cache.is_some() {
+        for k in 0..n_cams {
+            let bytes = primal::path_cache::camera_bytes(pixels, settings.primal_spp, max_depth);
+            buffers.push(pixel(format!("path cache {k}"), bytes));
+        }
+    }
     if settings.primal == PrimalMode::ControlVariate {
         buffers.extend(
             primal::memory(pixels, n_cams as u64)

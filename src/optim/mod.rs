@@ -51,6 +51,12 @@ pub use prior::{multiscale, smoothness, Priors};
 pub(crate) const WGSL: &[(&str, &str)] = &[
     ("loss", include_str!("loss/loss.wgsl")),
     ("primal_cv", include_str!("primal/primal_cv.wgsl")),
+    ("primal_cached", include_str!("primal/primal_cached.wgsl")),
+    (
+        "primal_cache_trace",
+        include_str!("primal/primal_cache_trace.wgsl"),
+    ),
+    ("primal/path_cache", include_str!("primal/path_cache.wgsl")),
     (
         "observed_texels",
         include_str!("observed/observed_texels.wgsl"),
@@ -164,6 +170,18 @@ impl Optimizer {
             observed: &observed.0,
         })?;
 
+        let path_cache = primal::path_cache::build(&primal::path_cache::PathCacheSetup {
+            gpu,
+            renderer: &renderer,
+            camera_infos: &camera_infos,
+            grid,
+            spp: settings.primal_spp,
+            refresh: settings.path_cache,
+            max_depth: depth,
+            accum: &bufs.accum,
+            accum_prev: &bufs.accum_prev,
+            stats: &bufs.stats.primal,
+        })?;
         let cams = camera_passes(&CameraSetup {
             gpu,
             renderer: &renderer,
@@ -198,6 +216,7 @@ impl Optimizer {
                 loss,
                 grid,
                 control_variate,
+                path_cache,
                 timer,
                 export_pipeline: std::sync::OnceLock::new(),
                 camera_images: std::sync::OnceLock::new(),
@@ -254,9 +273,21 @@ impl Optimizer {
             if self.passes.control_variate.is_some() {
                 enc.clear_buffer(&self.bufs.accum_prev, 0, None);
             }
-            let t = self.passes.timer.next(PassKind::Primal);
-            self.renderer
-                .encode_render(enc, "primal", &cam.render_group, self.passes.grid, t);
+            if let Some(cache) = &mut self.passes.path_cache {
+                cache.encode(
+                    enc,
+                    &self.renderer.scene.bind_group,
+                    k,
+                    cam.render_params.seed,
+                    cam.render_params.two_states != 0,
+                    self.passes.grid,
+                    &mut self.passes.timer,
+                );
+            } else {
+                let t = self.passes.timer.next(PassKind::Primal);
+                self.renderer
+                    .encode_render(enc, "primal", &cam.render_group, self.passes.grid, t);
+            }
             if let Some(cv) = &mut self.passes.control_variate {
                 cv.encode(enc, k, &mut self.passes.timer);
             }
@@ -312,6 +343,9 @@ impl Optimizer {
             if let Some(cv) = &mut self.passes.control_variate {
                 cv.finish_iteration();
             }
+            if let Some(cache) = &mut self.passes.path_cache {
+                cache.finish_iteration();
+            }
         }
     }
 
@@ -329,6 +363,10 @@ impl Optimizer {
         p.push("observed_texels");
         if settings.primal == primal::PrimalMode::ControlVariate {
             p.push("primal_cv");
+        }
+        if settings.path_cache.is_some() {
+            p.push("primal_cache_trace");
+            p.push("primal_cached");
         }
         p.push("loss");
         p.push(settings.step.kind().pass);

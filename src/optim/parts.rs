@@ -32,6 +32,9 @@ pub(in crate::optim) struct Passes {
     pub(in crate::optim) grid: (u32, u32),
     /// The control-variate primal, when `settings.primal` asks for it.
     pub(in crate::optim) control_variate: Option<primal::ControlVariate>,
+    /// The path cache the primal is shaded from, when `settings.path_cache` asks for it and
+    /// the images allow it.
+    pub(in crate::optim) path_cache: Option<primal::PathCache>,
     pub(in crate::optim) timer: PassTimer,
     /// The texture_export pipeline, built on first use.
     pub(in crate::optim) export_pipeline: std::sync::OnceLock<wgpu::ComputePipeline>,

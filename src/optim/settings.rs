@@ -21,6 +21,10 @@ pub struct Settings {
     /// Upper clamp of the control variate's per-pixel weight (in [0, 1]; see
     /// [`PrimalMode::ControlVariate`]).
     pub cv_max_weight: f32,
+    /// The path cache ([`super::primal::path_cache`]; None: off): the primal image shades
+    /// `primal_spp` stored camera paths per pixel, of which this many are traced anew each
+    /// iteration.
+    pub path_cache: Option<u32>,
     /// Samples per pixel of the gradient pass.
     pub gradient_spp: u32,
     /// Image loss.
@@ -67,6 +71,7 @@ impl Settings {
             primal_spp: 4,
             primal: PrimalMode::Independent,
             cv_max_weight: super::primal::DEFAULT_MAX_WEIGHT,
+            path_cache: None,
             gradient_spp: 1,
             loss: Loss::L2,
             seed: 1,
@@ -100,6 +105,18 @@ impl Settings {
         }
         if !spp_ok(self.gradient_spp) {
             return bad("optimizer.gradient_spp", "must be between 1 and 4096");
+        }
+        if let Some(r) = self.path_cache {
+            if r == 0 || r > self.primal_spp {
+                return bad(
+                    "optimizer.path_cache",
+                    &format!(
+                        "must be between 1 and primal_spp ({}): the paths per pixel traced \
+                         anew each iteration",
+                        self.primal_spp
+                    ),
+                );
+            }
         }
         if !(0.0..=1.0).contains(&self.cv_max_weight) {
             return bad("optimizer.cv_max_weight", "must be between 0 and 1");

@@ -33,6 +33,11 @@ pub struct OptimizerSpec {
     /// Upper clamp of the control variate's per-pixel weight, in [0, 1].
     #[serde(default = "default_cv_max_weight")]
     pub cv_max_weight: f32,
+    /// The path cache: the primal image shades `primal_spp` stored camera paths per pixel,
+    /// this many of them traced anew each iteration (absent: every path traced anew, no
+    /// cache).
+    #[serde(default)]
+    pub path_cache: Option<u32>,
     /// Samples per pixel of the gradient pass.
     #[serde(default = "one")]
     pub gradient_spp: u32,
@@ -344,6 +349,7 @@ pub fn task_settings(
         primal_spp: task.optimizer.primal_spp,
         primal: task.optimizer.primal,
         cv_max_weight: task.optimizer.cv_max_weight,
+        path_cache: task.optimizer.path_cache,
         gradient_spp: task.optimizer.gradient_spp,
         loss: task.optimizer.loss,
         seed: task.seed,

@@ -13,6 +13,9 @@
 //! image) stays unbiased. The loss *value* is biased upwards by the image's variance (its mean
 //! is L(E\[I\]) + Var(I) x the loss's weights), as with any noisy render; the control variate
 //! lowers that bias with the variance.
+pub mod path_cache;
+pub(crate) use path_cache::PathCache;
+
 use crate::gpu::Gpu;
 use crate::optim::{PassKind, PassTimer};
 use crate::render::WORKGROUP;

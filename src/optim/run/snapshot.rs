@@ -231,6 +231,10 @@ impl Optimizer {
         if let Some(cv) = &mut self.passes.control_variate {
             cv.restore(&self.gpu, cv_snapshot)?;
         }
+        if let Some(cache) = &mut self.passes.path_cache {
+            // (The stored paths are not saved: the next render traces its pool anew.)
+            cache.reset();
+        }
         if let Some(env) = &state.environment {
             self.restore_environment(env)?;
         }

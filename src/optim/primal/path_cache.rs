@@ -1,0 +1,296 @@
+//! The path cache (primal_cache_trace.wgsl stores paths, primal_cached.wgsl shades them, in
+//! the layout of path_cache.wgsl): each camera's primal image shaded from a pool of
+//! stored camera paths, `primal_spp` per pixel, of which `refresh` are traced anew every
+//! iteration in rotation, so that every path is replaced within `primal_spp / refresh`
+//! iterations. Geometry, cameras and lights never change in a texture optimization, so a
+//! stored path is a sample of the same path space under any textures; shading it under the
+//! current ones, with the densities and MIS weights of the iteration that drew it, stays an
+//! unbiased estimate of the current render. The image of one iteration is not independent
+//! of the last ones (they share paths), which is what the refresh bounds.
+use crate::gpu::Gpu;
+use crate::optim::{PassKind, PassTimer};
+use crate::render::layout::GpuCameraInfo;
+use crate::render::{Renderer, WORKGROUP};
+use crate::{Error, Result};
+use bytemuck::{Pod, Zeroable};
+
+/// Group 1 of `primal_cached.wgsl`.
+pub(crate) const PRIMAL_CACHED_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
+    pass: "primal_cached",
+    group: 1,
+    names: &["cp", "accum", "stats", "accum_prev", "path_cache"],
+};
+/// Group 1 of `primal_cache_trace.wgsl`.
+pub(crate) const PRIMAL_CACHE_TRACE_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
+    pass: "primal_cache_trace",
+    group: 1,
+    names: &["cp", "stats", "path_cache"],
+};
+
+/// `PrimalCachedParams` in path_cache.wgsl (a test checks the layout); the fields are
+/// documented there.
+#[allow(missing_docs)]
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct PrimalCachedParams {
+    pub camera: GpuCameraInfo,
+    pub seed: u32,
+    pub spp: u32,
+    pub techniques: u32,
+    pub stride: u32,
+    pub two_states: u32,
+    pub refresh_first: u32,
+    pub refresh_count: u32,
+    pub vertices: u32,
+}
+
+/// The deepest paths the cache keeps (the vertices whose arrivals the integrator records,
+/// `PATH_RECORD_VERTICES`).
+pub const MAX_VERTICES: u32 = 3;
+
+/// Words of one stored path with `vertices` vertices (path_cache.wgsl: a header of 4, 20
+/// per vertex, 11 per arrival, two arrivals per vertex).
+pub fn path_words(vertices: u32) -> u64 {
+    4 + vertices as u64 * (20 + 2 * 11)
+}
+
+/// Bytes of the cache of one camera: `pixels` x `spp` paths of `max_depth` vertices.
+pub fn camera_bytes(pixels: u64, spp: u32, max_depth: u32) -> u64 {
+    4 * pixels * spp as u64 * path_words(max_depth.clamp(1, MAX_VERTICES))
+}
+
+/// Why the cache cannot be used for these images, or None: paths deeper than it keeps, or
+/// a camera's pool larger than one storage binding.
+pub fn unusable(gpu: &Gpu, pixels: u64, spp: u32, max_depth: u32) -> Option<String> {
+    if max_depth > MAX_VERTICES {
+        return Some(format!(
+            "it keeps paths of at most {MAX_VERTICES} vertices (the scene's depth is {max_depth})"
+        ));
+    }
+    let bytes = camera_bytes(pixels, spp, max_depth);
+    let limit = gpu.device.limits().max_storage_buffer_binding_size as u64;
+    (bytes > limit).then(|| {
+        format!(
+            "one camera's pool would take {:.0} MiB, more than one storage binding holds \
+             ({:.0} MiB)",
+            bytes as f64 / 1048576.0,
+            limit as f64 / 1048576.0
+        )
+    })
+}
+
+struct Camera {
+    /// The trace pass's uniform and the shading pass's (their strides differ).
+    uniform: wgpu::Buffer,
+    shade_uniform: wgpu::Buffer,
+    params: PrimalCachedParams,
+    /// The trace pass's group and the shading pass's.
+    trace_group: wgpu::BindGroup,
+    group: wgpu::BindGroup,
+}
+
+/// The cached primal passes of every camera and their pools.
+pub(crate) struct PathCache {
+    trace_pipeline: wgpu::ComputePipeline,
+    pipeline: wgpu::ComputePipeline,
+    cameras: Vec<Camera>,
+    /// Paths traced anew per pixel and iteration.
+    refresh: u32,
+    /// Whether the pools hold paths (false until the first render, and after a restore).
+    filled: bool,
+    /// Where the next refresh starts.
+    next_slot: u32,
+    max_dim: u32,
+    queue: wgpu::Queue,
+}
+
+/// What [`PathCache::new`] binds.
+pub(crate) struct PathCacheSetup<'a> {
+    pub gpu: &'a Gpu,
+    pub renderer: &'a Renderer,
+    pub camera_infos: &'a [GpuCameraInfo],
+    pub grid: (u32, u32),
+    pub spp: u32,
+    /// Paths traced anew per pixel and iteration (None: no cache).
+    pub refresh: Option<u32>,
+    pub max_depth: u32,
+    pub accum: &'a wgpu::Buffer,
+    pub accum_prev: &'a wgpu::Buffer,
+    pub stats: &'a wgpu::Buffer,
+}
+
+/// The cache `s` asks for, or None where it asks for none or the images cannot use one (the
+/// log says why; the primal then traces every sample, as without it).
+pub(crate) fn build(s: &PathCacheSetup) -> Result<Option<PathCache>> {
+    let Some(refresh) = s.refresh else {
+        return Ok(None);
+    };
+    let pixels = s
+        .camera_infos
+        .first()
+        .map_or(0, |c| c.width as u64 * c.height as u64);
+    if let Some(why) = unusable(s.gpu, pixels, s.spp, s.max_depth) {
+        log::warn!("path cache off, the primal traces every sample: {why}");
+        return Ok(None);
+    }
+    log::info!(
+        "path cache: {} paths per pixel, {refresh} traced anew each iteration",
+        s.spp
+    );
+    PathCache::new(s, refresh).map(Some)
+}
+
+impl PathCache {
+    fn new(s: &PathCacheSetup, refresh: u32) -> Result<PathCache> {
+        let gpu = s.gpu;
+        let layout = gpu.pass_layout("primal_cached", 1)?;
+        let trace_layout = gpu.pass_layout("primal_cache_trace", 1)?;
+        let scene = &s.renderer.scene;
+        let pipeline = scene.pipeline(gpu, "primal_cached", &[&scene.layout, &layout])?;
+        let trace_pipeline =
+            scene.pipeline(gpu, "primal_cache_trace", &[&scene.layout, &trace_layout])?;
+        let vertices = s.max_depth.clamp(1, MAX_VERTICES);
+        let cameras = s
+            .camera_infos
+            .iter()
+            .enumerate()
+            .map(|(k, camera)| {
+                let pixels = camera.width as u64 * camera.height as u64;
+                let pool = gpu.storage_zeroed(
+                    &format!("path cache {k}"),
+                    camera_bytes(pixels, s.spp, s.max_depth),
+                );
+                let params = PrimalCachedParams {
+                    camera: *camera,
+                    spp: s.spp,
+                    techniques: crate::render::Techniques::Mis.bits(),
+                    stride: s.grid.0 * WORKGROUP,
+                    vertices,
+                    ..Default::default()
+                };
+                let uniform = gpu.uniform(
+                    &format!("primal_cache_trace params {k}"),
+                    bytemuck::bytes_of(&params),
+                );
+                let shade_uniform = gpu.uniform(
+                    &format!("primal_cached params {k}"),
+                    bytemuck::bytes_of(&params),
+                );
+                let group = gpu.bind(
+                    &PRIMAL_CACHED_GROUP,
+                    "primal_cached",
+                    &layout,
+                    &[
+                        ("cp", &shade_uniform),
+                        ("accum", s.accum),
+                        ("stats", s.stats),
+                        ("accum_prev", s.accum_prev),
+                        ("path_cache", &pool),
+                    ],
+                );
+                let trace_group = gpu.bind(
+                    &PRIMAL_CACHE_TRACE_GROUP,
+                    "primal_cache_trace",
+                    &trace_layout,
+                    &[("cp", &uniform), ("stats", s.stats), ("path_cache", &pool)],
+                );
+                Camera {
+                    uniform,
+                    shade_uniform,
+                    params,
+                    trace_group,
+                    group,
+                }
+            })
+            .collect();
+        if refresh == 0 || refresh > s.spp {
+            return Err(Error::Invalid(format!(
+                "path cache: {refresh} paths refreshed per iteration of {} kept",
+                s.spp
+            )));
+        }
+        Ok(PathCache {
+            trace_pipeline,
+            pipeline,
+            cameras,
+            refresh,
+            filled: false,
+            next_slot: 0,
+            max_dim: gpu.device.limits().max_compute_workgroups_per_dimension,
+            queue: gpu.queue.clone(),
+        })
+    }
+
+    /// Record camera `k`'s primal render into the accumulators (cleared by the caller): the
+    /// paths traced this iteration, drawn from `seed`, stored, then the pool shaded, with
+    /// `two_states` under the previous textures too (`scene`: the scene's bind group; `grid`
+    /// the image's tiles, [`Renderer::tile_grid`]).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn encode(
+        &mut self,
+        enc: &mut wgpu::CommandEncoder,
+        scene: &wgpu::BindGroup,
+        k: usize,
+        seed: u32,
+        two_states: bool,
+        grid: (u32, u32),
+        timer: &mut PassTimer,
+    ) {
+        let cam = &mut self.cameras[k];
+        cam.params.seed = seed;
+        cam.params.two_states = two_states as u32;
+        cam.params.refresh_first = self.next_slot;
+        cam.params.refresh_count = if self.filled {
+            self.refresh
+        } else {
+            cam.params.spp
+        };
+        let tiles = grid.0 as u64 * grid.1 as u64 * WORKGROUP as u64;
+        let invocations = tiles * cam.params.refresh_count as u64;
+        let trace_grid = crate::gpu::grid_2d(
+            invocations.min(u32::MAX as u64) as u32,
+            WORKGROUP,
+            self.max_dim,
+        );
+        cam.params.stride = trace_grid.0 * WORKGROUP;
+        self.queue
+            .write_buffer(&cam.uniform, 0, bytemuck::bytes_of(&cam.params));
+        crate::gpu::encode_timed_pass(
+            enc,
+            "primal_cache_trace",
+            &self.trace_pipeline,
+            &[scene, &cam.trace_group],
+            trace_grid,
+            timer.next(PassKind::Primal),
+        );
+        // (The shading pass reads the same uniform, its stride the image's: a second copy.)
+        let mut shade = cam.params;
+        shade.stride = grid.0 * WORKGROUP;
+        self.queue
+            .write_buffer(&cam.shade_uniform, 0, bytemuck::bytes_of(&shade));
+        crate::gpu::encode_timed_pass(
+            enc,
+            "primal_cached",
+            &self.pipeline,
+            &[scene, &cam.group],
+            grid,
+            timer.next(PassKind::Primal),
+        );
+    }
+
+    /// Called once an iteration's renders are submitted: the next refresh starts where this
+    /// one ended.
+    pub(crate) fn finish_iteration(&mut self) {
+        let spp = self.cameras.first().map_or(1, |c| c.params.spp);
+        if self.filled {
+            self.next_slot = (self.next_slot + self.refresh) % spp;
+        }
+        self.filled = true;
+    }
+
+    /// Forget the stored paths (a restored state): the next render traces every slot.
+    pub(crate) fn reset(&mut self) {
+        self.filled = false;
+        self.next_slot = 0;
+    }
+}

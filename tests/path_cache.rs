@@ -1,0 +1,235 @@
+//! The path cache (src/optim/primal/path_cache.rs): a primal image shaded from camera paths
+//! traced in earlier iterations, under textures that moved since (roughness and normal maps
+//! move the BSDF sample's density), is still an unbiased estimate of the current render, at
+//! depth 1 and 3; a pool refreshed whole every iteration gives the uncached primal's values;
+//! bad settings are refused by name.
+mod common;
+
+use common::*;
+use psrestir::image_io::Image;
+use psrestir::optim::{Method, Optimizer, PrimalMode, Settings};
+use psrestir::render::params::ParamSet;
+use psrestir::scene::Scene;
+use psrestir::task::{Filter, Init, Slot, TextureSpec};
+
+const W: u32 = 16;
+
+/// Textures of `slots` (2x2 each) on material "plane", learning rate 0. The primal keeps
+/// `spp` paths per pixel, `refresh` traced anew each iteration (None: no cache). Its image
+/// is read through the control variate with weight 0, which is the iteration's render itself.
+fn optimizer(
+    gpu: &psrestir::gpu::Gpu,
+    scene: &Scene,
+    slots: &[Slot],
+    spp: u32,
+    refresh: Option<u32>,
+) -> Optimizer {
+    let specs: Vec<TextureSpec> = slots
+        .iter()
+        .map(|&slot| TextureSpec {
+            material: "plane".into(),
+            slot,
+            resolution: [2, 2],
+            init: Init::Vector(vec![0.5; slot.channels() as usize]),
+            learning_rate: Some(0.0),
+        })
+        .collect();
+    let set =
+        ParamSet::from_specs(scene, &specs, Filter::Bilinear, std::path::Path::new("t")).unwrap();
+    let settings = Settings {
+        primal_spp: spp,
+        primal: PrimalMode::ControlVariate,
+        cv_max_weight: 0.0,
+        path_cache: refresh,
+        method: Method::BASELINE,
+        seed: 33,
+        ..Settings::new(W, W, vec![0])
+    };
+    Optimizer::new(gpu, scene, set, settings, &[Image::new(W, W)]).unwrap()
+}
+
+/// The textures of iteration t: every value moves every iteration, roughness between 0.15
+/// and 0.85 (the BSDF sample's density moves with it), a normal map's tilt up to about 0.4.
+fn params_at(slots: &[Slot], t: u32) -> Vec<f32> {
+    let mut v = Vec::new();
+    for &slot in slots {
+        for k in 0..4 {
+            let phase = t as f32 * 0.7 + k as f32 * 1.3;
+            match slot {
+                Slot::Normal => v.extend([
+                    0.5 + 0.2 * phase.sin(),
+                    0.5 + 0.2 * (phase * 0.8).cos(),
+                    1.0,
+                ]),
+                Slot::Roughness => v.push(0.5 + 0.35 * phase.sin()),
+                _ => {
+                    for c in 0..slot.channels() {
+                        v.push(0.5 + 0.3 * (phase + c as f32).sin());
+                    }
+                }
+            }
+        }
+    }
+    v
+}
+
+/// Independent runs per test: each a fresh pool, 12 iterations.
+const RUNS: u32 = 192;
+
+/// Over `runs` independent runs of `steps` iterations with moving textures, the last
+/// iteration's image (luminance of 4x4-pixel blocks: the three channels' noise is one
+/// sample's, so they are not counted as three) against a converged render at its textures:
+/// chi2/dof and the worst |z|.
+fn cached_image_bias(scene: &Scene, slots: &[Slot], runs: u32, steps: u32) -> (f64, f64) {
+    let gpu = gpu().unwrap();
+    let mut opt = optimizer(&gpu, scene, slots, 4, Some(1));
+    let fresh = opt.state().unwrap();
+    let blocks = ((W / 4) * (W / 4)) as usize;
+    let block_means = |img: &Image| -> Vec<f64> {
+        let mut b = vec![0f64; blocks];
+        for y in 0..W {
+            for x in 0..W {
+                let k = ((y / 4) * (W / 4) + x / 4) as usize;
+                b[k] += lum(img.rgb[(y * W + x) as usize]) / 16.0;
+            }
+        }
+        b
+    };
+    let (mut sum, mut sum2) = (vec![0f64; blocks], vec![0f64; blocks]);
+    for r in 0..runs {
+        let mut st = fresh.clone();
+        st.iteration = 1000 * (r + 1);
+        // (A restore empties the pool: every run fills its own.)
+        opt.restore(&st).unwrap();
+        for t in 0..steps {
+            opt.write_params(&params_at(slots, t)).unwrap();
+            opt.step().unwrap();
+        }
+        let img = opt.control_variate_image(0).unwrap().unwrap();
+        for (i, v) in block_means(&img).iter().enumerate() {
+            sum[i] += v;
+            sum2[i] += v * v;
+        }
+    }
+    opt.write_params(&params_at(slots, steps - 1)).unwrap();
+    let truth = block_means(&opt.render(0, 8192, 5).unwrap());
+    let (mut z2, mut worst, mut dof) = (0.0, 0f64, 0.0);
+    for i in 0..blocks {
+        let n = runs as f64;
+        let mean = sum[i] / n;
+        let var = (sum2[i] / n - mean * mean).max(0.0) * n / (n - 1.0);
+        if var == 0.0 && truth[i] == 0.0 {
+            continue;
+        }
+        let z = (mean - truth[i]) / (var / n).sqrt().max(1e-9);
+        z2 += z * z;
+        worst = worst.max(z.abs());
+        dof += 1.0;
+    }
+    assert!(dof >= 12.0, "too few lit blocks: {dof}");
+    eprintln!(
+        "chi2/dof {:.3} over {dof} block means (worst |z| {worst:.2})",
+        z2 / dof
+    );
+    (z2 / dof, worst)
+}
+
+// An unbiased mean gives chi2/dof near 1 with 16 blocks (standard deviation 0.35); it
+// exceeds 2.45 with probability 0.001. A bias of 2% in every block is about 2 standard
+// errors with 192 runs (a block's relative standard error is about 1%): chi2/dof near 5.
+fn assert_unbiased((chi2, worst): (f64, f64), what: &str) {
+    assert!(
+        chi2 < 2.45,
+        "{what}: the cached image is biased: chi2/dof {chi2}"
+    );
+    assert!(
+        worst < 4.0,
+        "{what}: a block is off by {worst} standard errors"
+    );
+}
+
+#[test]
+fn a_cached_image_is_unbiased_while_roughness_moves_the_sampling() {
+    if gpu().is_none() {
+        return;
+    }
+    // Each of the 4 paths per pixel was traced 0-3 iterations ago, under other textures.
+    let slots = [Slot::BaseColor, Slot::Roughness];
+    assert_unbiased(
+        cached_image_bias(&shadow_scene(), &slots, RUNS, 12),
+        "depth 1",
+    );
+}
+
+#[test]
+fn a_cached_image_is_unbiased_under_a_moving_normal_map() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut scene = shadow_scene();
+    with_normal_map(&mut scene);
+    let slots = [Slot::BaseColor, Slot::Normal];
+    assert_unbiased(cached_image_bias(&scene, &slots, RUNS, 12), "normal map");
+}
+
+#[test]
+fn a_cached_image_is_unbiased_with_indirect_light() {
+    if gpu().is_none() {
+        return;
+    }
+    let slots = [Slot::BaseColor, Slot::Roughness];
+    assert_unbiased(
+        cached_image_bias(&corner_scene(3), &slots, RUNS, 12),
+        "depth 3",
+    );
+}
+
+#[test]
+fn a_pool_refreshed_whole_gives_the_uncached_primal() {
+    let Some(gpu) = gpu() else { return };
+    // Every path is traced anew every iteration: the stored paths re-evaluate to what their
+    // samples were worth when traced (the same camera samples as the uncached primal's). At
+    // depth 1 to float rounding; with later vertices the stored path's directions run
+    // between the vertices themselves, where the tracer's rays started from origins pushed
+    // off the surface (by 1e-4 of the scene's scale): values differ by about that much.
+    for (scene, tol) in [(shadow_scene(), 1e-5), (corner_scene(3), 1e-3)] {
+        let slots = [Slot::BaseColor, Slot::Roughness];
+        let mut a = optimizer(&gpu, &scene, &slots, 2, None);
+        let mut b = optimizer(&gpu, &scene, &slots, 2, Some(2));
+        for t in 0..3 {
+            a.write_params(&params_at(&slots, t)).unwrap();
+            b.write_params(&params_at(&slots, t)).unwrap();
+            a.step().unwrap();
+            b.step().unwrap();
+            let ia = a.control_variate_image(0).unwrap().unwrap();
+            let ib = b.control_variate_image(0).unwrap().unwrap();
+            let (mut diff, mut total) = (0f64, 0f64);
+            for (pa, pb) in ia.rgb.iter().zip(&ib.rgb) {
+                for c in 0..3 {
+                    diff += (pa[c] as f64 - pb[c] as f64).abs();
+                    total += pa[c].abs() as f64;
+                }
+            }
+            assert!(total > 0.0);
+            assert!(
+                diff <= tol * total,
+                "iteration {t}: relative difference {}",
+                diff / total
+            );
+        }
+    }
+}
+
+#[test]
+fn bad_path_cache_settings_are_refused_by_name() {
+    for refresh in [0, 5] {
+        let s = Settings {
+            primal_spp: 4,
+            path_cache: Some(refresh),
+            ..Settings::new(W, W, vec![0])
+        };
+        let (key, msg) = s.validate().unwrap_err();
+        assert_eq!(key, "optimizer.path_cache");
+        assert!(msg.contains("primal_spp (4)"), "{msg}");
+    }
+}
