@@ -689,8 +689,8 @@ fn kill_after_first_checkpoint_and_resume(task: &Path, out: &Path) {
     assert!(resumed > 0, "resumed from the start");
 }
 
-/// Every estimator with either step, filtered moments, the environment and the cameras'
-/// exposures and white balances, killed after its first checkpoint and resumed: the resumed
+/// Every estimator with either step, filtered moments, the path cache, the environment and
+/// the cameras' exposures and white balances, killed after its first checkpoint and resumed: the resumed
 /// run writes the uninterrupted run's metrics.csv bit for bit (loss, texture and image
 /// errors, learning rate at every iteration). The checkpoint holds everything a step reads:
 /// a missing moment, counter or seed stream would change the iterations after it. (Before
@@ -728,6 +728,11 @@ fn every_configuration_resumes_bit_exactly() {
         (
             "recursive, variance-scaled step",
             "method = \"recursive\"\nstep = \"variance\"".to_string(),
+            "",
+        ),
+        (
+            "baseline, the path cache (1 of 4 paths traced anew per iteration)",
+            format!("method = \"baseline\"\n{variance}\npath_cache = 1"),
             "",
         ),
         (

@@ -44,6 +44,7 @@ use crate::{Error, Result};
 use cameras::{camera_passes, check_inputs, CameraSetup};
 pub use estimator::{Choice, EstimatorOptions, EstimatorState, Method, MethodChoice};
 use parts::{build_step, pass_timer, Inputs, IterationBuffers, Passes, Plugins};
+pub use primal::path_cache::PathCacheSnapshot;
 pub use primal::{ControlVariateSnapshot, PrimalMode};
 pub use prior::{multiscale, smoothness, Priors};
 /// The optimizer's own passes besides the steps', priors' and estimators' (a pass is named

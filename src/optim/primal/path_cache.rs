@@ -79,7 +79,19 @@ pub fn unusable(gpu: &Gpu, pixels: u64, spp: u32, max_depth: u32) -> Option<Stri
     })
 }
 
+/// What a checkpoint keeps of the path cache: every camera's stored paths and where the next
+/// refresh starts. Paths are samples of the same path space under any textures, so a resumed
+/// run shades them as the uninterrupted run does.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PathCacheSnapshot {
+    /// Per camera, the pool's words (path_cache.wgsl's layout).
+    pub pools: Vec<Vec<u32>>,
+    /// The slot the next refresh starts at.
+    pub next_slot: u32,
+}
+
 struct Camera {
+    pool: wgpu::Buffer,
     /// The trace pass's uniform and the shading pass's (their strides differ).
     uniform: wgpu::Buffer,
     shade_uniform: wgpu::Buffer,
@@ -195,6 +207,7 @@ impl PathCache {
                     &[("cp", &uniform), ("stats", s.stats), ("path_cache", &pool)],
                 );
                 Camera {
+                    pool,
                     uniform,
                     shade_uniform,
                     params,
@@ -288,9 +301,41 @@ impl PathCache {
         self.filled = true;
     }
 
-    /// Forget the stored paths (a restored state): the next render traces every slot.
-    pub(crate) fn reset(&mut self) {
-        self.filled = false;
-        self.next_slot = 0;
+    /// The stored paths, once the pool is filled.
+    pub(crate) fn snapshot(&self, gpu: &Gpu) -> Result<Option<PathCacheSnapshot>> {
+        if !self.filled {
+            return Ok(None);
+        }
+        let pools = (self.cameras.iter())
+            .map(|c| gpu.read_pod::<u32>(&c.pool))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Some(PathCacheSnapshot {
+            pools,
+            next_slot: self.next_slot,
+        }))
+    }
+
+    /// Continue from `s`; None empties the pool (the next render traces every slot).
+    pub(crate) fn restore(&mut self, gpu: &Gpu, s: Option<&PathCacheSnapshot>) -> Result<()> {
+        let Some(s) = s else {
+            self.filled = false;
+            self.next_slot = 0;
+            return Ok(());
+        };
+        let spp = self.cameras.first().map_or(1, |c| c.params.spp);
+        if s.pools.len() != self.cameras.len()
+            || s.next_slot >= spp
+            || (s.pools.iter().zip(&self.cameras)).any(|(p, c)| p.len() as u64 * 4 != c.pool.size())
+        {
+            return Err(Error::Invalid(
+                "the saved path cache does not match this optimizer's images and paths".into(),
+            ));
+        }
+        for (p, c) in s.pools.iter().zip(&self.cameras) {
+            gpu.queue.write_buffer(&c.pool, 0, bytemuck::cast_slice(p));
+        }
+        self.filled = true;
+        self.next_slot = s.next_slot;
+        Ok(())
     }
 }

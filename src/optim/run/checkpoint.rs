@@ -5,7 +5,10 @@
 //! rename.
 use crate::optim::environment_fit::EnvFitState;
 use crate::optim::param_table::{GroupState, ENVIRONMENT, EXPOSURE, WHITE_BALANCE};
-use crate::optim::{ControlVariateSnapshot, EstimatorState, OptimizerState, PreviousState, Values};
+use crate::optim::{
+    ControlVariateSnapshot, EstimatorState, OptimizerState, PathCacheSnapshot, PreviousState,
+    Values,
+};
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -66,6 +69,12 @@ struct Stored {
     /// Iterations the control variate has run.
     #[serde(default)]
     control_variate_iterations: u32,
+    /// Words of each camera's stored paths, when the path cache has any (their data follows
+    /// the control variate's), and the slot its next refresh starts at.
+    #[serde(default)]
+    path_cache_words: Option<Vec<usize>>,
+    #[serde(default)]
+    path_cache_next_slot: u32,
     /// The parameter table's CPU groups with their step's state.
     #[serde(default)]
     groups: BTreeMap<String, GroupState>,
@@ -212,6 +221,9 @@ impl Checkpoint {
             },
             control_variate_floats: st.control_variate.as_ref().map(|c| c.state.len()),
             control_variate_iterations: st.control_variate.as_ref().map_or(0, |c| c.iterations),
+            path_cache_words: (st.path_cache.as_ref())
+                .map(|c| c.pools.iter().map(Vec::len).collect()),
+            path_cache_next_slot: st.path_cache.as_ref().map_or(0, |c| c.next_slot),
             groups: st.groups.clone(),
             environment_fit: st.environment.clone(),
             exposure: None,
@@ -252,6 +264,9 @@ impl Checkpoint {
         }
         if let Some(c) = &st.control_variate {
             out.extend_from_slice(bytemuck::cast_slice(&c.state));
+        }
+        for p in st.path_cache.iter().flat_map(|c| &c.pools) {
+            out.extend_from_slice(bytemuck::cast_slice(p));
         }
         if let Some(k) = &self.kept {
             out.extend_from_slice(bytemuck::cast_slice(&k.values.params));
@@ -298,6 +313,9 @@ impl Checkpoint {
         if let Some(c) = stored.control_variate_floats {
             sizes.push(Some(c));
         }
+        for &w in stored.path_cache_words.iter().flatten() {
+            sizes.push(Some(w));
+        }
         if stored.kept.is_some() {
             sizes.push(Some(n));
         }
@@ -333,6 +351,12 @@ impl Checkpoint {
                 state: bytemuck::pod_collect_to_vec(take(c)),
                 iterations: stored.control_variate_iterations,
             });
+        let path_cache = stored.path_cache_words.map(|words| PathCacheSnapshot {
+            pools: (words.into_iter())
+                .map(|w| bytemuck::pod_collect_to_vec(take(w)))
+                .collect(),
+            next_slot: stored.path_cache_next_slot,
+        });
         let kept = stored.kept.map(|k| Kept {
             image_relmse: k.image_relmse,
             values: Values {
@@ -352,6 +376,7 @@ impl Checkpoint {
                 previous,
                 estimator,
                 control_variate,
+                path_cache,
                 groups,
                 environment,
             },
@@ -401,6 +426,10 @@ mod tests {
                 control_variate: Some(ControlVariateSnapshot {
                     state: vec![0.25; 32],
                     iterations: 9,
+                }),
+                path_cache: Some(PathCacheSnapshot {
+                    pools: vec![vec![1, 2, 3], vec![4, 5, 6]],
+                    next_slot: 1,
                 }),
                 groups: [
                     (EXPOSURE, vec![1.5], 3),

@@ -1,7 +1,7 @@
 //! What an iteration reports, and the optimizer's state as checkpoints save it.
 
 use crate::optim::param_table::GroupState;
-use crate::optim::{ControlVariateSnapshot, EstimatorState, Optimizer};
+use crate::optim::{ControlVariateSnapshot, EstimatorState, Optimizer, PathCacheSnapshot};
 use crate::{Error, Result};
 use std::collections::BTreeMap;
 
@@ -40,6 +40,8 @@ pub struct OptimizerState {
     pub estimator: EstimatorState,
     /// The control-variate primal's state; `None` for the independent primal.
     pub control_variate: Option<ControlVariateSnapshot>,
+    /// The path cache's stored paths; `None` without a cache or before its first render.
+    pub path_cache: Option<PathCacheSnapshot>,
     /// The parameter table's CPU groups (exposures, white balances, the environment's
     /// logarithms when it is optimized), by name, with their step's state.
     pub groups: BTreeMap<String, GroupState>,
@@ -183,6 +185,10 @@ impl Optimizer {
                 Some(cv) => Some(cv.snapshot(&self.gpu)?),
                 None => None,
             },
+            path_cache: match &self.passes.path_cache {
+                Some(cache) => cache.snapshot(&self.gpu)?,
+                None => None,
+            },
             groups: self.fit.table.states(),
             environment: self.environment_state().cloned(),
         })
@@ -232,8 +238,8 @@ impl Optimizer {
             cv.restore(&self.gpu, cv_snapshot)?;
         }
         if let Some(cache) = &mut self.passes.path_cache {
-            // (The stored paths are not saved: the next render traces its pool anew.)
-            cache.reset();
+            // (Stored paths are samples under any textures: they need no previous state.)
+            cache.restore(&self.gpu, state.path_cache.as_ref())?;
         }
         if let Some(env) = &state.environment {
             self.restore_environment(env)?;
