@@ -46,6 +46,7 @@ pub fn run(scene_path: &Path, out: &Path, iterations: u32) -> psrestir::Result<O
         primal_spp: 2,
         primal: Default::default(),
         cv_max_weight: psrestir::optim::primal::DEFAULT_MAX_WEIGHT,
+        path_cache: None,
         gradient_spp: 2,
         ..Settings::new(64, 64, vec![main])
     };

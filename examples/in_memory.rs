@@ -124,6 +124,7 @@ pub fn run(iterations: u32) -> psrestir::Result<(f64, f64)> {
         primal_spp: 2,
         primal: Default::default(),
         cv_max_weight: psrestir::optim::primal::DEFAULT_MAX_WEIGHT,
+        path_cache: None,
         gradient_spp: 2,
         ..Settings::new(64, 64, vec![0])
     };

@@ -379,6 +379,11 @@ pub(crate) struct BenchArgs {
     /// Primal estimator of every run (default: each task's own).
     #[arg(long, value_enum)]
     pub(crate) primal: Option<PrimalArg>,
+    /// Shade every run's primal from the path cache, this many paths per pixel traced anew
+    /// each iteration (at most the task's primal spp); default: each task's own
+    /// `optimizer.path_cache`.
+    #[arg(long)]
+    pub(crate) path_cache: Option<u32>,
     /// Samples per pixel of the renders that measure image error.
     #[arg(long, default_value_t = 64)]
     pub(crate) eval_spp: u32,

@@ -98,6 +98,7 @@ fn settings(method: Method) -> Settings {
         primal_spp: 2,
         primal: Default::default(),
         cv_max_weight: psrestir::optim::primal::DEFAULT_MAX_WEIGHT,
+        path_cache: None,
         gradient_spp: 2,
         method,
         ..Settings::new(32, 32, vec![0])

@@ -63,6 +63,7 @@ fn check_gradient_on(
         primal_spp: 16,
         primal,
         cv_max_weight: psrestir::optim::primal::DEFAULT_MAX_WEIGHT,
+        path_cache: None,
         gradient_spp: 16,
         loss: Loss::L2,
         seed: 7,

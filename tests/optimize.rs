@@ -73,6 +73,7 @@ fn setup_with(
         primal_spp: 4,
         primal: Default::default(),
         cv_max_weight: psrestir::optim::primal::DEFAULT_MAX_WEIGHT,
+        path_cache: None,
         gradient_spp: 4,
         loss: Loss::L2,
         seed: 3,

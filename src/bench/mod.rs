@@ -58,6 +58,9 @@ fn settings(prep: &Problem, task: &Task, method: Method, o: &BenchOptions) -> Se
     if let Some(p) = o.primal {
         s.primal = p;
     }
+    if let Some(r) = o.path_cache {
+        s.path_cache = Some(r.min(s.primal_spp));
+    }
     s
 }
 
@@ -126,6 +129,9 @@ pub struct BenchOptions {
     pub gradient_only: bool,
     /// The primal estimator of every run (None: each task's own).
     pub primal: Option<crate::optim::PrimalMode>,
+    /// The path cache of every run: paths per pixel traced anew each iteration, at most the
+    /// task's primal spp (None: each task's own).
+    pub path_cache: Option<u32>,
     /// Vertices of a camera path in every task (None: each task's own `max_depth`).
     pub max_depth: Option<u32>,
     /// Samples per pixel of the renders that measure image error.
@@ -175,6 +181,7 @@ impl Default for BenchOptions {
             protocol: Protocol::Default,
             gradient_only: false,
             primal: None,
+            path_cache: None,
             max_depth: None,
             eval_spp: 64,
             curve_points: 11,
@@ -539,7 +546,8 @@ fn tune_contenders(
     }
     let budget = o.tune_budget_s.unwrap_or(o.budget_s / 3.0);
     let key = format!(
-        "{} {}x{} {:?} scale {} priors {} primal {:?} options {:?} tuning {budget} s, psrestir {}",
+        "{} {}x{} {:?} scale {} priors {} primal {:?} cache {:?} options {:?} tuning {budget} s, \
+         psrestir {}",
         task.path.display(),
         task.width,
         task.height,
@@ -547,6 +555,7 @@ fn tune_contenders(
         o.scale,
         !o.no_priors,
         o.primal,
+        o.path_cache,
         o.estimator_options,
         env!("CARGO_PKG_VERSION"),
     );

@@ -128,6 +128,7 @@ pub fn memory_plan(
                 .map(|(l, b)| (l, b, Scale::Texel)),
         );
     }
+    // (Settings ask for a cache only where the images can use one: path_cache::usable.)
     if settings.path_cache.is_some() {
         for k in 0..n_cams {
             let bytes = primal::path_cache::camera_bytes(pixels, settings.primal_spp, max_depth);

@@ -121,6 +121,7 @@ impl Optimizer {
         check_inputs(&settings, targets)?;
         // Textures and scene first: the texels the paths reach decide what ReSTIR allocates.
         let depth = scene.max_depth.get();
+        let settings = primal::path_cache::usable(gpu, settings, depth);
         memory_plan(&set, &settings, targets.len(), 0, depth).check(gpu)?;
         let params = ParamBuffers::new(gpu, &set);
         let renderer = Renderer::with_param_buffers(gpu, scene, &set, &params)?;
@@ -171,18 +172,8 @@ impl Optimizer {
             observed: &observed.0,
         })?;
 
-        let path_cache = primal::path_cache::build(&primal::path_cache::PathCacheSetup {
-            gpu,
-            renderer: &renderer,
-            camera_infos: &camera_infos,
-            grid,
-            spp: settings.primal_spp,
-            refresh: settings.path_cache,
-            max_depth: depth,
-            accum: &bufs.accum,
-            accum_prev: &bufs.accum_prev,
-            stats: &bufs.stats.primal,
-        })?;
+        let cache_for = (&renderer, &camera_infos[..], grid);
+        let path_cache = primal::path_cache::build(gpu, cache_for, (&settings, depth), &bufs)?;
         let cams = camera_passes(&CameraSetup {
             gpu,
             renderer: &renderer,

@@ -8,7 +8,8 @@
 //! unbiased estimate of the current render. The image of one iteration is not independent
 //! of the last ones (they share paths), which is what the refresh bounds.
 use crate::gpu::Gpu;
-use crate::optim::{PassKind, PassTimer};
+use crate::optim::parts::IterationBuffers;
+use crate::optim::{PassKind, PassTimer, Settings};
 use crate::render::layout::GpuCameraInfo;
 use crate::render::{Renderer, WORKGROUP};
 use crate::{Error, Result};
@@ -59,8 +60,9 @@ pub fn camera_bytes(pixels: u64, spp: u32, max_depth: u32) -> u64 {
     4 * pixels * spp as u64 * path_words(max_depth.clamp(1, MAX_VERTICES))
 }
 
-/// Why the cache cannot be used for these images, or None: paths deeper than it keeps, or
-/// a camera's pool larger than one storage binding.
+/// Why the cache cannot be used for images of `pixels` pixels, `spp` paths each of
+/// `max_depth` vertices, or None: paths deeper than it keeps, or a camera's pool larger than
+/// one storage buffer.
 pub fn unusable(gpu: &Gpu, pixels: u64, spp: u32, max_depth: u32) -> Option<String> {
     if max_depth > MAX_VERTICES {
         return Some(format!(
@@ -68,15 +70,30 @@ pub fn unusable(gpu: &Gpu, pixels: u64, spp: u32, max_depth: u32) -> Option<Stri
         ));
     }
     let bytes = camera_bytes(pixels, spp, max_depth);
-    let limit = gpu.device.limits().max_storage_buffer_binding_size as u64;
+    let l = gpu.device.limits();
+    let limit = l.max_storage_buffer_binding_size.min(l.max_buffer_size);
     (bytes > limit).then(|| {
         format!(
-            "one camera's pool would take {:.0} MiB, more than one storage binding holds \
+            "one camera's pool would take {:.0} MiB, more than one storage buffer holds \
              ({:.0} MiB)",
             bytes as f64 / 1048576.0,
             limit as f64 / 1048576.0
         )
     })
+}
+
+/// `settings` without the path cache where the images cannot use one (the log says why; the
+/// primal then traces every sample, as without it), so that the memory plan counts it only
+/// where it is made.
+pub(crate) fn usable(gpu: &Gpu, mut settings: Settings, max_depth: u32) -> Settings {
+    if settings.path_cache.is_some() {
+        let pixels = settings.width as u64 * settings.height as u64;
+        if let Some(why) = unusable(gpu, pixels, settings.primal_spp, max_depth) {
+            log::warn!("path cache off, the primal traces every sample: {why}");
+            settings.path_cache = None;
+        }
+    }
+    settings
 }
 
 /// What a checkpoint keeps of the path cache: every camera's stored paths and where the next
@@ -116,67 +133,62 @@ pub(crate) struct PathCache {
     queue: wgpu::Queue,
 }
 
-/// What [`PathCache::new`] binds.
-pub(crate) struct PathCacheSetup<'a> {
-    pub gpu: &'a Gpu,
-    pub renderer: &'a Renderer,
-    pub camera_infos: &'a [GpuCameraInfo],
-    pub grid: (u32, u32),
-    pub spp: u32,
-    /// Paths traced anew per pixel and iteration (None: no cache).
-    pub refresh: Option<u32>,
-    pub max_depth: u32,
-    pub accum: &'a wgpu::Buffer,
-    pub accum_prev: &'a wgpu::Buffer,
-    pub stats: &'a wgpu::Buffer,
-}
-
-/// The cache `s` asks for, or None where it asks for none or the images cannot use one (the
-/// log says why; the primal then traces every sample, as without it).
-pub(crate) fn build(s: &PathCacheSetup) -> Result<Option<PathCache>> {
-    let Some(refresh) = s.refresh else {
+/// The cache `settings` asks for (after [`usable`]) for the cameras `camera_infos` of
+/// `renderer`'s scene (paths of `max_depth` vertices), rendered over `grid` into the
+/// iteration's accumulators; None without.
+pub(in crate::optim) fn build(
+    gpu: &Gpu,
+    (renderer, camera_infos, grid): (&Renderer, &[GpuCameraInfo], (u32, u32)),
+    (settings, max_depth): (&Settings, u32),
+    bufs: &IterationBuffers,
+) -> Result<Option<PathCache>> {
+    let Some(refresh) = settings.path_cache else {
         return Ok(None);
     };
-    let pixels = s
-        .camera_infos
-        .first()
-        .map_or(0, |c| c.width as u64 * c.height as u64);
-    if let Some(why) = unusable(s.gpu, pixels, s.spp, s.max_depth) {
-        log::warn!("path cache off, the primal traces every sample: {why}");
-        return Ok(None);
-    }
     log::info!(
         "path cache: {} paths per pixel, {refresh} traced anew each iteration",
-        s.spp
+        settings.primal_spp
     );
-    PathCache::new(s, refresh).map(Some)
+    PathCache::new(
+        gpu,
+        (renderer, camera_infos, grid),
+        settings,
+        bufs,
+        (refresh, max_depth),
+    )
+    .map(Some)
 }
 
 impl PathCache {
-    fn new(s: &PathCacheSetup, refresh: u32) -> Result<PathCache> {
-        let gpu = s.gpu;
+    fn new(
+        gpu: &Gpu,
+        (renderer, camera_infos, grid): (&Renderer, &[GpuCameraInfo], (u32, u32)),
+        settings: &Settings,
+        bufs: &IterationBuffers,
+        (refresh, max_depth): (u32, u32),
+    ) -> Result<PathCache> {
+        let spp = settings.primal_spp;
         let layout = gpu.pass_layout("primal_cached", 1)?;
         let trace_layout = gpu.pass_layout("primal_cache_trace", 1)?;
-        let scene = &s.renderer.scene;
+        let scene = &renderer.scene;
         let pipeline = scene.pipeline(gpu, "primal_cached", &[&scene.layout, &layout])?;
         let trace_pipeline =
             scene.pipeline(gpu, "primal_cache_trace", &[&scene.layout, &trace_layout])?;
-        let vertices = s.max_depth.clamp(1, MAX_VERTICES);
-        let cameras = s
-            .camera_infos
+        let vertices = max_depth.clamp(1, MAX_VERTICES);
+        let cameras = camera_infos
             .iter()
             .enumerate()
             .map(|(k, camera)| {
                 let pixels = camera.width as u64 * camera.height as u64;
                 let pool = gpu.storage_zeroed(
                     &format!("path cache {k}"),
-                    camera_bytes(pixels, s.spp, s.max_depth),
+                    camera_bytes(pixels, spp, max_depth),
                 );
                 let params = PrimalCachedParams {
                     camera: *camera,
-                    spp: s.spp,
+                    spp,
                     techniques: crate::render::Techniques::Mis.bits(),
-                    stride: s.grid.0 * WORKGROUP,
+                    stride: grid.0 * WORKGROUP,
                     vertices,
                     ..Default::default()
                 };
@@ -194,9 +206,9 @@ impl PathCache {
                     &layout,
                     &[
                         ("cp", &shade_uniform),
-                        ("accum", s.accum),
-                        ("stats", s.stats),
-                        ("accum_prev", s.accum_prev),
+                        ("accum", &bufs.accum),
+                        ("stats", &bufs.stats.primal),
+                        ("accum_prev", &bufs.accum_prev),
                         ("path_cache", &pool),
                     ],
                 );
@@ -204,7 +216,11 @@ impl PathCache {
                     &PRIMAL_CACHE_TRACE_GROUP,
                     "primal_cache_trace",
                     &trace_layout,
-                    &[("cp", &uniform), ("stats", s.stats), ("path_cache", &pool)],
+                    &[
+                        ("cp", &uniform),
+                        ("stats", &bufs.stats.primal),
+                        ("path_cache", &pool),
+                    ],
                 );
                 Camera {
                     pool,
@@ -216,10 +232,9 @@ impl PathCache {
                 }
             })
             .collect();
-        if refresh == 0 || refresh > s.spp {
+        if refresh == 0 || refresh > spp {
             return Err(Error::Invalid(format!(
-                "path cache: {refresh} paths refreshed per iteration of {} kept",
-                s.spp
+                "path cache: {refresh} paths refreshed per iteration of {spp} kept"
             )));
         }
         Ok(PathCache {
