@@ -44,6 +44,20 @@ pub mod path_encoding {
 /// vec4s of control-variate state per pixel (`primal_cv.wgsl`).
 pub const CV_VEC4S: u32 = 8;
 
+/// The path cache's layout (`primal/path_cache.wgsl`, WGSL `CACHE_*`): words of a stored
+/// path's header, of each of its vertices and of each arrival (two per vertex), and the
+/// most vertices a path keeps (the integrator's `PATH_RECORD_VERTICES`).
+pub mod path_cache {
+    /// The header, and the radiance along the camera ray.
+    pub const HEADER_WORDS: u32 = 4;
+    /// Triangle, barycentrics, material, uv, position, two directions, the glTF inputs.
+    pub const VERTEX_WORDS: u32 = 20;
+    /// Tag, two directions, radiance, factor.
+    pub const ARRIVAL_WORDS: u32 = 11;
+    /// Vertices of the deepest path kept.
+    pub const MAX_VERTICES: u32 = 3;
+}
+
 pub mod step_phase {
     //! What a step pass (`adam.wgsl`, `variance_step.wgsl`) does in one dispatch: the whole
     //! step (no moment filter), or, around the moment filter (`moment_filter.wgsl`), first
@@ -92,6 +106,10 @@ pub const CONSTANTS: &[(&str, u32)] = &[
     ("PATH_BARY_BITS", path_encoding::BARY_BITS),
     ("PATH_OCT_BITS", path_encoding::OCT_BITS),
     ("CV_VEC4S", CV_VEC4S),
+    ("CACHE_HEADER_WORDS", path_cache::HEADER_WORDS),
+    ("CACHE_VERTEX_WORDS", path_cache::VERTEX_WORDS),
+    ("CACHE_ARRIVAL_WORDS", path_cache::ARRIVAL_WORDS),
+    ("CACHE_MAX_VERTICES", path_cache::MAX_VERTICES),
     ("STEP_PHASE_FUSED", step_phase::FUSED),
     ("STEP_PHASE_PAIR", step_phase::PAIR),
     ("STEP_PHASE_FILTERED", step_phase::FILTERED),

@@ -45,14 +45,13 @@ pub struct PrimalCachedParams {
     pub vertices: u32,
 }
 
-/// The deepest paths the cache keeps (the vertices whose arrivals the integrator records,
-/// `PATH_RECORD_VERTICES`).
-pub const MAX_VERTICES: u32 = 3;
+pub use crate::gpu::abi::path_cache::MAX_VERTICES;
 
-/// Words of one stored path with `vertices` vertices (path_cache.wgsl: a header of 4, 20
-/// per vertex, 11 per arrival, two arrivals per vertex).
+/// Words of one stored path with `vertices` vertices (path_cache.wgsl: its header, and per
+/// vertex the vertex and two arrivals).
 pub fn path_words(vertices: u32) -> u64 {
-    4 + vertices as u64 * (20 + 2 * 11)
+    use crate::gpu::abi::path_cache::*;
+    (HEADER_WORDS + vertices * (VERTEX_WORDS + 2 * ARRIVAL_WORDS)) as u64
 }
 
 /// Bytes of the cache of one camera: `pixels` x `spp` paths of `max_depth` vertices.

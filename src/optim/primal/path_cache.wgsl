@@ -31,12 +31,7 @@ struct PrimalCachedParams {
 // reads no geometry, unless an optimized normal map moves its frame (then the surface is
 // rebuilt from the triangle). An arrival: its vertex count with CACHED_ENV_ARRIVAL, the
 // direction (world space, then in its vertex's shading frame), the radiance, the factor (AR_*).
-// The most vertices a stored path has (the integrator's PATH_RECORD_VERTICES; MAX_VERTICES in
-// path_cache.rs).
-const CACHE_MAX_VERTICES: u32 = 3u;
-const CACHE_HEADER_WORDS: u32 = 4u;
-const CACHE_VERTEX_WORDS: u32 = 20u;
-const CACHE_ARRIVAL_WORDS: u32 = 11u;
+// The sizes (CACHE_*_WORDS, CACHE_MAX_VERTICES) come from src/gpu/abi.rs.
 const VX_TRI: u32 = 0u;
 const VX_MATERIAL: u32 = 3u;
 const VX_UV: u32 = 4u;
