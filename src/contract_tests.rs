@@ -330,6 +330,23 @@ fn pass_uniform_mirrors_match_wgsl_field_by_field() {
         [offset, width, height, channels, texel_offset, scale]
     );
     mirror!(
+        "observed_texels",
+        "ObservedParams",
+        crate::optim::observed::ObservedParams,
+        [camera, strata, stride]
+    );
+    mirror!(
+        "texture_export",
+        "ExportParams",
+        crate::optim::texture_export::ExportParams,
+        [offset, width, height, channels]
+    );
+}
+
+// The primal passes' uniforms (the control variate's, the path cache's).
+#[test]
+fn primal_uniform_mirrors_match_wgsl_field_by_field() {
+    mirror!(
         "primal_cv",
         "PrimalCvParams",
         crate::optim::primal::PrimalCvParams,
@@ -362,17 +379,5 @@ fn pass_uniform_mirrors_match_wgsl_field_by_field() {
             refresh_count,
             vertices
         ]
-    );
-    mirror!(
-        "observed_texels",
-        "ObservedParams",
-        crate::optim::observed::ObservedParams,
-        [camera, strata, stride]
-    );
-    mirror!(
-        "texture_export",
-        "ExportParams",
-        crate::optim::texture_export::ExportParams,
-        [offset, width, height, channels]
     );
 }

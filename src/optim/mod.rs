@@ -134,17 +134,7 @@ impl Optimizer {
         log::info!("{}", plan.summary());
         let n_cams = targets.len() as u32;
         let bufs = IterationBuffers::new(gpu, (w, h), n_cams, set.values.len() as u64);
-        let control_variate = match settings.primal {
-            PrimalMode::ControlVariate => Some(primal::ControlVariate::new(
-                gpu,
-                (w, h),
-                targets.len(),
-                &bufs.accum,
-                &bufs.accum_prev,
-                settings.cv_max_weight,
-            )?),
-            PrimalMode::Independent => None,
-        };
+        let control_variate = parts::control_variate(gpu, &settings, targets.len(), &bufs)?;
         let loss = loss::LossPass::new(
             gpu,
             settings.loss,

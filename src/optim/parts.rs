@@ -142,3 +142,19 @@ pub(in crate::optim) fn pass_timer(
     let per_texture = 4 * n_textures as u32;
     PassTimer::new(gpu, 6 * n_cams + 4 + per_texture + filter_dispatches)
 }
+
+/// The control variate `settings` ask for, over `n_cams` cameras' images in the iteration's
+/// accumulators `bufs`; None for the independent primal.
+pub(in crate::optim) fn control_variate(
+    gpu: &Gpu,
+    settings: &Settings,
+    n_cams: usize,
+    bufs: &IterationBuffers,
+) -> Result<Option<primal::ControlVariate>> {
+    if settings.primal != primal::PrimalMode::ControlVariate {
+        return Ok(None);
+    }
+    let size = (settings.width, settings.height);
+    let (accum, prev) = (&bufs.accum, &bufs.accum_prev);
+    primal::ControlVariate::new(gpu, size, n_cams, accum, prev, settings.cv_max_weight).map(Some)
+}

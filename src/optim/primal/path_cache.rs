@@ -122,7 +122,8 @@ pub(crate) struct PathCache {
     trace_pipeline: wgpu::ComputePipeline,
     pipeline: wgpu::ComputePipeline,
     cameras: Vec<Camera>,
-    /// Paths traced anew per pixel and iteration.
+    /// Paths kept per pixel, and traced anew per pixel and iteration.
+    spp: u32,
     refresh: u32,
     /// Whether the pools hold paths (false until the first render, and after a restore).
     filled: bool,
@@ -240,6 +241,7 @@ impl PathCache {
             trace_pipeline,
             pipeline,
             cameras,
+            spp,
             refresh,
             filled: false,
             next_slot: 0,
@@ -267,11 +269,7 @@ impl PathCache {
         cam.params.seed = seed;
         cam.params.two_states = two_states as u32;
         cam.params.refresh_first = self.next_slot;
-        cam.params.refresh_count = if self.filled {
-            self.refresh
-        } else {
-            cam.params.spp
-        };
+        cam.params.refresh_count = if self.filled { self.refresh } else { self.spp };
         let tiles = grid.0 as u64 * grid.1 as u64 * WORKGROUP as u64;
         let invocations = tiles * cam.params.refresh_count as u64;
         let trace_grid = crate::gpu::grid_2d(
@@ -308,9 +306,8 @@ impl PathCache {
     /// Called once an iteration's renders are submitted: the next refresh starts where this
     /// one ended.
     pub(crate) fn finish_iteration(&mut self) {
-        let spp = self.cameras.first().map_or(1, |c| c.params.spp);
         if self.filled {
-            self.next_slot = (self.next_slot + self.refresh) % spp;
+            self.next_slot = (self.next_slot + self.refresh) % self.spp;
         }
         self.filled = true;
     }
@@ -336,9 +333,8 @@ impl PathCache {
             self.next_slot = 0;
             return Ok(());
         };
-        let spp = self.cameras.first().map_or(1, |c| c.params.spp);
         if s.pools.len() != self.cameras.len()
-            || s.next_slot >= spp
+            || s.next_slot >= self.spp
             || (s.pools.iter().zip(&self.cameras)).any(|(p, c)| p.len() as u64 * 4 != c.pool.size())
         {
             return Err(Error::Invalid(
