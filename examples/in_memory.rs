@@ -139,7 +139,7 @@ pub fn run(iterations: u32) -> psrestir::Result<(f64, f64)> {
     let after = rmse(&opt.texture_values(0)?, &reference);
     println!("texture RMSE {before:.4} -> {after:.4} after {iterations} iterations");
     // The recovered texture as a GPU texture the application can bind.
-    let tex = opt.create_texture(0)?;
+    let tex = psrestir::optim::texture_export::create_texture(&opt, 0)?;
     println!(
         "GPU texture: {}x{} {:?}",
         tex.width(),

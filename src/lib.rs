@@ -15,8 +15,9 @@
 //! target image per camera ([`Problem`]). An [`Optimizer`] steps it, runs it for a number of
 //! iterations or a time budget ([`Optimizer::run`]), renders the current state, estimates
 //! gradients, and hands the textures over as a `wgpu::Buffer`
-//! ([`Optimizer::params_buffer`]), a `wgpu::Texture` ([`Optimizer::create_texture`]) or
-//! CPU values ([`Optimizer::texture_values`]). Every fallible call returns [`Error`].
+//! ([`Optimizer::params_buffer`]), a `wgpu::Texture`
+//! ([`create_texture`](optim::texture_export::create_texture)) or CPU values
+//! ([`Optimizer::texture_values`]). Every fallible call returns [`Error`].
 //!
 //! ```no_run
 //! use psrestir::glam::Vec3;
@@ -54,7 +55,7 @@
 //!     ControlFlow::Continue(())
 //! })?;
 //! let base_color: Vec<f32> = opt.texture_values(0)?; // 8 x 8 x RGB
-//! let on_gpu: psrestir::wgpu::Texture = opt.create_texture(0)?; // Rgba32Float, bindable
+//! let on_gpu = psrestir::optim::texture_export::create_texture(&opt, 0)?; // Rgba32Float
 //! # Ok(())
 //! # }
 //! ```

@@ -11,7 +11,7 @@ mod gltf_textures;
 #[path = "../examples/in_memory.rs"]
 mod in_memory;
 
-use psrestir::optim::StepKind;
+use psrestir::optim::{texture_export, StepKind};
 use psrestir::{Filter, Gpu, Method, Optimizer, Problem, Settings, Stop};
 use std::ops::ControlFlow;
 
@@ -259,7 +259,7 @@ fn the_gpu_texture_holds_the_current_values() {
     o.run(Stop::iterations(5), |_| ControlFlow::Continue(()))
         .unwrap();
     let values = o.texture_values(0).unwrap();
-    let tex = o.create_texture(0).unwrap();
+    let tex = texture_export::create_texture(&o, 0).unwrap();
     assert_eq!((tex.width(), tex.height()), (8, 8));
     // Read the texture back: 8 texels x 16 bytes per row, padded to 256.
     let buf = gpu.device.create_buffer(&wgpu::BufferDescriptor {
@@ -295,7 +295,9 @@ fn the_gpu_texture_holds_the_current_values() {
     let all: Vec<f32> = gpu.read_pod(o.params_buffer()).unwrap();
     let off = o.set.textures[0].offset as usize;
     assert_eq!(&all[off..off + values.len()], &values[..]);
-    let e = o.create_texture(1).unwrap_err().to_string();
+    let e = texture_export::create_texture(&o, 1)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("texture 1 does not exist"), "{e}");
 }
 

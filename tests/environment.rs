@@ -70,7 +70,7 @@ fn mean_gradient(opt: &mut Optimizer, k: u32) -> (Vec<f64>, Vec<f64>) {
     let mut sum2 = Vec::new();
     for it in 0..k {
         opt.estimate_gradient(1000 + it).unwrap();
-        let (g, faults) = opt.read_environment_gradient().unwrap();
+        let (g, faults) = opt.fit_mut().read_environment_gradient().unwrap();
         assert_eq!(faults, 0, "environment gradient updates lost or dropped");
         sum.resize(g.len(), 0f64);
         sum2.resize(g.len(), 0f64);
@@ -97,7 +97,8 @@ fn check_against_finite_differences(scene: Scene) {
     let start = env(0.6);
     let fitted = with_env(scene, start.clone());
     let mut opt = optimizer(&gpu, &fitted, Method::BASELINE, &target);
-    opt.optimize_environment(&start, EnvFitOptions::default())
+    opt.fit_mut()
+        .optimize_environment(&start, EnvFitOptions::default())
         .unwrap();
     let (mean, var) = mean_gradient(&mut opt, 48);
 
@@ -107,7 +108,8 @@ fn check_against_finite_differences(scene: Scene) {
     let h = 0.05f32;
     let spp = 512;
     let mut lossf = |e: &EnvMap, seed: u32| -> f64 {
-        opt.optimize_environment(e, EnvFitOptions::default())
+        opt.fit_mut()
+            .optimize_environment(e, EnvFitOptions::default())
             .unwrap();
         let a = opt.render(0, spp, seed).unwrap();
         let b = opt.render(0, spp, seed + 1).unwrap();
@@ -218,7 +220,8 @@ fn every_estimator_gives_the_environment_gradient_the_baseline_gives() {
     let mut results = Vec::new();
     for method in Method::all() {
         let mut opt = optimizer(&gpu, &fitted, method, &target);
-        opt.optimize_environment(&start, EnvFitOptions::default())
+        opt.fit_mut()
+            .optimize_environment(&start, EnvFitOptions::default())
             .unwrap();
         results.push((method, mean_gradient(&mut opt, 32)));
     }
@@ -287,7 +290,7 @@ fn an_environment_fitted_from_gray_finds_the_sun() {
         rebuild_every: 2,
         ..Default::default()
     };
-    opt.optimize_environment(&gray, opts).unwrap();
+    opt.fit_mut().optimize_environment(&gray, opts).unwrap();
     let first = opt.step().unwrap().loss;
     opt.run(Stop::iterations(150), |_| {
         std::ops::ControlFlow::Continue(())
@@ -297,7 +300,7 @@ fn an_environment_fitted_from_gray_finds_the_sun() {
     for _ in 0..10 {
         last += opt.step().unwrap().loss / 10.0;
     }
-    let env = opt.environment().unwrap();
+    let env = opt.fit().environment().unwrap();
     let angle = psrestir::job::relight::direction_error_deg(&env, &sky);
     eprintln!("loss {first:.4e} -> {last:.4e}, strongest emission {angle:.1} degrees off");
     assert!(angle <= 20.0, "the recovered sun is {angle:.1} degrees off");
@@ -350,10 +353,11 @@ fn one_environment_texel_seen_by_every_pixel_loses_nothing() {
         };
         let target = Image::new(side, side);
         let mut opt = Optimizer::new(&gpu, &scene, set.clone(), settings, &[target]).unwrap();
-        opt.optimize_environment(&sky, EnvFitOptions::default())
+        opt.fit_mut()
+            .optimize_environment(&sky, EnvFitOptions::default())
             .unwrap();
         opt.estimate_gradient_with_adjoint(0, &adjoint).unwrap();
-        let (g, faults) = opt.read_environment_gradient().unwrap();
+        let (g, faults) = opt.fit_mut().read_environment_gradient().unwrap();
         assert_eq!(faults, 0, "{method}: updates lost or dropped");
         for c in 0..3 {
             let got = g[c] as f64;

@@ -904,7 +904,7 @@ fn the_uncertainty_map_ranks_dim_texels_above_well_lit_ones() {
     for _ in 0..60 {
         loss = opt.step().unwrap().loss;
     }
-    let sigma = opt.uncertainty(loss).unwrap();
+    let sigma = psrestir::optim::uncertainty::standard_deviations(&opt, loss).unwrap();
     let observed = opt.observed_texels().unwrap().to_vec();
     // Texel (row, column) at u = column: x = -1 + 2 u, the light at x = -1.2.
     let column_mean = |cols: std::ops::Range<usize>| {

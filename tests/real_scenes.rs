@@ -515,7 +515,7 @@ fn the_exposure_of_a_camera_is_recovered() {
         opt.set_progress(i as f64 / 120.0);
         opt.step().unwrap();
     }
-    let e = opt.exposure()[0];
+    let e = opt.fit().exposure()[0];
     eprintln!("exposure {e}");
     assert!((e - 1.4).abs() < 0.03, "exposure {e}, the photo's is 1.4");
     // It is part of the state.
@@ -543,12 +543,12 @@ fn the_white_balance_of_a_camera_is_recovered() {
     };
     let mut opt = plane_optimizer(&gpu, settings, &target);
     opt.write_params(&truth).unwrap();
-    opt.optimize_white_balance(0.05).unwrap();
+    opt.fit_mut().optimize_white_balance(0.05).unwrap();
     for i in 0..120 {
         opt.set_progress(i as f64 / 120.0);
         opt.step().unwrap();
     }
-    let got = opt.gains()[0];
+    let got = opt.fit().gains()[0];
     eprintln!("gains {got:?}");
     for c in 0..3 {
         assert!(

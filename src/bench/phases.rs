@@ -164,7 +164,7 @@ impl Relit {
         let Some(truth) = prep.truth.as_ref() else {
             return Ok(out);
         };
-        if let (Some(env), Some(t)) = (opt.environment(), truth.env.as_ref()) {
+        if let (Some(env), Some(t)) = (opt.fit().environment(), truth.env.as_ref()) {
             out.direction_error_deg = Some(crate::job::relight::direction_error_deg(&env, t));
         }
         let values = opt.read_params()?;
@@ -298,7 +298,12 @@ pub(super) fn optimization_phase(
         iterations: None,
         seconds: Some(o.budget_s),
     };
-    opt.run_observed(limits, &mut clock, &mut [&mut sampler, &mut watch])?;
+    crate::optim::run_loop::run_observed(
+        &mut opt,
+        limits,
+        &mut clock,
+        &mut [&mut sampler, &mut watch],
+    )?;
     let seconds = clock.seconds();
     let BenchWatch {
         curve,

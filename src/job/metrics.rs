@@ -195,8 +195,8 @@ pub(super) fn log_exposures(prep: &Problem, opt: &Optimizer) {
     let list: Vec<String> = prep
         .cameras
         .iter()
-        .zip(opt.exposure())
-        .zip(opt.white_balance())
+        .zip(opt.fit().exposure())
+        .zip(opt.fit().white_balance())
         .map(|((&c, e), wb)| {
             format!(
                 "{} {e:.4} (white balance {:.3} {:.3} {:.3})",
@@ -247,7 +247,7 @@ pub fn evaluate(
                 spp,
                 crate::optim::pass_seed(seed, u32::MAX - 2, k as u32, crate::optim::Seeds::EVAL),
             )?,
-            opt.gains()[k],
+            opt.fit().gains()[k],
         );
         sum += crate::optim::loss::image_relmse(&img, target);
         images.push(img);

@@ -61,7 +61,7 @@ pub fn save_textures(dir: &Path, set: &ParamSet, values: &[f32]) -> Result<()> {
 }
 
 /// `uncertainty_<texture>.exr` and `.png`: each texel's standard deviation from
-/// [`Optimizer::uncertainty`] (laid out like the values), -1 where the images tell nothing (no
+/// [`uncertainty::standard_deviations`](crate::optim::uncertainty::standard_deviations) (laid out like the values), -1 where the images tell nothing (no
 /// camera observes the texel, or it never received a gradient). The PNG is a gray scale up to
 /// the other texels' 99th percentile (white: at or above it), magenta where it is -1.
 pub fn save_uncertainty(dir: &Path, set: &ParamSet, sigma: &[f32]) -> Result<()> {
@@ -121,7 +121,7 @@ pub(super) fn write_outputs(
             task.target.spp.min(64),
             crate::optim::pass_seed(task.seed, u32::MAX - 1, k as u32, crate::optim::Seeds::EVAL),
         )?;
-        let img = exposed(img, opt.gains()[k]);
+        let img = exposed(img, opt.fit().gains()[k]);
         img.save(&out.join(format!("final_{}.exr", camera_file_name(&prep.scene, cam))))?;
         image_io::side_by_side(&img, &prep.targets[k]).save(&out.join(format!(
             "final_vs_target_{}.png",

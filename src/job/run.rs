@@ -15,7 +15,7 @@ use super::watch::{LossWatch, PlateauWatch};
 use super::Problem;
 use crate::gpu::Gpu;
 use crate::optim::checkpoint::{Checkpoint, Header, Kept, MetricRow};
-use crate::optim::run_loop::{Clock, Limits, Observer, PassSampler};
+use crate::optim::run_loop::{run_observed, Clock, Limits, Observer, PassSampler};
 use crate::optim::{FaultCounts, Optimizer, PassTimes, StepStats};
 use crate::render::params::ParamSet;
 use crate::task::Task;
@@ -113,7 +113,7 @@ pub struct RunSummary {
     /// Each camera's final exposure and white balance.
     pub gains: Vec<(f32, [f32; 3])>,
     /// Each texel's standard deviation, laid out like `set.values`
-    /// ([`crate::optim::Optimizer::uncertainty`]; -1: the images tell nothing), as
+    /// ([`crate::optim::uncertainty::standard_deviations`]; -1: the images tell nothing), as
     /// `uncertainty_*.exr`.
     pub uncertainty: Option<Vec<f32>>,
 }
@@ -224,13 +224,13 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
     write_outputs(&out, task, &prep, &opt, &values, &session.rows)?;
     // What the images could not tell, from the last loss (none before any iteration).
     let uncertainty = if session.last_loss.is_finite() && session.last_loss > 0.0 {
-        let sigma = opt.uncertainty(session.last_loss)?;
+        let sigma = crate::optim::uncertainty::standard_deviations(&opt, session.last_loss)?;
         super::outputs::save_uncertainty(&out, &prep.set, &sigma)?;
         Some(sigma)
     } else {
         None
     };
-    let environment = opt.environment();
+    let environment = opt.fit().environment();
     let light_direction_error_deg = match &environment {
         Some(env) => save_environment(&out, &prep, env)?,
         None => None,
@@ -277,10 +277,11 @@ pub fn run(gpu: &Gpu, task: &Task, opts: &RunOptions) -> Result<RunSummary> {
         environment,
         uncertainty,
         gains: opt
+            .fit()
             .exposure()
             .iter()
             .copied()
-            .zip(opt.white_balance().iter().copied())
+            .zip(opt.fit().white_balance().iter().copied())
             .collect(),
     })
 }
@@ -475,7 +476,7 @@ impl Watches {
 
 /// Step `opt` until the task's (or the options') budget is spent or an interrupt comes,
 /// with a metrics row per iteration, the progress bar, the loss watch and checkpoints: the
-/// optimizer's loop ([`Optimizer::run_observed`]) with a [`JobWatch`] and the passes'
+/// optimizer's loop ([`run_observed`](crate::optim::run_loop::run_observed)) with a [`JobWatch`] and the passes'
 /// sampler.
 fn iterate(
     opt: &mut Optimizer,
@@ -538,7 +539,7 @@ fn iterate(
         last_checkpoint: Instant::now(),
     };
     let mut sampler = PassSampler::default();
-    opt.run_observed(limits, &mut clock, &mut [&mut sampler, &mut watch])?;
+    run_observed(opt, limits, &mut clock, &mut [&mut sampler, &mut watch])?;
     let mut session = watch.session;
     if let Some(b) = &watch.bar {
         b.finish_and_clear();

@@ -26,7 +26,7 @@ pub mod step;
 mod timing;
 pub use api::diff_render::{DiffRender, Gradients};
 pub use api::{texture_export, uncertainty};
-pub use fit::{environment_fit, param_table};
+pub use fit::{environment_fit, param_table, Fit, FitMut};
 pub use memory::*;
 pub use run::seeds::*;
 pub use run::snapshot::*;
@@ -294,7 +294,7 @@ impl Optimizer {
         seed: u32,
     ) {
         self.passes.timer.begin();
-        self.clear_environment_gradient(enc);
+        self.fit.clear_environment_gradient(enc);
         if primal {
             self.encode_primal(enc, iteration);
         }
@@ -396,8 +396,9 @@ impl Optimizer {
         self.finish_iteration(true);
         self.iteration = t;
         let loss = self.read_loss()?;
-        self.step_gains(factor)?;
-        self.step_environment(factor)?;
+        let mut fit = self.fit_mut();
+        fit.step_gains(factor)?;
+        fit.step_environment(factor)?;
         Ok(StepStats { loss })
     }
 
@@ -422,7 +423,7 @@ impl Optimizer {
         }
         let factor = self.settings.schedule.factor(iteration, self.run.progress);
         // While the environment warms up the textures hold (environment_fit.rs).
-        let texture_factor = if self.environment_warming_up() {
+        let texture_factor = if self.fit.environment_warming_up() {
             0.0
         } else {
             factor
@@ -436,6 +437,105 @@ impl Optimizer {
             &mut self.passes.timer,
         );
         factor
+    }
+
+    /// Weigh each camera's pixels by a mask (one value per pixel in [0, 1]; None: all 1):
+    /// masked-out pixels add neither loss nor gradient. The loss is the mean over the
+    /// masked pixels.
+    pub fn set_masks(&mut self, masks: &[Option<Vec<f32>>]) -> Result<()> {
+        let n_pixels = (self.settings.width * self.settings.height) as usize;
+        if masks.len() != self.passes.cams.len() {
+            return Err(Error::Invalid(format!(
+                "{} masks for {} cameras",
+                masks.len(),
+                self.passes.cams.len()
+            )));
+        }
+        let mut total = 0f64;
+        for (k, m) in masks.iter().enumerate() {
+            let data: Vec<[f32; 4]> = match m {
+                Some(m) => {
+                    if m.len() != n_pixels || m.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+                        return Err(Error::Invalid(format!(
+                            "the mask of camera {k} needs {n_pixels} finite weights >= 0"
+                        )));
+                    }
+                    self.inputs.targets[k]
+                        .rgb
+                        .iter()
+                        .zip(m)
+                        .map(|(p, &w)| [p[0], p[1], p[2], w])
+                        .collect()
+                }
+                None => self.inputs.targets[k]
+                    .rgb
+                    .iter()
+                    .map(|p| [p[0], p[1], p[2], 1.0])
+                    .collect(),
+            };
+            total += data.iter().map(|p| p[3] as f64).sum::<f64>();
+            self.passes.loss.write_target(&self.gpu, k, &data);
+        }
+        // Also catches a NaN total.
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
+        if !(total > 0.0) {
+            return Err(Error::Invalid("the masks leave no pixel to compare".into()));
+        }
+        let norm = (1.0 / (3.0 * total)) as f32;
+        self.passes.loss.set_norm(&self.gpu, norm);
+        self.gpu.check("set masks")
+    }
+
+    /// An optimizer for `problem`: its scene, textures and targets, with the sampling options
+    /// of `settings` (whose cameras, width and height are taken from the problem).
+    pub fn for_problem(gpu: &Gpu, problem: &Problem, settings: Settings) -> Result<Optimizer> {
+        let first = problem.targets.first().ok_or_else(|| {
+            crate::Error::Invalid("the problem has no targets: set or render them first".into())
+        })?;
+        let settings = Settings {
+            width: first.width,
+            height: first.height,
+            cameras: problem.cameras.clone(),
+            ..settings
+        };
+        let mut opt = Optimizer::new(
+            gpu,
+            &problem.scene,
+            problem.set.clone(),
+            settings,
+            &problem.targets,
+        )?;
+        if problem.masks.iter().any(Option::is_some) {
+            opt.set_masks(&problem.masks)?;
+        }
+        problem.set_camera_and_light(&mut opt)?;
+        Ok(opt)
+    }
+
+    /// For every texel of the optimized textures (in the order of `set.textures`, row-major
+    /// within each), whether some camera sample of the task reaches it with a non-zero filter
+    /// weight: 4 x 4 rays per pixel and camera, computed on the GPU when the optimizer is made
+    /// (ReSTIR gives reservoirs to these texels only).
+    pub fn observed_texels(&self) -> Result<&[bool]> {
+        Ok(&self.inputs.observed.0)
+    }
+
+    /// The fit of the light and the cameras' response: exposures, white balances, the
+    /// environment as recovered so far.
+    pub fn fit(&self) -> &Fit {
+        &self.fit
+    }
+
+    /// The fit, to change: set or optimize the cameras' response and the environment.
+    pub fn fit_mut(&mut self) -> FitMut<'_> {
+        FitMut {
+            fit: &mut self.fit,
+            gpu: &self.gpu,
+            scene: &mut self.renderer.scene,
+            loss: &mut self.passes.loss,
+            settings: &self.settings,
+            cameras: self.passes.cams.len(),
+        }
     }
 
     /// Tell the learning-rate schedule which fraction of the run is done (in [0, 1]; for a
@@ -472,52 +572,7 @@ impl Optimizer {
         stop: Stop,
         on_iteration: impl FnMut(&Progress) -> std::ops::ControlFlow<()>,
     ) -> Result<Option<Progress>> {
-        if stop.iterations.is_none() && stop.time_budget.is_none() {
-            return Err(Error::Invalid(
-                "Optimizer::run needs a number of iterations, a time budget or both".into(),
-            ));
-        }
-        /// The caller's callback as an observer, with the last iteration's progress.
-        struct Callback<F> {
-            first: u32,
-            last: Option<Progress>,
-            on_iteration: F,
-        }
-        impl<F: FnMut(&Progress) -> std::ops::ControlFlow<()>> run_loop::Observer for Callback<F> {
-            fn after(
-                &mut self,
-                opt: &mut Optimizer,
-                stats: &StepStats,
-                _: f64,
-                clock: &mut run_loop::Clock,
-            ) -> Result<std::ops::ControlFlow<()>> {
-                let p = Progress {
-                    iteration: opt.iteration,
-                    in_this_run: opt.iteration - self.first,
-                    loss: stats.loss,
-                    elapsed: std::time::Duration::from_secs_f64(clock.seconds().max(0.0)),
-                };
-                self.last = Some(p);
-                Ok((self.on_iteration)(&p))
-            }
-        }
-        let first = self.iteration;
-        let limits = run_loop::Limits {
-            first,
-            iterations: stop.iterations.map(|n| first.saturating_add(n)),
-            seconds: stop.time_budget.map(|d| d.as_secs_f64()),
-        };
-        let mut callback = Callback {
-            first,
-            last: None,
-            on_iteration,
-        };
-        self.run_observed(
-            limits,
-            &mut run_loop::Clock::start(0.0),
-            &mut [&mut callback],
-        )?;
-        Ok(callback.last)
+        run_loop::run(self, stop, on_iteration)
     }
 
     /// The GPU buffer that holds the current values of all optimized textures (`f32`s, laid

@@ -55,7 +55,7 @@ pub struct Settings {
     /// the multiscale gradient); the priors they switch on act on the gradient before the
     /// step, in the registry's order.
     pub priors: super::prior::Priors,
-    /// Optimize the per-camera exposures (see [`Optimizer::set_exposure`](super::Optimizer::set_exposure)) with Adam on
+    /// Optimize the per-camera exposures (see [`FitMut::set_exposure`](super::FitMut::set_exposure)) with Adam on
     /// their logarithms, at this learning rate; None: exposures stay fixed.
     pub exposure_learning_rate: Option<f32>,
 }

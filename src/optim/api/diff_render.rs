@@ -1,166 +1,16 @@
 //! A differentiable render with the loss left to the caller: [`Optimizer::render_cameras`]
 //! renders every camera at the current textures, [`Optimizer::backward`] turns the adjoint
 //! images of the caller's own loss (dL/dI per pixel) into each texel's gradient with the
-//! optimizer's estimator, which keeps its state across calls as it does across iterations.
-//! [`DiffRender`] wraps the two with the checks an application needs (one backward per
-//! render, textures in range); the Python package is built on it.
+//! optimizer's estimator, which keeps its state across calls as it does across iterations
+//! (both in `outward.rs`). [`DiffRender`] wraps the two with the checks an application needs
+//! (one backward per render, textures in range); the Python package is built on it.
 
 use crate::gpu::Gpu;
 use crate::image_io::Image;
-use crate::optim::{pass_seed, Optimizer, PrimalMode, Seeds, Settings};
+use crate::optim::{Optimizer, PrimalMode, Settings};
 use crate::render::params::{ParamSet, ParamTexture};
 use crate::scene::Scene;
 use crate::{Error, Result};
-
-impl Optimizer {
-    /// Render every camera at the current textures, `spp` samples per pixel from `seed`'s
-    /// streams (camera `k` draws from `pass_seed(seed, 0, k, Seeds::PRIMAL)`), in one
-    /// submission unless the samples need chunks (2^20 per dispatch), and read the images
-    /// back: the forward half of a differentiable render. With `primal` the control variate
-    /// (which the optimizer must have), each sample is also evaluated under the previous
-    /// textures and the images are the control variate's `I_t` (src/optim/primal/), whose
-    /// state advances once; otherwise no state changes. No loss, adjoint or estimator state
-    /// changes either way.
-    pub fn render_cameras(
-        &mut self,
-        spp: u32,
-        seed: u32,
-        primal: PrimalMode,
-    ) -> Result<Vec<Image>> {
-        if spp == 0 || spp > 1 << 16 {
-            return Err(Error::Invalid(format!(
-                "spp must be between 1 and 65536, not {spp}"
-            )));
-        }
-        let two_states = primal == PrimalMode::ControlVariate;
-        if two_states && self.passes.control_variate.is_none() {
-            return Err(Error::Invalid(
-                "this render has no control-variate primal (the optimizer was made with the \
-                 independent one)"
-                    .into(),
-            ));
-        }
-        let (w, h) = (self.settings.width, self.settings.height);
-        let n_pixels = w * h;
-        let bytes = n_pixels as u64 * 16;
-        let n_cams = self.passes.cams.len() as u64;
-        let gpu = &self.gpu;
-        let images = self
-            .passes
-            .camera_images
-            .get_or_init(|| gpu.storage_zeroed("render_cameras images", bytes * n_cams))
-            .clone();
-        let chunk = ((1u32 << 20) / n_pixels).clamp(1, 64);
-        let new_encoder = |gpu: &Gpu| {
-            gpu.device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("render_cameras"),
-                })
-        };
-        self.passes.timer.begin();
-        let mut enc = new_encoder(&self.gpu);
-        for k in 0..self.passes.cams.len() {
-            let mut done = 0;
-            while done < spp {
-                let cam = &mut self.passes.cams[k];
-                let n = cam.set_samples(
-                    &self.gpu.queue,
-                    pass_seed(seed, 0, k as u32, Seeds::PRIMAL),
-                    done,
-                    chunk.min(spp - done),
-                    two_states,
-                );
-                if done == 0 {
-                    enc.clear_buffer(&self.bufs.accum, 0, None);
-                    if two_states {
-                        enc.clear_buffer(&self.bufs.accum_prev, 0, None);
-                    }
-                }
-                self.renderer.encode_render(
-                    &mut enc,
-                    "primal",
-                    &cam.render_group,
-                    self.passes.grid,
-                    None,
-                );
-                done += n;
-                if done < spp {
-                    // The next chunk writes this camera's uniform again: submit this one first.
-                    self.gpu.queue.submit([enc.finish()]);
-                    enc = new_encoder(&self.gpu);
-                }
-            }
-            if let Some(cv) = self.passes.control_variate.as_mut().filter(|_| two_states) {
-                // I_t replaces the render in accum.
-                cv.encode(&mut enc, k, &mut self.passes.timer);
-            }
-            enc.copy_buffer_to_buffer(&self.bufs.accum, 0, &images, k as u64 * bytes, bytes);
-        }
-        self.gpu.queue.submit([enc.finish()]);
-        if two_states {
-            if let Some(cv) = &mut self.passes.control_variate {
-                cv.finish_iteration();
-            }
-        }
-        let sums: Vec<[f32; 4]> = self.gpu.read_pod(&images)?;
-        Ok(sums
-            .chunks(n_pixels as usize)
-            .take(self.passes.cams.len())
-            .map(|c| crate::render::accum_image(w, h, c))
-            .collect())
-    }
-
-    /// The gradient of a loss whose derivative with respect to the rendered images is
-    /// `adjoint` (dL/dI: RGB per pixel, row-major, the cameras one after another as
-    /// [`Optimizer::render_cameras`] returns them), laid out like the parameters, estimated
-    /// with the optimizer's estimator from `seed`'s streams (mixed with the iteration). The
-    /// estimator's state advances one iteration, as an [`Optimizer::step`] advances it: ReSTIR
-    /// pairs this call's samples with the textures and adjoint of the previous call. The
-    /// textures do not change. Unbiased when the adjoint comes from a render whose random
-    /// numbers are independent of the gradient's (another seed, or another stream of one).
-    pub fn backward(&mut self, adjoint: &[[f32; 3]], seed: u32) -> Result<Vec<f32>> {
-        let n = (self.settings.width * self.settings.height) as usize * self.passes.cams.len();
-        if adjoint.len() != n {
-            return Err(Error::Invalid(format!(
-                "the adjoint has {} pixels, the cameras' images have {n} ({} cameras of {}x{})",
-                adjoint.len(),
-                self.passes.cams.len(),
-                self.settings.width,
-                self.settings.height
-            )));
-        }
-        if let Some(i) = adjoint
-            .iter()
-            .position(|a| !a.iter().all(|v| v.is_finite()))
-        {
-            return Err(Error::Invalid(format!(
-                "the adjoint is not finite at pixel {i} (counting through the cameras)"
-            )));
-        }
-        // The w component says whether the loss pass's own gain derivative may read the
-        // adjoint; an external adjoint is not one it wrote.
-        let rgba: Vec<[f32; 4]> = adjoint.iter().map(|a| [a[0], a[1], a[2], 0.0]).collect();
-        let t = self.iteration;
-        self.gpu.queue.write_buffer(
-            &self.bufs.adjoint[(t % 2) as usize],
-            0,
-            bytemuck::cast_slice(&rgba),
-        );
-        let mut enc = self
-            .gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("backward"),
-            });
-        self.encode_gradient_seeded(&mut enc, t, false, seed);
-        self.gpu.queue.submit([enc.finish()]);
-        self.finish_iteration(false);
-        self.iteration = t + 1;
-        let g = self.read_gradient()?;
-        self.gpu.check("backward")?;
-        Ok(g)
-    }
-}
 
 /// A differentiable render whose loss belongs to the caller: set the parameters (the
 /// textures, the environment when it is recovered, each camera's exposure and white balance),
@@ -336,37 +186,37 @@ impl DiffRender {
 
     /// The environment, when it is recovered (a parameter); None otherwise.
     pub fn environment(&self) -> Option<crate::scene::EnvMap> {
-        self.opt.environment()
+        self.opt.fit().environment()
     }
 
     /// Replace the recovered environment's radiance (`width * height` RGB texels, each
     /// finite and positive, row 0 at the zenith); its sampling tables are rebuilt.
     pub fn set_environment(&mut self, rgb: &[[f32; 3]]) -> Result<()> {
-        self.opt.set_environment(rgb)?;
+        self.opt.fit_mut().set_environment(rgb)?;
         self.rendered = None;
         Ok(())
     }
 
     /// Each camera's exposure (the factor its render is multiplied by).
     pub fn exposure(&self) -> &[f32] {
-        self.opt.exposure()
+        self.opt.fit().exposure()
     }
 
     /// Each camera's white balance (per-channel factors over its exposure).
     pub fn white_balance(&self) -> &[[f32; 3]] {
-        self.opt.white_balance()
+        self.opt.fit().white_balance()
     }
 
     /// Set each camera's exposure (positive).
     pub fn set_exposure(&mut self, values: &[f32]) -> Result<()> {
-        self.opt.set_exposure(values)?;
+        self.opt.fit_mut().set_exposure(values)?;
         self.rendered = None;
         Ok(())
     }
 
     /// Set each camera's white balance (positive per channel).
     pub fn set_white_balance(&mut self, values: &[[f32; 3]]) -> Result<()> {
-        self.opt.set_white_balance(values)?;
+        self.opt.fit_mut().set_white_balance(values)?;
         self.rendered = None;
         Ok(())
     }
@@ -384,7 +234,7 @@ impl DiffRender {
         let raw = self
             .opt
             .render_cameras(spp, seed, primal.unwrap_or(self.primal))?;
-        let gains = self.opt.gains();
+        let gains = self.opt.fit().gains();
         let images = raw
             .iter()
             .zip(&gains)
@@ -433,7 +283,7 @@ impl DiffRender {
                 adjoint[k].width, adjoint[k].height
             )));
         }
-        let gains = self.opt.gains();
+        let gains = self.opt.fit().gains();
         // dL/d(gain) = sum of the adjoint times the render; the render's own adjoint is the
         // gain times the image's.
         let d_gain: Vec<[f64; 3]> = adjoint
@@ -463,7 +313,7 @@ impl DiffRender {
         self.rendered = None;
         // The updates the pass lost or dropped are counted when a step reads the gradient.
         let environment = if self.opt.fit.env_fit.is_some() {
-            Some(self.opt.read_environment_gradient()?.0)
+            Some(self.opt.fit_mut().read_environment_gradient()?.0)
         } else {
             None
         };
@@ -485,7 +335,7 @@ impl DiffRender {
 
     /// dL/d(exposure) and dL/d(white balance) per camera from dL/d(gain).
     fn gain_parts(&self, d_gain: &[[f64; 3]]) -> (Vec<f32>, Vec<[f32; 3]>) {
-        let (e, wb) = (self.opt.exposure(), self.opt.white_balance());
+        let (e, wb) = (self.opt.fit().exposure(), self.opt.fit().white_balance());
         d_gain
             .iter()
             .enumerate()
@@ -544,7 +394,7 @@ impl DiffRender {
                             .into(),
                     ));
                 };
-                let gains = self.opt.gains();
+                let gains = self.opt.fit().gains();
                 crate::optim::fit::gains::log_gain_gradients(d, &gains)
             }
         };
@@ -562,10 +412,10 @@ impl DiffRender {
         let factor = self.opt.encode_update(&mut enc, iteration, iteration + 1);
         self.opt.gpu.queue.submit([enc.finish()]);
         self.steps += 1;
-        if self.opt.gains_optimized() {
-            self.opt.step_log_gains(factor, &d_log_gains);
+        if self.opt.fit().gains_optimized() {
+            self.opt.fit_mut().step_log_gains(factor, &d_log_gains);
         }
-        self.opt.step_environment(factor)?;
+        self.opt.fit_mut().step_environment(factor)?;
         self.rendered = None;
         self.opt.gpu.check("step")
     }
@@ -617,13 +467,13 @@ impl DiffRender {
             (None, None) => {}
         }
         let n = self.opt.passes.cams.len();
-        if !self.opt.gains_optimized() {
+        if !self.opt.fit().gains_optimized() {
             return Ok((vec![0.0; n], vec![[0.0; 3]; n]));
         }
         let flat: Vec<f32> = g.white_balance.iter().flatten().copied().collect();
         check_gradient("the exposures", &g.exposure, n)?;
         check_gradient("the white balances", &flat, 3 * n)?;
-        let (e, wb) = (self.opt.exposure(), self.opt.white_balance());
+        let (e, wb) = (self.opt.fit().exposure(), self.opt.fit().white_balance());
         Ok((
             (0..n).map(|k| g.exposure[k] * e[k]).collect(),
             (0..n)

@@ -3,9 +3,7 @@
 //! the textures, the uncertainty maps and the measurements the bench and the job take.
 
 pub(in crate::optim) mod diff_render;
-#[cfg(feature = "test-hooks")]
-pub(in crate::optim) mod hooks;
-pub(in crate::optim) mod measure;
+pub(in crate::optim) mod outward;
 pub(in crate::optim) mod problem;
 pub mod texture_export;
 pub mod uncertainty;

@@ -4,7 +4,7 @@
 //! describes one (`Problem::from_task`, in `job`).
 use crate::gpu::Gpu;
 use crate::image_io::Image;
-use crate::optim::{pass_seed, Optimizer, Settings};
+use crate::optim::{pass_seed, Optimizer};
 use crate::render::params::ParamSet;
 use crate::render::{RenderSettings, Renderer, Techniques};
 use crate::scene::Scene;
@@ -40,7 +40,7 @@ pub struct Problem {
     /// (the scene's environment is that start) and how it is stepped.
     pub environment: Option<EnvironmentFit>,
     /// The learning rate of the cameras' white balances, when they are optimized
-    /// ([`Optimizer::optimize_white_balance`]).
+    /// ([`FitMut::optimize_white_balance`](crate::optim::FitMut::optimize_white_balance)).
     pub white_balance_learning_rate: Option<f32>,
 }
 
@@ -191,34 +191,6 @@ impl Problem {
     }
 }
 
-impl Optimizer {
-    /// An optimizer for `problem`: its scene, textures and targets, with the sampling options
-    /// of `settings` (whose cameras, width and height are taken from the problem).
-    pub fn for_problem(gpu: &Gpu, problem: &Problem, settings: Settings) -> Result<Optimizer> {
-        let first = problem.targets.first().ok_or_else(|| {
-            crate::Error::Invalid("the problem has no targets: set or render them first".into())
-        })?;
-        let settings = Settings {
-            width: first.width,
-            height: first.height,
-            cameras: problem.cameras.clone(),
-            ..settings
-        };
-        let mut opt = Optimizer::new(
-            gpu,
-            &problem.scene,
-            problem.set.clone(),
-            settings,
-            &problem.targets,
-        )?;
-        if problem.masks.iter().any(Option::is_some) {
-            opt.set_masks(&problem.masks)?;
-        }
-        problem.set_camera_and_light(&mut opt)?;
-        Ok(opt)
-    }
-}
-
 impl Problem {
     /// The RMSE of `values` (laid out like `set.values`) against the ground truth over every
     /// texel, normal maps as the renderer reads them ([`crate::optim::observed::texture_rmse`]);
@@ -233,13 +205,14 @@ impl Problem {
     /// caller's) takes from the problem besides its targets and masks.
     pub fn set_camera_and_light(&self, opt: &mut Optimizer) -> Result<()> {
         if self.exposure.iter().any(|&e| e != 1.0) {
-            opt.set_exposure(&self.exposure)?;
+            opt.fit_mut().set_exposure(&self.exposure)?;
         }
         if let Some(e) = &self.environment {
-            opt.optimize_environment(&e.start, e.options.clone())?;
+            opt.fit_mut()
+                .optimize_environment(&e.start, e.options.clone())?;
         }
         if let Some(lr) = self.white_balance_learning_rate {
-            opt.optimize_white_balance(lr)?;
+            opt.fit_mut().optimize_white_balance(lr)?;
         }
         Ok(())
     }

@@ -19,66 +19,64 @@
 use crate::optim::Optimizer;
 use crate::{Error, Result};
 
-/// The value [`Optimizer::uncertainty`] gives a texel the images tell nothing of: one no
+/// The value [`standard_deviations`] gives a texel the images tell nothing of: one no
 /// camera observes, or one that never received a gradient.
 pub const UNOBSERVED: f32 = -1.0;
 
-impl Optimizer {
-    /// Each parameter scalar's standard deviation (laid out like the values) under the
-    /// Laplace approximation above, for a run whose last loss was `loss`:
-    /// [`UNOBSERVED`] for the texels no camera sample reaches and for those whose gradient
-    /// was always 0 (the output files stay finite, as every image psrestir reads must be).
-    pub fn uncertainty(&self, loss: f64) -> Result<Vec<f32>> {
-        let n_values = self.set.values.len();
-        let own = self
-            .plugins
-            .estimator
-            .variance()
-            .filter(|_| self.settings.step.kind().divides_by_variance)
-            .filter(|_| self.settings.priors.keep_variance());
-        let v: Vec<f32> = match own {
-            Some(buf) => {
-                let mut v: Vec<f32> = self.gpu.read_pod(buf)?;
-                v.truncate(n_values);
-                v
-            }
-            None => {
-                let kind = self.settings.step.kind();
-                let beta = (kind.second_moment_decay)(&self.settings.steps).ok_or_else(|| {
-                    Error::Invalid(format!(
-                        "the {} step keeps no second moment to tell the uncertainty from",
-                        kind.name
-                    ))
-                })?;
-                // The moving moment's bias correction after the steps taken.
-                let bias = 1.0 - (beta as f64).powi(self.iteration.max(1) as i32);
-                let mut m2: Vec<f32> = self.gpu.read_pod(&self.bufs.moments[1])?;
-                m2.truncate(n_values);
-                m2.iter().map(|&m| (m as f64 / bias) as f32).collect()
-            }
-        };
-        let pixel_channels = 1.0 / self.passes.loss.norm() as f64;
-        let observed = &self.inputs.observed.0;
-        let mut out = vec![UNOBSERVED; n_values];
-        let mut texel = 0;
-        for t in &self.set.textures {
-            let ch = t.channels() as usize;
-            for k in 0..(t.width * t.height) as usize {
-                if observed[texel + k] {
-                    for c in 0..ch {
-                        let i = t.offset as usize + k * ch + c;
-                        let sigma = 2.0 * loss / (pixel_channels * (v[i] as f64).sqrt());
-                        out[i] = if v[i] > 0.0 && sigma.is_finite() {
-                            sigma as f32
-                        } else {
-                            // Never a gradient: nothing to tell from, as if unobserved.
-                            UNOBSERVED
-                        };
-                    }
+/// Each parameter scalar's standard deviation (laid out like the values) under the
+/// Laplace approximation above, for a run whose last loss was `loss`:
+/// [`UNOBSERVED`] for the texels no camera sample reaches and for those whose gradient
+/// was always 0 (the output files stay finite, as every image psrestir reads must be).
+pub fn standard_deviations(opt: &Optimizer, loss: f64) -> Result<Vec<f32>> {
+    let n_values = opt.set.values.len();
+    let own = opt
+        .plugins
+        .estimator
+        .variance()
+        .filter(|_| opt.settings.step.kind().divides_by_variance)
+        .filter(|_| opt.settings.priors.keep_variance());
+    let v: Vec<f32> = match own {
+        Some(buf) => {
+            let mut v: Vec<f32> = opt.gpu.read_pod(buf)?;
+            v.truncate(n_values);
+            v
+        }
+        None => {
+            let kind = opt.settings.step.kind();
+            let beta = (kind.second_moment_decay)(&opt.settings.steps).ok_or_else(|| {
+                Error::Invalid(format!(
+                    "the {} step keeps no second moment to tell the uncertainty from",
+                    kind.name
+                ))
+            })?;
+            // The moving moment's bias correction after the steps taken.
+            let bias = 1.0 - (beta as f64).powi(opt.iteration.max(1) as i32);
+            let mut m2: Vec<f32> = opt.gpu.read_pod(&opt.bufs.moments[1])?;
+            m2.truncate(n_values);
+            m2.iter().map(|&m| (m as f64 / bias) as f32).collect()
+        }
+    };
+    let pixel_channels = 1.0 / opt.passes.loss.norm() as f64;
+    let observed = &opt.inputs.observed.0;
+    let mut out = vec![UNOBSERVED; n_values];
+    let mut texel = 0;
+    for t in &opt.set.textures {
+        let ch = t.channels() as usize;
+        for k in 0..(t.width * t.height) as usize {
+            if observed[texel + k] {
+                for c in 0..ch {
+                    let i = t.offset as usize + k * ch + c;
+                    let sigma = 2.0 * loss / (pixel_channels * (v[i] as f64).sqrt());
+                    out[i] = if v[i] > 0.0 && sigma.is_finite() {
+                        sigma as f32
+                    } else {
+                        // Never a gradient: nothing to tell from, as if unobserved.
+                        UNOBSERVED
+                    };
                 }
             }
-            texel += (t.width * t.height) as usize;
         }
-        Ok(out)
+        texel += (t.width * t.height) as usize;
     }
+    Ok(out)
 }

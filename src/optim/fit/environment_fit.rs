@@ -12,8 +12,8 @@
 //! means pulled together). Albedo and light share a scale that images do not fix: the
 //! gauge `mean` holds the environment's mean luminance at its start after every step;
 //! `none` leaves the scale free (docs/guide.md, "Unknown light").
+use super::{Fit, FitMut};
 use crate::optim::param_table::{Group, Space, ENVIRONMENT, EXPOSURE, WHITE_BALANCE};
-use crate::optim::Optimizer;
 use crate::scene::EnvMap;
 use crate::{Error, Result};
 use serde::{Deserialize, Serialize};
@@ -248,13 +248,44 @@ impl EnvFitState {
     }
 }
 
-impl Optimizer {
+impl Fit {
+    /// The recovered environment's logarithms (the table's `environment` group).
+    pub(in crate::optim) fn environment_log(&self) -> &[f32] {
+        &self.table.group(ENVIRONMENT).state.values
+    }
+
+    /// Whether the textures hold this iteration: the environment's warm-up
+    /// ([`EnvFitOptions::warmup_iterations`]) is not over.
+    pub(in crate::optim) fn environment_warming_up(&self) -> bool {
+        self.env_fit
+            .as_ref()
+            .is_some_and(|f| self.table.group(ENVIRONMENT).state.steps < f.opts.warmup_iterations)
+    }
+
+    /// The environment as recovered so far (None unless it is optimized).
+    pub fn environment(&self) -> Option<EnvMap> {
+        (self.env_fit.as_ref()).map(|f| f.state.env(self.environment_log()))
+    }
+
+    /// What the environment's fit keeps besides its group in the table, for checkpoints.
+    pub fn environment_state(&self) -> Option<&EnvFitState> {
+        self.env_fit.as_ref().map(|f| &f.state)
+    }
+
+    pub(in crate::optim) fn clear_environment_gradient(&self, enc: &mut wgpu::CommandEncoder) {
+        if self.env_fit.is_some() {
+            enc.clear_buffer(&self.env_grad, 0, None);
+        }
+    }
+}
+
+impl FitMut<'_> {
     /// Recover the environment with the textures, starting from `start` (the size of the
     /// scene's environment as uploaded; the task's `[environment]` table builds both).
     pub fn optimize_environment(&mut self, start: &EnvMap, opts: EnvFitOptions) -> Result<()> {
         opts.check()
             .map_err(|(k, m)| Error::Invalid(format!("environment.{k}: {m}")))?;
-        let info = self.renderer.scene.info;
+        let info = self.scene.info;
         if info.env_width == 0 || (start.width, start.height) != (info.env_width, info.env_height) {
             return Err(Error::Invalid(format!(
                 "optimize_environment: the scene was uploaded with a {}x{} environment, the \
@@ -274,11 +305,6 @@ impl Optimizer {
         self.gpu.check("optimize environment")
     }
 
-    /// The recovered environment's logarithms (the table's `environment` group).
-    fn environment_log(&self) -> &[f32] {
-        &self.fit.table.group(ENVIRONMENT).state.values
-    }
-
     /// Upload the recovered environment, and its sampling tables with `tables`.
     pub(in crate::optim) fn upload_environment(&mut self, tables: bool) -> Result<()> {
         let fit = self
@@ -286,23 +312,8 @@ impl Optimizer {
             .env_fit
             .as_ref()
             .expect("the environment is recovered");
-        let env = fit.state.env(self.environment_log());
-        self.renderer
-            .scene
-            .update_environment(&self.gpu, &env, tables, true)
-    }
-
-    /// Whether the textures hold this iteration: the environment's warm-up
-    /// ([`EnvFitOptions::warmup_iterations`]) is not over.
-    pub(in crate::optim) fn environment_warming_up(&self) -> bool {
-        self.fit.env_fit.as_ref().is_some_and(|f| {
-            self.fit.table.group(ENVIRONMENT).state.steps < f.opts.warmup_iterations
-        })
-    }
-
-    /// The environment as recovered so far (None unless it is optimized).
-    pub fn environment(&self) -> Option<EnvMap> {
-        (self.fit.env_fit.as_ref()).map(|f| f.state.env(self.environment_log()))
+        let env = fit.state.env(self.fit.environment_log());
+        self.scene.update_environment(self.gpu, &env, tables, true)
     }
 
     /// Replace the recovered environment's radiance (`width * height` RGB texels, each
@@ -342,11 +353,6 @@ impl Optimizer {
         self.gpu.check("set environment")
     }
 
-    /// What the environment's fit keeps besides its group in the table, for checkpoints.
-    pub fn environment_state(&self) -> Option<&EnvFitState> {
-        self.fit.env_fit.as_ref().map(|f| &f.state)
-    }
-
     /// Go on from a checkpoint's environment state (of the same size; its logarithms are
     /// the table's `environment` group, restored with the table).
     pub(in crate::optim) fn restore_environment(&mut self, state: &EnvFitState) -> Result<()> {
@@ -371,16 +377,10 @@ impl Optimizer {
     /// gradient pass left it, and the updates it lost or dropped.
     pub fn read_environment_gradient(&self) -> Result<(Vec<f32>, u32)> {
         let raw: Vec<u32> = self.gpu.read_pod(&self.fit.env_grad)?;
-        let info = self.renderer.scene.info;
+        let info = self.scene.info;
         let n = 3 * (info.env_width * info.env_height) as usize;
         let g = raw[..n].iter().map(|&b| f32::from_bits(b)).collect();
         Ok((g, raw[n] + raw[n + 1]))
-    }
-
-    pub(in crate::optim) fn clear_environment_gradient(&self, enc: &mut wgpu::CommandEncoder) {
-        if self.fit.env_fit.is_some() {
-            enc.clear_buffer(&self.fit.env_grad, 0, None);
-        }
     }
 
     /// One step of the environment from this iteration's gradient (schedule factor
@@ -394,7 +394,7 @@ impl Optimizer {
         let fit = self.fit.env_fit.as_ref().expect("checked above");
         let log = &self.fit.table.group(ENVIRONMENT).state.values;
         let g = fit.state.log_gradient(&fit.opts, log, &d_radiance);
-        self.fit.table.step(&self.settings, ENVIRONMENT, &g, factor);
+        self.fit.table.step(self.settings, ENVIRONMENT, &g, factor);
         let group = self.fit.table.group_mut(ENVIRONMENT);
         fit.state.hold_gauge(&fit.opts, &mut group.state.values);
         let tables = group.state.steps % fit.opts.rebuild_every == 0;

@@ -1,107 +1,20 @@
 //! The targets' per-pixel masks and the per-camera gains: exposures (optimized on their
 //! logarithms when [`crate::optim::Settings::exposure_learning_rate`] is set) and white balances
-//! (per-channel factors, [`Optimizer::optimize_white_balance`]), both groups of the
+//! (per-channel factors, [`FitMut::optimize_white_balance`]), both groups of the
 //! parameter table.
+use super::{Fit, FitMut};
 use crate::optim::param_table::{EXPOSURE, WHITE_BALANCE};
-use crate::optim::Optimizer;
 use crate::{Error, Result};
 
-impl Optimizer {
-    /// Weigh each camera's pixels by a mask (one value per pixel in [0, 1]; None: all 1):
-    /// masked-out pixels add neither loss nor gradient. The loss is the mean over the
-    /// masked pixels.
-    pub fn set_masks(&mut self, masks: &[Option<Vec<f32>>]) -> Result<()> {
-        let n_pixels = (self.settings.width * self.settings.height) as usize;
-        if masks.len() != self.passes.cams.len() {
-            return Err(Error::Invalid(format!(
-                "{} masks for {} cameras",
-                masks.len(),
-                self.passes.cams.len()
-            )));
-        }
-        let mut total = 0f64;
-        for (k, m) in masks.iter().enumerate() {
-            let data: Vec<[f32; 4]> = match m {
-                Some(m) => {
-                    if m.len() != n_pixels || m.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
-                        return Err(Error::Invalid(format!(
-                            "the mask of camera {k} needs {n_pixels} finite weights >= 0"
-                        )));
-                    }
-                    self.inputs.targets[k]
-                        .rgb
-                        .iter()
-                        .zip(m)
-                        .map(|(p, &w)| [p[0], p[1], p[2], w])
-                        .collect()
-                }
-                None => self.inputs.targets[k]
-                    .rgb
-                    .iter()
-                    .map(|p| [p[0], p[1], p[2], 1.0])
-                    .collect(),
-            };
-            total += data.iter().map(|p| p[3] as f64).sum::<f64>();
-            self.passes.loss.write_target(&self.gpu, k, &data);
-        }
-        // Also catches a NaN total.
-        #[allow(clippy::neg_cmp_op_on_partial_ord)]
-        if !(total > 0.0) {
-            return Err(Error::Invalid("the masks leave no pixel to compare".into()));
-        }
-        let norm = (1.0 / (3.0 * total)) as f32;
-        self.passes.loss.set_norm(&self.gpu, norm);
-        self.gpu.check("set masks")
-    }
-
-    /// Set the factor each camera's render is multiplied by before it is compared with its
-    /// target (photos have their own exposure). With `Settings::exposure_learning_rate` the
-    /// optimizer goes on from these values.
-    pub fn set_exposure(&mut self, values: &[f32]) -> Result<()> {
-        if values.len() != self.passes.cams.len()
-            || values.iter().any(|v| !(v.is_finite() && *v > 0.0))
-        {
-            return Err(Error::Invalid(format!(
-                "{} exposures for {} cameras (each positive)",
-                values.len(),
-                self.passes.cams.len()
-            )));
-        }
-        self.fit.table.group_mut(EXPOSURE).state.values = values.to_vec();
-        self.fit.gain_prev = self.gains();
-        self.upload_exposure();
-        self.gpu.check("set exposure")
-    }
-
+impl Fit {
     /// The current per-camera exposures.
     pub fn exposure(&self) -> &[f32] {
-        &self.fit.table.group(EXPOSURE).state.values
+        &self.table.group(EXPOSURE).state.values
     }
 
     /// The current per-camera white balances (per-channel factors on top of the exposure).
     pub fn white_balance(&self) -> &[[f32; 3]] {
-        bytemuck::cast_slice(&self.fit.table.group(WHITE_BALANCE).state.values)
-    }
-
-    /// Set each camera's white balance (per-channel factors over its exposure, positive).
-    /// With the white balances optimized the optimizer goes on from these values.
-    pub fn set_white_balance(&mut self, values: &[[f32; 3]]) -> Result<()> {
-        if values.len() != self.passes.cams.len()
-            || values
-                .iter()
-                .flatten()
-                .any(|v| !(v.is_finite() && *v > 0.0))
-        {
-            return Err(Error::Invalid(format!(
-                "{} white balances for {} cameras (each three positive factors)",
-                values.len(),
-                self.passes.cams.len()
-            )));
-        }
-        self.fit.table.group_mut(WHITE_BALANCE).state.values = values.concat();
-        self.fit.gain_prev = self.gains();
-        self.upload_exposure();
-        self.gpu.check("set white balance")
+        bytemuck::cast_slice(&self.table.group(WHITE_BALANCE).state.values)
     }
 
     /// Each camera's per-channel gain, exposure times white balance: what its render is
@@ -110,6 +23,51 @@ impl Optimizer {
         (self.exposure().iter().zip(self.white_balance()))
             .map(|(&e, wb)| wb.map(|w| w * e))
             .collect()
+    }
+
+    /// Whether the exposures or the white balances are optimized.
+    pub(in crate::optim) fn gains_optimized(&self) -> bool {
+        self.table.optimizes(&[EXPOSURE, WHITE_BALANCE])
+    }
+}
+
+impl FitMut<'_> {
+    /// Set the factor each camera's render is multiplied by before it is compared with its
+    /// target (photos have their own exposure). With `Settings::exposure_learning_rate` the
+    /// optimizer goes on from these values.
+    pub fn set_exposure(&mut self, values: &[f32]) -> Result<()> {
+        if values.len() != self.cameras || values.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+            return Err(Error::Invalid(format!(
+                "{} exposures for {} cameras (each positive)",
+                values.len(),
+                self.cameras
+            )));
+        }
+        self.fit.table.group_mut(EXPOSURE).state.values = values.to_vec();
+        self.fit.gain_prev = self.fit.gains();
+        self.upload_exposure();
+        self.gpu.check("set exposure")
+    }
+
+    /// Set each camera's white balance (per-channel factors over its exposure, positive).
+    /// With the white balances optimized the optimizer goes on from these values.
+    pub fn set_white_balance(&mut self, values: &[[f32; 3]]) -> Result<()> {
+        if values.len() != self.cameras
+            || values
+                .iter()
+                .flatten()
+                .any(|v| !(v.is_finite() && *v > 0.0))
+        {
+            return Err(Error::Invalid(format!(
+                "{} white balances for {} cameras (each three positive factors)",
+                values.len(),
+                self.cameras
+            )));
+        }
+        self.fit.table.group_mut(WHITE_BALANCE).state.values = values.concat();
+        self.fit.gain_prev = self.fit.gains();
+        self.upload_exposure();
+        self.gpu.check("set white balance")
     }
 
     /// Optimize each camera's white balance (per-channel gains over its exposure) with Adam
@@ -127,28 +85,32 @@ impl Optimizer {
         Ok(())
     }
 
+    /// Upload the gains and the environment anew after their values were replaced (a
+    /// checkpoint's, a kept state's): the next adjoint pairs with these gains.
+    pub(in crate::optim) fn upload(&mut self) -> Result<()> {
+        self.fit.gain_prev = self.fit.gains();
+        self.upload_exposure();
+        if self.fit.env_fit.is_some() {
+            self.upload_environment(true)?;
+        }
+        Ok(())
+    }
+
     pub(in crate::optim) fn upload_exposure(&mut self) {
-        let gains = self.gains();
-        self.passes
-            .loss
-            .set_gains(&self.gpu, &gains, &self.fit.gain_prev);
+        let gains = self.fit.gains();
+        self.loss.set_gains(self.gpu, &gains, &self.fit.gain_prev);
     }
 
     /// One Adam step of the exposures' and the white balances' logarithms (those optimized)
     /// from this iteration's dL/d(gain), at schedule factor `factor`.
     pub(in crate::optim) fn step_gains(&mut self, factor: f32) -> Result<()> {
-        if !self.gains_optimized() {
+        if !self.fit.gains_optimized() {
             return Ok(());
         }
-        let d = self.passes.loss.read_gain_gradients(&self.gpu)?;
-        let g = log_gain_gradients(&d, &self.gains());
+        let d = self.loss.read_gain_gradients(self.gpu)?;
+        let g = log_gain_gradients(&d, &self.fit.gains());
         self.step_log_gains(factor, &g);
         Ok(())
-    }
-
-    /// Whether the exposures or the white balances are optimized.
-    pub(in crate::optim) fn gains_optimized(&self) -> bool {
-        self.fit.table.optimizes(&[EXPOSURE, WHITE_BALANCE])
     }
 
     /// One step of the optimized gains' logarithms from `(d_exposure, d_white_balance)`,
@@ -159,8 +121,8 @@ impl Optimizer {
         factor: f32,
         (d_e, d_wb): &(Vec<f32>, Vec<[f32; 3]>),
     ) {
-        let gains = self.gains();
-        let settings = &self.settings;
+        let gains = self.fit.gains();
+        let settings = self.settings;
         self.fit.table.step(settings, EXPOSURE, d_e, factor);
         self.fit
             .table

@@ -2,7 +2,6 @@
 //! camera sample of the task can reach, computed once per optimizer. The others get no
 //! gradient, keep their initial values, and are not determined by the images, so texture
 //! errors are reported over the observed ones as well ([`rmse_observed`]).
-use super::Optimizer;
 use crate::render::layout::GpuCameraInfo;
 use crate::render::params::ParamSet;
 use crate::render::WORKGROUP;
@@ -31,16 +30,6 @@ pub struct ObservedParams {
 
 /// Rays per pixel side: 4 x 4 positions spread over each pixel.
 pub const STRATA: u32 = 4;
-
-impl Optimizer {
-    /// For every texel of the optimized textures (in the order of `set.textures`, row-major
-    /// within each), whether some camera sample of the task reaches it with a non-zero filter
-    /// weight: 4 x 4 rays per pixel and camera, computed on the GPU when the optimizer is made
-    /// (ReSTIR gives reservoirs to these texels only).
-    pub fn observed_texels(&self) -> Result<&[bool]> {
-        Ok(&self.inputs.observed.0)
-    }
-}
 
 /// Which texels of the optimized textures of `scene` the cameras `cameras` observe (tiled in
 /// `grid` workgroups per image), and the GPU buffer the flags were read from (one `u32` per

@@ -1,12 +1,12 @@
-//! The one iteration loop: [`Optimizer::run_observed`] steps until a limit (iterations,
+//! The one iteration loop: [`run_observed`] steps until a limit (iterations,
 //! seconds of optimization) or an observer ends it, and hands each iteration to its
 //! [`Observer`]s: the job's metrics, checkpoints, progress bar and loss watches
 //! (`crate::job::run`), the bench's evaluations and samples (`crate::bench`), a caller's
 //! callback ([`Optimizer::run`]), and [`PassSampler`], the passes' mean times. The time an
 //! observer sets aside ([`Clock::aside`]: evaluation renders, metrics) is not optimization
 //! time: budgets, progress and the schedule read [`Clock::seconds`].
-use crate::optim::{Optimizer, PassTimes, StepStats};
-use crate::Result;
+use crate::optim::{Optimizer, PassTimes, Progress, StepStats, Stop};
+use crate::{Error, Result};
 use std::ops::ControlFlow;
 use std::time::Instant;
 
@@ -155,42 +155,90 @@ impl Observer for PassSampler {
     }
 }
 
-impl Optimizer {
-    /// Step until `limits` or an observer ends the run, every pass compiled first. Before each
-    /// iteration every observer's `before` is called, then the limits are checked (at a limit
-    /// the observers' `before` is called once more with `last`); the schedule's progress is
-    /// set from the limits and the clock; after the step every observer's `after` is called
-    /// (all of them, even when one ends the run).
-    pub fn run_observed(
-        &mut self,
-        limits: Limits,
-        clock: &mut Clock,
-        observers: &mut [&mut dyn Observer],
-    ) -> Result<Ended> {
-        self.prepare()?;
-        loop {
-            let last = limits.reached(self.iteration, clock.seconds());
-            let mut stop = false;
-            for o in observers.iter_mut() {
-                stop |= o.before(self, clock, last)?.is_break();
-            }
-            if last {
-                return Ok(Ended::Limit);
-            }
-            if stop {
-                return Ok(Ended::Observer);
-            }
-            let progress = limits.progress(self.iteration, clock.seconds());
-            self.set_progress(progress);
-            let stats = self.step()?;
-            for o in observers.iter_mut() {
-                stop |= o.after(self, &stats, progress, clock)?.is_break();
-            }
-            if stop {
-                return Ok(Ended::Observer);
-            }
+/// Step until `limits` or an observer ends the run, every pass compiled first. Before each
+/// iteration every observer's `before` is called, then the limits are checked (at a limit
+/// the observers' `before` is called once more with `last`); the schedule's progress is
+/// set from the limits and the clock; after the step every observer's `after` is called
+/// (all of them, even when one ends the run).
+pub fn run_observed(
+    opt: &mut Optimizer,
+    limits: Limits,
+    clock: &mut Clock,
+    observers: &mut [&mut dyn Observer],
+) -> Result<Ended> {
+    opt.prepare()?;
+    loop {
+        let last = limits.reached(opt.iteration, clock.seconds());
+        let mut stop = false;
+        for o in observers.iter_mut() {
+            stop |= o.before(opt, clock, last)?.is_break();
+        }
+        if last {
+            return Ok(Ended::Limit);
+        }
+        if stop {
+            return Ok(Ended::Observer);
+        }
+        let progress = limits.progress(opt.iteration, clock.seconds());
+        opt.set_progress(progress);
+        let stats = opt.step()?;
+        for o in observers.iter_mut() {
+            stop |= o.after(opt, &stats, progress, clock)?.is_break();
+        }
+        if stop {
+            return Ok(Ended::Observer);
         }
     }
+}
+
+/// [`Optimizer::run`]: the loop with the caller's callback as its one observer.
+pub fn run(
+    opt: &mut Optimizer,
+    stop: Stop,
+    on_iteration: impl FnMut(&Progress) -> std::ops::ControlFlow<()>,
+) -> Result<Option<Progress>> {
+    if stop.iterations.is_none() && stop.time_budget.is_none() {
+        return Err(Error::Invalid(
+            "Optimizer::run needs a number of iterations, a time budget or both".into(),
+        ));
+    }
+    /// The caller's callback as an observer, with the last iteration's progress.
+    struct Callback<F> {
+        first: u32,
+        last: Option<Progress>,
+        on_iteration: F,
+    }
+    impl<F: FnMut(&Progress) -> std::ops::ControlFlow<()>> Observer for Callback<F> {
+        fn after(
+            &mut self,
+            opt: &mut Optimizer,
+            stats: &StepStats,
+            _: f64,
+            clock: &mut Clock,
+        ) -> Result<std::ops::ControlFlow<()>> {
+            let p = Progress {
+                iteration: opt.iteration,
+                in_this_run: opt.iteration - self.first,
+                loss: stats.loss,
+                elapsed: std::time::Duration::from_secs_f64(clock.seconds().max(0.0)),
+            };
+            self.last = Some(p);
+            Ok((self.on_iteration)(&p))
+        }
+    }
+    let first = opt.iteration;
+    let limits = Limits {
+        first,
+        iterations: stop.iterations.map(|n| first.saturating_add(n)),
+        seconds: stop.time_budget.map(|d| d.as_secs_f64()),
+    };
+    let mut callback = Callback {
+        first,
+        last: None,
+        on_iteration,
+    };
+    run_observed(opt, limits, &mut Clock::start(0.0), &mut [&mut callback])?;
+    Ok(callback.last)
 }
 
 #[cfg(test)]

@@ -115,11 +115,7 @@ impl Optimizer {
         }
         self.fit.table.set_values(&values.groups)?;
         self.write_params(&values.params)?;
-        self.fit.gain_prev = self.gains();
-        self.upload_exposure();
-        if self.fit.env_fit.is_some() {
-            self.upload_environment(true)?;
-        }
+        self.fit_mut().upload()?;
         self.gpu.check("set optimizer values")
     }
 
@@ -190,7 +186,7 @@ impl Optimizer {
                 None => None,
             },
             groups: self.fit.table.states(),
-            environment: self.environment_state().cloned(),
+            environment: self.fit.environment_state().cloned(),
         })
     }
 
@@ -242,14 +238,10 @@ impl Optimizer {
             cache.restore(&self.gpu, state.path_cache.as_ref())?;
         }
         if let Some(env) = &state.environment {
-            self.restore_environment(env)?;
+            self.fit_mut().restore_environment(env)?;
         }
         self.fit.table.restore(&state.groups)?;
-        self.fit.gain_prev = self.gains();
-        self.upload_exposure();
-        if self.fit.env_fit.is_some() {
-            self.upload_environment(true)?;
-        }
+        self.fit_mut().upload()?;
         self.iteration = state.iteration;
         self.gpu.check("restore optimizer state")
     }
