@@ -24,6 +24,7 @@
 //! The report (`bench.json`, `report.md`, plots and gradient images) is written by
 //! [`report`].
 mod contender;
+mod counters;
 mod gradient;
 pub mod peer;
 mod phases;

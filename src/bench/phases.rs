@@ -1,5 +1,6 @@
 //! The benchmark's phases (see the module above): the primal estimators' error, and the
 //! equal-time optimization with its cost; the gradient error is in `gradient.rs`.
+use super::counters::Counted;
 use super::*;
 
 /// The primal estimators' image error and cost (issue: recursive control variates): per
@@ -147,6 +148,9 @@ pub(super) struct OptimizationRun {
     pub(super) final_image: Image,
     pub(super) per_texture_observed: Vec<f64>,
     pub(super) relit: Relit,
+    /// The errors of the state the run handed back where it was not its last (a run of the
+    /// task keeps its lowest evaluation's, `optimizer.keep_best`), at that state's iteration.
+    pub(super) kept: Option<CurvePoint>,
 }
 
 /// A run's relit error (mean over the task's `relight` environments) and, with the
@@ -220,51 +224,6 @@ fn auto_configuration(task: &Task, prep: &Problem) -> crate::auto::Configuration
     )
 }
 
-/// The estimator's counters over a run, sampled every few iterations: the first sampled
-/// iteration, the last, the sums of their differences since the first, and their values at
-/// the last. 32 bits on the GPU, they may wrap over a long run, never between two samples,
-/// so they are summed as wrapping differences.
-#[derive(Default)]
-struct Counted(
-    Option<(
-        u32,
-        u32,
-        Vec<(&'static str, f64)>,
-        crate::optim::estimator::Diagnostics,
-    )>,
-);
-
-impl Counted {
-    fn sample(&mut self, opt: &Optimizer) -> Result<()> {
-        let now = opt.estimator_counters()?;
-        match &mut self.0 {
-            None => {
-                let sums = now.iter().map(|(n, _)| (*n, 0.0)).collect();
-                self.0 = Some((opt.iteration, opt.iteration, sums, now));
-            }
-            Some((_, to, sums, last)) => {
-                for ((s, (_, v)), (_, l)) in sums.iter_mut().zip(&now).zip(last.iter()) {
-                    s.1 += (*v as u32).wrapping_sub(*l as u32) as f64;
-                }
-                *last = now;
-                *to = opt.iteration;
-            }
-        }
-        Ok(())
-    }
-
-    /// Each counter's rise per iteration between the first and the last sample.
-    fn per_iteration(self) -> Vec<(String, f64)> {
-        match self.0 {
-            Some((from, to, sums, _)) if to > from => sums
-                .into_iter()
-                .map(|(n, s)| (n.to_string(), s / (to - from) as f64))
-                .collect(),
-            _ => Vec::new(),
-        }
-    }
-}
-
 pub(super) fn optimization_phase(
     gpu: &Gpu,
     task: &Task,
@@ -272,11 +231,15 @@ pub(super) fn optimization_phase(
     o: &BenchOptions,
     who: Contender,
     tuned: Option<&tune::Tunable>,
+    start: &Start,
     progress: &Progress,
 ) -> Result<OptimizationRun> {
     let mut opt = contender_optimizer(gpu, task, prep, o, who, tuned)?;
     let truth = prep.reference.as_deref();
     let observed = opt.observed_texels()?.to_vec();
+    // A run of the task hands back its lowest evaluation's state, the start's included.
+    let mut keeper = crate::job::keep::Keeper::new(task.optimizer.keep_best, None);
+    keeper.offer(&opt, Some(start.image))?;
     let mut watch = BenchWatch {
         prep,
         task,
@@ -289,6 +252,7 @@ pub(super) fn optimization_phase(
         curve: Vec::new(),
         counted: Counted::default(),
         last_image: None,
+        keeper,
     };
     let mut sampler = crate::optim::run_loop::PassSampler::default();
     // Only the iterations count: every evaluation, curve point and sample is set aside.
@@ -309,12 +273,27 @@ pub(super) fn optimization_phase(
         curve,
         counted,
         last_image,
+        keeper,
         ..
     } = watch;
-    // The loop ends with an evaluation at the end of the budget.
-    let final_image = match last_image {
-        Some(img) => img,
-        None => evaluate(&opt, prep, task, o.eval_spp)?.1,
+    // The loop ends with an evaluation at the end of the budget. The errors below are those
+    // of the state the run hands back.
+    let last_error = curve.iter().rev().find_map(|p| p.image_relmse);
+    let mut kept = None;
+    let final_image = match (keeper.hand_back(&mut opt, last_error)?, last_image) {
+        (Some(h), _) => {
+            let (e, img) = evaluate(&opt, prep, task, o.eval_spp)?;
+            let p = curve_point(&opt, prep, &observed, f64::NAN, seconds)?;
+            let (iteration, image_relmse) = (h.iteration, Some(e));
+            kept = Some(CurvePoint {
+                iteration,
+                image_relmse,
+                ..p
+            });
+            img
+        }
+        (None, Some(img)) => img,
+        (None, None) => evaluate(&opt, prep, task, o.eval_spp)?.1,
     };
     let passes = sampler.mean();
     let iterations = opt.iteration;
@@ -339,6 +318,7 @@ pub(super) fn optimization_phase(
         curve,
         final_image,
         per_texture_observed,
+        kept,
     })
 }
 
@@ -357,6 +337,8 @@ struct BenchWatch<'a> {
     curve: Vec<CurvePoint>,
     counted: Counted,
     last_image: Option<Image>,
+    /// The state with the lowest evaluation error so far.
+    keeper: crate::job::keep::Keeper,
 }
 
 impl crate::optim::run_loop::Observer for BenchWatch<'_> {
@@ -370,6 +352,7 @@ impl crate::optim::run_loop::Observer for BenchWatch<'_> {
         let due = seconds >= o.budget_s * self.next_eval as f64 / (self.points - 1) as f64;
         if last || due {
             let (e, img) = clock.aside(|| evaluate(opt, self.prep, self.task, o.eval_spp))?;
+            clock.aside(|| self.keeper.offer(opt, Some(e)))?;
             self.last_image = Some(img);
             if let Some(p) = self.curve.last_mut() {
                 p.image_relmse = Some(e);
@@ -435,7 +418,7 @@ fn curve_point(
 
 /// The errors every run starts from: the initial textures' image relMSE, texture RMSE over
 /// all and over the observed texels, and which texels are observed.
-struct Start {
+pub(super) struct Start {
     image: f64,
     texture: f64,
     texture_observed: f64,
@@ -483,17 +466,25 @@ impl Start {
         settings: String,
         tuned: Option<tune::Tuned>,
     ) -> RunResult {
-        let (t, to) = run
+        let (t_last, to_last) = run
             .curve
             .last()
             .map(|p| (p.texture_rmse, p.texture_rmse_observed))
             .unwrap_or((self.texture, self.texture_observed));
-        let i = run
+        let i_last = run
             .curve
             .iter()
             .rev()
             .find_map(|p| p.image_relmse)
             .unwrap_or(self.image);
+        let (t, to, i) = match &run.kept {
+            Some(k) => (
+                k.texture_rmse,
+                k.texture_rmse_observed,
+                k.image_relmse.unwrap_or(f64::NAN),
+            ),
+            None => (t_last, to_last, i_last),
+        };
         let (ib, tob) = first.map_or((i, to), |b| (b.image_relmse, b.texture_rmse_observed));
         let third = run
             .curve
@@ -530,6 +521,8 @@ impl Start {
             texture_rmse_observed_third: third,
             texture_rmse_observed_min: min,
             texture_rmse_observed_per_texture: run.per_texture_observed,
+            kept_iteration: run.kept.as_ref().map(|k| k.iteration),
+            last_state_errors: run.kept.is_some().then_some([to_last, i_last]),
             ms_per_iteration: run.ms_per_iteration,
             iterations: run.iterations,
             passes: run.passes,
@@ -600,7 +593,7 @@ pub(super) fn optimization_phases(
     };
     for (who, tuned) in runs_of.zip(tuned) {
         let t_best = tuned.as_ref().map(|t| &t.best);
-        let mut run = optimization_phase(gpu, task, prep, o, who, t_best, progress)?;
+        let mut run = optimization_phase(gpu, task, prep, o, who, t_best, &start, progress)?;
         let empty = Image {
             width: 0,
             height: 0,

@@ -305,6 +305,16 @@ pub struct RunResult {
     pub texture_rmse_observed_min: f64,
     /// Per texture (as [`OptimizationResult::textures`]), its observed-texel RMSE at the end.
     pub texture_rmse_observed_per_texture: Vec<f64>,
+    /// The iteration whose state the errors above are of, where the run handed back an
+    /// earlier state than its last, as a run of the task does (`optimizer.keep_best`: the
+    /// lowest evaluation image relMSE, the start's included); None: the last state. The
+    /// curve, `_third` and `_min` follow the run itself.
+    #[serde(default)]
+    pub kept_iteration: Option<u32>,
+    /// Where an earlier state was handed back: the last state's observed-texel RMSE and
+    /// image relMSE.
+    #[serde(default)]
+    pub last_state_errors: Option<[f64; 2]>,
     /// Mean wall-clock milliseconds per iteration (GPU work finished).
     #[serde(deserialize_with = "f64_or_nan")]
     pub ms_per_iteration: f64,

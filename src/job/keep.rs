@@ -3,14 +3,15 @@
 //! and keeps the textures and light of the lowest; at the end the run writes that state
 //! (`optimizer.keep_best`, on by default), as early stopping on a validation measure does.
 //! The evaluation renders use one seed for the whole run, so two states' errors differ by
-//! what their textures do, not by the render's noise.
-use crate::optim::checkpoint::{Kept, MetricRow};
+//! what their textures do, not by the render's noise. The bench keeps its runs' states with
+//! the same keeper, so that it scores what a run of the task hands back.
+use crate::optim::checkpoint::Kept;
 use crate::optim::Optimizer;
 use crate::Result;
 
 /// Keeps the state with the lowest evaluation image error; see the module documentation.
 #[derive(Debug)]
-pub(super) struct Keeper {
+pub(crate) struct Keeper {
     on: bool,
     kept: Option<Kept>,
 }
@@ -28,7 +29,7 @@ pub struct HandedBack {
 
 impl Keeper {
     /// A keeper (`on`: `optimizer.keep_best`), going on from a resumed run's kept state.
-    pub(super) fn new(on: bool, resumed: Option<Kept>) -> Keeper {
+    pub(crate) fn new(on: bool, resumed: Option<Kept>) -> Keeper {
         Keeper {
             on,
             kept: resumed.filter(|_| on),
@@ -40,10 +41,10 @@ impl Keeper {
         self.kept.as_ref()
     }
 
-    /// `row` of the state `opt` holds now: kept when its evaluation image error is the
-    /// lowest so far (its values read back then only).
-    pub(super) fn offer(&mut self, opt: &Optimizer, row: &MetricRow) -> Result<()> {
-        let Some(e) = row.image_relmse.filter(|e| e.is_finite()) else {
+    /// The state `opt` holds now, with its evaluation image error (None: not evaluated):
+    /// kept when that error is the lowest so far (its values read back then only).
+    pub(crate) fn offer(&mut self, opt: &Optimizer, image_relmse: Option<f64>) -> Result<()> {
+        let Some(e) = image_relmse.filter(|e| e.is_finite()) else {
             return Ok(());
         };
         if !self.on || self.kept.as_ref().is_some_and(|k| k.image_relmse <= e) {
@@ -56,16 +57,13 @@ impl Keeper {
         Ok(())
     }
 
-    /// At the end, `rows` the run's (the last one's evaluation done): put the kept state into
-    /// `opt` where it is lower than the last and log it (a warning, added to `warnings`,
-    /// where it is the start); None where the last state stands.
-    pub(super) fn hand_back(
+    /// At the end, `last` the last state's evaluation image error: put the kept state into
+    /// `opt` where it is lower than the last; None where the last state stands.
+    pub(crate) fn hand_back(
         &self,
         opt: &mut Optimizer,
-        rows: &[MetricRow],
-        warnings: &mut Vec<String>,
+        last: Option<f64>,
     ) -> Result<Option<HandedBack>> {
-        let last = rows.last().and_then(|r| r.image_relmse);
         let (Some(k), Some(last_e)) = (&self.kept, last) else {
             return Ok(None);
         };
@@ -73,23 +71,27 @@ impl Keeper {
             return Ok(None);
         }
         opt.set_values(&k.values)?;
-        let h = HandedBack {
+        Ok(Some(HandedBack {
             iteration: k.values.iteration,
             image_relmse: k.image_relmse,
             last_image_relmse: last_e,
-        };
-        let message = h.describe(opt.iteration);
-        if h.iteration == 0 {
+        }))
+    }
+}
+
+impl HandedBack {
+    /// Log it after a run whose last iteration is `last_iteration`: a warning, added to
+    /// `warnings`, where it is the start.
+    pub(super) fn log(&self, last_iteration: u32, warnings: &mut Vec<String>) {
+        let message = self.describe(last_iteration);
+        if self.iteration == 0 {
             log::warn!("{message}");
             warnings.push(message);
         } else {
             log::info!("{message}");
         }
-        Ok(Some(h))
     }
-}
 
-impl HandedBack {
     /// What the log says of it: a warning where the run could not improve on its start.
     pub fn describe(&self, last_iteration: u32) -> String {
         if self.iteration == 0 {

@@ -403,7 +403,12 @@ impl Saver {
         elapsed: f64,
     ) -> Result<Option<HandedBack>> {
         self.save(opt, &session.rows, elapsed, session.keeper.kept())?;
-        (session.keeper).hand_back(opt, &session.rows, &mut session.warnings)
+        let last = session.rows.last().and_then(|r| r.image_relmse);
+        let handed_back = session.keeper.hand_back(opt, last)?;
+        if let Some(h) = &handed_back {
+            h.log(opt.iteration, &mut session.warnings);
+        }
+        Ok(handed_back)
     }
 
     /// Write the checkpoint (with the kept state) and `metrics.csv` (both atomically).
@@ -505,7 +510,7 @@ fn iterate(
     if rows.is_empty() {
         // The start: texture and image errors of the initial textures.
         let start = clock.aside(|| metrics.start_row(opt))?;
-        clock.aside(|| keeper.offer(opt, &start))?;
+        clock.aside(|| keeper.offer(opt, start.image_relmse))?;
         rows.push(start);
     }
     let stop_on_plateau = task
@@ -547,7 +552,7 @@ fn iterate(
     // The last row's evaluation render, like every evaluation, is not optimization time.
     clock.aside(|| metrics.complete_last(&mut session.rows, opt))?;
     if let Some(last) = session.rows.last() {
-        clock.aside(|| session.keeper.offer(opt, last))?;
+        clock.aside(|| session.keeper.offer(opt, last.image_relmse))?;
     }
     session.seconds = clock.session_seconds();
     session.iterations = opt.iteration - start_iter;
@@ -608,7 +613,7 @@ impl Observer for JobWatch<'_> {
             .plateau
             .as_mut()
             .and_then(|p| p.observe(row.iteration, stats.loss, row.image_relmse, progress));
-        clock.aside(|| session.keeper.offer(opt, &row))?;
+        clock.aside(|| session.keeper.offer(opt, row.image_relmse))?;
         session.rows.push(row);
         if let Some(b) = &self.bar {
             b.set_position(if self.limits.iterations.is_some() {

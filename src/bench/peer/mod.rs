@@ -234,6 +234,9 @@ fn run_of(r: &RaceResult, row: &Row, input: &RaceInput) -> RunResult {
             .iter()
             .map(|v| v.unwrap_or(f64::NAN))
             .collect(),
+        // Mitsuba's loop hands back its last state: it has no keeper.
+        kept_iteration: None,
+        last_state_errors: None,
         ms_per_iteration: row.ms_per_iteration,
         iterations: row.iterations,
         passes: None,

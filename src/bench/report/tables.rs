@@ -159,7 +159,10 @@ pub fn optimization_table(r: &BenchReport) -> String {
                 ratio(c.texture_rmse_observed / c.texture_rmse_observed_min),
                 c.texture_rmse,
                 c.ms_per_iteration,
-                c.iterations,
+                match c.kept_iteration {
+                    Some(k) => format!("{} (kept {k})", c.iterations),
+                    None => c.iterations.to_string(),
+                },
             );
         }
     }
