@@ -1,7 +1,6 @@
-//! The targets' per-pixel masks and the per-camera gains: exposures (optimized on their
-//! logarithms when [`crate::optim::Settings::exposure_learning_rate`] is set) and white balances
-//! (per-channel factors, [`FitMut::optimize_white_balance`]), both groups of the
-//! parameter table.
+//! The per-camera gains: exposures (optimized on their logarithms when
+//! [`crate::optim::Settings::exposure_learning_rate`] is set) and white balances (per-channel
+//! factors, [`FitMut::optimize_white_balance`]), both groups of the parameter table.
 use super::{Fit, FitMut};
 use crate::optim::param_table::{EXPOSURE, WHITE_BALANCE};
 use crate::{Error, Result};
