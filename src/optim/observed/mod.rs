@@ -94,8 +94,9 @@ pub fn texture_rmse(set: &ParamSet, values: &[f32], truth: &[f32]) -> f64 {
 }
 
 /// RMSE of `values` against `truth` (laid out like `set.values`) over the channels of the
-/// texels marked in `observed` (one flag per texel, as [`Optimizer::observed_texels`]);
-/// NaN when none is observed.
+/// texels marked in `observed` (one flag per texel, as
+/// [`Optimizer::observed_texels`](crate::optim::Optimizer::observed_texels)); NaN when none is
+/// observed.
 pub fn rmse_observed(set: &ParamSet, values: &[f32], truth: &[f32], observed: &[bool]) -> f64 {
     let (s, n) = squared_errors_observed(set, values, truth, observed)
         .into_iter()
