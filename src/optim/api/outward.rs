@@ -185,15 +185,7 @@ impl Optimizer {
     /// without changing the textures. For ReSTIR this advances the reservoirs like an
     /// iteration does. Returns (gradient laid out like the parameters, loss).
     pub fn estimate_gradient(&mut self, iteration: u32) -> Result<(Vec<f32>, f64)> {
-        let mut enc = self
-            .gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("gradient estimate"),
-            });
-        self.encode_gradient(&mut enc, iteration, true);
-        self.gpu.queue.submit([enc.finish()]);
-        self.finish_iteration(true);
+        self.submit_gradient("gradient estimate", iteration, true);
         let loss = self.read_loss()?;
         Ok((self.read_gradient()?, loss))
     }
@@ -227,16 +219,20 @@ impl Optimizer {
         self.gpu
             .queue
             .write_buffer(buf, 0, bytemuck::cast_slice(adjoint));
+        self.submit_gradient("gradient estimate (given adjoint)", iteration, false);
+        self.read_gradient()
+    }
+
+    /// Submit iteration `iteration`'s gradient passes in one command buffer labelled `label`
+    /// (its primal render and loss first with `primal`), the textures held.
+    fn submit_gradient(&mut self, label: &str, iteration: u32, primal: bool) {
         let mut enc = self
             .gpu
             .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("gradient estimate (given adjoint)"),
-            });
-        self.encode_gradient(&mut enc, iteration, false);
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+        self.encode_gradient(&mut enc, iteration, primal);
         self.gpu.queue.submit([enc.finish()]);
-        self.finish_iteration(false);
-        self.read_gradient()
+        self.finish_iteration(primal);
     }
 
     /// The adjoint of the loss at the current textures from a primal render of `spp` samples
