@@ -479,11 +479,7 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         return bench_throughput(name, max_depth, &out);
     }
     if to_docs {
-        // Before the hours of measuring: the checkout must be where the report goes.
-        let readme = std::fs::read_to_string("README.md")
-            .context("--report: README.md in the current folder (run it in the checkout)")?;
-        psrestir::bench::report::replace_headline(&readme, "")
-            .map_err(|m| anyhow::anyhow!("--report: README.md: {m}"))?;
+        check_report_target()?;
     }
     let names: Vec<String> = if scenes.is_empty() {
         assets::bench_scenes::BENCH_SCENES
@@ -497,6 +493,10 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         .iter()
         .map(|n| psrestir::bench::resolve_scene(n))
         .collect::<std::result::Result<Vec<_>, _>>()?;
+    let command = format!(
+        "psrestir {}",
+        std::env::args().skip(1).collect::<Vec<_>>().join(" ")
+    );
     let opts = psrestir::bench::BenchOptions {
         budget_s: budget_s.unwrap_or(60.0),
         task_budgets: budget_s.is_none(),
@@ -527,10 +527,7 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
         estimator_options,
         gradient_method,
         out: out.clone(),
-        command: Some(format!(
-            "psrestir {}",
-            std::env::args().skip(1).collect::<Vec<_>>().join(" ")
-        )),
+        command: Some(command.clone()),
         progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
         ..Default::default()
     };
@@ -539,14 +536,18 @@ fn cmd_bench(args: BenchArgs) -> Result<()> {
     println!("{}", psrestir::bench::report::table(&report));
     println!("wrote {}", out.join("report.md").display());
     if to_docs {
-        let command: Vec<String> = std::env::args().skip(1).collect();
-        psrestir::bench::report::write_docs(
-            std::path::Path::new("."),
-            &report,
-            &format!("psrestir {}", command.join(" ")),
-        )?;
+        psrestir::bench::report::write_docs(std::path::Path::new("."), &report, &command)?;
         println!("wrote docs/results.md and the headline table in README.md");
     }
+    Ok(())
+}
+
+/// `--report`, before the hours of measuring: the checkout must be where the report goes.
+fn check_report_target() -> Result<()> {
+    let readme = std::fs::read_to_string("README.md")
+        .context("--report: README.md in the current folder (run it in the checkout)")?;
+    psrestir::bench::report::replace_headline(&readme, "")
+        .map_err(|m| anyhow::anyhow!("--report: README.md: {m}"))?;
     Ok(())
 }
 

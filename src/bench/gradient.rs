@@ -517,3 +517,32 @@ impl SeedRun<'_> {
         Ok(())
     }
 }
+
+/// relMSE over entries with a non-zero reference: mean of (g - r)^2 / (r^2 + 1e-2).
+pub fn gradient_relmse(g: &[f32], reference: &[f64]) -> f64 {
+    let whole = 0..g.len();
+    gradient_relmse_parts(g, reference, std::slice::from_ref(&whole))[0]
+}
+
+/// Each range's part of [`gradient_relmse`]: the sum of its terms over the range's entries
+/// (those with a non-zero reference), divided by the number of such entries in the whole
+/// vector, so that the parts of disjoint ranges covering it add up to the whole. With one
+/// range per optimized texture it says which texture the error is in.
+pub fn gradient_relmse_parts(
+    g: &[f32],
+    reference: &[f64],
+    ranges: &[std::ops::Range<usize>],
+) -> Vec<f64> {
+    let term = |i: usize| -> Option<f64> {
+        let (a, r) = (*g.get(i)? as f64, *reference.get(i)?);
+        (r != 0.0).then(|| (a - r).powi(2) / (r * r + 1e-2))
+    };
+    let n = (0..g.len().min(reference.len()))
+        .filter(|&i| term(i).is_some())
+        .count()
+        .max(1) as f64;
+    ranges
+        .iter()
+        .map(|range| range.clone().filter_map(term).sum::<f64>() / n)
+        .collect()
+}
