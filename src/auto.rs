@@ -28,9 +28,7 @@
 //!   normal map alone it made the variance step tilt whole regions.
 //! - **Learning rates**: for Adam the bench tasks' (0.03 for base color and metallic, 0.02
 //!   for roughness); for the variance step 0.01 per step (a normal map 0.003), 0.03 with
-//!   indirect light ([`StepKind::learning_rate`], [`learning_rate_for`]), and 0.01 for base
-//!   color and roughness there once the run is known to hold at least [`LONG_RUN`] iterations
-//!   ([`long_run_rate_for`]).
+//!   indirect light ([`StepKind::learning_rate`], [`learning_rate_for`]).
 //! - **A cosine decay to 5%** over the run (its iterations or its time budget): the last
 //!   steps refine instead of walking.
 //! - **The smoothness prior** at 0.03 with sparse sampling, 0.01 with dense ([`smoothness`]):
@@ -40,7 +38,6 @@ use crate::optim::estimator::Regime;
 use crate::optim::estimator::DENSE_SAMPLES_PER_TEXEL;
 use crate::optim::moment_filter::{MomentFilterOptions, SUGGESTED_LEVELS};
 use crate::optim::{Choice, MethodChoice, Schedule, ScheduleKind, StepKind};
-use crate::render::params::LongRunRate;
 use crate::vocab::Slot;
 
 /// The step where a task in `regime` names none: Adam with direct light and fewer than
@@ -92,49 +89,13 @@ pub const FINAL_FACTOR: f32 = 0.05;
 /// color, fitted there, failed on the test split: on `1004` (a sphere under a sun, paths of
 /// 3 vertices, 49 iterations in its budget) it ended at 2.9x the error of 0.03, and tied on
 /// `1010` (80 iterations). The rate that wins follows the run's length, which a time budget
-/// leaves unknown until the run has timed its iterations: [`long_run_rate_for`] reads it.
+/// leaves unknown until the run has timed its iterations; until a rule reads it, 0.03 stays.
 pub fn learning_rate_for(step: StepKind, slot: Slot, regime: &Regime) -> f32 {
     if step == StepKind::VARIANCE && regime.max_depth > 1 && slot != Slot::Normal {
         0.03
     } else {
         step.learning_rate(slot)
     }
-}
-
-/// The run length (iterations) from which a base color or roughness texture under the
-/// variance-scaled step with indirect light steps at [`LONG_RUN_RATE`] instead of 0.03
-/// ([`long_run_rate_for`]).
-pub const LONG_RUN: u32 = 160;
-
-/// The variance-scaled step's rate with indirect light in a run of at least [`LONG_RUN`]
-/// iterations.
-pub const LONG_RUN_RATE: f32 = 0.01;
-
-/// The rate a texture of `slot` that names none takes in a long run, where it differs from
-/// [`learning_rate_for`]'s: with the variance-scaled step and indirect light, base color and
-/// roughness take [`LONG_RUN_RATE`] in a run that holds at least [`LONG_RUN`] iterations (its
-/// iteration limit, or what its time budget holds at the pace of its first iterations; until
-/// that pace is known it steps at 0.03).
-///
-/// Fitted on the scene family's train split (`ci/family_study.sh`, members 0-23, one seed,
-/// each at its own budget; docs/studies.md, "The variance step's rate with indirect light"):
-/// on base color 0.03 ended lower on the two runs of 116 and 143 iterations (0.01 at 1.05x
-/// and 1.21x), 0.01 on all six of 181 to 551 iterations (0.71-0.94x); on roughness 0.01 on
-/// the one task (1586 iterations, 0.96x). On metallic 0.03 won both (73 and 258 iterations,
-/// 0.01 at 1.08x and 1.26x), so it keeps 0.03. The threshold lies between 143 and 181.
-/// Judged on the test split's members 1014-1048 that fall under it (three seeds, the rule
-/// against 0.03 all run): on the four base color tasks where it switched in every seed it
-/// ended at 0.62-0.94x the texture error (each 90% interval below 1); on roughness level
-/// (three tasks) or 1.01x (one); near the threshold one run of `1048` switched and ended
-/// 1.14x above (docs/studies.md, "The variance step's rate with indirect light").
-pub fn long_run_rate_for(step: StepKind, slot: Slot, regime: &Regime) -> Option<LongRunRate> {
-    (step == StepKind::VARIANCE
-        && regime.max_depth > 1
-        && matches!(slot, Slot::BaseColor | Slot::Roughness))
-    .then_some(LongRunRate {
-        from_iterations: LONG_RUN,
-        learning_rate: LONG_RUN_RATE,
-    })
 }
 
 /// The moment filter where a task sets none, for `step` over textures of `slots`: with the
@@ -284,17 +245,8 @@ impl Configuration {
         let mut unset: Vec<Slot> = textures.iter().filter(|t| !t.1).map(|t| t.0).collect();
         unset.dedup();
         for slot in unset {
-            let long = match long_run_rate_for(step, slot, regime) {
-                Some(l) => format!(
-                    ", {} once the run is known to hold at least {} iterations (with indirect \
-                     light the shorter runs of the family's train split ended lower at 0.03, \
-                     the longer at 0.01)",
-                    l.learning_rate, l.from_iterations
-                ),
-                None => String::new(),
-            };
             reasons.push(format!(
-                "learning rate {} for {} textures that name none (the {} step's){long}",
+                "learning rate {} for {} textures that name none (the {} step's)",
                 learning_rate_for(step, slot, regime),
                 slot.name(),
                 step.name()
@@ -314,12 +266,6 @@ impl Configuration {
     /// The learning rate of a texture of `slot` that names none.
     pub fn rate(&self, slot: Slot) -> f32 {
         learning_rate_for(self.step, slot, &self.regime)
-    }
-
-    /// The rate a texture of `slot` that names none takes in a long run, where it differs
-    /// ([`long_run_rate_for`]).
-    pub fn long_run_rate(&self, slot: Slot) -> Option<LongRunRate> {
-        long_run_rate_for(self.step, slot, &self.regime)
     }
 
     /// Put the estimator, step, moment filter and schedule into `settings` (the library's
@@ -455,35 +401,11 @@ mod tests {
             assert_eq!(indirect.rate(slot), 0.03, "{slot:?}");
         }
         assert_eq!(indirect.rate(Slot::Normal), 0.003);
-        // In a long run base color and roughness step at 0.01; metallic and normal maps keep
-        // their rate, and so does every slot with direct light or with Adam.
-        let long = |c: &Configuration, slot| c.long_run_rate(slot).map(|l| l.learning_rate);
-        assert_eq!(long(&indirect, Slot::BaseColor), Some(LONG_RUN_RATE));
-        assert_eq!(long(&indirect, Slot::Roughness), Some(LONG_RUN_RATE));
-        assert_eq!(long(&indirect, Slot::Metallic), None);
-        assert_eq!(long(&indirect, Slot::Normal), None);
-        assert_eq!(
-            indirect
-                .long_run_rate(Slot::BaseColor)
-                .unwrap()
-                .from_iterations,
-            LONG_RUN
-        );
-        assert!(
-            indirect.reasons[5].contains("0.01 once the run"),
-            "{:?}",
-            indirect.reasons
-        );
-        let r = regime(1, 128 * 128, 256 * 256, 3);
-        let adam = learning_rate_for(StepKind::ADAM, Slot::BaseColor, &r);
-        assert_eq!(adam, 0.03);
-        assert_eq!(long_run_rate_for(StepKind::ADAM, Slot::BaseColor, &r), None);
         // Direct light with dense samples: the variance step's own for every slot.
         let dense = unset(&regime(2, 2 * 128 * 128, 256 * 128, 1));
         assert_eq!(dense.step, StepKind::VARIANCE);
         assert_eq!(dense.rate(Slot::BaseColor), 0.01);
         assert_eq!(dense.rate(Slot::Metallic), 0.01);
-        assert_eq!(dense.long_run_rate(Slot::BaseColor), None);
     }
 
     #[test]

@@ -272,12 +272,16 @@ fn task_with_flags(args: &OptimizeArgs) -> Result<(PathBuf, Task)> {
         if !(f.is_finite() && f > 0.0) {
             bail!("--lr-scale must be a positive number");
         }
-        // A texture without a rate scales those `auto` gives it under the task's step (its
-        // rate for long runs included, `Problem::load`).
+        // A texture without a rate scales the one `auto` gives it under the task's step.
+        let config = psrestir::task::task_configuration(
+            &task,
+            task.optimizer.method,
+            psrestir::task::named_cameras(&task),
+        );
         for t in &mut task.textures {
-            t.learning_rate = t.learning_rate.map(|r| r * f);
+            let rate = t.learning_rate.unwrap_or_else(|| config.rate(t.slot));
+            t.learning_rate = Some(rate * f);
         }
-        task.auto_rate_scale = Some(f);
     }
     // A flag on the filter changes the filter the task would run with (its own, or `auto`'s
     // for its step).

@@ -5,15 +5,13 @@
 //! as a GPU texture equal to the CPU values; injected non-finite values are dropped and
 //! counted, never stored; passes whose grid is split over two rows (past the device's
 //! workgroups per dimension) still cover every pixel and texel once; invalid ReSTIR options
-//! are refused by name; a texture's rate for long runs applies where the run holds its
-//! iterations.
+//! are refused by name.
 #[path = "../examples/gltf_textures.rs"]
 mod gltf_textures;
 #[path = "../examples/in_memory.rs"]
 mod in_memory;
 
 use psrestir::optim::{texture_export, StepKind};
-use psrestir::render::params::LongRunRate;
 use psrestir::{Filter, Gpu, Method, Optimizer, Problem, Settings, Stop};
 use std::ops::ControlFlow;
 
@@ -248,49 +246,6 @@ fn steps_after_prepare_create_no_pipeline() {
             );
         }
     }
-}
-
-/// A texture's rate for long runs (`auto`'s with indirect light) applies from the start of a
-/// run whose iteration limit holds its `from_iterations`, after the first iterations' pace
-/// under a time budget that holds them, and never in a shorter run.
-#[test]
-fn a_rate_for_long_runs_applies_where_the_run_holds_its_iterations() {
-    if no_gpu() {
-        return;
-    }
-    let gpu = Gpu::new().unwrap();
-    let p = problem(&gpu, [[230, 60, 40], [40, 90, 220]]);
-    // The rate of the last step of a run until `stop` (the callback may end it early).
-    let last_rate = |from: u32, stop: Stop, until: u32| {
-        let mut p = p.clone();
-        p.set.textures[0].learning_rate = Some(0.02);
-        p.set.textures[0].long_run = Some(LongRunRate {
-            from_iterations: from,
-            learning_rate: 0.05,
-        });
-        let mut o = Optimizer::for_problem(&gpu, &p, settings(Method::BASELINE)).unwrap();
-        o.run(stop, |q| {
-            if q.in_this_run >= until {
-                ControlFlow::Break(())
-            } else {
-                ControlFlow::Continue(())
-            }
-        })
-        .unwrap();
-        o.last_learning_rates()[0]
-    };
-    // Settings::new has a constant schedule: the rates are as given.
-    assert_eq!(last_rate(12, Stop::iterations(12), u32::MAX), 0.05);
-    assert_eq!(last_rate(12, Stop::iterations(11), u32::MAX), 0.02);
-    assert_eq!(last_rate(12, Stop::iterations(1), u32::MAX), 0.02);
-    // A time budget: until its pace is known the run steps at its rate; 2 s hold at least
-    // 20 iterations of this 32² task, not a million (one takes milliseconds, debug builds
-    // on lavapipe included).
-    let budget = Stop::time(std::time::Duration::from_secs(2));
-    let minute = Stop::time(std::time::Duration::from_secs(60));
-    assert_eq!(last_rate(20, minute, 5), 0.02);
-    assert_eq!(last_rate(20, budget, u32::MAX), 0.05);
-    assert_eq!(last_rate(1_000_000, budget, u32::MAX), 0.02);
 }
 
 #[test]

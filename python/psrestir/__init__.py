@@ -500,8 +500,6 @@ class Step:
         :class:`InvalidArgument`."""
         if self._start is None:
             self._start = _time.monotonic()
-        # auto's rates for long runs switch once the run's length is known, as in optimize.
-        self.op._op.tell_run_length(self.iterations, self.time_budget, self.elapsed_s)
         self.op._op.set_progress(self._progress())
         self.op._op.step(grads)
         # The next backward's estimator reads the schedule too.

@@ -394,8 +394,6 @@ struct DiffRender {
     env_shape: Option<[usize; 3]>,
     /// The task's targets and reference textures, loaded at first use.
     targets: Mutex<Option<psrestir::Problem>>,
-    /// `Step`'s pace, from which a time budget's length is estimated.
-    pace: Mutex<psrestir::optim::run_loop::Pace>,
 }
 
 impl DiffRender {
@@ -480,7 +478,6 @@ impl DiffRender {
             method,
             env_shape,
             targets: Mutex::new(None),
-            pace: Mutex::new(Default::default()),
         })
     }
 
@@ -720,26 +717,6 @@ impl DiffRender {
             seconds: time_budget,
         };
         limits.progress(self.lock().steps(), elapsed).min(1.0)
-    }
-
-    /// Before a step of a run of `iterations` steps or `time_budget` seconds, `elapsed`
-    /// seconds in: tell the optimizer the run's length as the run loop does (its limit, or
-    /// what the budget holds at the pace so far), so that `auto`'s rates for long runs
-    /// switch as in `psrestir optimize`.
-    #[pyo3(signature = (iterations, time_budget, elapsed))]
-    fn tell_run_length(&self, iterations: Option<u32>, time_budget: Option<f64>, elapsed: f64) {
-        let limits = psrestir::optim::run_loop::Limits {
-            first: 0,
-            iterations,
-            seconds: time_budget,
-        };
-        let mut op = self.lock();
-        let steps = op.steps();
-        let mut pace = self.pace.lock().unwrap_or_else(|p| p.into_inner());
-        let per_iteration = pace.seconds_per_iteration(steps, elapsed);
-        if let Some(n) = limits.length(steps, elapsed, per_iteration) {
-            op.set_run_length(n);
-        }
     }
 
     /// Each texture's learning rate in the last step, by name.

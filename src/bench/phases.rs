@@ -202,16 +202,13 @@ fn contender_optimizer(
     if let Some(t) = tuned {
         t.apply_learning_rate(&mut opt, prep);
     }
-    // The default takes the rates `auto` gives textures that name none, as a run of the
-    // bare task gets them (`Problem::load`), its rate for long runs included. None here would
-    // be the step's own rate, which is not `auto`'s where the rule differs from it (the
-    // variance step with indirect light). A fixed contender keeps one rate all run.
-    let config = who.auto.then(|| auto_configuration(task, prep));
-    for t in &mut opt.set.textures {
-        t.long_run = None;
-        if let Some(config) = &config {
+    if who.auto {
+        // The rates `auto` gives textures that name none, as a run of the bare task gets
+        // them (`Problem::load`). None here would be the step's own rate, which is not
+        // `auto`'s where the rule differs from it (the variance step with indirect light).
+        let config = auto_configuration(task, prep);
+        for t in &mut opt.set.textures {
             t.learning_rate = Some(config.rate(t.slot));
-            t.long_run = config.long_run_rate(t.slot);
         }
     }
     Ok(opt)
@@ -561,15 +558,7 @@ fn describe_run(
         .set
         .textures
         .iter()
-        .map(|t| match config.long_run_rate(t.slot) {
-            Some(l) => format!(
-                "{} ({} from {} iterations)",
-                config.rate(t.slot),
-                l.learning_rate,
-                l.from_iterations
-            ),
-            None => format!("{}", config.rate(t.slot)),
-        })
+        .map(|t| format!("{}", config.rate(t.slot)))
         .collect();
     format!(
         "{d}; auto's rates {}, {}, smoothness {}",

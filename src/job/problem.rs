@@ -6,7 +6,7 @@ pub use crate::optim::Problem;
 
 use crate::gpu::Gpu;
 use crate::image_io;
-use crate::render::params::{LongRunRate, ParamSet};
+use crate::render::params::ParamSet;
 use crate::scene::{self, EnvMap, Scene};
 use crate::task::Task;
 use crate::{Error, Result};
@@ -34,16 +34,8 @@ impl Problem {
             ParamSet::from_specs(&scene, &task.textures, task.optimizer.filter, &task.path)?;
         // A texture that names no learning rate takes `auto`'s for the task's step and regime.
         let config = crate::task::task_configuration(task, task.optimizer.method, cameras.len());
-        // So does its rate for long runs; `--lr-scale` scales both.
-        let scale = task.auto_rate_scale.unwrap_or(1.0);
         for t in &mut set.textures {
-            if t.learning_rate.is_none() {
-                t.learning_rate = Some(config.rate(t.slot) * scale);
-                t.long_run = config.long_run_rate(t.slot).map(|l| LongRunRate {
-                    learning_rate: l.learning_rate * scale,
-                    ..l
-                });
-            }
+            t.learning_rate.get_or_insert_with(|| config.rate(t.slot));
         }
         let exposure = cameras
             .iter()

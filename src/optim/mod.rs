@@ -550,17 +550,6 @@ impl Optimizer {
         };
     }
 
-    /// Tell the optimizer how many iterations the run holds (its iteration limit, or what
-    /// its time budget holds at the pace so far; [`run_loop::run_observed`] tells it). The
-    /// first call counts: textures with a rate for long runs (`auto`'s,
-    /// [`ParamTexture::long_run`](crate::render::params::ParamTexture::long_run)) take it
-    /// where the run holds at least its `from_iterations`, and the log says so.
-    pub fn set_run_length(&mut self, iterations: f64) {
-        for line in self.run.read_length(iterations, &mut self.set) {
-            log::info!("{line}");
-        }
-    }
-
     /// The learning rate of each texture in the last [`Optimizer::step`] (the schedule's
     /// factor times the texture's rate); empty before the first.
     pub fn last_learning_rates(&self) -> &[f32] {

@@ -23,20 +23,6 @@ pub struct ParamTexture {
     pub offset: u32,
     /// Learning rate (None: the step's default for the slot, `optim::StepKind::learning_rate`).
     pub learning_rate: Option<f32>,
-    /// The learning rate it takes instead once the run is known to hold enough iterations
-    /// (`auto`'s, for a texture that names no rate; None: it keeps `learning_rate`).
-    pub long_run: Option<LongRunRate>,
-}
-
-/// A learning rate for long runs: a run that holds at least `from_iterations` iterations
-/// (its limit, or what its time budget holds at the pace of its first iterations) steps at
-/// `learning_rate` ([`crate::optim::Optimizer::set_run_length`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct LongRunRate {
-    /// The run length from which it applies.
-    pub from_iterations: u32,
-    /// The rate.
-    pub learning_rate: f32,
 }
 
 impl ParamTexture {
@@ -159,7 +145,6 @@ impl ParamSet {
                 filter,
                 offset: set.values.len() as u32,
                 learning_rate: spec.learning_rate,
-                long_run: None,
             };
             let init = spec.init_values();
             for _ in 0..tex.width * tex.height {

@@ -251,10 +251,6 @@ pub struct Task {
     /// The task file itself.
     #[serde(skip)]
     pub path: PathBuf,
-    /// A factor of the rates `auto` gives textures that name none, its rate for long runs
-    /// included (`--lr-scale`; None: 1).
-    #[serde(skip)]
-    pub auto_rate_scale: Option<f32>,
 }
 
 fn yes() -> bool {

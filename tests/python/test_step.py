@@ -194,20 +194,6 @@ def test_a_step_for_a_given_gradient_is_the_tasks_adam(out_dir):
     np.testing.assert_allclose(op.texture(0), expect, atol=1e-6)
 
 
-def test_step_takes_autos_rate_for_long_runs_as_optimize_does(out_dir):
-    """With indirect light a base color that names no rate steps at auto's 0.03, and at its
-    rate for long runs, 0.01, in a run of at least 160 iterations: a run counted in
-    iterations knows its length at its first step (where the cosine schedule's factor is 1)."""
-    for iterations, rate in ((159, 0.03), (160, 0.01)):
-        task = small_task(out_dir / f"long_{iterations}", resolution=(4, 2), iterations=iterations)
-        task["max_depth"] = 2
-        del task["textures"][0]["learning_rate"]
-        op = psrestir.DiffRender(task, method="baseline")
-        step = psrestir.Step(op)
-        step({"sphere_base_color": np.full((2, 4, 3), 1e-3, np.float32)})
-        assert step.learning_rates["sphere_base_color"] == pytest.approx(rate), iterations
-
-
 def test_the_python_loop_with_step_ends_where_optimize_ends(out_dir):
     """The same task (the default task's configuration in miniature: variance-scaled step,
     filtered moments, smoothness, multiscale gradient, cosine schedule, control-variate

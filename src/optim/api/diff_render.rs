@@ -372,12 +372,6 @@ impl DiffRender {
         self.opt.set_progress(fraction);
     }
 
-    /// Tell the optimizer how many iterations the run holds (see
-    /// [`Optimizer::set_run_length`]).
-    pub fn set_run_length(&mut self, iterations: f64) {
-        self.opt.set_run_length(iterations);
-    }
-
     /// The learning rate of each texture in the last step.
     pub fn last_learning_rates(&self) -> &[f32] {
         self.opt.last_learning_rates()

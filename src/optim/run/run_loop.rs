@@ -74,25 +74,6 @@ impl Limits {
         by_iterations.max(by_time)
     }
 
-    /// The iterations the run holds, counted from `first`: its iteration limit, or with a
-    /// time budget the iterations done plus those the budget's remaining seconds hold at
-    /// `seconds_per_iteration` (the smaller of the two where both are set). None without
-    /// limits, and with a time budget until its pace is known.
-    pub fn length(
-        &self,
-        iteration: u32,
-        seconds: f64,
-        seconds_per_iteration: Option<f64>,
-    ) -> Option<f64> {
-        let by_iterations = self.iterations.map(|n| n.saturating_sub(self.first) as f64);
-        let Some(budget) = self.seconds else {
-            return by_iterations;
-        };
-        let done = iteration.saturating_sub(self.first) as f64;
-        let by_time = done + (budget - seconds).max(0.0) / seconds_per_iteration?.max(1e-9);
-        Some(by_iterations.map_or(by_time, |n| n.min(by_time)))
-    }
-
     fn reached(&self, iteration: u32, seconds: f64) -> bool {
         self.iterations.is_some_and(|n| iteration >= n)
             || self.seconds.is_some_and(|b| seconds >= b)
@@ -174,38 +155,10 @@ impl Observer for PassSampler {
     }
 }
 
-/// The iterations of a session a time-budgeted run times before it estimates its length
-/// ([`Limits::length`], [`Optimizer::set_run_length`]), after its first.
-pub const PACED_ITERATIONS: u32 = 8;
-
-/// A session's pace: seconds per iteration, timed from after its first step (which may pay
-/// for first use) over at least [`PACED_ITERATIONS`].
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Pace {
-    /// The session's first iteration count.
-    start: Option<u32>,
-    /// The iteration count and seconds after its first step.
-    since: Option<(u32, f64)>,
-}
-
-impl Pace {
-    /// Before each step, at `iteration` and `seconds` of optimization: the seconds per
-    /// iteration so far, once [`PACED_ITERATIONS`] have been timed.
-    pub fn seconds_per_iteration(&mut self, iteration: u32, seconds: f64) -> Option<f64> {
-        let start = *self.start.get_or_insert(iteration);
-        if iteration > start {
-            self.since.get_or_insert((iteration, seconds));
-        }
-        let (i0, s0) = self.since?;
-        let done = iteration.saturating_sub(i0);
-        (done >= PACED_ITERATIONS).then(|| (seconds - s0).max(0.0) / done as f64)
-    }
-}
-
 /// Step until `limits` or an observer ends the run, every pass compiled first. Before each
 /// iteration every observer's `before` is called, then the limits are checked (at a limit
 /// the observers' `before` is called once more with `last`); the schedule's progress is
-/// set from the limits and the clock, and the run's length once it is known; after the step every observer's `after` is called
+/// set from the limits and the clock; after the step every observer's `after` is called
 /// (all of them, even when one ends the run).
 pub fn run_observed(
     opt: &mut Optimizer,
@@ -214,7 +167,6 @@ pub fn run_observed(
     observers: &mut [&mut dyn Observer],
 ) -> Result<Ended> {
     opt.prepare()?;
-    let mut pace = Pace::default();
     loop {
         let last = limits.reached(opt.iteration, clock.seconds());
         let mut stop = false;
@@ -227,12 +179,7 @@ pub fn run_observed(
         if stop {
             return Ok(Ended::Observer);
         }
-        let seconds = clock.seconds();
-        let per_iteration = pace.seconds_per_iteration(opt.iteration, seconds);
-        if let Some(n) = limits.length(opt.iteration, seconds, per_iteration) {
-            opt.set_run_length(n);
-        }
-        let progress = limits.progress(opt.iteration, seconds);
+        let progress = limits.progress(opt.iteration, clock.seconds());
         opt.set_progress(progress);
         let stats = opt.step()?;
         for o in observers.iter_mut() {
@@ -315,36 +262,5 @@ mod tests {
         c.aside(|| std::thread::sleep(std::time::Duration::from_millis(30)));
         assert!(c.seconds() >= 2.0 && c.seconds() < 2.02, "{}", c.seconds());
         assert!(c.session_seconds() < 0.02);
-    }
-
-    /// A run's length: its iteration limit (from `first`); with a time budget, once the pace
-    /// is known, the iterations done plus those the remaining seconds hold, the smaller of
-    /// the two. The pace is timed from after a session's first step over
-    /// [`PACED_ITERATIONS`].
-    #[test]
-    fn the_run_length_and_its_pace() {
-        let by_count = Limits {
-            first: 10,
-            iterations: Some(30),
-            seconds: None,
-        };
-        assert_eq!(by_count.length(12, 5.0, None), Some(20.0));
-        let both = Limits {
-            seconds: Some(10.0),
-            ..by_count
-        };
-        assert_eq!(both.length(12, 2.0, None), None);
-        // 2 done, 8 s left at 0.5 s each: 18 in all, under the limit's 20.
-        assert_eq!(both.length(12, 2.0, Some(0.5)), Some(18.0));
-        assert_eq!(both.length(12, 2.0, Some(0.1)), Some(20.0));
-        assert_eq!(Limits::default().length(3, 1.0, Some(0.1)), None);
-        // A session starting at iteration 4: its first step (4 -> 5) is not timed.
-        let mut pace = Pace::default();
-        assert_eq!(pace.seconds_per_iteration(4, 0.0), None);
-        assert_eq!(pace.seconds_per_iteration(5, 3.0), None);
-        let after = 5 + PACED_ITERATIONS;
-        assert_eq!(pace.seconds_per_iteration(after - 1, 9.0), None);
-        let s = pace.seconds_per_iteration(after, 3.0 + 0.25 * PACED_ITERATIONS as f64);
-        assert_eq!(s, Some(0.25));
     }
 }
