@@ -88,11 +88,12 @@ pub const FINAL_FACTOR: f32 = 0.05;
 /// 1.21x), and on both metallic tasks (0.01 at 1.08x and 1.26x). A rule of 0.01 for base
 /// color, fitted there, failed on the test split: on `1004` (a sphere under a sun, paths of
 /// 3 vertices, 49 iterations in its budget) it ended at 2.9x the error of 0.03, and tied on
-/// `1010` (80 iterations). The rate that wins follows the run's length, which a time budget
-/// leaves unknown until the run has timed its iterations. A rule that read it (0.01 for base
-/// color and roughness in runs of 160 iterations or more) held on the test split's directly
-/// lit tasks and lost 2-9% on the bundled bounce-lit scenes (`room`, `gallery`), so 0.03 stays
-/// (docs/studies.md, "The variance step's rate with indirect light").
+/// `1010` (80 iterations). On the family the rate that won followed the run's length, which a
+/// time budget leaves unknown until the run has timed its iterations. A rule that read it
+/// (0.01 for base color and roughness in runs of 160 iterations or more) held on the test
+/// split's directly lit tasks and lost 2-9% on the bundled bounce-lit scenes (`room`,
+/// `gallery`), so 0.03 stays (docs/studies.md, "The variance step's rate with indirect
+/// light").
 pub fn learning_rate_for(step: StepKind, slot: Slot, regime: &Regime) -> f32 {
     if step == StepKind::VARIANCE && regime.max_depth > 1 && slot != Slot::Normal {
         0.03
