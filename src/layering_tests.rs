@@ -80,9 +80,11 @@ fn library_code(source: &str) -> String {
     code
 }
 
-/// Every path `code` names from `crate::` or `super::`, with `use` groups expanded
-/// (`super::{a::B, c}` gives `super::a::B` and `super::c`), as segments.
-fn paths(code: &str) -> Vec<Vec<String>> {
+/// Every path `code` names from `crate::`, `super::`, `self::` or one of `children` (the
+/// module's own submodules, named relative to it), with `use` groups expanded
+/// (`super::{a::B, c}` gives `super::a::B` and `super::c`), as segments; and the children a
+/// `registry!` lists.
+fn paths(code: &str, children: &[String]) -> Vec<Vec<String>> {
     fn ident(s: &str) -> usize {
         s.find(|c: char| !(c.is_alphanumeric() || c == '_'))
             .unwrap_or(s.len())
@@ -109,7 +111,10 @@ fn paths(code: &str) -> Vec<Vec<String>> {
             }
             let n = ident(rest);
             if n == 0 {
-                out.push(path);
+                // A group's trailing comma leaves nothing to name.
+                if !rest.starts_with('}') {
+                    out.push(path);
+                }
                 return at;
             }
             path.push(rest[..n].to_string());
@@ -123,15 +128,91 @@ fn paths(code: &str) -> Vec<Vec<String>> {
         }
     }
     let mut out = Vec::new();
-    for start in ["crate::", "super::"] {
-        for (i, _) in code.match_indices(start) {
+    let starts = ["crate", "super", "self"]
+        .into_iter()
+        .chain(children.iter().map(String::as_str))
+        .map(|head| format!("{head}::"));
+    for start in starts {
+        for (i, _) in code.match_indices(&start) {
             let before = code[..i].chars().next_back();
-            if before.is_some_and(|c| c.is_alphanumeric() || c == '_' || c == ':') {
+            if before.is_some_and(|c| c.is_alphanumeric() || "_:.".contains(c))
+                || code[..i].trim_end().ends_with("pub(in")
+            {
                 continue;
             }
             let head = start.trim_end_matches("::").to_string();
             read(&code[i + start.len()..], vec![head], &mut out);
         }
+    }
+    // A registry names its kinds' folders bare: `registry!("...", adam, variance_step)`.
+    for (i, _) in code.match_indices("registry!(") {
+        let args = &code[i..];
+        let args = &args[..args.find(')').unwrap_or(args.len())];
+        for word in args.split(|c: char| !(c.is_alphanumeric() || c == '_')) {
+            if children.iter().any(|c| c == word) {
+                out.push(vec![word.to_string()]);
+            }
+        }
+    }
+    out
+}
+
+/// `code` without its re-exports: the names of `pub use` items (of any visibility) that the
+/// rest of the file never uses (string literals and other re-exports aside). A module
+/// re-exporting a name it does not use itself does not depend on it; its importers' paths
+/// are followed through the re-export instead.
+fn without_re_exports(code: &str) -> String {
+    let word = |c: char| c.is_alphanumeric() || c == '_';
+    // Each `pub use` item's span and the names it binds.
+    let mut items = Vec::new();
+    for (at, _) in code.match_indices("pub") {
+        if code[..at].chars().next_back().is_some_and(word) {
+            continue;
+        }
+        let after = &code[at + 3..];
+        let vis = if after.starts_with('(') {
+            after.find(')').map_or(0, |i| i + 1)
+        } else {
+            0
+        };
+        let item = after[vis..].trim_start();
+        let Some(end) = item.find(';').filter(|_| item.starts_with("use ")) else {
+            continue;
+        };
+        let mut bound = Vec::new();
+        use_tree(&item[4..end], &[], &mut bound);
+        let item_end = code.len() - item.len() + end + 1;
+        items.push((at..item_end, bound));
+    }
+    let mut rest = String::new();
+    let mut last = 0;
+    for (span, _) in &items {
+        rest.push_str(&code[last..span.start]);
+        last = span.end;
+    }
+    rest.push_str(&code[last..]);
+    let rest: String = rest.split('"').step_by(2).collect::<Vec<_>>().join(" ");
+    // A use: the name as a word, not a module's declaration, a function's or a method call.
+    let used = |name: &str| {
+        rest.match_indices(name).any(|(i, _)| {
+            let before = rest[..i].trim_end();
+            !rest[..i].chars().next_back().is_some_and(word)
+                && !rest[i + name.len()..].chars().next().is_some_and(word)
+                && !before.ends_with('.')
+                && !["mod", "fn"].iter().any(|k| {
+                    before.ends_with(k) && !before[..before.len() - k.len()].ends_with(word)
+                })
+        })
+    };
+    // Each item keeps only the names the file uses.
+    let mut out = code.to_string();
+    for (span, bound) in items.iter().rev() {
+        let kept: String = bound
+            .iter()
+            .filter(|(name, _)| name != "*" && used(name))
+            .map(|(_, path)| format!("use {};", path.join("::")))
+            .collect();
+        out.replace_range(span.clone(), &kept);
     }
     out
 }
@@ -167,10 +248,50 @@ struct Names {
     uses: Vec<(String, Vec<String>)>,
 }
 
+/// `code` with the contents of its string literals and the braces of its character literals
+/// blanked (braces in them would not balance).
+fn without_strings(code: &str) -> String {
+    let (mut out, mut in_string, mut escaped) = (String::new(), false, false);
+    let code = code
+        .replace("'{'", "' '")
+        .replace("'}'", "' '")
+        .replace("'\"'", "' '");
+    for c in code.chars() {
+        let blank = in_string && c != '"';
+        if in_string && !escaped && c == '"' {
+            in_string = false;
+        } else if !in_string && c == '"' {
+            in_string = true;
+        }
+        escaped = in_string && !escaped && c == '\\';
+        out.push(if blank { ' ' } else { c });
+    }
+    out
+}
+
 /// `code`'s definitions and `use` bindings.
 fn names(code: &str) -> Names {
     let mut defined = BTreeSet::new();
-    let words: Vec<&str> = code
+    // The module's own items only: those outside any braces (not an impl's associated types).
+    let mut depth = 0i32;
+    let top: String = without_strings(code)
+        .chars()
+        .map(|c| {
+            depth += match c {
+                '{' => 1,
+                '}' => -1,
+                _ => 0,
+            };
+            if depth > 0 || c == '}' {
+                ' '
+            } else {
+                c
+            }
+        })
+        .collect();
+    // `'static` is a lifetime, not a static item.
+    let top = top.replace("'static", "");
+    let words: Vec<&str> = top
         .split(|c: char| !(c.is_alphanumeric() || c == '_' || c == '!'))
         .filter(|w| !w.is_empty())
         .collect();
@@ -270,31 +391,49 @@ impl Modules {
         Modules { files, names }
     }
 
+    /// The names of `module`'s own submodules that are files.
+    fn children(&self, module: &[String]) -> Vec<String> {
+        self.files
+            .keys()
+            .filter(|m| m.len() == module.len() + 1 && m.starts_with(module))
+            .map(|m| m[module.len()].clone())
+            .collect()
+    }
+
     /// `path` as written in module `from`, made absolute (None: another crate's).
     fn absolute(&self, from: &[String], path: &[String]) -> Option<Vec<String>> {
         let (first, rest) = path.split_first()?;
-        let mut abs = match first.as_str() {
-            "crate" => Vec::new(),
-            "self" => from.to_vec(),
-            "super" => {
-                let mut abs = from.to_vec();
-                abs.pop();
-                let supers = rest.iter().take_while(|s| *s == "super").count();
-                for _ in 0..supers {
+        let mut abs =
+            match first.as_str() {
+                "crate" => Vec::new(),
+                "self" => from.to_vec(),
+                "super" => {
+                    let mut abs = from.to_vec();
                     abs.pop();
+                    let supers = rest.iter().take_while(|s| *s == "super").count();
+                    for _ in 0..supers {
+                        abs.pop();
+                    }
+                    abs.extend(rest[supers..].iter().cloned());
+                    return Some(abs);
                 }
-                abs.extend(rest[supers..].iter().cloned());
-                return Some(abs);
-            }
-            _ => {
-                let mut child = from.to_vec();
-                child.push(first.clone());
-                if !self.files.contains_key(&child) {
-                    return None;
+                _ => {
+                    let mut child = from.to_vec();
+                    child.push(first.clone());
+                    if !self.files.contains_key(&child) {
+                        // A name a `use` of `from` binds (`pub use run::schedule;` then
+                        // `schedule::Schedule`).
+                        let (_, bound) =
+                            self.names.get(from)?.uses.iter().find(|(n, p)| {
+                                n == first && p.first().is_some_and(|h| h != first)
+                            })?;
+                        let mut abs = self.absolute(from, bound)?;
+                        abs.extend(rest.iter().cloned());
+                        return Some(abs);
+                    }
+                    from.to_vec()
                 }
-                from.to_vec()
-            }
-        };
+            };
         if first != "crate" && first != "self" {
             abs.push(first.clone());
         }
@@ -331,11 +470,8 @@ impl Modules {
             };
             target.extend(abs[m.len() + 1..].iter().cloned());
             let found = self.defining(&target, depth + 1);
-            let defines = |f: &Vec<String>| {
-                self.names
-                    .get(f)
-                    .is_some_and(|n| target.get(f.len()).is_some_and(|t| n.defined.contains(t)))
-            };
+            let defines =
+                |f: &Vec<String>| self.names.get(f).is_some_and(|n| n.defined.contains(name));
             if found != m && (!glob || defines(&found) || found == target) {
                 return found;
             }
@@ -344,29 +480,37 @@ impl Modules {
     }
 }
 
-/// No two files import each other through any chain. A path is followed to the file that
-/// defines what it names, through re-exports (`crate::optim::Settings` is `optim/settings.rs`'s,
-/// whichever module re-exports it), so that no circle hides behind a parent's re-export; a
-/// module and its own submodules aside (a parent declaring and re-exporting its children is
-/// how modules are put together).
-#[test]
-fn no_two_files_import_each_other() {
-    let modules = Modules::read();
-    assert!(modules.files.len() > 60, "{} files", modules.files.len());
+/// Every import edge between the crate's files: from each file to the files that define what
+/// it names, parents and children included.
+fn import_edges(modules: &Modules) -> Edges {
     let mut edges = Edges::new();
     for (module, path) in &modules.files {
         let code = library_code(&std::fs::read_to_string(path).unwrap());
-        for p in paths(&code) {
+        for p in paths(&without_re_exports(&code), &modules.children(module)) {
             let Some(abs) = modules.absolute(module, &p) else {
                 continue;
             };
             let t = modules.defining(&abs, 0);
-            let related = t.starts_with(module) || module.starts_with(&t);
-            if !related {
+            if t != *module {
                 edges.entry(module.clone()).or_default().insert(t);
             }
         }
     }
+    edges
+}
+
+/// No two files import each other through any chain, a module and its own submodules
+/// included: a parent that uses its children (a registry, a field of a child's type) does
+/// not also define what they use (the plugins' contract is a file of its own). A path is
+/// followed to the file that defines what it names, through re-exports
+/// (`crate::optim::Settings` is `optim/settings.rs`'s, whichever module re-exports it), so
+/// that no circle hides behind a re-export; a parent's re-export of a child's name that the
+/// parent does not use itself is no import of its own.
+#[test]
+fn no_two_files_import_each_other() {
+    let modules = Modules::read();
+    assert!(modules.files.len() > 60, "{} files", modules.files.len());
+    let edges = import_edges(&modules);
     assert!(
         edges
             .get(&vec!["bench".to_string()])
@@ -375,6 +519,38 @@ fn no_two_files_import_each_other() {
     );
     let cycles = cycles(&edges);
     assert!(cycles.is_empty(), "import circles:\n{}", cycles.join("\n"));
+}
+
+/// Parent-child edges are counted: a registry's bare list of its folders, a parent's own use
+/// of its child, a child's use of what its parent defines; and a parent's re-export alone
+/// is none.
+#[test]
+fn edges_between_a_parent_and_its_children_are_counted() {
+    let m = |s: &str| s.split("::").map(String::from).collect::<Vec<_>>();
+    let modules = Modules::read();
+    let edges = import_edges(&modules);
+    let has = |a: &str, b: &str| edges.get(&m(a)).is_some_and(|e| e.contains(&m(b)));
+    // `registry!(..., baseline, restir, recursive)`.
+    assert!(has("optim::estimator", "optim::estimator::restir"));
+    // `optim/mod.rs` builds its fit (`fit::Fit`) and its run state (`run::RunState`).
+    assert!(has("optim", "optim::fit"));
+    assert!(has("optim", "optim::run"));
+    // A step folder implements its parent's contract (`super::Step`, from `contract.rs`).
+    assert!(has("optim::step::adam", "optim::step::contract"));
+    assert!(!has("optim::step::adam", "optim::step"));
+    // The parent of a file it only re-exports: `pub use binding::GroupDecl`.
+    assert!(!has("gpu", "gpu::binding"));
+    let code = library_code(
+        "mod a;\nmod b;\npub use a::{A, B};\npub(crate) use b::C;\nfn f(x: A) { b::g(); }",
+    );
+    let kept = without_re_exports(&code);
+    let p: Vec<String> = paths(&kept, &["a".into(), "b".into()])
+        .iter()
+        .map(|p| p.join("::"))
+        .collect();
+    assert_eq!(p, ["a::A", "b::g"], "{kept}");
+    let n = names("impl K for T { type Kind = Kind; const N: &'static str = \"\"; }\nstruct S;");
+    assert_eq!(n.defined.into_iter().collect::<Vec<_>>(), ["S"]);
 }
 
 /// A path through a parent's re-export lands in the file that defines the name: the circle
@@ -392,7 +568,10 @@ fn a_path_through_a_re_export_lands_where_the_name_is_defined() {
     let timer = modules.absolute(&m("optim::prior"), &m("super::PassTimer"));
     assert_eq!(modules.defining(&timer.unwrap(), 0), m("optim::timing"));
     let method = modules.absolute(&m("bench"), &m("crate::optim::Method::RESTIR"));
-    assert_eq!(modules.defining(&method.unwrap(), 0), m("optim::estimator"));
+    assert_eq!(
+        modules.defining(&method.unwrap(), 0),
+        m("optim::estimator::handle")
+    );
     let own = modules.absolute(&m("optim"), &m("crate::optim::Optimizer"));
     assert_eq!(modules.defining(&own.unwrap(), 0), m("optim"));
     let uses = names("use a::{b::C as D, e::*, self};").uses;
@@ -449,7 +628,7 @@ fn the_reader_finds_paths_in_use_groups() {
         "use super::{metrics::{A, b}, Problem};\nuse crate::optim::Method; // crate::job\n\
          #[cfg(test)]\nmod tests { use crate::bench::X; }\nfn f() { crate::gpu::grid_2d(1); }",
     );
-    let p: Vec<String> = paths(&code).iter().map(|p| p.join("::")).collect();
+    let p: Vec<String> = paths(&code, &[]).iter().map(|p| p.join("::")).collect();
     assert_eq!(
         p,
         [
@@ -475,7 +654,7 @@ fn the_gpu_layer_imports_nothing_above_it() {
         }
         checked += 1;
         let code = library_code(&std::fs::read_to_string(path).unwrap());
-        for p in paths(&code) {
+        for p in paths(&code, &[]) {
             let t = target(module, &p, &files);
             assert!(
                 t.starts_with(&gpu) || t.is_empty(),

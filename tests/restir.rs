@@ -479,7 +479,7 @@ fn shift_trial_of(
         se,
         ref_mean,
         ref_se,
-        diagnostics: MergeDiagnostics::of(&re).unwrap().unwrap(),
+        diagnostics: MergeDiagnostics::from_named(&re.estimator_diagnostics().unwrap()).unwrap(),
     }
 }
 
@@ -614,7 +614,7 @@ fn check_whole_paths_unbiased(filter: Filter, normal_map: bool) {
     assert_eq!(re.faults().unwrap(), Default::default());
     let label = format!("whole paths {filter:?}, normal map {normal_map}");
     assert_means_agree(&label, 5.5, (&mean, &se), (&ref_mean, &ref_se));
-    let d = MergeDiagnostics::of(&re).unwrap().unwrap();
+    let d = MergeDiagnostics::from_named(&re.estimator_diagnostics().unwrap()).unwrap();
     eprintln!("{label}: {d:?}");
     assert!(d.verified > 1000, "too few kept paths were checked: {d:?}");
     assert!(
@@ -695,7 +695,7 @@ fn the_merge_pass_traces_no_ray() {
     for _ in 0..4 {
         re.step().unwrap();
     }
-    let d = MergeDiagnostics::of(&re).unwrap().unwrap();
+    let d = MergeDiagnostics::from_named(&re.estimator_diagnostics().unwrap()).unwrap();
     assert!(d.evaluations > 0, "{d:?}");
 }
 
@@ -735,7 +735,7 @@ fn a_full_claim_log_writes_the_same_winners() {
                 .collect();
             (
                 grads,
-                MergeDiagnostics::of(&re).unwrap().unwrap(),
+                MergeDiagnostics::from_named(&re.estimator_diagnostics().unwrap()).unwrap(),
                 re.faults().unwrap(),
             )
         };
@@ -804,7 +804,7 @@ fn stored_paths_keep_the_inputs_no_texture_replaces() {
             re.write_params(if it % 2 == 0 { &a } else { &b }).unwrap();
             re.step().unwrap();
         }
-        let d = MergeDiagnostics::of(&re).unwrap().unwrap();
+        let d = MergeDiagnostics::from_named(&re.estimator_diagnostics().unwrap()).unwrap();
         eprintln!("{slots:?}: {d:?}");
         assert!(
             d.verified > 100,

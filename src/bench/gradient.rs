@@ -2,9 +2,17 @@
 //! under study ([`BenchOptions::gradient_method`], ReSTIR by default; "the estimator" below),
 //! the equal-time baseline spp, the reference gradient, and the total, estimator-only and
 //! successive-estimate errors of the estimator and the baseline.
+use super::options::BenchOptions;
 use super::phases::time_steps;
+use super::progress::Progress;
+use super::results::GradientSnapshot;
 use super::settings;
-use super::*;
+use crate::gpu::Gpu;
+use crate::job::Problem;
+use crate::optim::{Method, Optimizer, Settings};
+use crate::task::Task;
+use crate::{Error, Result};
+use std::time::Instant;
 
 /// The mean of `spp` gradient samples per pixel under `adjoint`, at `r`'s textures (`r` is a
 /// baseline optimizer of at most 64 spp).

@@ -1,7 +1,18 @@
 //! The benchmark's phases (see the module above): the primal estimators' error, and the
 //! equal-time optimization with its cost; the gradient error is in `gradient.rs`.
-use super::counters::Counted;
-use super::*;
+use super::{contender::Contender, counters::Counted, options, progress::Progress, results, tune};
+use crate::gpu::Gpu;
+use crate::image_io::Image;
+use crate::job::Problem;
+use crate::optim::loss::image_relmse;
+use crate::optim::observed::rmse_observed;
+use crate::optim::{Method, Optimizer, PassTimes, Settings};
+use crate::task::Task;
+use crate::{Error, Result};
+use options::{settings, BenchOptions};
+use results::{AutoResult, CurvePoint, DefaultResult, FinalImages, OptimizationResult, RunResult};
+use std::path::Path;
+use std::time::Instant;
 
 /// The primal estimators' image error and cost (issue: recursive control variates): per
 /// seed, an optimizer with each primal mode runs `warmup` iterations, then one more estimate

@@ -132,7 +132,7 @@ pub fn throughput(gpu: &Gpu, task: &Task, path: &Path, out: &Path) -> Result<Thr
         adapter: gpu.describe(),
         task: path.display().to_string(),
         rates,
-        pipelines: super::first_creations(&gpu.pipeline_times()[before..]),
+        pipelines: first_creations(&gpu.pipeline_times()[before..]),
     })
 }
 
@@ -159,4 +159,16 @@ pub fn markdown(r: &ThroughputReport) -> String {
     );
     md.push_str(&super::report::pipeline_markdown(&r.pipelines));
     md
+}
+
+/// The first creation of each pass among `times`, in order (later ones load what the first
+/// compiled).
+pub(super) fn first_creations(times: &[crate::gpu::PipelineTime]) -> Vec<crate::gpu::PipelineTime> {
+    let mut out: Vec<crate::gpu::PipelineTime> = Vec::new();
+    for t in times {
+        if !out.iter().any(|o| o.pass == t.pass) {
+            out.push(t.clone());
+        }
+    }
+    out
 }

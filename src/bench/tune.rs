@@ -17,12 +17,19 @@
 //! [`MIN_GAIN`] (noise between trials of one seed is about that). Adam's ε is not searched: it
 //! matters only where it is comparable to the gradients' size, which differs by orders of
 //! magnitude between scenes (settable with the task's `[optimizer.adam]`).
-use super::*;
+use super::progress::Progress;
+use crate::gpu::Gpu;
+use crate::job::Problem;
 use crate::optim::adam::AdamOptions;
 use crate::optim::moment_filter::MomentFilterOptions;
+use crate::optim::observed::rmse_observed;
 use crate::optim::{EstimatorOptions, StepKind, Stop, VarianceStepOptions};
+use crate::optim::{Method, Optimizer, Settings};
+use crate::{Error, Result};
 use serde::Deserialize;
+use serde::Serialize;
 use std::fmt::Write as _;
+use std::path::Path;
 
 /// The tuning runs use the task's seed plus this.
 pub const TUNE_SEED_OFFSET: u32 = 7919;

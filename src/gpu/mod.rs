@@ -5,10 +5,11 @@
 
 pub mod abi;
 mod binding;
+mod made;
 mod prepare;
 pub mod shaders;
 pub use binding::GroupDecl;
-pub use prepare::PipelineTime;
+pub use made::PipelineTime;
 pub use shaders::Binding;
 pub use shaders::Tracer;
 
@@ -50,7 +51,7 @@ pub struct Gpu {
     compiles_ahead: bool,
     /// The layouts and pipelines this device has made, which later passes of the same WGSL
     /// and layouts reuse ([`Gpu::compute_pipeline_in`]).
-    made: Arc<Mutex<prepare::Made>>,
+    made: Arc<Mutex<made::Made>>,
 }
 
 /// A recorded device error, by kind.

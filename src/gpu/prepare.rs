@@ -9,35 +9,15 @@
 //! workgroups, on placeholder resources of the layout reflected from its WGSL: the driver
 //! compiles it (or loads it from Mesa's shader cache) and runs nothing. On a GPU, whose
 //! driver compiles at creation, this costs one empty submission per pipeline.
+use super::made::PipelineTime;
 use super::{shaders::Library, Binding, Gpu};
 use crate::Result;
-use std::collections::HashMap;
 use std::time::Instant;
 
 /// Placeholder buffer size: enough for any uniform block and the fixed part of any storage
 /// binding of the passes (wgpu checks a binding's size against the shader's even when no
 /// workgroup runs).
 const PLACEHOLDER_BYTES: u64 = 1 << 16;
-
-/// What a device has made, to be reused: bind group layouts by label and bindings, and
-/// pipelines by composed WGSL and layouts.
-#[derive(Default)]
-pub(super) struct Made {
-    pub(super) layouts: HashMap<(String, Vec<Binding>), wgpu::BindGroupLayout>,
-    pipelines: HashMap<String, Vec<(Vec<wgpu::BindGroupLayout>, wgpu::ComputePipeline)>>,
-}
-
-/// Seconds spent creating (and compiling) one pass's pipeline.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct PipelineTime {
-    /// The pass (its WGSL file).
-    pub pass: String,
-    /// Wall-clock seconds of creation and compilation.
-    pub seconds: f64,
-    /// Whether a second device compiled it ahead, beside the first's work
-    /// ([`Gpu::compile_elsewhere_in`]); the first device's own creation of the pass follows.
-    pub ahead: bool,
-}
 
 impl Gpu {
     /// Every pipeline this device has been asked for so far, with the seconds each took, in

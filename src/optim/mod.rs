@@ -486,32 +486,6 @@ impl Optimizer {
         self.gpu.check("set masks")
     }
 
-    /// An optimizer for `problem`: its scene, textures and targets, with the sampling options
-    /// of `settings` (whose cameras, width and height are taken from the problem).
-    pub fn for_problem(gpu: &Gpu, problem: &Problem, settings: Settings) -> Result<Optimizer> {
-        let first = problem.targets.first().ok_or_else(|| {
-            crate::Error::Invalid("the problem has no targets: set or render them first".into())
-        })?;
-        let settings = Settings {
-            width: first.width,
-            height: first.height,
-            cameras: problem.cameras.clone(),
-            ..settings
-        };
-        let mut opt = Optimizer::new(
-            gpu,
-            &problem.scene,
-            problem.set.clone(),
-            settings,
-            &problem.targets,
-        )?;
-        if problem.masks.iter().any(Option::is_some) {
-            opt.set_masks(&problem.masks)?;
-        }
-        problem.set_camera_and_light(&mut opt)?;
-        Ok(opt)
-    }
-
     /// For every texel of the optimized textures (in the order of `set.textures`, row-major
     /// within each), whether some camera sample of the task reaches it with a non-zero filter
     /// weight: 4 x 4 rays per pixel and camera, computed on the GPU when the optimizer is made
@@ -560,19 +534,6 @@ impl Optimizer {
     /// timestamp queries.
     pub fn pass_times(&self) -> Result<Option<PassTimes>> {
         self.passes.timer.read(&self.gpu)
-    }
-
-    /// Run iterations until `stop`, calling `on_iteration` after each; the callback returns
-    /// [`ControlFlow::Break`](std::ops::ControlFlow::Break) to stop early. Returns the
-    /// progress after the last iteration run (`None` if none ran). The learning-rate
-    /// schedule runs over this call: its progress is the larger of the fractions of
-    /// `stop`'s iterations and time budget done.
-    pub fn run(
-        &mut self,
-        stop: Stop,
-        on_iteration: impl FnMut(&Progress) -> std::ops::ControlFlow<()>,
-    ) -> Result<Option<Progress>> {
-        run_loop::run(self, stop, on_iteration)
     }
 
     /// The GPU buffer that holds the current values of all optimized textures (`f32`s, laid

@@ -2,6 +2,36 @@
 //! shaders/shared/camera.wgsl, src/render/render.wgsl, src/render/trace_rays.wgsl). The test below
 //! checks every mirror in the crate, field by field, against naga's layout of its WGSL twin.
 use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+
+/// Invocations per workgroup of every pass.
+pub const WORKGROUP: u32 = 64;
+
+/// Camera constants for a pinhole camera at the given image size: the camera's intrinsics
+/// scaled to it, or, without intrinsics, square pixels with the vertical field of view and
+/// the principal point at the center. Its `light_base` is 0, every light of the scene; a
+/// camera whose capture sees some of them takes [`GpuScene::camera_info`](super::GpuScene::camera_info)'s.
+pub fn camera_info(cam: &crate::scene::Camera, width: u32, height: u32) -> GpuCameraInfo {
+    let m = cam.world;
+    let right = m.transform_vector3(Vec3::X).normalize_or(Vec3::X);
+    let up = m.transform_vector3(Vec3::Y).normalize_or(Vec3::Y);
+    let forward = m.transform_vector3(Vec3::NEG_Z).normalize_or(Vec3::NEG_Z);
+    let [fx, fy, cx, cy] = cam.pixel_intrinsics(width, height);
+    GpuCameraInfo {
+        origin: m.transform_point3(Vec3::ZERO).to_array(),
+        fx,
+        right: right.to_array(),
+        fy,
+        up: up.to_array(),
+        width,
+        forward: forward.to_array(),
+        height,
+        cx,
+        cy,
+        light_base: 0,
+        _pad: 0,
+    }
+}
 
 /// `TriShading` in types.wgsl.
 #[repr(C)]

@@ -18,6 +18,7 @@ use crate::scene::Scene;
 use crate::{Error, Result};
 use glam::Vec3;
 use layout::*;
+pub use layout::{camera_info, WORKGROUP};
 pub use params::ParamBuffers;
 use params::ParamSet;
 use std::time::Instant;
@@ -41,9 +42,6 @@ pub(crate) const TRACE_RAYS_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl
     group: 1,
     names: &["tp", "rays", "hits"],
 };
-
-/// Invocations per workgroup of every pass.
-pub const WORKGROUP: u32 = 64;
 
 /// Which techniques light the scene (for area and environment lights; delta lights always use
 /// next-event estimation).
@@ -130,32 +128,6 @@ pub struct RayHit {
     pub tri: Option<u32>,
     /// Barycentric coordinates of vertices 1 and 2.
     pub b: [f32; 2],
-}
-
-/// Camera constants for a pinhole camera at the given image size: the camera's intrinsics
-/// scaled to it, or, without intrinsics, square pixels with the vertical field of view and
-/// the principal point at the center. Its `light_base` is 0, every light of the scene; a
-/// camera whose capture sees some of them takes [`GpuScene::camera_info`]'s.
-pub fn camera_info(cam: &crate::scene::Camera, width: u32, height: u32) -> GpuCameraInfo {
-    let m = cam.world;
-    let right = m.transform_vector3(Vec3::X).normalize_or(Vec3::X);
-    let up = m.transform_vector3(Vec3::Y).normalize_or(Vec3::Y);
-    let forward = m.transform_vector3(Vec3::NEG_Z).normalize_or(Vec3::NEG_Z);
-    let [fx, fy, cx, cy] = cam.pixel_intrinsics(width, height);
-    GpuCameraInfo {
-        origin: m.transform_point3(Vec3::ZERO).to_array(),
-        fx,
-        right: right.to_array(),
-        fy,
-        up: up.to_array(),
-        width,
-        forward: forward.to_array(),
-        height,
-        cx,
-        cy,
-        light_base: 0,
-        _pad: 0,
-    }
 }
 
 /// The renderer: a scene on the GPU and the compiled passes.

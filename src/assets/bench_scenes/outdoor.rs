@@ -2,7 +2,7 @@
 //! textured sphere on a gray floor under a sky with a sun, seen by three cameras; the fit
 //! starts its environment from a uniform gray and is judged by relighting under two held-out
 //! skies (a low orange sun from the other side, and an overcast sky).
-use super::{camera, create, floor, texture, unit, write_png, write_task};
+use super::parts::{camera, create, floor, texture, unit, write_png, write_task};
 use crate::assets::authoring::{uv_sphere, GltfBuilder};
 use crate::assets::bundled::srgb8;
 use crate::image_io::write_atomic_with;

@@ -1,6 +1,6 @@
 //! The benchmark scenes lit by indirect light (see `bench_scenes`): `room`, lit mostly by
 //! light that bounced, and `gallery`, whose painting is lit only by bounced light.
-use super::{area_light, camera, create, hash, texture, write_png, write_task};
+use super::parts::{area_light, camera, create, hash, texture, write_png, write_task};
 use crate::assets::authoring::{box_triangles, GltfBuilder};
 use crate::assets::bundled::srgb8;
 use crate::Result;

@@ -5,7 +5,7 @@
 //! (`task.toml`), the base color alone with the true normal map given
 //! (`task_given_normals.toml`), and the base color alone on a wall without one
 //! (`task_flat_normals.toml`, its scene `scene_flat.gltf`).
-use super::{camera, create, hash, texture, unit, write_png, TASK_COMMON};
+use super::parts::{camera, create, hash, texture, unit, write_png, TASK_COMMON};
 use crate::assets::authoring::GltfBuilder;
 use crate::assets::bundled::{look_at, srgb8, write_sky};
 use crate::image_io::write_atomic;

@@ -1,10 +1,27 @@
 //! The family's geometry: its shapes' meshes (wound about their normals) and the room's
 //! shell, with the plain materials and panels they are built from.
-use super::Shape;
 use crate::assets::authoring::GltfBuilder;
 use glam::Vec3;
 use serde_json::json;
 use std::f32::consts::PI;
+
+/// The shape whose texture is optimized.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Shape {
+    /// A UV sphere on a floor.
+    Sphere,
+    /// A superellipsoid close to a box with rounded edges, on a floor.
+    RoundedBox,
+    /// A torus on a floor.
+    Torus,
+    /// A flat wall whose detail is in its texture (and its normal map's relief).
+    Relief,
+    /// The back wall of a closed room lit only through an opening in its side: no light
+    /// reaches the wall but by bounces (depth 3).
+    Room,
+    /// A cube whose six faces share one texture as a 3 x 2 atlas: seams at every edge.
+    SeamedCube,
+}
 
 /// Positions, normals, uvs and indices of a surface over a (nu x nv) grid of (u, v) in
 /// [0, 1]², each triangle wound counter-clockwise about its vertices' normals and those of

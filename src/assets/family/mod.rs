@@ -8,8 +8,11 @@
 //! 1 to 3, one to four cameras, and sampling from sparse to dense (texture size against
 //! image size and samples per pixel). Everything is a pure function of the seed: a member is
 //! the same files on every machine.
+mod draw;
 mod geometry;
 mod truth;
+
+pub use geometry::Shape;
 
 use super::authoring::GltfBuilder;
 use super::bench_scenes::{area_light, camera};
@@ -17,6 +20,7 @@ use super::bundled::{look_at, write_sky};
 use crate::image_io::write_atomic;
 use crate::vocab::Slot;
 use crate::{Error, Result};
+use draw::Draw;
 use geometry::{panel, plain, room_shell, shape_mesh};
 use glam::Vec3;
 use serde_json::json;
@@ -65,24 +69,6 @@ impl Split {
     }
 }
 
-/// The shape whose texture is optimized.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Shape {
-    /// A UV sphere on a floor.
-    Sphere,
-    /// A superellipsoid close to a box with rounded edges, on a floor.
-    RoundedBox,
-    /// A torus on a floor.
-    Torus,
-    /// A flat wall whose detail is in its texture (and its normal map's relief).
-    Relief,
-    /// The back wall of a closed room lit only through an opening in its side: no light
-    /// reaches the wall but by bounces (depth 3).
-    Room,
-    /// A cube whose six faces share one texture as a 3 x 2 atlas: seams at every edge.
-    SeamedCube,
-}
-
 /// A kind of light.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Light {
@@ -123,29 +109,6 @@ pub struct Member {
     pub gradient_spp: u32,
     /// The run's time budget, seconds of optimization.
     pub budget_s: f64,
-}
-
-/// A deterministic stream of numbers from a seed (SplitMix64).
-struct Draw(u64);
-
-impl Draw {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// In [0, 1).
-    fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn range(&mut self, a: f32, b: f32) -> f32 {
-        a + (b - a) * self.unit()
-    }
-    fn pick<T: Copy>(&mut self, from: &[T]) -> T {
-        from[(self.next() % from.len() as u64) as usize]
-    }
 }
 
 impl Shape {

@@ -1,6 +1,6 @@
 //! The family's procedural ground truths: a field over (u, v) drawn from a member's seed,
 //! made into base color, roughness, metallic or a normal map.
-use super::Draw;
+use super::draw::Draw;
 use crate::assets::bench_scenes::hash;
 use crate::assets::bundled::srgb8;
 use crate::vocab::Slot;

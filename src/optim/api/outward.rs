@@ -2,13 +2,15 @@
 //! backward halves of a differentiable render ([`DiffRender`](super::diff_render::DiffRender)
 //! is built on them), gradients measured outside a step (the bench's error protocol and the
 //! tests: an estimate under this iteration's or a given adjoint, and a converged adjoint),
-//! and the test hooks (feature `test-hooks`, which the crate's own tests turn on: one pass
+//! the test hooks (feature `test-hooks`, which the crate's own tests turn on: one pass
 //! run on given data and read back, so that a test can check the GPU pass against its CPU
-//! twin; not part of the library's interface).
+//! twin; not part of the library's interface), and the engine as the outside makes and runs
+//! it: from a [`Problem`] and through the run's loop.
 
+use super::problem::Problem;
 use crate::gpu::Gpu;
 use crate::image_io::Image;
-use crate::optim::{pass_seed, Optimizer, PrimalMode, Seeds};
+use crate::optim::{pass_seed, run_loop, Optimizer, PrimalMode, Progress, Seeds, Settings, Stop};
 use crate::{Error, Result};
 
 impl Optimizer {
@@ -431,5 +433,47 @@ impl Optimizer {
             }
         }
         Ok(out)
+    }
+}
+
+/// The optimizer made for a problem, and run by the run's loop.
+impl Optimizer {
+    /// An optimizer for `problem`: its scene, textures and targets, with the sampling options
+    /// of `settings` (whose cameras, width and height are taken from the problem).
+    pub fn for_problem(gpu: &Gpu, problem: &Problem, settings: Settings) -> Result<Optimizer> {
+        let first = problem.targets.first().ok_or_else(|| {
+            crate::Error::Invalid("the problem has no targets: set or render them first".into())
+        })?;
+        let settings = Settings {
+            width: first.width,
+            height: first.height,
+            cameras: problem.cameras.clone(),
+            ..settings
+        };
+        let mut opt = Optimizer::new(
+            gpu,
+            &problem.scene,
+            problem.set.clone(),
+            settings,
+            &problem.targets,
+        )?;
+        if problem.masks.iter().any(Option::is_some) {
+            opt.set_masks(&problem.masks)?;
+        }
+        problem.set_camera_and_light(&mut opt)?;
+        Ok(opt)
+    }
+
+    /// Run iterations until `stop`, calling `on_iteration` after each; the callback returns
+    /// [`ControlFlow::Break`](std::ops::ControlFlow::Break) to stop early. Returns the
+    /// progress after the last iteration run (`None` if none ran). The learning-rate
+    /// schedule runs over this call: its progress is the larger of the fractions of
+    /// `stop`'s iterations and time budget done.
+    pub fn run(
+        &mut self,
+        stop: Stop,
+        on_iteration: impl FnMut(&Progress) -> std::ops::ControlFlow<()>,
+    ) -> Result<Option<Progress>> {
+        run_loop::run(self, stop, on_iteration)
     }
 }

@@ -1,18 +1,8 @@
 //! Estimator options: each estimator's own type ([`Options`](super::Options)) in its folder,
 //! read from its table of [`EstimatorOptions`] (the task file's `[optimizer.<method>]` tables
 //! and the command line's `--estimator-option`).
-use super::{EstimatorFamily, Method};
+use super::{EstimatorOptions, Method};
 use crate::Result;
-
-/// What the registry knows of an estimator's options, without their type.
-pub type OptionsKind = crate::optim::registry::OptionsKind<EstimatorFamily>;
-
-/// Every estimator's options, one table of TOML values per method name: the task file's
-/// `[optimizer.<method>]` tables, with the command line's `--estimator-option
-/// METHOD.KEY=VALUE` on top. The optimizer, the job and the bench only pass the tables on;
-/// each estimator reads its own ([`Options`](super::Options)) and [`EstimatorOptions::check`]
-/// asks each to check its table.
-pub type EstimatorOptions = crate::optim::registry::Tables<EstimatorFamily>;
 
 impl EstimatorOptions {
     /// Apply `METHOD.KEY=VALUE` (the value as TOML, or else as a string: `restir.m_cap=16`,

@@ -1,6 +1,7 @@
 //! The fit of the light and the cameras' response: the parameter table's CPU groups and
 //! their steps ([`param_table`]), the cameras' exposures and white balances (`gains`), and
-//! the environment's radiance ([`environment_fit`]). [`Fit`] owns the state and reads it;
+//! the environment's radiance (`environment`, with its options and state in
+//! [`environment_fit`]). [`Fit`] owns the state and reads it;
 //! [`FitMut`] changes it and uploads what the engine's passes read of it (the loss pass's
 //! gains, the scene's environment). The optimizer hands out both
 //! ([`Optimizer::fit`](crate::optim::Optimizer::fit),
@@ -10,6 +11,7 @@ use crate::optim::loss::LossPass;
 use crate::optim::Settings;
 use crate::render::GpuScene;
 
+mod environment;
 pub mod environment_fit;
 pub(in crate::optim) mod gains;
 pub mod param_table;
@@ -22,7 +24,7 @@ pub struct Fit {
     pub(in crate::optim) table: param_table::ParamTable,
     /// The gains the last adjoint was written with.
     pub(in crate::optim) gain_prev: Vec<[f32; 3]>,
-    /// The environment's gradient (`environment_fit.rs`), and the environment's fit when it
+    /// The environment's gradient (`environment.rs`), and the environment's fit when it
     /// is optimized, with the gradient updates its passes lost or dropped.
     pub(in crate::optim) env_grad: wgpu::Buffer,
     pub(in crate::optim) env_fit: Option<environment_fit::EnvFit>,

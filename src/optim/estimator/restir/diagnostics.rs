@@ -1,7 +1,6 @@
 //! What ReSTIR reports about itself: the names in its checkpointed state and what its merge
 //! counted.
 use super::Diagnostics;
-use crate::Result;
 
 /// Names in the ReSTIR estimator's [`EstimatorState`](super::EstimatorState): the kept reservoirs (two per texel,
 /// sign 0 then sign 1, [`reservoir::WORDS`](super::reservoir::WORDS) words each), the target adjoints of both parities
@@ -66,27 +65,25 @@ impl MergeDiagnostics {
         ]
     }
 
-    /// What the ReSTIR merge of `optimizer` counted (None when it runs another estimator).
-    pub fn of(optimizer: &crate::optim::Optimizer) -> Result<Option<MergeDiagnostics>> {
-        let d = optimizer.estimator_diagnostics()?;
+    /// What the ReSTIR merge counted, read from an estimator's named diagnostics (the
+    /// optimizer's `estimator_diagnostics()`; None when it runs another estimator).
+    pub fn from_named(d: &Diagnostics) -> Option<MergeDiagnostics> {
         let get = |name: &str| d.iter().find(|(n, _)| *n == name).map(|v| v.1);
-        Ok(
-            match (
+        match (
                 get(Self::EVALUATIONS),
                 get(Self::VERIFIED),
                 get(Self::MAX_RELATIVE_ERROR),
                 get(Self::UNMAPPED),
             ) {
-                (Some(e), Some(v), Some(m), Some(u)) => Some(MergeDiagnostics {
-                    evaluations: e as u64,
-                    verified: v as u64,
-                    max_relative_error: m as f32,
-                    unmapped: u as u64,
-                    logged: get(Self::LOGGED).unwrap_or(0.0) as u64,
-                    overflowed: get(Self::OVERFLOWED).unwrap_or(0.0) as u64,
-                }),
-                _ => None,
-            },
-        )
+            (Some(e), Some(v), Some(m), Some(u)) => Some(MergeDiagnostics {
+                evaluations: e as u64,
+                verified: v as u64,
+                max_relative_error: m as f32,
+                unmapped: u as u64,
+                logged: get(Self::LOGGED).unwrap_or(0.0) as u64,
+                overflowed: get(Self::OVERFLOWED).unwrap_or(0.0) as u64,
+            }),
+            _ => None,
+        }
     }
 }

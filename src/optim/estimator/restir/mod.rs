@@ -40,7 +40,8 @@ pub mod abi;
 pub use abi::reservoir;
 pub use diagnostics::{state_names, MergeDiagnostics};
 pub use options::{Confidence, RestirOptions, TARGET_SMOOTHING_INDEPENDENT};
-pub use params::{CandidateParams, MergeParams};
+pub use params::{CandidateParams, MergeParams, MAX_CAMERAS};
+pub use setup::{STATE_BYTES_PER_32_TEXELS, STATE_BYTES_PER_OBSERVED_TEXEL, STATE_BYTES_PER_PIXEL};
 pub(crate) use params::{CANDIDATES_GROUP, CLAIM_GROUP, MERGE_GROUP};
 pub use reservoir_test::selection_trial;
 use setup::{
@@ -48,26 +49,6 @@ use setup::{
     variance_factor, Buffers, Camera, CLAIM_LOG_MAX_BYTES, FRESH_MOMENT_DECAY, PHASES,
 };
 use reservoir_test::RESERVOIR_TEST_GROUP;
-
-/// Cameras a ReSTIR optimizer can use (the camera index has three bits in a reservoir).
-pub const MAX_CAMERAS: usize = abi::MAX_CAMERAS as usize;
-
-/// Bytes of ReSTIR state per observed texel: four reservoir slots (the kept positive and
-/// negative reservoirs and the fresh ones, [`reservoir::WORDS`] words each), a header word
-/// (slots and locks) and the texel's entry in the list of observed texels (with whole paths,
-/// at depth 2 and 3, every texel counts as observed). Per texel of the
-/// textures it also keeps [`STATE_BYTES_PER_32_TEXELS`] per 32 texels (the compaction map),
-/// and per pixel of every camera [`STATE_BYTES_PER_PIXEL`].
-pub const STATE_BYTES_PER_OBSERVED_TEXEL: u64 =
-    reservoir::SLOTS as u64 * reservoir::WORDS as u64 * 4 + 4 + 4;
-
-/// Bytes of ReSTIR's compaction map per 32 texels of the optimized textures: which are
-/// observed (a bit each) and how many observed texels come before them.
-pub const STATE_BYTES_PER_32_TEXELS: u64 = 8;
-
-/// Bytes of ReSTIR state per pixel of every camera: the target adjoints of both parities
-/// (RGBA f32 each).
-pub const STATE_BYTES_PER_PIXEL: u64 = 2 * 16;
 
 use abi::merge_flag::{
     HAVE_PREV as FLAG_HAVE_PREV, POSITIVIZE as FLAG_POSITIVIZE, TEMPORAL as FLAG_TEMPORAL,
@@ -125,6 +106,71 @@ pub const KIND: Kind = Kind {
     every_texel: abi::reservoir::whole_paths,
     build: |setup| Ok(Box::new(Restir::new(setup)?)),
 };
+
+impl crate::optim::estimator::Options<crate::optim::estimator::EstimatorFamily> for RestirOptions {
+    const KIND: &'static crate::optim::estimator::Kind = &KIND;
+    const OPTIONAL: &'static [&'static str] = &["target_smoothing", "claim_entries"];
+
+    fn check(&self) -> std::result::Result<(), (String, String)> {
+        if !(self.m_cap.is_finite() && self.m_cap > 0.0) {
+            return Err(("m_cap".into(), "must be a positive number".into()));
+        }
+        if self.claim_entries == Some(0) {
+            return Err(("claim_entries".into(), "must be at least 1".into()));
+        }
+        if self
+            .target_smoothing
+            .is_some_and(|b| !(0.0..1.0).contains(&b))
+        {
+            return Err(("target_smoothing".into(), "must be in [0, 1)".into()));
+        }
+        Ok(())
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "M cap {}{}, target smoothing {}",
+            self.m_cap,
+            if self.m_cap_follows_schedule {
+                " (follows the schedule)"
+            } else {
+                ""
+            },
+            self.target_smoothing
+                .map_or("by primal".to_string(), |b| b.to_string())
+        )
+    }
+
+    fn tuning() -> Vec<crate::optim::estimator::TypedAxis<Self>> {
+        tuning()
+    }
+}
+
+/// What `bench --tune` searches for ReSTIR, in order: the M cap (2, 32), whether it follows
+/// the learning-rate schedule, and the target smoothing (0, 0.9).
+fn tuning() -> Vec<crate::optim::estimator::TypedAxis<RestirOptions>> {
+    vec![
+        |b| {
+            [2.0, 32.0]
+                .map(|m_cap| RestirOptions { m_cap, ..*b })
+                .to_vec()
+        },
+        |b| {
+            vec![RestirOptions {
+                m_cap_follows_schedule: !b.m_cap_follows_schedule,
+                ..*b
+            }]
+        },
+        |b| {
+            [0.0, TARGET_SMOOTHING_INDEPENDENT]
+                .map(|s| RestirOptions {
+                    target_smoothing: Some(s),
+                    ..*b
+                })
+                .to_vec()
+        },
+    ]
+}
 
 /// What a run at `conditions` should know: beyond [`abi::reservoir::MAX_PATH_VERTICES`]
 /// vertices, only the first vertex is reused.

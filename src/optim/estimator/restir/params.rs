@@ -1,8 +1,10 @@
 //! The uniforms and bind groups of ReSTIR's passes (`restir_candidates.wgsl`,
 //! `restir_merge.wgsl`), with the tests of their layout against the WGSL.
-use super::MAX_CAMERAS;
 use crate::render::layout::GpuCameraInfo;
 use bytemuck::{Pod, Zeroable};
+
+/// Cameras a ReSTIR optimizer can use (the camera index has three bits in a reservoir).
+pub const MAX_CAMERAS: usize = super::abi::MAX_CAMERAS as usize;
 
 /// Group 1 of `restir_candidates.wgsl`.
 pub(crate) const CANDIDATES_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {

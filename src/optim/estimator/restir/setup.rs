@@ -2,10 +2,27 @@
 //! buffers both passes share, the merge's first uniform and each camera's candidate groups.
 use super::{
     abi::claim, reservoir, CandidateParams, Confidence, MergeParams, RestirOptions, Setup,
-    CANDIDATES_GROUP, MAX_CAMERAS, STATE_BYTES_PER_32_TEXELS, STATE_BYTES_PER_PIXEL,
+    CANDIDATES_GROUP, MAX_CAMERAS,
 };
 use crate::optim::Scale;
 use crate::render::WORKGROUP;
+
+/// Bytes of ReSTIR state per observed texel: four reservoir slots (the kept positive and
+/// negative reservoirs and the fresh ones, [`reservoir::WORDS`] words each), a header word
+/// (slots and locks) and the texel's entry in the list of observed texels (with whole paths,
+/// at depth 2 and 3, every texel counts as observed). Per texel of the
+/// textures it also keeps [`STATE_BYTES_PER_32_TEXELS`] per 32 texels (the compaction map),
+/// and per pixel of every camera [`STATE_BYTES_PER_PIXEL`].
+pub const STATE_BYTES_PER_OBSERVED_TEXEL: u64 =
+    reservoir::SLOTS as u64 * reservoir::WORDS as u64 * 4 + 4 + 4;
+
+/// Bytes of ReSTIR's compaction map per 32 texels of the optimized textures: which are
+/// observed (a bit each) and how many observed texels come before them.
+pub const STATE_BYTES_PER_32_TEXELS: u64 = 8;
+
+/// Bytes of ReSTIR state per pixel of every camera: the target adjoints of both parities
+/// (RGBA f32 each).
+pub const STATE_BYTES_PER_PIXEL: u64 = 2 * 16;
 
 /// Entries of the claim log for `n_observed` texels with reservoirs and at most `offers`
 /// offers in an iteration: the offers that lead a race when they enter it. A reservoir that
