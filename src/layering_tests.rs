@@ -250,7 +250,7 @@ struct Names {
 
 /// `code` with the contents of its string literals and the braces of its character literals
 /// blanked (braces in them would not balance).
-fn without_strings(code: &str) -> String {
+pub(crate) fn without_strings(code: &str) -> String {
     let (mut out, mut in_string, mut escaped) = (String::new(), false, false);
     let code = code
         .replace("'{'", "' '")

@@ -69,6 +69,8 @@
 //! checkpoints and outputs. `examples/` holds two complete programs.
 #![warn(missing_docs)]
 
+#[cfg(test)]
+mod architecture_tests;
 pub mod assets;
 pub mod auto;
 pub mod bench;

@@ -74,12 +74,7 @@ pub(in crate::assets) fn write_task(dir: &Path, head: &str, textures: &str) -> R
 }
 
 /// [`write_task`] into the file `name`.
-pub(in crate::assets) fn write_task_named(
-    dir: &Path,
-    name: &str,
-    head: &str,
-    textures: &str,
-) -> Result<()> {
+fn write_task_named(dir: &Path, name: &str, head: &str, textures: &str) -> Result<()> {
     let text = format!("{head}{TASK_COMMON}{textures}");
     write_atomic(&dir.join(name), text.as_bytes())
 }
