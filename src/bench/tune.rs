@@ -422,3 +422,110 @@ pub(super) fn tune(
     );
     Ok(tuned)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// What a candidate sets of what the search varies, as `key value` pairs.
+    fn show(t: &Tunable, method: Method) -> Vec<String> {
+        let f = &t.moment_filter;
+        let mut out = vec![format!("lr {}", t.learning_rate_scale)];
+        if t.step == StepKind::VARIANCE {
+            out.push(format!("clip {}", t.variance_clip));
+            out.push(format!("threshold {}", t.variance_threshold));
+        } else {
+            out.push(format!("beta1 {}", t.adam.beta1));
+            out.push(format!("beta2 {}", t.adam.beta2));
+        }
+        out.push(format!("sigma {}", f.sigma));
+        out.push(format!("own {}", f.own_weight));
+        out.push(format!("log {}", f.log_space));
+        out.push(format!("wb {}", f.write_back));
+        let defaults = method.kind().options.defaults();
+        for (k, v) in &t.estimator {
+            if defaults.get(k) != Some(v) {
+                out.push(format!("{k} {v}"));
+            }
+        }
+        out
+    }
+
+    /// Each coordinate's candidates in search order, each as what it changes from the base.
+    fn search(method: Method, step: StepKind, filtered: bool) -> Vec<String> {
+        let base = Tunable {
+            learning_rate_scale: 1.0,
+            adam: AdamOptions::default(),
+            estimator: toml::Table::new(),
+            step,
+            variance_clip: default_clip(),
+            variance_threshold: default_threshold(),
+            moment_filter: MomentFilterOptions {
+                levels: if filtered { 2 } else { 0 },
+                ..Default::default()
+            },
+        };
+        let was = show(&base, method);
+        coordinates(method, step, filtered)
+            .iter()
+            .map(|c| {
+                let changes: Vec<String> = c(&base)
+                    .iter()
+                    .map(|t| {
+                        let now = show(t, method);
+                        let changed: Vec<&str> = now
+                            .iter()
+                            .filter(|p| !was.contains(p))
+                            .map(String::as_str)
+                            .collect();
+                        changed.join(", ")
+                    })
+                    .collect();
+                changes.join(" | ")
+            })
+            .collect()
+    }
+
+    /// The search's coordinates and their candidates, in order, for each step with and
+    /// without the moment filter: the protocol `bench --tune` results were made with.
+    #[test]
+    fn the_search_order_is_the_protocol() {
+        let adam = ["lr 0.5 | lr 2", "beta1 0.5 | beta1 0", "beta2 0.99"];
+        assert_eq!(search(Method::BASELINE, StepKind::ADAM, false), adam);
+        let adam_filtered = [
+            "lr 0.5 | lr 2",
+            "sigma 0.025 | sigma 0.4",
+            "own 0.1 | own 0.5",
+            "log true",
+            "wb true",
+            "beta1 0.5 | beta1 0.2 | beta1 0",
+            "beta2 0.99",
+        ];
+        assert_eq!(search(Method::BASELINE, StepKind::ADAM, true), adam_filtered);
+        let variance_restir = [
+            "lr 0.5 | lr 2",
+            "clip 0.5 | clip 2",
+            "threshold 0 | threshold 2",
+            "m_cap 2.0 | m_cap 32.0",
+            "m_cap_follows_schedule true",
+            "target_smoothing 0.0 | target_smoothing 0.9",
+        ];
+        assert_eq!(
+            search(Method::RESTIR, StepKind::VARIANCE, false),
+            variance_restir
+        );
+        let variance_filtered_recursive = [
+            "lr 0.5 | lr 2",
+            "clip 0.5 | clip 2",
+            "threshold 0 | threshold 2",
+            "sigma 0.025 | sigma 0.4",
+            "own 0.1 | own 0.5",
+            "log true",
+            "min_weight 0.2 | min_weight 0.5",
+        ];
+        assert_eq!(
+            search(Method::RECURSIVE, StepKind::VARIANCE, true),
+            variance_filtered_recursive
+        );
+    }
+}
