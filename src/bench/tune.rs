@@ -2,28 +2,27 @@
 //! not the reported one, so that neither runs on settings made for the other.
 //!
 //! Coordinate search from the task's settings, one pass, in this order: the learning rate
-//! (x0.5, x2, and on in the better direction while it keeps improving, up to x1/8 or x8),
-//! with Adam its β1 (0.5, 0) and β2 (0.99), with the variance-scaled step its clip (× 0.5,
-//! × 2) and threshold (0, twice the task's),
-//! with filtered moments the filter's σ (× 0.25, × 4), its own weight (0.1, 0.5), log space,
-//! and with Adam the write-back, and β1 0.2 as well (the filter averages in space what β1
-//! averages in time), and last the estimator's own options as it lists them
-//! ([`EstimatorOptions::tuning`]: for ReSTIR the M cap (2, 32), whether the cap follows the
-//! learning-rate schedule and the target smoothing (0, 0.9); for the recursive estimator the
-//! lower bound of its adaptive weight (0.2, 0.5)). Each trial
+//! (x0.5, x2, and on in the better direction while it keeps improving, up to x1/8 or x8);
+//! the step's own options where its kind searches them before the moment filter's
+//! ([`Kind::tuned_before_filter`](crate::optim::step::Kind::tuned_before_filter): the
+//! variance-scaled step's clip and threshold); with filtered moments the filter's σ (× 0.25,
+//! × 4), its own weight (0.1, 0.5), log space, and where the step keeps a first moment the
+//! write-back; the step's own options where they come after the filter's (Adam's β1 and β2);
+//! and last the estimator's own options. What a step or an estimator searches is its options'
+//! [`Options::tuning`](crate::optim::registry::Options::tuning), in its folder (ReSTIR: the M
+//! cap, whether it follows the schedule, the target smoothing; the recursive estimator: the
+//! lower bound of its adaptive weight). Each trial
 //! optimizes for the tuning budget from the initial textures with the seed
 //! [`TUNE_SEED_OFFSET`] away from the task's; its score is the observed-texel RMSE at the
 //! end (the headline's measure). A value is kept only when it lowers the score by more than
-//! [`MIN_GAIN`] (noise between trials of one seed is about that). Adam's ε is not searched: it
-//! matters only where it is comparable to the gradients' size, which differs by orders of
-//! magnitude between scenes (settable with the task's `[optimizer.adam]`).
+//! [`MIN_GAIN`] (noise between trials of one seed is about that).
 use super::progress::Progress;
 use crate::gpu::Gpu;
 use crate::job::Problem;
-use crate::optim::adam::AdamOptions;
 use crate::optim::moment_filter::MomentFilterOptions;
 use crate::optim::observed::rmse_observed;
-use crate::optim::{EstimatorOptions, StepKind, Stop, VarianceStepOptions};
+use crate::optim::registry::TuningContext;
+use crate::optim::{EstimatorOptions, StepKind, Steps, Stop};
 use crate::optim::{Method, Optimizer, Settings};
 use crate::{Error, Result};
 use serde::Deserialize;
@@ -37,67 +36,50 @@ pub const TUNE_SEED_OFFSET: u32 = 7919;
 /// Relative improvement a trial needs over the best so far to replace it.
 pub const MIN_GAIN: f64 = 0.01;
 
-/// Settings of one estimator that the search chooses.
+/// Settings of one estimator that the search chooses. A cache written before the step's
+/// options became its table (with `adam`, `variance_clip`, `variance_threshold`) does not
+/// read, and the search runs again.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Tunable {
     /// Factor of every texture's learning rate.
     pub learning_rate_scale: f32,
-    /// Adam's decays and epsilon.
-    pub adam: AdamOptions,
+    /// The step's options table (its part of [`Steps`]).
+    #[serde(default)]
+    pub step_options: toml::Table,
     /// The estimator's options table (its part of [`EstimatorOptions`]).
     #[serde(default)]
     pub estimator: toml::Table,
     /// The step (not searched: the bench tunes each estimator with each step).
     #[serde(default)]
     pub step: StepKind,
-    /// The variance-scaled step's clip, in learning rates.
-    #[serde(default = "default_clip")]
-    pub variance_clip: f32,
-    /// The variance-scaled step's threshold, in standard deviations.
-    #[serde(default = "default_threshold")]
-    pub variance_threshold: f32,
     /// The moment filter (not searched when off).
     #[serde(default)]
     pub moment_filter: MomentFilterOptions,
 }
 
-fn default_clip() -> f32 {
-    VarianceStepOptions::default().clip
-}
-
-fn default_threshold() -> f32 {
-    VarianceStepOptions::default().threshold
-}
-
 impl Tunable {
     /// The task's and the bench options' settings.
     pub fn untuned(settings: &Settings) -> Tunable {
-        let variance = settings.steps.of::<VarianceStepOptions>();
         Tunable {
             learning_rate_scale: 1.0,
-            adam: settings.steps.of(),
+            step_options: settings.steps.table(settings.step),
             estimator: settings.estimator_options.table(settings.method.table()),
             step: settings.step,
-            variance_clip: variance.clip,
-            variance_threshold: variance.threshold,
             moment_filter: settings.moment_filter,
         }
     }
 
     /// Put these settings into `settings`.
     pub fn apply(&self, settings: &mut Settings) {
-        settings.steps.put(&self.adam);
+        settings
+            .steps
+            .set_table(self.step, self.step_options.clone());
         let method = settings.method;
         settings
             .estimator_options
             .set_table(method.table(), self.estimator.clone());
         settings.step = self.step;
-        let variance = settings.steps.of::<VarianceStepOptions>();
-        settings.steps.put(&VarianceStepOptions {
-            clip: self.variance_clip,
-            threshold: self.variance_threshold,
-            ..variance
-        });
         settings.moment_filter = self.moment_filter;
     }
 
@@ -110,17 +92,13 @@ impl Tunable {
 
     /// A short description, e.g. `lr x2, β1 0.5, M cap 2 (scheduled)`.
     pub fn describe(&self, method: Method) -> String {
-        let mut s = if self.step == StepKind::VARIANCE {
-            format!(
-                "variance-scaled step, lr ×{}, clip {}, threshold {}",
-                self.learning_rate_scale, self.variance_clip, self.variance_threshold
-            )
-        } else {
-            format!(
-                "lr ×{}, β1 {}, β2 {}",
-                self.learning_rate_scale, self.adam.beta1, self.adam.beta2
-            )
-        };
+        let mut steps = Steps::default();
+        steps.set_table(self.step, self.step_options.clone());
+        let mut s = format!("{} step, lr ×{}", self.step, self.learning_rate_scale);
+        let own = steps.describe(self.step);
+        if !own.is_empty() {
+            let _ = write!(s, ", {own}");
+        }
         let f = &self.moment_filter;
         if f.enabled() {
             let _ = write!(
@@ -195,27 +173,53 @@ fn coordinates(method: Method, step: StepKind, filtered: bool) -> Vec<Coordinate
             })
             .to_vec()
     });
+    let context = TuningContext { filtered };
+    let step_axes = || -> Vec<Coordinate> {
+        Steps::tuning(step, &context)
+            .into_iter()
+            .map(|axis| -> Coordinate {
+                Box::new(move |b: &Tunable| {
+                    axis(&b.step_options)
+                        .into_iter()
+                        .map(|step_options| Tunable {
+                            step_options,
+                            ..b.clone()
+                        })
+                        .collect()
+                })
+            })
+            .collect()
+    };
     let mut c: Vec<Coordinate> = vec![learning_rate];
-    if step == StepKind::VARIANCE {
-        c.push(Box::new(|b: &Tunable| {
-            [0.5, 2.0]
-                .map(|f| Tunable {
-                    variance_clip: b.variance_clip * f,
-                    ..b.clone()
-                })
-                .to_vec()
-        }));
-        c.push(Box::new(|b: &Tunable| {
-            [0.0, 2.0 * b.variance_threshold.max(0.5)]
-                .map(|variance_threshold| Tunable {
-                    variance_threshold,
-                    ..b.clone()
-                })
-                .to_vec()
-        }));
+    let kind = step.kind();
+    if kind.tuned_before_filter {
+        c.extend(step_axes());
     }
     if filtered {
-        c.push(Box::new(|b: &Tunable| {
+        c.extend(filter_axes(kind.first_moment));
+    }
+    if !kind.tuned_before_filter {
+        c.extend(step_axes());
+    }
+    for axis in EstimatorOptions::tuning(method, &context) {
+        c.push(Box::new(move |b: &Tunable| {
+            axis(&b.estimator)
+                .into_iter()
+                .map(|estimator| Tunable {
+                    estimator,
+                    ..b.clone()
+                })
+                .collect()
+        }));
+    }
+    c
+}
+
+/// The moment filter's coordinates: σ, its own weight, log space, and the write-back into a
+/// step's first moment where it keeps one.
+fn filter_axes(first_moment: bool) -> Vec<Coordinate> {
+    let mut c: Vec<Coordinate> = vec![
+        Box::new(|b: &Tunable| {
             [0.25, 4.0]
                 .map(|f| {
                     let mut t = b.clone();
@@ -223,8 +227,8 @@ fn coordinates(method: Method, step: StepKind, filtered: bool) -> Vec<Coordinate
                     t
                 })
                 .to_vec()
-        }));
-        c.push(Box::new(|b: &Tunable| {
+        }),
+        Box::new(|b: &Tunable| {
             [0.1, 0.5]
                 .map(|own_weight| {
                     let mut t = b.clone();
@@ -232,63 +236,20 @@ fn coordinates(method: Method, step: StepKind, filtered: bool) -> Vec<Coordinate
                     t
                 })
                 .to_vec()
-        }));
-        c.push(Box::new(|b: &Tunable| {
+        }),
+        Box::new(|b: &Tunable| {
             let mut t = b.clone();
             t.moment_filter.log_space = !t.moment_filter.log_space;
             vec![t]
-        }));
-    }
-    let own = |c: &mut Vec<Coordinate>| {
-        for axis in EstimatorOptions::tuning(method) {
-            c.push(Box::new(move |b: &Tunable| {
-                axis(&b.estimator)
-                    .into_iter()
-                    .map(|estimator| Tunable {
-                        estimator,
-                        ..b.clone()
-                    })
-                    .collect()
-            }));
-        }
-    };
-    if step == StepKind::VARIANCE {
-        own(&mut c);
-        return c;
-    }
-    if filtered {
+        }),
+    ];
+    if first_moment {
         c.push(Box::new(|b: &Tunable| {
             let mut t = b.clone();
             t.moment_filter.write_back = !t.moment_filter.write_back;
             vec![t]
         }));
     }
-    let beta1s: &'static [f32] = if filtered {
-        &[0.5, 0.2, 0.0]
-    } else {
-        &[0.5, 0.0]
-    };
-    c.extend::<Vec<Coordinate>>(vec![
-        Box::new(move |b: &Tunable| {
-            beta1s
-                .iter()
-                .map(|&beta1| Tunable {
-                    adam: AdamOptions { beta1, ..b.adam },
-                    ..b.clone()
-                })
-                .collect()
-        }),
-        Box::new(|b: &Tunable| {
-            vec![Tunable {
-                adam: AdamOptions {
-                    beta2: 0.99,
-                    ..b.adam
-                },
-                ..b.clone()
-            }]
-        }),
-    ]);
-    own(&mut c);
     c
 }
 
@@ -426,17 +387,23 @@ pub(super) fn tune(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::optim::adam::AdamOptions;
+    use crate::optim::VarianceStepOptions;
 
     /// What a candidate sets of what the search varies, as `key value` pairs.
     fn show(t: &Tunable, method: Method) -> Vec<String> {
         let f = &t.moment_filter;
         let mut out = vec![format!("lr {}", t.learning_rate_scale)];
+        let mut steps = Steps::default();
+        steps.set_table(t.step, t.step_options.clone());
         if t.step == StepKind::VARIANCE {
-            out.push(format!("clip {}", t.variance_clip));
-            out.push(format!("threshold {}", t.variance_threshold));
+            let v = steps.of::<VarianceStepOptions>();
+            out.push(format!("clip {}", v.clip));
+            out.push(format!("threshold {}", v.threshold));
         } else {
-            out.push(format!("beta1 {}", t.adam.beta1));
-            out.push(format!("beta2 {}", t.adam.beta2));
+            let a = steps.of::<AdamOptions>();
+            out.push(format!("beta1 {}", a.beta1));
+            out.push(format!("beta2 {}", a.beta2));
         }
         out.push(format!("sigma {}", f.sigma));
         out.push(format!("own {}", f.own_weight));
@@ -455,11 +422,9 @@ mod tests {
     fn search(method: Method, step: StepKind, filtered: bool) -> Vec<String> {
         let base = Tunable {
             learning_rate_scale: 1.0,
-            adam: AdamOptions::default(),
+            step_options: toml::Table::new(),
             estimator: toml::Table::new(),
             step,
-            variance_clip: default_clip(),
-            variance_threshold: default_threshold(),
             moment_filter: MomentFilterOptions {
                 levels: if filtered { 2 } else { 0 },
                 ..Default::default()
@@ -488,6 +453,28 @@ mod tests {
 
     /// The search's coordinates and their candidates, in order, for each step with and
     /// without the moment filter: the protocol `bench --tune` results were made with.
+    /// A cache of the earlier format is not read as settings at their defaults.
+    #[test]
+    fn an_earlier_cache_is_searched_again() {
+        let old = r#"{"learning_rate_scale": 1.0, "adam": {"beta1": 0.5, "beta2": 0.999,
+            "eps": 1e-8}, "estimator": {}, "step": "adam", "variance_clip": 1.0,
+            "variance_threshold": 1.0, "moment_filter": {}}"#;
+        assert!(serde_json::from_str::<Tunable>(old).is_err());
+        let t = Tunable {
+            learning_rate_scale: 2.0,
+            step_options: toml::toml! { beta1 = 0.5 },
+            estimator: toml::Table::new(),
+            step: StepKind::ADAM,
+            moment_filter: MomentFilterOptions::default(),
+        };
+        let back: Tunable = serde_json::from_str(&serde_json::to_string(&t).unwrap()).unwrap();
+        assert_eq!(back, t);
+        assert_eq!(
+            t.describe(Method::BASELINE),
+            "adam step, lr ×2, β1 0.5, β2 0.999"
+        );
+    }
+
     #[test]
     fn the_search_order_is_the_protocol() {
         let adam = ["lr 0.5 | lr 2", "beta1 0.5 | beta1 0", "beta2 0.99"];
@@ -501,7 +488,10 @@ mod tests {
             "beta1 0.5 | beta1 0.2 | beta1 0",
             "beta2 0.99",
         ];
-        assert_eq!(search(Method::BASELINE, StepKind::ADAM, true), adam_filtered);
+        assert_eq!(
+            search(Method::BASELINE, StepKind::ADAM, true),
+            adam_filtered
+        );
         let variance_restir = [
             "lr 0.5 | lr 2",
             "clip 0.5 | clip 2",

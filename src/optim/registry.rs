@@ -72,9 +72,16 @@ pub trait Options<F: Family>:
     }
     /// What `bench --tune` varies, in search order: for each option searched, the
     /// candidates around the best options so far (none: these options are not tuned).
-    fn tuning() -> Vec<TypedAxis<Self>> {
+    fn tuning(_context: &TuningContext) -> Vec<TypedAxis<Self>> {
         Vec::new()
     }
+}
+
+/// What a kind's search may depend on besides its own options.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TuningContext {
+    /// The run filters the step's moments (`moment_filter`).
+    pub filtered: bool,
 }
 
 /// One option a search varies: the tables to try around the best so far.
@@ -92,7 +99,7 @@ pub struct OptionsKind<F: Family> {
     describe: fn(&Tables<F>) -> String,
     defaults: fn() -> toml::Table,
     defaults_toml: fn() -> String,
-    tuning: fn() -> Vec<TuningAxis>,
+    tuning: fn(&TuningContext) -> Vec<TuningAxis>,
     /// Whether the kind has no options at all (any key in its table is an error).
     none: bool,
 }
@@ -113,7 +120,7 @@ impl<F: Family> OptionsKind<F> {
         describe: |_| String::new(),
         defaults: toml::Table::new,
         defaults_toml: String::new,
-        tuning: Vec::new,
+        tuning: |_| Vec::new(),
         none: true,
     };
 
@@ -131,8 +138,8 @@ impl<F: Family> OptionsKind<F> {
                 }
                 s
             },
-            tuning: || {
-                T::tuning()
+            tuning: |context| {
+                T::tuning(context)
                     .into_iter()
                     .map(|axis| -> TuningAxis {
                         Box::new(move |table: &toml::Table| {
@@ -459,10 +466,10 @@ impl<F: Family> Tables<F> {
         (F::options(kind.as_kind()).defaults_toml)()
     }
 
-    /// What `bench --tune` tries for `kind`'s options: for each option searched, in search
-    /// order, a function from the best table so far to the tables to try.
-    pub fn tuning(kind: impl AsKind<F>) -> Vec<TuningAxis> {
-        (F::options(kind.as_kind()).tuning)()
+    /// What `bench --tune` tries for `kind`'s options in `context`: for each option
+    /// searched, in search order, a function from the best table so far to the tables to try.
+    pub fn tuning(kind: impl AsKind<F>, context: &TuningContext) -> Vec<TuningAxis> {
+        (F::options(kind.as_kind()).tuning)(context)
     }
 
     /// Every table as `TABLE.KEY=VALUE` assignments, comma-separated (`none` without any).

@@ -22,7 +22,7 @@ mod handle;
 mod options;
 mod state;
 
-pub use super::registry::{Options, TuningAxis, TypedAxis};
+pub use super::registry::{Options, TuningAxis, TuningContext, TypedAxis};
 pub use choice::{
     rule as auto_rule, Choice, MethodChoice, Regime, DENSE_SAMPLES_PER_TEXEL,
     RESTIR_MAX_TEXELS_CHEAP_PRIMAL, RESTIR_PRIMAL_RATIO,

@@ -37,6 +37,10 @@ pub struct Kind {
     /// estimator keeps one (and the priors keep it), otherwise a moving variance. The moment
     /// filter then filters that variance as the variance of a mean.
     pub divides_by_variance: bool,
+    /// Whether `bench --tune` searches its options before the moment filter's (the variance
+    /// step: its clip and threshold set what the filter's pair is divided into) or after
+    /// them (Adam: its decays, whose β1 candidates depend on the filter).
+    pub tuned_before_filter: bool,
     /// The decay of the moving second moment it keeps in the optimizer's second moment
     /// buffer, with its options (None: it keeps none, and no uncertainty can be read).
     pub second_moment_decay: fn(&Steps) -> Option<f32>,

@@ -17,7 +17,7 @@
 mod contract;
 pub mod moment_filter;
 
-pub use crate::optim::registry::Options;
+pub use crate::optim::registry::{Options, TuningContext, TypedAxis};
 pub use contract::{CpuGroup, Kind, OptionsKind, StepFamily, StepKind, Steps};
 pub(crate) use contract::{Setup, Step, StepBuffers, StepChoice, TextureSteps};
 

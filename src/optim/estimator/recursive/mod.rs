@@ -125,7 +125,9 @@ impl crate::optim::estimator::Options<crate::optim::estimator::EstimatorFamily> 
         }
     }
 
-    fn tuning() -> Vec<crate::optim::estimator::TypedAxis<Self>> {
+    fn tuning(
+        _: &crate::optim::estimator::TuningContext,
+    ) -> Vec<crate::optim::estimator::TypedAxis<Self>> {
         tuning()
     }
 }

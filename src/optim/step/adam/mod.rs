@@ -21,6 +21,7 @@ pub const KIND: Kind = Kind {
     learning_rate,
     first_moment: true,
     divides_by_variance: false,
+    tuned_before_filter: false,
     second_moment_decay: |steps| Some(steps.of::<AdamOptions>().beta2),
     if_not_converging: "Adam moves every texel by about its learning rate per step however \
         noisy its gradient: try the variance-scaled step (`--step variance`, or remove `step` \
@@ -82,6 +83,22 @@ impl Default for AdamOptions {
 
 impl Options<super::StepFamily> for AdamOptions {
     const KIND: &'static Kind = &KIND;
+
+    fn describe(&self) -> String {
+        format!("β1 {}, β2 {}", self.beta1, self.beta2)
+    }
+
+    /// β1 (0.5, 0, and 0.2 as well with the filter, which averages in space what β1
+    /// averages in time), then β2 (0.99). ε is not searched: it matters only where it is
+    /// comparable to the gradients' size, which differs by orders of magnitude between scenes.
+    fn tuning(context: &super::TuningContext) -> Vec<super::TypedAxis<Self>> {
+        let beta1: super::TypedAxis<Self> = if context.filtered {
+            |b| [0.5, 0.2, 0.0].map(|beta1| AdamOptions { beta1, ..*b }).to_vec()
+        } else {
+            |b| [0.5, 0.0].map(|beta1| AdamOptions { beta1, ..*b }).to_vec()
+        };
+        vec![beta1, |b| vec![AdamOptions { beta2: 0.99, ..*b }]]
+    }
 
     /// An error naming the field (`beta1`, `beta2`, `eps`) that is out of range.
     fn check(&self) -> std::result::Result<(), (String, String)> {

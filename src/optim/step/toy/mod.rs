@@ -23,6 +23,7 @@ pub const KIND: Kind = Kind {
     learning_rate: |_| 0.1,
     first_moment: false,
     divides_by_variance: false,
+    tuned_before_filter: false,
     second_moment_decay: |_| None,
     if_not_converging: "try a lower learning rate",
     cpu: Some(|steps, g| {

@@ -31,6 +31,7 @@ pub const KIND: Kind = Kind {
     learning_rate,
     first_moment: false,
     divides_by_variance: true,
+    tuned_before_filter: true,
     second_moment_decay: |steps| Some(steps.of::<VarianceStepOptions>().beta),
     if_not_converging: "try a lower learning rate (`--lr-scale 0.5`) or more gradient \
         samples per pixel (`gradient_spp`)",
@@ -86,6 +87,29 @@ impl Default for VarianceStepOptions {
 
 impl Options<super::StepFamily> for VarianceStepOptions {
     const KIND: &'static Kind = &KIND;
+
+    fn describe(&self) -> String {
+        format!("clip {}, threshold {}", self.clip, self.threshold)
+    }
+
+    /// The clip (× 0.5, × 2), then the threshold (0, and twice the current one, at least 1).
+    fn tuning(_: &super::TuningContext) -> Vec<super::TypedAxis<Self>> {
+        vec![
+            |b| {
+                [0.5, 2.0]
+                    .map(|f| VarianceStepOptions {
+                        clip: b.clip * f,
+                        ..*b
+                    })
+                    .to_vec()
+            },
+            |b| {
+                [0.0, 2.0 * b.threshold.max(0.5)]
+                    .map(|threshold| VarianceStepOptions { threshold, ..*b })
+                    .to_vec()
+            },
+        ]
+    }
 
     /// An error naming the field that is out of range.
     fn check(&self) -> std::result::Result<(), (String, String)> {
