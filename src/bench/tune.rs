@@ -90,7 +90,7 @@ impl Tunable {
         }
     }
 
-    /// A short description, e.g. `lr x2, β1 0.5, M cap 2 (scheduled)`.
+    /// A short description, e.g. `adam step, lr ×2, β1 0.5, β2 0.999, M cap 2 (scheduled)`.
     pub fn describe(&self, method: Method) -> String {
         let mut steps = Steps::default();
         steps.set_table(self.step, self.step_options.clone());
