@@ -191,7 +191,7 @@ fn without_re_exports(code: &str) -> String {
         last = span.end;
     }
     rest.push_str(&code[last..]);
-    let rest: String = rest.split('"').step_by(2).collect::<Vec<_>>().join(" ");
+    let rest = without_strings(&rest);
     // A use: the name as a word, not a module's declaration, a function's or a method call.
     let used = |name: &str| {
         rest.match_indices(name).any(|(i, _)| {
