@@ -114,7 +114,7 @@ pub(in crate::optim) struct EnvFit {
 
 /// The pairs of neighbouring texels of a `w` x `h` lat-long map: each with the next in its
 /// row (wrapping in azimuth) and the one below it.
-pub(super) fn neighbour_pairs(w: usize, h: usize) -> Vec<(usize, usize)> {
+fn neighbour_pairs(w: usize, h: usize) -> Vec<(usize, usize)> {
     let mut pairs = Vec::with_capacity(2 * w * h);
     for j in 0..h {
         for i in 0..w {
@@ -128,7 +128,7 @@ pub(super) fn neighbour_pairs(w: usize, h: usize) -> Vec<(usize, usize)> {
 }
 
 /// Solid angle of each row's texels (sin θ dθ dφ).
-pub(super) fn row_weights(w: usize, h: usize) -> Vec<f64> {
+fn row_weights(w: usize, h: usize) -> Vec<f64> {
     use std::f64::consts::PI;
     (0..h)
         .map(|j| {
@@ -185,7 +185,7 @@ impl EnvFitState {
     }
 
     /// The priors' gradient with respect to the logarithms `log`, added into `g`.
-    pub(super) fn add_priors(&self, opts: &EnvFitOptions, log: &[f32], g: &mut [f32]) {
+    fn add_priors(&self, opts: &EnvFitOptions, log: &[f32], g: &mut [f32]) {
         let (w, h) = (self.size[0] as usize, self.size[1] as usize);
         if opts.smoothness > 0.0 {
             // smoothness x mean over neighbour pairs (wrapping in azimuth) of squared
@@ -259,4 +259,121 @@ pub(in crate::optim) fn env_gradient_buffer(
 ) -> wgpu::Buffer {
     let texels = scene.env.as_ref().map_or(0, |e| e.width * e.height) as u64;
     gpu.storage_zeroed("environment gradient", (3 * texels + 2) * 4)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::optim::param_table::{Group, ParamTable, Space, ENVIRONMENT};
+    use crate::optim::Settings;
+
+    fn state(w: u32, h: u32, f: impl Fn(usize) -> [f32; 3]) -> (Vec<f32>, EnvFitState) {
+        logarithms(&EnvMap {
+            width: w,
+            height: h,
+            rgb: (0..(w * h) as usize).map(f).collect(),
+            scale: 1.0,
+        })
+    }
+
+    /// The priors' gradients against central differences of their energies.
+    #[test]
+    fn prior_gradients_match_finite_differences() {
+        let (log, s) = state(4, 3, |i| {
+            [0.2 + 0.1 * i as f32, 0.5, 1.0 + 0.05 * (i % 3) as f32]
+        });
+        let opts = EnvFitOptions {
+            smoothness: 0.7,
+            gray_world: 0.3,
+            ..Default::default()
+        };
+        let energy = |log: &[f32]| -> f64 {
+            let pairs = neighbour_pairs(4, 3);
+            let mut e = 0.0;
+            for &(a, b) in &pairs {
+                for c in 0..3 {
+                    e += (log[3 * a + c] - log[3 * b + c]).powi(2) as f64;
+                }
+            }
+            e *= 0.7 / (3.0 * pairs.len() as f64);
+            let m = channel_means(&s.env(log)).map(f64::ln);
+            let avg = m.iter().sum::<f64>() / 3.0;
+            e + 0.3 * m.iter().map(|v| (v - avg).powi(2)).sum::<f64>()
+        };
+        let mut g = vec![0f32; log.len()];
+        s.add_priors(&opts, &log, &mut g);
+        for k in 0..log.len() {
+            let h = 1e-3;
+            let mut p = log.clone();
+            let mut m = log.clone();
+            p[k] += h;
+            m[k] -= h;
+            let fd = (energy(&p) - energy(&m)) / (2.0 * h as f64);
+            assert!(
+                (fd - g[k] as f64).abs() <= 1e-3 * (1.0 + fd.abs()),
+                "entry {k}: prior gradient {} against finite difference {fd}",
+                g[k]
+            );
+        }
+    }
+
+    /// One Adam step of the logarithms `log` at rate `lr` from dL/d(radiance) `d`, through
+    /// the parameter table as the optimizer takes it, and the gauge after it.
+    fn step(s: &EnvFitState, opts: &EnvFitOptions, log: &[f32], d: &[f32], lr: f32) -> Vec<f32> {
+        let settings = Settings::new(8, 8, vec![0]);
+        let mut table = ParamTable::new(0, &settings);
+        let mut group = Group::new(ENVIRONMENT, Space::Values, log.to_vec());
+        group.learning_rate = Some(lr);
+        table.insert(group);
+        table.step(&settings, ENVIRONMENT, &s.log_gradient(opts, log, d), 1.0);
+        let mut log = table.group(ENVIRONMENT).state.values.clone();
+        s.hold_gauge(opts, &mut log);
+        log
+    }
+
+    /// The `mean` gauge holds the solid-angle mean luminance through a step.
+    #[test]
+    fn the_mean_gauge_holds_the_mean_luminance() {
+        let (log, s) = state(8, 4, |i| [0.5, 0.5 + 0.01 * i as f32, 0.5]);
+        let before = luminance(channel_means(&s.env(&log)));
+        let opts = EnvFitOptions {
+            gauge: Gauge::Mean,
+            ..Default::default()
+        };
+        let g = vec![-1.0f32; log.len()];
+        let after = luminance(channel_means(&s.env(&step(&s, &opts, &log, &g, 0.3))));
+        assert!((after / before - 1.0).abs() < 1e-4, "{before} -> {after}");
+        // Without the gauge the same step brightens everything.
+        let free = step(&s, &EnvFitOptions::default(), &log, &g, 0.3);
+        assert!(luminance(channel_means(&s.env(&free))) > 1.2 * before);
+    }
+
+    #[test]
+    fn bad_options_are_refused_by_name() {
+        for (o, key) in [
+            (
+                EnvFitOptions {
+                    learning_rate: 0.0,
+                    ..Default::default()
+                },
+                "learning_rate",
+            ),
+            (
+                EnvFitOptions {
+                    rebuild_every: 0,
+                    ..Default::default()
+                },
+                "rebuild_every",
+            ),
+            (
+                EnvFitOptions {
+                    gray_world: f32::NAN,
+                    ..Default::default()
+                },
+                "gray_world",
+            ),
+        ] {
+            assert_eq!(o.check().unwrap_err().0, key);
+        }
+    }
 }
