@@ -9,6 +9,7 @@ use super::results::GradientSnapshot;
 use super::settings;
 use crate::gpu::Gpu;
 use crate::job::Problem;
+use crate::optim::run_loop::run_steps;
 use crate::optim::{Method, Optimizer, Settings};
 use crate::task::Task;
 use crate::{Error, Result};
@@ -244,14 +245,10 @@ impl GradientPhase {
 /// (untimed, timed, ms per timed step).
 fn warm_up(re: &mut Optimizer, warmup: u32) -> Result<(u32, u32, Option<f64>)> {
     let untimed = (warmup / 4).max(1).min(warmup);
-    for _ in 0..untimed {
-        re.step()?;
-    }
+    run_steps(re, untimed, &mut [])?;
     let t0 = Instant::now();
-    for _ in untimed..warmup {
-        re.step()?;
-    }
     let timed = warmup - untimed;
+    run_steps(re, timed, &mut [])?;
     let ms = (timed > 0).then(|| 1000.0 * t0.elapsed().as_secs_f64() / timed as f64);
     Ok((untimed, timed, ms))
 }

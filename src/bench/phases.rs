@@ -6,6 +6,7 @@ use crate::image_io::Image;
 use crate::job::Problem;
 use crate::optim::loss::image_relmse;
 use crate::optim::observed::rmse_observed;
+use crate::optim::run_loop::{run_observed, run_steps, Clock, Limits, PassSampler};
 use crate::optim::{Method, Optimizer, PassTimes, Settings};
 use crate::task::Task;
 use crate::{Error, Result};
@@ -66,20 +67,13 @@ pub(super) fn primal_phase(
                     ..settings(prep, task, Method::BASELINE, o)
                 },
             )?;
-            let mut times = PassTimes::default();
-            let mut timed = 0;
-            for i in 0..o.warmup {
-                opt.step()?;
-                if i >= o.warmup / 2 {
-                    if let Some(t) = opt.pass_times()? {
-                        times.add(&t);
-                        timed += 1;
-                    }
-                }
-            }
+            // The second half of the warm-up is timed, every iteration sampled.
+            let mut times = PassSampler::every(1);
+            run_steps(&mut opt, o.warmup / 2, &mut [])?;
+            run_steps(&mut opt, o.warmup - o.warmup / 2, &mut [&mut times])?;
             // One more estimate at fixed textures: its primal image is at `read_params`.
             opt.estimate_gradient(opt.iteration)?;
-            let ms = (timed > 0).then(|| times.primal_ms / timed as f64);
+            let ms = times.mean().map(|t| t.primal_ms);
             for k in 0..prep.targets.len() {
                 let converged = opt.render(
                     k,
@@ -122,13 +116,9 @@ pub(super) fn primal_phase(
 
 /// Mean milliseconds of `n` steps after `untimed` untimed ones.
 pub(super) fn time_steps(opt: &mut Optimizer, untimed: u32, n: u32) -> Result<f64> {
-    for _ in 0..untimed {
-        opt.step()?;
-    }
+    run_steps(opt, untimed, &mut [])?;
     let t0 = Instant::now();
-    for _ in 0..n {
-        opt.step()?;
-    }
+    run_steps(opt, n, &mut [])?;
     Ok(1000.0 * t0.elapsed().as_secs_f64() / n.max(1) as f64)
 }
 
@@ -265,15 +255,15 @@ pub(super) fn optimization_phase(
         last_image: None,
         keeper,
     };
-    let mut sampler = crate::optim::run_loop::PassSampler::default();
+    let mut sampler = PassSampler::default();
     // Only the iterations count: every evaluation, curve point and sample is set aside.
-    let mut clock = crate::optim::run_loop::Clock::start(0.0);
-    let limits = crate::optim::run_loop::Limits {
+    let mut clock = Clock::start(0.0);
+    let limits = Limits {
         first: 0,
         iterations: None,
         seconds: Some(o.budget_s),
     };
-    crate::optim::run_loop::run_observed(
+    run_observed(
         &mut opt,
         limits,
         &mut clock,

@@ -3,7 +3,8 @@
 //! these figures stay measured rather than quoted.
 use crate::gpu::{Gpu, PipelineTime};
 use crate::job::Problem;
-use crate::optim::{Method, Optimizer, PassTimes};
+use crate::optim::run_loop::{run_steps, PassSampler};
+use crate::optim::{Method, Optimizer};
 use crate::render::{RenderSettings, Renderer, Techniques};
 use crate::task::{task_settings, Task};
 use crate::{Error, Result};
@@ -96,18 +97,10 @@ pub fn throughput(gpu: &Gpu, task: &Task, path: &Path, out: &Path) -> Result<Thr
         let s = task_settings(task, &prep.cameras, method, &Default::default());
         let (primal_spp, gradient_spp) = (s.primal_spp as u64, s.gradient_spp as u64);
         let mut opt = Optimizer::for_problem(gpu, &prep, s)?;
-        opt.prepare()?;
-        for _ in 0..WARM_ITERATIONS {
-            opt.step()?;
-        }
-        let mut sum = PassTimes::default();
-        for _ in 0..TIMED_ITERATIONS {
-            opt.step()?;
-            if let Some(t) = opt.pass_times()? {
-                sum.add(&t);
-            }
-        }
-        let t = sum.divided(TIMED_ITERATIONS as f64);
+        run_steps(&mut opt, WARM_ITERATIONS, &mut [])?;
+        let mut sampler = PassSampler::every(1);
+        run_steps(&mut opt, TIMED_ITERATIONS, &mut [&mut sampler])?;
+        let t = sampler.mean().unwrap_or_default();
         let name = method.name();
         rates.push(Rate::new(
             format!("{name}: primal"),

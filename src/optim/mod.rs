@@ -512,6 +512,12 @@ impl Optimizer {
         }
     }
 
+    /// The fraction of the run done, as the schedule reads it (see
+    /// [`Optimizer::set_progress`]).
+    pub fn progress(&self) -> f64 {
+        self.run.progress
+    }
+
     /// Tell the learning-rate schedule which fraction of the run is done (in [0, 1]; for a
     /// run of N iterations, i / N before iteration i; for a time budget, the elapsed
     /// fraction). [`Optimizer::run`] sets it from its [`Stop`]. Without a schedule it has no

@@ -8,6 +8,19 @@ use crate::{Init, Optimizer, Problem, Scene, Settings, Slot, Stop, TextureSpec};
 /// The texture values (8 x 8 base color, from 0.5) after `iterations` of Adam at 0.01 on
 /// a lit plane seen from above, with the settings `configure` gives.
 pub(crate) fn run_on_plane(iterations: u32, configure: impl FnOnce(&mut Settings)) -> Vec<f32> {
+    let mut opt = plane_optimizer(configure);
+    opt.run(Stop::iterations(iterations), |_| {
+        std::ops::ControlFlow::Continue(())
+    })
+    .unwrap();
+    let values = opt.texture_values(0).unwrap();
+    assert_eq!(values.len(), 8 * 8 * 3);
+    values
+}
+
+/// An optimizer of the lit plane's 8 x 8 base color (Adam at 0.01, from 0.5, its target
+/// rendered at 16 x 16), with the settings `configure` gives.
+pub(crate) fn plane_optimizer(configure: impl FnOnce(&mut Settings)) -> Optimizer {
     let plane = Material {
         name: "plane".into(),
         ..Default::default()
@@ -47,12 +60,5 @@ pub(crate) fn run_on_plane(iterations: u32, configure: impl FnOnce(&mut Settings
     problem.render_targets(&gpu, scene, 16, 16, 1, 1).unwrap();
     let mut settings = Settings::new(16, 16, vec![0]);
     configure(&mut settings);
-    let mut opt = Optimizer::for_problem(&gpu, problem, settings).unwrap();
-    opt.run(Stop::iterations(iterations), |_| {
-        std::ops::ControlFlow::Continue(())
-    })
-    .unwrap();
-    let values = opt.texture_values(0).unwrap();
-    assert_eq!(values.len(), 8 * 8 * 3);
-    values
+    Optimizer::for_problem(&gpu, problem, settings).unwrap()
 }

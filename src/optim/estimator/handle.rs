@@ -1,6 +1,8 @@
 //! What names an estimator outside its folder: its handle ([`Method`]) and the tables of
-//! its options, typed by the marker through which the generic registry sees the estimators.
+//! its options, typed by the marker through which the generic registry sees the estimators,
+//! and the command line's `--estimator-option` assignments into those tables.
 use crate::optim::registry::Handle;
+use crate::Result;
 
 /// The estimators as the generic registry sees them.
 pub struct EstimatorFamily;
@@ -22,3 +24,29 @@ pub type OptionsKind = crate::optim::registry::OptionsKind<EstimatorFamily>;
 /// each estimator reads its own ([`Options`](super::Options)) and [`EstimatorOptions::check`]
 /// asks each to check its table.
 pub type EstimatorOptions = crate::optim::registry::Tables<EstimatorFamily>;
+
+impl EstimatorOptions {
+    /// Apply `METHOD.KEY=VALUE` (the value as TOML, or else as a string: `restir.m_cap=16`,
+    /// `restir.confidence=candidates`).
+    pub fn assign(&mut self, assignment: &str) -> Result<()> {
+        let bad = |why: String| {
+            crate::Error::Invalid(format!("--estimator-option `{assignment}`: {why}"))
+        };
+        let (path, value) = assignment
+            .split_once('=')
+            .ok_or_else(|| bad("expected METHOD.KEY=VALUE".into()))?;
+        let (method, key) = path
+            .trim()
+            .split_once('.')
+            .ok_or_else(|| bad("expected METHOD.KEY=VALUE".into()))?;
+        let method = method.parse::<Method>().map_err(|e| bad(e.to_string()))?;
+        let value = value.trim();
+        let value = toml::from_str::<toml::Table>(&format!("v = {value}"))
+            .ok()
+            .and_then(|mut t| t.remove("v"))
+            .unwrap_or_else(|| toml::Value::String(value.to_string()));
+        self.set(method.table(), key.trim(), value);
+        self.check_one(method)
+            .map_err(|(key, msg)| bad(format!("{key} {msg}")))
+    }
+}

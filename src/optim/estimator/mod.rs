@@ -19,7 +19,6 @@
 mod choice;
 mod contract;
 mod handle;
-mod options;
 mod state;
 
 pub use super::registry::{Options, TuningAxis, TuningContext, TypedAxis};

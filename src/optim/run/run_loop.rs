@@ -114,24 +114,41 @@ pub enum Ended {
     Observer,
 }
 
-/// The passes' mean times, read back on every 8th iteration of a run (one readback less per
-/// iteration, and the mean is as good); the readback is set aside on the clock.
-#[derive(Debug, Default)]
+/// The passes' mean times, read back on every 8th iteration of a run by default (one
+/// readback less per iteration, and the mean is as good; [`PassSampler::every`] sets the
+/// period); the readback is set aside on the clock.
+#[derive(Debug)]
 pub struct PassSampler {
     sum: Option<(PassTimes, u32)>,
     seen: u32,
+    period: u32,
+}
+
+impl Default for PassSampler {
+    fn default() -> PassSampler {
+        PassSampler::every(8)
+    }
 }
 
 impl PassSampler {
+    /// A sampler that reads the times on every `period`-th iteration, the first included.
+    pub fn every(period: u32) -> PassSampler {
+        PassSampler {
+            sum: None,
+            seen: 0,
+            period: period.max(1),
+        }
+    }
+
     /// The mean of the samples so far.
     pub fn mean(&self) -> Option<PassTimes> {
         self.sum.as_ref().map(|(s, n)| s.divided(*n as f64))
     }
 
-    /// Whether this iteration is one it samples (the run's 1st, 9th, 17th, ...): other
-    /// observers sample their own counters on the same iterations.
+    /// Whether this iteration is one it samples (by default the run's 1st, 9th, 17th, ...):
+    /// other observers sample their own counters on the same iterations.
     pub fn due(&self) -> bool {
-        self.seen % 8 == 1
+        self.seen >= 1 && (self.seen - 1) % self.period == 0
     }
 }
 
@@ -166,6 +183,44 @@ pub fn run_observed(
     clock: &mut Clock,
     observers: &mut [&mut dyn Observer],
 ) -> Result<Ended> {
+    drive(opt, limits, Schedule::Follows, clock, observers)
+}
+
+/// `n` more iterations through the same loop, with the schedule held where it is: its
+/// progress is not set, so a fresh optimizer steps at its start. The bench's warm-ups and
+/// timed steps measure an iteration near a run's start, not a run of `n` iterations,
+/// whose schedule would decay over them.
+pub fn run_steps(opt: &mut Optimizer, n: u32, observers: &mut [&mut dyn Observer]) -> Result<()> {
+    let first = opt.iteration;
+    let limits = Limits {
+        first,
+        iterations: Some(first.saturating_add(n)),
+        seconds: None,
+    };
+    drive(
+        opt,
+        limits,
+        Schedule::Held,
+        &mut Clock::start(0.0),
+        observers,
+    )?;
+    Ok(())
+}
+
+/// Whether the loop sets the schedule's progress from its limits.
+#[derive(Clone, Copy, PartialEq)]
+enum Schedule {
+    Follows,
+    Held,
+}
+
+fn drive(
+    opt: &mut Optimizer,
+    limits: Limits,
+    schedule: Schedule,
+    clock: &mut Clock,
+    observers: &mut [&mut dyn Observer],
+) -> Result<Ended> {
     opt.prepare()?;
     loop {
         let last = limits.reached(opt.iteration, clock.seconds());
@@ -179,8 +234,14 @@ pub fn run_observed(
         if stop {
             return Ok(Ended::Observer);
         }
-        let progress = limits.progress(opt.iteration, clock.seconds());
-        opt.set_progress(progress);
+        let progress = match schedule {
+            Schedule::Follows => {
+                let p = limits.progress(opt.iteration, clock.seconds());
+                opt.set_progress(p);
+                p
+            }
+            Schedule::Held => opt.progress(),
+        };
         let stats = opt.step()?;
         for o in observers.iter_mut() {
             stop |= o.after(opt, &stats, progress, clock)?.is_break();
@@ -262,5 +323,41 @@ mod tests {
         c.aside(|| std::thread::sleep(std::time::Duration::from_millis(30)));
         assert!(c.seconds() >= 2.0 && c.seconds() < 2.02, "{}", c.seconds());
         assert!(c.session_seconds() < 0.02);
+    }
+
+    /// `run_steps` takes exactly `n` more iterations through the loop, its observers called
+    /// on each, at the schedule's position as it was: a cosine schedule's factor at 0.25 of
+    /// the run in its last step, not the factor of a run that ends with the steps.
+    #[test]
+    fn steps_hold_the_schedule() {
+        use crate::optim::schedule::Schedule;
+        let mut opt = crate::optim::plane_tests::plane_optimizer(|s| {
+            s.schedule = Schedule::cosine(0.1);
+        });
+        opt.set_progress(0.25);
+        let mut sampler = PassSampler::every(1);
+        run_steps(&mut opt, 2, &mut []).unwrap();
+        run_steps(&mut opt, 3, &mut [&mut sampler]).unwrap();
+        assert_eq!(opt.iteration, 5);
+        assert_eq!(sampler.seen, 3);
+        assert_eq!(opt.progress(), 0.25);
+        let want = 0.01 * Schedule::cosine(0.1).factor(4, 0.25);
+        assert_eq!(opt.last_learning_rates(), &[want]);
+        assert!(want < 0.01 && want > 0.01 * Schedule::cosine(0.1).factor(4, 1.0));
+    }
+
+    /// A sampler reads on its first iteration and every `period`-th after it.
+    #[test]
+    fn the_sampler_period() {
+        let mut s = PassSampler::default();
+        let mut due = Vec::new();
+        for _ in 0..20 {
+            s.seen += 1;
+            if s.due() {
+                due.push(s.seen);
+            }
+        }
+        assert_eq!(due, [1, 9, 17]);
+        assert!(!PassSampler::every(1).due());
     }
 }
