@@ -451,8 +451,6 @@ mod tests {
             .collect()
     }
 
-    /// The search's coordinates and their candidates, in order, for each step with and
-    /// without the moment filter: the protocol `bench --tune` results were made with.
     /// A cache of the earlier format is not read as settings at their defaults.
     #[test]
     fn an_earlier_cache_is_searched_again() {
@@ -475,6 +473,8 @@ mod tests {
         );
     }
 
+    /// The search's coordinates and their candidates, in order, for each step with and
+    /// without the moment filter: the protocol `bench --tune` results were made with.
     #[test]
     fn the_search_order_is_the_protocol() {
         let adam = ["lr 0.5 | lr 2", "beta1 0.5 | beta1 0", "beta2 0.99"];

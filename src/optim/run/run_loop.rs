@@ -183,7 +183,7 @@ pub fn run_observed(
     clock: &mut Clock,
     observers: &mut [&mut dyn Observer],
 ) -> Result<Ended> {
-    drive(opt, limits, Schedule::Follows, clock, observers)
+    drive(opt, limits, ScheduleProgress::Follows, clock, observers)
 }
 
 /// `n` more iterations through the same loop, with the schedule held where it is: its
@@ -200,16 +200,17 @@ pub fn run_steps(opt: &mut Optimizer, n: u32, observers: &mut [&mut dyn Observer
     drive(
         opt,
         limits,
-        Schedule::Held,
+        ScheduleProgress::Held,
         &mut Clock::start(0.0),
         observers,
     )?;
     Ok(())
 }
 
-/// Whether the loop sets the schedule's progress from its limits.
+/// Whether the loop sets the schedule's progress from its limits (`Follows`) or leaves it
+/// where it is (`Held`).
 #[derive(Clone, Copy, PartialEq)]
-enum Schedule {
+enum ScheduleProgress {
     Follows,
     Held,
 }
@@ -217,7 +218,7 @@ enum Schedule {
 fn drive(
     opt: &mut Optimizer,
     limits: Limits,
-    schedule: Schedule,
+    mode: ScheduleProgress,
     clock: &mut Clock,
     observers: &mut [&mut dyn Observer],
 ) -> Result<Ended> {
@@ -234,13 +235,13 @@ fn drive(
         if stop {
             return Ok(Ended::Observer);
         }
-        let progress = match schedule {
-            Schedule::Follows => {
+        let progress = match mode {
+            ScheduleProgress::Follows => {
                 let p = limits.progress(opt.iteration, clock.seconds());
                 opt.set_progress(p);
                 p
             }
-            Schedule::Held => opt.progress(),
+            ScheduleProgress::Held => opt.progress(),
         };
         let stats = opt.step()?;
         for o in observers.iter_mut() {
