@@ -14,7 +14,7 @@ fn every_bind_group_declaration_names_its_wgsl_bindings() {
         crate::optim::loss::LOSS_GROUP,
         crate::optim::primal::PRIMAL_CV_GROUP,
         crate::optim::primal::path_cache::PRIMAL_CACHED_GROUP,
-        crate::optim::primal::path_cache::PRIMAL_CACHE_TRACE_GROUP,
+        crate::optim::primal::path_pool::PRIMAL_CACHE_TRACE_GROUP,
         crate::optim::observed::OBSERVED_GROUP,
         crate::render::gpu_scene::TEXTURE_WRAP_TEST_GROUP,
         crate::optim::texture_export::TEXTURE_EXPORT_GROUP,

@@ -7,6 +7,7 @@ mod common;
 
 use common::*;
 use psrestir::image_io::Image;
+use psrestir::optim::estimator::baseline::BaselineOptions;
 use psrestir::optim::{Method, Optimizer, PrimalMode, Settings};
 use psrestir::render::params::ParamSet;
 use psrestir::scene::Scene;
@@ -15,16 +16,15 @@ use psrestir::task::{Filter, Init, Slot, TextureSpec};
 const W: u32 = 16;
 
 /// Textures of `slots` (2x2 each, read through `filter`) on material "plane", learning rate
-/// 0. The primal keeps `spp` paths per pixel, `refresh` traced anew each iteration (None: no
-/// cache). Its image is read through the control variate with weight 0, which is the
-/// iteration's render itself.
-fn optimizer(
-    gpu: &psrestir::gpu::Gpu,
+/// 0, and the settings of an optimizer over them: the primal keeps `spp` paths per pixel,
+/// `refresh` traced anew each iteration (None: no cache), read through the control variate
+/// with weight 0, which is the iteration's render itself.
+fn setup(
     scene: &Scene,
     (slots, filter): (&[Slot], Filter),
     spp: u32,
     refresh: Option<u32>,
-) -> Optimizer {
+) -> (ParamSet, Settings) {
     let specs: Vec<TextureSpec> = slots
         .iter()
         .map(|&slot| TextureSpec {
@@ -45,6 +45,18 @@ fn optimizer(
         seed: 33,
         ..Settings::new(W, W, vec![0])
     };
+    (set, settings)
+}
+
+/// The optimizer of [`setup`].
+fn optimizer(
+    gpu: &psrestir::gpu::Gpu,
+    scene: &Scene,
+    (slots, filter): (&[Slot], Filter),
+    spp: u32,
+    refresh: Option<u32>,
+) -> Optimizer {
+    let (set, settings) = setup(scene, (slots, filter), spp, refresh);
     Optimizer::new(gpu, scene, set, settings, &[Image::new(W, W)]).unwrap()
 }
 
@@ -145,7 +157,7 @@ fn cached_image_bias(
 fn assert_unbiased((chi2, worst): (f64, f64), what: &str) {
     assert!(
         chi2 < 2.45,
-        "{what}: the cached image is biased: chi2/dof {chi2}"
+        "{what}: the cached estimate is biased: chi2/dof {chi2}"
     );
     assert!(
         worst < 4.0,
@@ -241,4 +253,208 @@ fn bad_path_cache_settings_are_refused_by_name() {
         assert_eq!(key, "optimizer.path_cache");
         assert!(msg.contains("primal_spp (4)"), "{msg}");
     }
+}
+
+// The baseline's gradient pool (src/optim/estimator/baseline/pool.rs): the same stored paths,
+// kept `gradient_spp` per pixel from the gradient's own random numbers, shaded and
+// differentiated by gradient_cached.wgsl.
+
+/// A baseline optimizer over `slots` whose gradient keeps `spp` paths per pixel, `refresh` of
+/// them traced anew each iteration (None: every sample traced), and a fixed adjoint: the
+/// loss's against a black target at the textures of iteration 0, from a 64-spp render.
+fn gradient_optimizer(
+    gpu: &psrestir::gpu::Gpu,
+    scene: &Scene,
+    (slots, filter): (&[Slot], Filter),
+    spp: u32,
+    refresh: Option<u32>,
+) -> (Optimizer, Vec<f32>) {
+    let (set, mut settings) = setup(scene, (slots, filter), 1, None);
+    settings.gradient_spp = spp;
+    settings.primal = PrimalMode::Independent;
+    let cache = BaselineOptions { cache: refresh };
+    settings.estimator_options.put(&cache);
+    let mut opt = Optimizer::new(gpu, scene, set, settings, &[Image::new(W, W)]).unwrap();
+    opt.write_params(&params_at(slots, 0)).unwrap();
+    let (adjoint, _) = opt.converged_adjoint(64, 5).unwrap();
+    (opt, adjoint)
+}
+
+#[test]
+fn a_gradient_pool_refreshed_whole_gives_the_traced_gradient() {
+    let Some(gpu) = gpu() else { return };
+    // Every path is traced anew every iteration, from the camera samples the gradient pass
+    // traces: the stored paths differentiate to what the traced ones do. The pool keeps its
+    // hits at fixed-point barycentrics (2^-16) and its directions between the vertices
+    // themselves (the tracer's rays start 1e-4 of the scene's scale off the surface): at
+    // depth 1 the gradients agree to float rounding (measured 3e-7 to 1e-6 of their
+    // magnitude; 1e-4 allowed), with later vertices in the corner scene, whose vertices lie
+    // close together near its corner, to 1e-3 to 5e-3 (1e-2 allowed: what the later vertices
+    // bring back taken at 0.9 of its value moved it by 1.7e-2 to 2.8e-2).
+    let mut normal = shadow_scene();
+    with_normal_map(&mut normal);
+    let cases = [
+        (
+            shadow_scene(),
+            &[Slot::BaseColor, Slot::Roughness][..],
+            1e-4,
+        ),
+        (normal, &[Slot::BaseColor, Slot::Normal][..], 1e-4),
+        (
+            corner_scene(3),
+            &[Slot::BaseColor, Slot::Metallic][..],
+            1e-2,
+        ),
+    ];
+    for (scene, slots, tol) in cases {
+        let (mut a, adjoint) = gradient_optimizer(&gpu, &scene, (slots, Filter::Bilinear), 2, None);
+        let (mut b, _) = gradient_optimizer(&gpu, &scene, (slots, Filter::Bilinear), 2, Some(2));
+        for t in 0..3 {
+            a.write_params(&params_at(slots, t)).unwrap();
+            b.write_params(&params_at(slots, t)).unwrap();
+            let ga = a.estimate_gradient_with_adjoint(100 + t, &adjoint).unwrap();
+            let gb = b.estimate_gradient_with_adjoint(100 + t, &adjoint).unwrap();
+            let diff: f64 = ga.iter().zip(&gb).map(|(x, y)| (x - y).abs() as f64).sum();
+            let total: f64 = ga.iter().map(|x| x.abs() as f64).sum();
+            eprintln!(
+                "{slots:?} iteration {t}: relative difference {}",
+                diff / total
+            );
+            assert!(total > 0.0, "{slots:?}: the gradient is zero");
+            assert!(
+                diff <= tol * total,
+                "{slots:?} iteration {t}: relative difference {}",
+                diff / total
+            );
+        }
+    }
+}
+
+/// Over `runs` runs of `steps` iterations with moving textures, each from an empty pool of
+/// 4 paths per pixel with one traced anew per iteration, the last iteration's gradient
+/// against the mean of `runs` traced gradients (4 samples per pixel) at its textures, under
+/// the same fixed adjoint: chi2/dof of the parameters' differences and the worst |z|.
+fn pooled_gradient_bias(
+    scene: &Scene,
+    (slots, filter): (&[Slot], Filter),
+    runs: u32,
+    steps: u32,
+) -> (f64, f64) {
+    let gpu = gpu().unwrap();
+    let (mut pooled, adjoint) = gradient_optimizer(&gpu, scene, (slots, filter), 4, Some(1));
+    let (mut traced, _) = gradient_optimizer(&gpu, scene, (slots, filter), 4, None);
+    let fresh = pooled.state().unwrap();
+    let n = params_at(slots, 0).len();
+    let mut stats = [vec![[0f64; 2]; n], vec![[0f64; 2]; n]];
+    traced.write_params(&params_at(slots, steps - 1)).unwrap();
+    for r in 0..runs {
+        let mut st = fresh.clone();
+        st.iteration = 0;
+        // (A restore empties the pool: every run fills its own.)
+        pooled.restore(&st).unwrap();
+        let mut g = Vec::new();
+        for t in 0..steps {
+            pooled.write_params(&params_at(slots, t)).unwrap();
+            g = (pooled)
+                .estimate_gradient_with_adjoint(1000 * (r + 1) + t, &adjoint)
+                .unwrap();
+        }
+        let h = (traced)
+            .estimate_gradient_with_adjoint(500_000 + r, &adjoint)
+            .unwrap();
+        for (s, v) in stats.iter_mut().zip([&g, &h]) {
+            for (acc, x) in s.iter_mut().zip(v) {
+                acc[0] += *x as f64;
+                acc[1] += (*x as f64).powi(2);
+            }
+        }
+    }
+    let k = runs as f64;
+    let (mut z2, mut worst, mut dof) = (0.0, 0f64, 0.0);
+    for i in 0..n {
+        let mean_var = |acc: [f64; 2]| {
+            let m = acc[0] / k;
+            (m, (acc[1] / k - m * m).max(0.0) * k / (k - 1.0) / k)
+        };
+        let (mp, vp) = mean_var(stats[0][i]);
+        let (mt, vt) = mean_var(stats[1][i]);
+        if vp + vt == 0.0 {
+            continue;
+        }
+        let z = (mp - mt) / (vp + vt).sqrt();
+        z2 += z * z;
+        worst = worst.max(z.abs());
+        dof += 1.0;
+    }
+    assert!(dof >= 12.0, "too few parameters with a gradient: {dof}");
+    eprintln!(
+        "chi2/dof {:.3} over {dof} parameters (worst |z| {worst:.2})",
+        z2 / dof
+    );
+    (z2 / dof, worst)
+}
+
+// An unbiased pool gives chi2/dof near 1 over 16 parameters; it exceeds 2.45 with
+// probability 0.001, and a |z| of 4.0 in one of 16 with probability 0.001.
+#[test]
+fn a_pooled_gradient_is_unbiased_while_roughness_moves_the_sampling() {
+    if gpu().is_none() {
+        return;
+    }
+    // Each of the 4 paths per pixel was traced 0-3 iterations ago, under other textures.
+    let slots = [Slot::BaseColor, Slot::Roughness];
+    assert_unbiased(
+        pooled_gradient_bias(&shadow_scene(), (&slots, Filter::Bilinear), RUNS, 8),
+        "depth 1",
+    );
+}
+
+#[test]
+fn a_pooled_gradient_is_unbiased_under_a_moving_normal_map() {
+    if gpu().is_none() {
+        return;
+    }
+    let mut scene = shadow_scene();
+    with_normal_map(&mut scene);
+    let slots = [Slot::BaseColor, Slot::Normal];
+    assert_unbiased(
+        pooled_gradient_bias(&scene, (&slots, Filter::Bilinear), RUNS, 8),
+        "normal map",
+    );
+}
+
+#[test]
+fn a_pooled_gradient_is_unbiased_with_indirect_light() {
+    if gpu().is_none() {
+        return;
+    }
+    let slots = [Slot::BaseColor, Slot::Roughness, Slot::Metallic];
+    assert_unbiased(
+        pooled_gradient_bias(&corner_scene(3), (&slots, Filter::Nearest), RUNS, 8),
+        "depth 3",
+    );
+}
+
+#[test]
+fn a_gradient_pool_larger_than_the_gradient_spp_is_refused_by_name() {
+    let Some(gpu) = gpu() else { return };
+    let scene = shadow_scene();
+    let (set, mut settings) = setup(&scene, (&[Slot::BaseColor], Filter::Bilinear), 1, None);
+    settings.gradient_spp = 2;
+    settings
+        .estimator_options
+        .put(&BaselineOptions { cache: Some(3) });
+    let err = Optimizer::new(&gpu, &scene, set, settings.clone(), &[Image::new(W, W)])
+        .err()
+        .expect("a pool refreshing more paths than it keeps");
+    let msg = err.to_string();
+    assert!(
+        msg.contains("optimizer.baseline.cache (3)") && msg.contains("gradient_spp (2)"),
+        "{msg}"
+    );
+    settings
+        .estimator_options
+        .put(&BaselineOptions { cache: Some(0) });
+    let (key, _) = settings.validate().unwrap_err();
+    assert_eq!(key, "optimizer.baseline.cache");
 }

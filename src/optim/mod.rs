@@ -341,7 +341,7 @@ impl Optimizer {
     /// compiles them while the targets render; a test checks the list against what an
     /// optimizer creates.
     pub fn passes(settings: &Settings) -> Vec<&'static str> {
-        let mut p = estimator::passes(settings.method);
+        let mut p = estimator::passes(settings.method, &settings.estimator_options);
         p.push("observed_texels");
         if settings.primal == primal::PrimalMode::ControlVariate {
             p.push("primal_cv");

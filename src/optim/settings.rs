@@ -286,10 +286,10 @@ mod tests {
                 }),
             ),
             (
-                "optimizer.baseline.m_cap",
+                "optimizer.baseline.cache",
                 Box::new(|s| {
                     s.estimator_options
-                        .set(Method::BASELINE.table(), "m_cap", 8.into())
+                        .set(Method::BASELINE.table(), "cache", 0.into())
                 }),
             ),
             (

@@ -24,8 +24,8 @@ pub struct Kind {
     pub generated: &'static [(&'static str, Generator)],
     /// Its bind-group declarations (checked against its WGSL by the contract test).
     pub groups: &'static [GroupDecl],
-    /// The passes it creates, the slowest to compile first.
-    pub passes: &'static [&'static str],
+    /// The passes it creates with its options, the slowest to compile first.
+    pub passes: fn(&EstimatorOptions) -> Vec<&'static str>,
     /// The most cameras it can use in one optimization (None: no limit of its own).
     pub max_cameras: Option<usize>,
     /// The buffers it allocates with its options, by label, size in bytes and what the size

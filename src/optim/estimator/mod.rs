@@ -101,9 +101,9 @@ pub(crate) fn groups() -> Vec<GroupDecl> {
         .collect()
 }
 
-/// The passes (WGSL files) `method` creates, the slowest to compile first.
-pub(crate) fn passes(method: Method) -> Vec<&'static str> {
-    method.kind().passes.to_vec()
+/// The passes (WGSL files) `method` creates with `options`, the slowest to compile first.
+pub(crate) fn passes(method: Method, options: &EstimatorOptions) -> Vec<&'static str> {
+    (method.kind().passes)(options)
 }
 
 /// Whether `method` keeps state for every texel at paths of `max_depth` vertices

@@ -49,10 +49,8 @@ mod options_tests {
             ("restir.m_capp=3", "m_capp"),
             ("restir.m_cap=-1", "optimizer.restir.m_cap"),
             ("recursive.min_weight=2", "optimizer.recursive.min_weight"),
-            (
-                "baseline.m_cap=2",
-                "the baseline gradient estimator has none",
-            ),
+            ("baseline.m_cap=2", "unknown field `m_cap`"),
+            ("baseline.cache=0", "optimizer.baseline.cache"),
         ] {
             let e = EstimatorOptions::default()
                 .assign(bad)

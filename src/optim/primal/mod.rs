@@ -14,6 +14,7 @@
 //! is L(E\[I\]) + Var(I) x the loss's weights), as with any noisy render; the control variate
 //! lowers that bias with the variance.
 pub mod path_cache;
+pub(crate) mod path_pool;
 pub(crate) use path_cache::PathCache;
 
 use crate::gpu::Gpu;

@@ -3,7 +3,14 @@
 //! material at its hit point and adds them, weighted by its pixel's adjoint, into the texels
 //! that the texture filter touches. Float additions are bounded compare-and-swap loops on
 //! 32-bit atomics; an exhausted bound is counted, never silently lost.
-use super::{Estimator, EstimatorState, Frame, Kind, Method, OptionsKind, Setup};
+//!
+//! With its `cache` option (pool.rs) the samples are camera paths kept from earlier
+//! iterations, `cache` of the `gradient_spp` per pixel traced anew each iteration, shaded and
+//! differentiated without a ray (gradient_cached.wgsl).
+mod pool;
+pub use pool::BaselineOptions;
+
+use super::{Estimator, EstimatorState, Frame, Kind, Method, Options, OptionsKind, Setup};
 use crate::gpu::encode_timed_pass;
 use crate::gpu::Gpu;
 use crate::optim::{pass_seed, FaultCounts, PassKind, PassTimer, Seeds};
@@ -16,17 +23,39 @@ use bytemuck::{Pod, Zeroable};
 pub const KIND: Kind = Kind {
     name: "baseline",
     summary: "plain Monte Carlo: every sample adds its derivative to the texels it touches",
-    options: OptionsKind::NONE,
-    wgsl: &[("gradient", include_str!("gradient.wgsl"))],
+    options: OptionsKind::of::<BaselineOptions>(),
+    wgsl: &[
+        ("gradient", include_str!("gradient.wgsl")),
+        ("gradient_cached", include_str!("gradient_cached.wgsl")),
+    ],
     generated: &[],
-    groups: &[GRADIENT_GROUP],
-    passes: &["gradient"],
+    groups: &[GRADIENT_GROUP, pool::GRADIENT_CACHED_GROUP],
+    passes: |options| match options.get::<BaselineOptions>() {
+        Ok(BaselineOptions { cache: Some(_) }) => vec!["gradient_cached", "primal_cache_trace"],
+        _ => vec!["gradient"],
+    },
     max_cameras: None,
-    memory: super::no_memory,
+    memory: pool::memory,
     warnings: super::no_warnings,
     every_texel: super::observed_only,
     build: |setup| Ok(Box::new(Baseline::new(setup)?)),
 };
+
+impl Options<super::EstimatorFamily> for BaselineOptions {
+    const KIND: &'static Kind = &KIND;
+    const OPTIONAL: &'static [&'static str] = &["cache"];
+
+    fn check(&self) -> std::result::Result<(), (String, String)> {
+        if self.cache == Some(0) {
+            return Err(("cache".into(), "must be at least 1 (paths traced anew each iteration)".into()));
+        }
+        Ok(())
+    }
+
+    fn describe(&self) -> String {
+        self.cache.map_or(String::new(), |r| format!("path pool, {r} traced anew"))
+    }
+}
 
 /// Group 1 of `gradient.wgsl`.
 pub(crate) const GRADIENT_GROUP: crate::gpu::GroupDecl = crate::gpu::GroupDecl {
@@ -65,8 +94,11 @@ struct Camera {
 
 /// The baseline estimator's passes and buffers.
 pub(crate) struct Baseline {
-    pipeline: wgpu::ComputePipeline,
+    /// The gradient pass that traces its samples (None with the path pool).
+    pipeline: Option<wgpu::ComputePipeline>,
     cameras: Vec<Camera>,
+    /// The path pool its samples are shaded from (the `cache` option).
+    pool: Option<pool::GradientPool>,
     grad: wgpu::Buffer,
     stats: wgpu::Buffer,
     grid: (u32, u32),
@@ -76,9 +108,26 @@ pub(crate) struct Baseline {
 impl Baseline {
     pub(crate) fn new(s: &Setup) -> Result<Baseline> {
         let gpu = s.gpu;
+        let options: BaselineOptions = (s.options.get())
+            .map_err(|(key, msg)| crate::Error::Invalid(format!("{key} {msg}")))?;
+        let stats = gpu.storage_zeroed("gradient stats", 16);
+        let pool = match options.cache {
+            Some(refresh) => pool::GradientPool::new(s, refresh, &stats)?,
+            None => None,
+        };
+        if pool.is_some() {
+            return Ok(Baseline {
+                pipeline: None,
+                cameras: Vec::new(),
+                pool,
+                grad: s.grad.clone(),
+                stats,
+                grid: s.grid,
+                queue: gpu.queue.clone(),
+            });
+        }
         let layout = gpu.pass_layout("gradient", 1)?;
         let pipeline = s.scene.pipeline(gpu, "gradient", &[&s.scene.layout, &layout])?;
-        let stats = gpu.storage_zeroed("gradient stats", 16);
         let n_pixels = s.width * s.height;
         let cameras = s
             .cameras
@@ -118,8 +167,9 @@ impl Baseline {
             })
             .collect();
         Ok(Baseline {
-            pipeline,
+            pipeline: Some(pipeline),
             cameras,
+            pool: None,
             grad: s.grad.clone(),
             stats,
             grid: s.grid,
@@ -131,6 +181,13 @@ impl Baseline {
 impl Estimator for Baseline {
     fn encode(&mut self, enc: &mut wgpu::CommandEncoder, frame: &Frame, timer: &mut PassTimer) {
         enc.clear_buffer(&self.grad, 0, None);
+        if let Some(pool) = &mut self.pool {
+            pool.encode(enc, frame, self.grid, timer);
+            return;
+        }
+        let Some(pipeline) = &self.pipeline else {
+            return;
+        };
         for (k, cam) in self.cameras.iter_mut().enumerate() {
             cam.params.seed = pass_seed(frame.seed, frame.iteration, k as u32, Seeds::GRADIENT);
             self.queue
@@ -138,11 +195,17 @@ impl Estimator for Baseline {
             encode_timed_pass(
                 enc,
                 "gradient",
-                &self.pipeline,
+                pipeline,
                 &[frame.scene_group, &cam.groups[frame.parity()]],
                 self.grid,
                 timer.next(PassKind::Gradient),
             );
+        }
+    }
+
+    fn finish_iteration(&mut self) {
+        if let Some(pool) = &mut self.pool {
+            pool.finish_iteration();
         }
     }
 
@@ -157,21 +220,31 @@ impl Estimator for Baseline {
         Ok(())
     }
 
-    fn snapshot(&self, _gpu: &Gpu, _iteration: u32) -> Result<EstimatorState> {
-        Ok(EstimatorState::new(Method::BASELINE))
+    fn snapshot(&self, gpu: &Gpu, _iteration: u32) -> Result<EstimatorState> {
+        let mut st = EstimatorState::new(Method::BASELINE);
+        if let Some(pool) = &self.pool {
+            pool.snapshot(gpu, &mut st)?;
+        }
+        Ok(st)
     }
 
-    fn restore(&mut self, _: &Gpu, _: Option<&EstimatorState>, _: u32) -> Result<()> {
+    fn restore(&mut self, gpu: &Gpu, st: Option<&EstimatorState>, _: u32) -> Result<()> {
+        if let Some(pool) = &mut self.pool {
+            pool.restore(gpu, st)?;
+        }
         Ok(())
     }
 
     fn state_bytes(&self) -> u64 {
-        0
+        self.pool.as_ref().map_or(0, |p| p.bytes())
     }
 
     fn set_techniques(&mut self, techniques: Techniques) -> Result<()> {
         for cam in &mut self.cameras {
             cam.params.techniques = techniques.bits();
+        }
+        if let Some(pool) = &mut self.pool {
+            pool.set_techniques(techniques);
         }
         Ok(())
     }
@@ -198,6 +271,12 @@ mod contract_tests {
                 inv_spp,
                 adjoint_offset
             ]
+        );
+        mirror!(
+            "gradient_cached",
+            "GradientCachedParams",
+            super::pool::GradientCachedParams,
+            [adjoint_offset, inv_spp]
         );
     }
 }

@@ -41,7 +41,7 @@ pub const KIND: Kind = Kind {
     ],
     generated: &[("gen/recursive", abi::wgsl)],
     groups: &[GRADIENT_GROUP, COMBINE_GROUP],
-    passes: &["recursive_gradient", "recursive_combine"],
+    passes: |_| vec!["recursive_gradient", "recursive_combine"],
     max_cameras: None,
     memory: |sizes, _| memory(sizes.params),
     warnings: super::no_warnings,

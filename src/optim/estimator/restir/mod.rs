@@ -75,7 +75,7 @@ pub const KIND: Kind = Kind {
     ],
     generated: &[("gen/restir", abi::wgsl)],
     groups: &[CANDIDATES_GROUP, MERGE_GROUP, CLAIM_GROUP, RESERVOIR_TEST_GROUP],
-    passes: &["restir_candidates", "restir_merge", "restir_claim"],
+    passes: |_| vec!["restir_candidates", "restir_merge", "restir_claim"],
     max_cameras: Some(MAX_CAMERAS),
     memory: |sizes, options| {
         let words = reservoir::words(sizes.max_depth);

@@ -18,7 +18,7 @@ pub const KIND: Kind = Kind {
     wgsl: &[("toy_gradient", include_str!("toy_gradient.wgsl"))],
     generated: &[],
     groups: &[TOY_GROUP],
-    passes: &["toy_gradient"],
+    passes: |_| vec!["toy_gradient"],
     max_cameras: None,
     memory: no_memory,
     warnings: no_warnings,
