@@ -377,7 +377,8 @@ fn primal_uniform_mirrors_match_wgsl_field_by_field() {
             two_states,
             refresh_first,
             refresh_count,
-            vertices
+            vertices,
+            optimized_only
         ]
     );
 }

@@ -240,6 +240,54 @@ fn every_estimator_gives_the_environment_gradient_the_baseline_gives() {
     }
 }
 
+/// The baseline's gradient pool (optimizer.baseline.cache) refreshed whole every iteration
+/// draws the camera samples the gradient pass traces: the environment's gradient from its
+/// stored paths (camera rays that miss, the environment's light and BSDF samples, at every
+/// vertex) is the traced one's, within float rounding at depth 1 and within what the stored
+/// directions between vertices move it at depth 3 (the same bounds as tests/path_cache.rs).
+#[test]
+fn the_gradient_pool_gives_the_traced_environment_gradient() {
+    use psrestir::optim::estimator::baseline::BaselineOptions;
+    let Some(gpu) = gpu() else { return };
+    for (scene, tol) in [(sky_in_view(true), 1e-4), (corner_scene(3), 1e-2)] {
+        let truth = with_env(scene.clone(), env(1.0));
+        let blank = Image::new(W, W);
+        let target = optimizer(&gpu, &truth, Method::BASELINE, &blank)
+            .render(0, 256, 99)
+            .unwrap();
+        let start = env(0.6);
+        let fitted = with_env(scene, start.clone());
+        let mut gradients = Vec::new();
+        for cache in [None, Some(16)] {
+            let set = plane_base_color(&fitted);
+            let mut settings = Settings {
+                primal_spp: 16,
+                gradient_spp: 16,
+                seed: 7,
+                method: Method::BASELINE,
+                ..Settings::new(W, W, vec![0])
+            };
+            settings.estimator_options.put(&BaselineOptions { cache });
+            let targets = std::slice::from_ref(&target);
+            let mut opt = Optimizer::new(&gpu, &fitted, set, settings, targets).unwrap();
+            opt.fit_mut()
+                .optimize_environment(&start, EnvFitOptions::default())
+                .unwrap();
+            opt.estimate_gradient(1000).unwrap();
+            let (g, faults) = opt.fit_mut().read_environment_gradient().unwrap();
+            assert_eq!(faults, 0, "environment gradient updates lost or dropped");
+            gradients.push(g);
+        }
+        let diff: f64 = (gradients[0].iter().zip(&gradients[1]))
+            .map(|(a, b)| (a - b).abs() as f64)
+            .sum();
+        let total: f64 = gradients[0].iter().map(|a| a.abs() as f64).sum();
+        eprintln!("relative difference {}", diff / total);
+        assert!(total > 0.0, "the environment's gradient is zero");
+        assert!(diff <= tol * total, "relative difference {}", diff / total);
+    }
+}
+
 /// A plane with a blocker under a sky whose sun is one bright texel: fitted from a uniform
 /// gray with the textures held, the environment's strongest emission ends within 20 degrees
 /// of the sun (texels here are 45 degrees wide: the right texel or a neighbour), and the

@@ -102,7 +102,8 @@ struct CameraPath {
     // ReSTIR stores.
     hit: Hit,
     // Whether the hit was shaded and its samples drawn: false on a miss, at the back of a
-    // single-sided surface, and (with optimized_only, unless replay at depth > 1) on a
+    // single-sided surface, and (with optimized_only, unless replay or record_paths at depth >
+    // 1) on a
     // material without optimized textures. Only e is set otherwise.
     shaded: bool,
     sf: Surface,
@@ -488,7 +489,7 @@ fn path_arrival(st: ptr<function, PathState>, sp: ptr<function, PathStep>) {
         }
         st.stage = STAGE_DONE;
         // (With replay, a path whose first vertex is not optimized may still reach one.)
-        sp.shade = sp.hit.tri != NONE && st.next_sf.valid && (!st.opts.optimized_only || has_optimized(st.next_sf.material) || (st.opts.replay && st.max_depth > 1u) || st.opts.env_gradients || st.opts.record_paths);
+        sp.shade = sp.hit.tri != NONE && st.next_sf.valid && (!st.opts.optimized_only || has_optimized(st.next_sf.material) || (st.opts.replay && st.max_depth > 1u) || st.opts.env_gradients || (st.opts.record_paths && st.max_depth > 1u));
         st.out.shaded = sp.shade;
     }
 }

@@ -79,6 +79,7 @@ pub(in crate::optim) fn build(
             refresh,
             max_depth,
             techniques: crate::render::Techniques::Mis.bits(),
+            optimized_only: false,
             stats: &bufs.stats.primal,
             label: "path cache",
         },

@@ -19,6 +19,10 @@ struct PrimalCachedParams {
     // Vertices kept per path (the scene's depth, at most PATH_RECORD_VERTICES); the words
     // per path are CACHE_HEADER_WORDS + its vertices' and two arrivals per vertex.
     vertices: u32,
+    // Whether the trace pass shades a first vertex without optimized textures only where a
+    // later vertex or the environment's derivative may need it (the gradient's pool: such a
+    // path adds nothing else to a gradient); the primal's stores every path whole.
+    optimized_only: u32,
 }
 
 // A stored path: the header (arrival count in bits 0-3, vertex count in bits 4-7,

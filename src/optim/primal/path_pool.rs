@@ -33,6 +33,8 @@ pub struct PrimalCachedParams {
     pub refresh_first: u32,
     pub refresh_count: u32,
     pub vertices: u32,
+    pub optimized_only: u32,
+    pub _pad: [u32; 3],
 }
 
 pub use crate::gpu::abi::path_cache::MAX_VERTICES;
@@ -102,6 +104,9 @@ pub(crate) struct PoolSetup<'a> {
     pub max_depth: u32,
     /// The techniques the paths are sampled with (`Techniques::bits`).
     pub techniques: u32,
+    /// Whether a path whose first vertex has no optimized texture is shaded only where a
+    /// later vertex or the environment may need it (PrimalCachedParams::optimized_only).
+    pub optimized_only: bool,
     /// Where the trace pass counts its rays (render.wgsl's statistics).
     pub stats: &'a wgpu::Buffer,
     /// The buffers' labels start with it.
@@ -148,6 +153,7 @@ impl PathPool {
                     techniques: s.techniques,
                     stride: s.grid.0 * WORKGROUP,
                     vertices: s.max_depth.clamp(1, MAX_VERTICES),
+                    optimized_only: s.optimized_only as u32,
                     ..Default::default()
                 };
                 let uniform = gpu.uniform(

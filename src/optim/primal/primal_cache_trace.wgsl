@@ -97,6 +97,7 @@ fn main(@builtin(global_invocation_id) id: vec3u) {
     po.techniques = cp.techniques;
     po.compact_paths = true;
     po.record_paths = true;
+    po.optimized_only = cp.optimized_only != 0u && scene.env_optimized == 0u;
     store_path((pixel * cp.spp + s) * cache_words(), camera_path(cp.camera.origin, d, po), d);
     atomicAdd(&stats[RENDER_STAT_CAMERA_RAYS], 1u);
     atomicAdd(&stats[RENDER_STAT_SHADOW_RAYS], shadow_rays);

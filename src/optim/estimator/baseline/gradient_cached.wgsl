@@ -42,12 +42,20 @@ struct GradientCachedParams {
 @group(1) @binding(5) var<storage, read_write> env_grad: array<atomic<u32>>;
 @group(1) @binding(6) var<storage, read_write> path_cache: array<u32>;
 
-// The derivative of BRDF x cos at a stored vertex towards wi (in its shading frame), with the
-// map's where its frame moves (sf: the vertex rebuilt from its triangle, `moves` set).
-fn stored_vertex_grad(mat: SurfaceMaterial, wo: vec3f, wi: vec3f, sf: Surface, moves: bool) -> BrdfGrad {
+// Vertex j of the stored path at `base`, rebuilt from its triangle, seen from `seen_from`
+// (for a vertex whose frame moves with an optimized normal map).
+fn stored_surface(base: u32, j: u32, seen_from: vec3f) -> Surface {
+    let w = base + CACHE_HEADER_WORDS + j * CACHE_VERTEX_WORDS;
+    return surface_at(seen_from, stored_hit(path_cache[w + VX_TRI], vec2u(path_cache[w + VX_TRI + 1u], path_cache[w + VX_TRI + 2u])));
+}
+
+// The derivative of BRDF x cos at vertex j of the stored path at `base` towards wi (in its
+// shading frame), with the normal map's where its frame moves (the vertex seen from
+// `seen_from`).
+fn stored_vertex_grad(mat: SurfaceMaterial, wo: vec3f, wi: vec3f, moves: bool, base: u32, j: u32, seen_from: vec3f) -> BrdfGrad {
     var bg = brdf_eval_cos_grad(mat, wo, wi);
     if moves {
-        bg.d_normal = normal_rgb_grad(sf, false, mat, wo, wi);
+        bg.d_normal = normal_rgb_grad(stored_surface(base, j, seen_from), false, mat, wo, wi);
     }
     return bg;
 }
@@ -64,14 +72,16 @@ fn differentiate_path(base: u32, origin: vec3f, adj: vec3f) {
         return;
     }
     // Per vertex: its material and uv, inputs, directions (outgoing, to the next vertex) in
-    // its frame, the surface where its frame moves, through[j], and R[j] (above).
+    // its frame, where it is seen from, whether its frame moves and that frame, through[j],
+    // and R[j] (above).
     var mi: array<u32, CACHE_MAX_VERTICES>;
     var uv: array<vec2f, CACHE_MAX_VERTICES>;
     var mat: array<SurfaceMaterial, CACHE_MAX_VERTICES>;
     var wo: array<vec3f, CACHE_MAX_VERTICES>;
     var wi_next: array<vec3f, CACHE_MAX_VERTICES>;
-    var sf: array<Surface, CACHE_MAX_VERTICES>;
+    var viewer: array<vec3f, CACHE_MAX_VERTICES>;
     var moves: array<bool, CACHE_MAX_VERTICES>;
+    var frame: array<mat3x3f, CACHE_MAX_VERTICES>;
     var through: array<vec3f, CACHE_MAX_VERTICES>;
     var rest: array<vec3f, CACHE_MAX_VERTICES>;
     var seen_from = origin;
@@ -84,13 +94,15 @@ fn differentiate_path(base: u32, origin: vec3f, adj: vec3f) {
         wo[j] = get_vec3(w + VX_WO);
         wi_next[j] = get_vec3(w + VX_WI_NEXT);
         moves[j] = frame_moves(mi[j]);
+        viewer[j] = seen_from;
         let p = get_vec3(w + VX_P);
         if moves[j] {
-            sf[j] = surface_at(seen_from, stored_hit(path_cache[w + VX_TRI], vec2u(path_cache[w + VX_TRI + 1u], path_cache[w + VX_TRI + 2u])));
-            wo[j] = to_local(sf[j].frame, sf[j].wo);
+            let sf = stored_surface(base, j, seen_from);
+            frame[j] = sf.frame;
+            wo[j] = to_local(sf.frame, sf.wo);
         }
         if j > 0u && moves[j - 1u] {
-            wi_next[j - 1u] = to_local(sf[j - 1u].frame, normalize(p - seen_from));
+            wi_next[j - 1u] = to_local(frame[j - 1u], normalize(p - seen_from));
         }
         rest[j] = vec3f(0.0);
         seen_from = p;
@@ -106,7 +118,7 @@ fn differentiate_path(base: u32, origin: vec3f, adj: vec3f) {
         let j = clamp(tag & 0xffu, 1u, n_vertices) - 1u;
         var wi = get_vec3(w + AR_WI_LOCAL);
         if moves[j] {
-            wi = to_local(sf[j].frame, get_vec3(w + AR_WI));
+            wi = to_local(frame[j], get_vec3(w + AR_WI));
         }
         let env = (tag & CACHED_ENV_ARRIVAL) != 0u;
         var radiance = get_vec3(w + AR_RADIANCE);
@@ -114,7 +126,7 @@ fn differentiate_path(base: u32, origin: vec3f, adj: vec3f) {
             radiance = env_radiance(get_vec3(w + AR_WI));
         }
         let s = get_f32(w + AR_SCALE);
-        let bg = stored_vertex_grad(mat[j], wo[j], wi, sf[j], moves[j]);
+        let bg = stored_vertex_grad(mat[j], wo[j], wi, moves[j], base, j, viewer[j]);
         if env {
             differentiate_env(get_vec3(w + AR_WI), through[j] * bg.value * s);
         }
@@ -128,7 +140,7 @@ fn differentiate_path(base: u32, origin: vec3f, adj: vec3f) {
     }
     for (var k = 0u; k + 1u < n_vertices; k++) {
         if any(rest[k] != vec3f(0.0)) {
-            let bg = stored_vertex_grad(mat[k], wo[k], wi_next[k], sf[k], moves[k]);
+            let bg = stored_vertex_grad(mat[k], wo[k], wi_next[k], moves[k], base, k, viewer[k]);
             scatter(materials[mi[k]], uv[k], bg, through[k] * rest[k], adj);
         }
     }

@@ -111,6 +111,7 @@ impl GradientPool {
                 refresh,
                 max_depth,
                 techniques: Techniques::Mis.bits(),
+                optimized_only: true,
                 stats: &trace_stats,
                 label: "gradient path pool",
             },
