@@ -68,6 +68,28 @@ fn get_f32(w: u32) -> f32 {
     return bitcast<f32>(path_cache[w]);
 }
 
+// Arrival `a` of the stored path at `base` with `n_vertices` vertices, as its shading reads
+// it: the vertex it arrives at (0-based), its direction in world space and in that vertex's
+// frame as stored, its radiance (the environment's read anew along it) and its factor.
+struct StoredArrival {
+    vertex: u32,
+    wi: vec3f,
+    wi_local: vec3f,
+    radiance: vec3f,
+    scale: f32,
+    env: bool,
+}
+
+fn stored_arrival(base: u32, n_vertices: u32, a: u32) -> StoredArrival {
+    let w = base + CACHE_HEADER_WORDS + cp.vertices * CACHE_VERTEX_WORDS + a * CACHE_ARRIVAL_WORDS;
+    let tag = path_cache[w];
+    var out = StoredArrival(clamp(tag & 0xffu, 1u, n_vertices) - 1u, get_vec3(w + AR_WI), get_vec3(w + AR_WI_LOCAL), get_vec3(w + AR_RADIANCE), get_f32(w + AR_SCALE), (tag & CACHED_ENV_ARRIVAL) != 0u);
+    if out.env {
+        out.radiance = env_radiance(out.wi);
+    }
+    return out;
+}
+
 // Whether vertex material mi's shading frame moves with the textures (an optimized normal
 // map).
 fn frame_moves(mi: u32) -> bool {

@@ -71,20 +71,14 @@ fn shade_path(base: u32, origin: vec3f, prev: bool) -> vec3f {
         seen_from = p;
     }
     use_prev_params = false;
-    let first_arrival = base + CACHE_HEADER_WORDS + cp.vertices * CACHE_VERTEX_WORDS;
     for (var a = 0u; a < n_arr; a++) {
-        let w = first_arrival + a * CACHE_ARRIVAL_WORDS;
-        let tag = path_cache[w];
-        let j = clamp(tag & 0xffu, 1u, n_vertices) - 1u;
-        var wi = get_vec3(w + AR_WI_LOCAL);
+        let ar = stored_arrival(base, n_vertices, a);
+        let j = ar.vertex;
+        var wi = ar.wi_local;
         if any(frame[j][2] != vec3f(0.0)) {
-            wi = to_local(frame[j], get_vec3(w + AR_WI));
+            wi = to_local(frame[j], ar.wi);
         }
-        var radiance = get_vec3(w + AR_RADIANCE);
-        if (tag & CACHED_ENV_ARRIVAL) != 0u {
-            radiance = env_radiance(get_vec3(w + AR_WI));
-        }
-        l += through[j] * brdf_eval_cos(mat[j], wo[j], wi) * radiance * get_f32(w + AR_SCALE);
+        l += through[j] * brdf_eval_cos(mat[j], wo[j], wi) * ar.radiance * ar.scale;
     }
     return l;
 }

@@ -111,28 +111,20 @@ fn differentiate_path(base: u32, origin: vec3f, adj: vec3f) {
     for (var j = 1u; j < n_vertices; j++) {
         through[j] = through[j - 1u] * brdf_eval_cos(mat[j - 1u], wo[j - 1u], wi_next[j - 1u]);
     }
-    let first_arrival = base + CACHE_HEADER_WORDS + cp.vertices * CACHE_VERTEX_WORDS;
     for (var a = 0u; a < n_arr; a++) {
-        let w = first_arrival + a * CACHE_ARRIVAL_WORDS;
-        let tag = path_cache[w];
-        let j = clamp(tag & 0xffu, 1u, n_vertices) - 1u;
-        var wi = get_vec3(w + AR_WI_LOCAL);
+        let ar = stored_arrival(base, n_vertices, a);
+        let j = ar.vertex;
+        var wi = ar.wi_local;
         if moves[j] {
-            wi = to_local(frame[j], get_vec3(w + AR_WI));
+            wi = to_local(frame[j], ar.wi);
         }
-        let env = (tag & CACHED_ENV_ARRIVAL) != 0u;
-        var radiance = get_vec3(w + AR_RADIANCE);
-        if env {
-            radiance = env_radiance(get_vec3(w + AR_WI));
-        }
-        let s = get_f32(w + AR_SCALE);
         let bg = stored_vertex_grad(mat[j], wo[j], wi, moves[j], base, j, viewer[j]);
-        if env {
-            differentiate_env(get_vec3(w + AR_WI), through[j] * bg.value * s);
+        if ar.env {
+            differentiate_env(ar.wi, through[j] * bg.value * ar.scale);
         }
-        scatter(materials[mi[j]], uv[j], bg, through[j] * radiance * s, adj);
+        scatter(materials[mi[j]], uv[j], bg, through[j] * ar.radiance * ar.scale, adj);
         // What it brings back to every vertex before j, along that vertex's way on.
-        var after = bg.value * radiance * s;
+        var after = bg.value * ar.radiance * ar.scale;
         for (var k = j; k > 0u; k--) {
             rest[k - 1u] += after;
             after *= brdf_eval_cos(mat[k - 1u], wo[k - 1u], wi_next[k - 1u]);
