@@ -92,13 +92,17 @@ struct Camera {
     groups: [wgpu::BindGroup; 2],
 }
 
+/// Where the baseline's samples come from.
+enum Samples {
+    /// Traced by the gradient pass, per camera.
+    Traced(wgpu::ComputePipeline, Vec<Camera>),
+    /// Shaded from its path pool (the `cache` option).
+    Pooled(pool::GradientPool),
+}
+
 /// The baseline estimator's passes and buffers.
 pub(crate) struct Baseline {
-    /// The gradient pass that traces its samples (None with the path pool).
-    pipeline: Option<wgpu::ComputePipeline>,
-    cameras: Vec<Camera>,
-    /// The path pool its samples are shaded from (the `cache` option).
-    pool: Option<pool::GradientPool>,
+    samples: Samples,
     grad: wgpu::Buffer,
     stats: wgpu::Buffer,
     grid: (u32, u32),
@@ -115,17 +119,22 @@ impl Baseline {
             Some(refresh) => pool::GradientPool::new(s, refresh, &stats)?,
             None => None,
         };
-        if pool.is_some() {
-            return Ok(Baseline {
-                pipeline: None,
-                cameras: Vec::new(),
-                pool,
-                grad: s.grad.clone(),
-                stats,
-                grid: s.grid,
-                queue: gpu.queue.clone(),
-            });
-        }
+        let samples = match pool {
+            Some(pool) => Samples::Pooled(pool),
+            None => Self::traced(s, &stats)?,
+        };
+        Ok(Baseline {
+            samples,
+            grad: s.grad.clone(),
+            stats,
+            grid: s.grid,
+            queue: gpu.queue.clone(),
+        })
+    }
+
+    /// The gradient pass of every camera of `s`, counting in `stats`.
+    fn traced(s: &Setup, stats: &wgpu::Buffer) -> Result<Samples> {
+        let gpu = s.gpu;
         let layout = gpu.pass_layout("gradient", 1)?;
         let pipeline = s.scene.pipeline(gpu, "gradient", &[&s.scene.layout, &layout])?;
         let n_pixels = s.width * s.height;
@@ -154,7 +163,7 @@ impl Baseline {
                             ("gp", &uniform),
                             ("adjoint", &s.adjoint[p]),
                             ("grad", s.grad),
-                            ("gstats", &stats),
+                            ("gstats", stats),
                             ("env_grad", s.env_grad),
                         ],
                     )
@@ -166,29 +175,18 @@ impl Baseline {
                 }
             })
             .collect();
-        Ok(Baseline {
-            pipeline: Some(pipeline),
-            cameras,
-            pool: None,
-            grad: s.grad.clone(),
-            stats,
-            grid: s.grid,
-            queue: gpu.queue.clone(),
-        })
+        Ok(Samples::Traced(pipeline, cameras))
     }
 }
 
 impl Estimator for Baseline {
     fn encode(&mut self, enc: &mut wgpu::CommandEncoder, frame: &Frame, timer: &mut PassTimer) {
         enc.clear_buffer(&self.grad, 0, None);
-        if let Some(pool) = &mut self.pool {
-            pool.encode(enc, frame, self.grid, timer);
-            return;
-        }
-        let Some(pipeline) = &self.pipeline else {
-            return;
+        let (pipeline, cameras) = match &mut self.samples {
+            Samples::Pooled(pool) => return pool.encode(enc, frame, self.grid, timer),
+            Samples::Traced(pipeline, cameras) => (pipeline, cameras),
         };
-        for (k, cam) in self.cameras.iter_mut().enumerate() {
+        for (k, cam) in cameras.iter_mut().enumerate() {
             cam.params.seed = pass_seed(frame.seed, frame.iteration, k as u32, Seeds::GRADIENT);
             self.queue
                 .write_buffer(&cam.uniform, 0, bytemuck::bytes_of(&cam.params));
@@ -204,7 +202,7 @@ impl Estimator for Baseline {
     }
 
     fn finish_iteration(&mut self) {
-        if let Some(pool) = &mut self.pool {
+        if let Samples::Pooled(pool) = &mut self.samples {
             pool.finish_iteration();
         }
     }
@@ -222,29 +220,34 @@ impl Estimator for Baseline {
 
     fn snapshot(&self, gpu: &Gpu, _iteration: u32) -> Result<EstimatorState> {
         let mut st = EstimatorState::new(Method::BASELINE);
-        if let Some(pool) = &self.pool {
+        if let Samples::Pooled(pool) = &self.samples {
             pool.snapshot(gpu, &mut st)?;
         }
         Ok(st)
     }
 
     fn restore(&mut self, gpu: &Gpu, st: Option<&EstimatorState>, _: u32) -> Result<()> {
-        if let Some(pool) = &mut self.pool {
+        if let Samples::Pooled(pool) = &mut self.samples {
             pool.restore(gpu, st)?;
         }
         Ok(())
     }
 
     fn state_bytes(&self) -> u64 {
-        self.pool.as_ref().map_or(0, |p| p.bytes())
+        match &self.samples {
+            Samples::Pooled(pool) => pool.bytes(),
+            Samples::Traced(..) => 0,
+        }
     }
 
     fn set_techniques(&mut self, techniques: Techniques) -> Result<()> {
-        for cam in &mut self.cameras {
-            cam.params.techniques = techniques.bits();
-        }
-        if let Some(pool) = &mut self.pool {
-            pool.set_techniques(techniques);
+        match &mut self.samples {
+            Samples::Pooled(pool) => pool.set_techniques(techniques),
+            Samples::Traced(_, cameras) => {
+                for cam in cameras {
+                    cam.params.techniques = techniques.bits();
+                }
+            }
         }
         Ok(())
     }

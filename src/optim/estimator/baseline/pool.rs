@@ -6,9 +6,8 @@
 //! gradient.wgsl would trace.
 use crate::gpu::{encode_timed_pass, Gpu};
 use crate::optim::estimator::{EstimatorOptions, EstimatorState, Frame, Scale, Setup, Sizes};
-use crate::optim::primal::path_pool::{camera_bytes, unusable, MAX_VERTICES};
-use crate::optim::primal::path_pool::{PathCacheSnapshot, PathPool, PoolSetup};
-use crate::optim::primal::path_pool::PrimalCachedParams;
+use crate::optim::primal::path_pool::{camera_bytes, unusable, PathCacheSnapshot, PathPool};
+use crate::optim::primal::path_pool::{PoolSetup, PrimalCachedParams, MAX_VERTICES};
 use crate::optim::{pass_seed, PassKind, PassTimer, Seeds};
 use crate::render::Techniques;
 use crate::Result;
@@ -60,15 +59,18 @@ pub(super) fn memory(sizes: &Sizes, options: &EstimatorOptions) -> Vec<(String, 
 }
 
 struct Camera {
-    /// The shading pass's uniforms and its group per parity of the iteration.
+    /// The shading pass's uniform (the pool's parameters) and its group per parity of the
+    /// iteration (the adjoint buffers alternate).
     uniform: wgpu::Buffer,
     groups: [wgpu::BindGroup; 2],
 }
 
+/// The pool of every camera and the pass that differentiates it.
 pub(super) struct GradientPool {
     pool: PathPool,
     pipeline: wgpu::ComputePipeline,
     cameras: Vec<Camera>,
+    /// Bytes of the stored paths, all cameras'.
     bytes: u64,
     queue: wgpu::Queue,
 }
