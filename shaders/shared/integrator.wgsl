@@ -102,9 +102,8 @@ struct CameraPath {
     // ReSTIR stores.
     hit: Hit,
     // Whether the hit was shaded and its samples drawn: false on a miss, at the back of a
-    // single-sided surface, and (with optimized_only, unless replay or record_paths at depth >
-    // 1) on a
-    // material without optimized textures. Only e is set otherwise.
+    // single-sided surface, and (with optimized_only, unless replay or record_paths at depth
+    // > 1) on a material without optimized textures. Only e is set otherwise.
     shaded: bool,
     sf: Surface,
     // The inputs that the glTF material gives, and those with the optimized textures.
@@ -150,15 +149,17 @@ fn max_component(v: vec3f) -> f32 {
 //   rounds the incident directions and the radiances to the compact path encoding
 //   (shared/path_encoding.wgsl) before anything is evaluated, so that a stored path
 //   (stored_vertex, path_factor) re-evaluates to the same value.
-// - record_paths (ReSTIR's candidates keeping whole paths, restir_candidates.wgsl): the
+// - record_paths (ReSTIR's candidates keeping whole paths, restir_candidates.wgsl; the path
+//   cache's trace, primal/primal_cache_trace.wgsl): the
 //   path's first PATH_RECORD_VERTICES vertices (rec_tri, rec_kb: triangle and fixed-point
 //   barycentrics, the camera ray's hit first; with compact_paths every vertex is moved to the
 //   barycentrics stored) and every sample that reaches an emitter from one of them (an
 //   arrival): the path of `n` vertices that it ends, the direction from its last vertex, the
 //   radiance arriving (unweighted) and its factor, MIS weight / density of the whole path (the
 //   BSDF samples' densities that led to the last vertex included). Such a path's contribution
-//   is its radiance times every vertex's BRDF x cos times the factor. camera_path also shades
-//   a first vertex without optimized textures then.
+//   is its radiance times every vertex's BRDF x cos times the factor. At depth > 1
+//   camera_path also shades a first vertex without optimized textures then (a later vertex
+//   may be optimized).
 struct PathOptions {
     optimized_only: bool,
     both: bool,

@@ -1,6 +1,8 @@
-// The path cache's layout, shared by its two passes (primal_cache_trace.wgsl stores paths,
-// primal_cached.wgsl shades them; src/optim/primal/path_cache.rs drives both). An importing
-// pass declares `cp` (PrimalCachedParams) and `path_cache` (array<u32>).
+// The path cache's layout, shared by its passes: primal_cache_trace.wgsl stores paths
+// (src/optim/primal/path_pool.rs drives it), primal_cached.wgsl shades the primal's pool
+// (path_cache.rs) and the baseline's gradient_cached.wgsl differentiates the gradient's
+// (estimator/baseline/pool.rs). An importing pass declares `cp` (PrimalCachedParams) and
+// `path_cache` (array<u32>).
 #import shared/camera
 #import shared/path_encoding
 

@@ -23,7 +23,7 @@
 #import shared/env_gradient
 #import primal/path_cache
 
-// Mirrored by GradientCachedParams in src/optim/estimator/baseline/mod.rs.
+// Mirrored by GradientCachedParams in src/optim/estimator/baseline/pool.rs.
 struct GradientCachedParams {
     // Where this camera's pixels start in adjoint[].
     adjoint_offset: u32,
