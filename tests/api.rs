@@ -972,3 +972,37 @@ fn a_capture_sees_only_its_own_lights() {
         );
     }
 }
+
+/// An evaluation's `expected` error estimates the relMSE of the render's expectation, so its
+/// mean does not depend on the evaluation's samples, while a render's own relMSE carries its
+/// noise. At the start (gray against a checkerboard near gray, so that the noise is most of
+/// a 16-sample render's error), the mean of 24 seeds' 16-sample `expected` is within 4
+/// standard errors of a 1024-sample evaluation's, and their `relmse` more than 4 above it.
+#[test]
+fn the_expected_image_error_does_not_depend_on_the_evaluations_samples() {
+    if no_gpu() {
+        return;
+    }
+    let gpu = Gpu::new().unwrap();
+    let p = problem(&gpu, [[196, 182, 190], [182, 194, 186]]);
+    let o = Optimizer::for_problem(&gpu, &p, settings(Method::BASELINE)).unwrap();
+    let eval = |spp, seed| psrestir::job::run::evaluate(&o, &p.targets, spp, seed).unwrap();
+    let hi = eval(1024, 1);
+    let lo: Vec<_> = (1..25).map(|seed| eval(16, seed)).collect();
+    let mean_se = |v: Vec<f64>| {
+        let n = v.len() as f64;
+        let m = v.iter().sum::<f64>() / n;
+        let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0);
+        (m, (var / n).sqrt())
+    };
+    let (e, e_se) = mean_se(lo.iter().map(|l| l.expected).collect());
+    let (r, r_se) = mean_se(lo.iter().map(|l| l.relmse).collect());
+    let report = format!(
+        "16 spp: expected {e:.4e} ± {e_se:.1e}, relmse {r:.4e} ± {r_se:.1e}; 1024 spp: \
+         expected {:.4e}, relmse {:.4e}",
+        hi.expected, hi.relmse
+    );
+    assert!((e - hi.expected).abs() < 4.0 * e_se, "{report}");
+    assert!(r - hi.expected > 4.0 * r_se, "{report}");
+    eprintln!("{report}");
+}

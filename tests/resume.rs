@@ -193,9 +193,10 @@ fn kill_and_resume(method: &str) {
     let m = std::fs::read_to_string(a.join("metrics.csv")).unwrap();
     let rows: Vec<&str> = m.lines().skip(1).collect();
     // The end is the kept state's (optimizer.keep_best): the row with the lowest evaluation
-    // image error, the earliest of equals, which may come before the last.
+    // image error (image_relmse_expected, the last column), the earliest of equals, which
+    // may come before the last.
     let image = |row: &&&str| -> f64 {
-        (row.split(',').nth(5).unwrap().parse::<f64>()).unwrap_or(f64::INFINITY)
+        (row.split(',').nth(7).unwrap().parse::<f64>()).unwrap_or(f64::INFINITY)
     };
     let kept = rows
         .iter()

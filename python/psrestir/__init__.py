@@ -170,7 +170,7 @@ def optimize(
     task's; ``out`` the output folder; ``resume=True`` continues from its checkpoint.
     ``progress`` shows a one-line progress display on stderr; ``callback(row)`` is called
     after each iteration with a dict (iteration, elapsed_s, loss, texture_rmse,
-    texture_rmse_observed, image_relmse, learning_rate).
+    texture_rmse_observed, image_relmse, learning_rate, image_relmse_expected).
 
     Ctrl-C stops the run after the iteration under way, writes the checkpoint and outputs,
     and raises ``KeyboardInterrupt`` (continue with ``resume=True``); an exception raised by

@@ -231,6 +231,7 @@ fn row_dict<'py>(py: Python<'py>, r: &MetricRow) -> PyResult<Bound<'py, PyDict>>
     d.set_item("texture_rmse_observed", r.texture_rmse_observed)?;
     d.set_item("image_relmse", r.image_relmse)?;
     d.set_item("learning_rate", r.learning_rate)?;
+    d.set_item("image_relmse_expected", r.image_relmse_expected)?;
     Ok(d)
 }
 

@@ -122,20 +122,21 @@ pub(super) fn time_steps(opt: &mut Optimizer, untimed: u32, n: u32) -> Result<f6
     Ok(1000.0 * t0.elapsed().as_secs_f64() / n.max(1) as f64)
 }
 
-/// Image relMSE of the current textures, mean over the task's cameras, and the render of
-/// the first camera (the same seed every time: differences are the textures', not the
-/// noise's).
+/// Image relMSE of the current textures, mean over the task's cameras; that of the render's
+/// expectation, which the keeper ranks states by; and the render of the first camera (the
+/// same seeds every time: differences are the textures', not the noise's). See
+/// [`crate::job::run::evaluate`].
 pub(super) fn evaluate(
     opt: &Optimizer,
     prep: &Problem,
     task: &Task,
     spp: u32,
-) -> Result<(f64, Image)> {
-    let (e, mut images) = crate::job::run::evaluate(opt, &prep.targets, spp, task.seed)?;
-    if images.is_empty() {
+) -> Result<(f64, f64, Image)> {
+    let mut e = crate::job::run::evaluate(opt, &prep.targets, spp, task.seed)?;
+    if e.images.is_empty() {
         return Err(Error::Invalid("the task has no camera".into()));
     }
-    Ok((e, images.swap_remove(0)))
+    Ok((e.relmse, e.expected, e.images.swap_remove(0)))
 }
 
 /// One estimator's equal-time optimization (phase 2).
@@ -240,7 +241,7 @@ pub(super) fn optimization_phase(
     let observed = opt.observed_texels()?.to_vec();
     // A run of the task hands back its lowest evaluation's state, the start's included.
     let mut keeper = crate::job::keep::Keeper::new(task.optimizer.keep_best, None);
-    keeper.offer(&opt, Some(start.image))?;
+    keeper.offer(&opt, Some(start.image_expected))?;
     let mut watch = BenchWatch {
         prep,
         task,
@@ -253,6 +254,7 @@ pub(super) fn optimization_phase(
         curve: Vec::new(),
         counted: Counted::default(),
         last_image: None,
+        last_expected: None,
         keeper,
     };
     let mut sampler = PassSampler::default();
@@ -274,16 +276,17 @@ pub(super) fn optimization_phase(
         curve,
         counted,
         last_image,
+        last_expected,
         keeper,
         ..
     } = watch;
     // The loop ends with an evaluation at the end of the budget. The errors below are those
     // of the state the run hands back.
-    let last_error = curve.iter().rev().find_map(|p| p.image_relmse);
+    let last_error = last_expected;
     let mut kept = None;
     let final_image = match (keeper.hand_back(&mut opt, last_error)?, last_image) {
         (Some(h), _) => {
-            let (e, img) = evaluate(&opt, prep, task, o.eval_spp)?;
+            let (e, _, img) = evaluate(&opt, prep, task, o.eval_spp)?;
             let p = curve_point(&opt, prep, &observed, f64::NAN, seconds)?;
             let (iteration, image_relmse) = (h.iteration, Some(e));
             kept = Some(CurvePoint {
@@ -294,7 +297,7 @@ pub(super) fn optimization_phase(
             img
         }
         (None, Some(img)) => img,
-        (None, None) => evaluate(&opt, prep, task, o.eval_spp)?.1,
+        (None, None) => evaluate(&opt, prep, task, o.eval_spp)?.2,
     };
     let passes = sampler.mean();
     let iterations = opt.iteration;
@@ -338,6 +341,8 @@ struct BenchWatch<'a> {
     curve: Vec<CurvePoint>,
     counted: Counted,
     last_image: Option<Image>,
+    /// The last evaluation's relMSE of the render's expectation.
+    last_expected: Option<f64>,
     /// The state with the lowest evaluation error so far.
     keeper: crate::job::keep::Keeper,
 }
@@ -352,9 +357,11 @@ impl crate::optim::run_loop::Observer for BenchWatch<'_> {
         let (o, seconds) = (self.o, clock.seconds());
         let due = seconds >= o.budget_s * self.next_eval as f64 / (self.points - 1) as f64;
         if last || due {
-            let (e, img) = clock.aside(|| evaluate(opt, self.prep, self.task, o.eval_spp))?;
-            clock.aside(|| self.keeper.offer(opt, Some(e)))?;
+            let (e, expected, img) =
+                clock.aside(|| evaluate(opt, self.prep, self.task, o.eval_spp))?;
+            clock.aside(|| self.keeper.offer(opt, Some(expected)))?;
             self.last_image = Some(img);
+            self.last_expected = Some(expected);
             if let Some(p) = self.curve.last_mut() {
                 p.image_relmse = Some(e);
             }
@@ -421,6 +428,8 @@ fn curve_point(
 /// all and over the observed texels, and which texels are observed.
 pub(super) struct Start {
     image: f64,
+    /// The relMSE of the start render's expectation (what the keeper ranks by).
+    image_expected: f64,
     texture: f64,
     texture_observed: f64,
     observed: Vec<bool>,
@@ -429,11 +438,12 @@ pub(super) struct Start {
 impl Start {
     fn measure(gpu: &Gpu, task: &Task, prep: &Problem, o: &BenchOptions) -> Result<Start> {
         let init = Optimizer::for_problem(gpu, prep, settings(prep, task, Method::BASELINE, o))?;
-        let (image, _) = evaluate(&init, prep, task, o.eval_spp)?;
+        let (image, image_expected, _) = evaluate(&init, prep, task, o.eval_spp)?;
         let truth = prep.reference.as_deref();
         let observed = init.observed_texels()?.to_vec();
         Ok(Start {
             image,
+            image_expected,
             texture: prep.texture_rmse(&prep.set.values).unwrap_or(f64::NAN),
             texture_observed: truth
                 .map(|r| rmse_observed(&prep.set, &prep.set.values, r, &observed))

@@ -307,7 +307,8 @@ pub struct RunResult {
     pub texture_rmse_observed_per_texture: Vec<f64>,
     /// The iteration whose state the errors above are of, where the run handed back an
     /// earlier state than its last, as a run of the task does (`optimizer.keep_best`: the
-    /// lowest evaluation image relMSE, the start's included); None: the last state. The
+    /// lowest evaluation's relMSE of the render's expectation, the start's included); None:
+    /// the last state. The
     /// curve, `_third` and `_min` follow the run itself.
     #[serde(default)]
     pub kept_iteration: Option<u32>,

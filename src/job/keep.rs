@@ -2,8 +2,12 @@
 //! evaluation image error (the rows of `metrics.csv` that have one, the start's included)
 //! and keeps the textures and light of the lowest; at the end the run writes that state
 //! (`optimizer.keep_best`, on by default), as early stopping on a validation measure does.
-//! The evaluation renders use one seed for the whole run, so two states' errors differ by
-//! what their textures do, not by the render's noise. The bench keeps its runs' states with
+//! The error it ranks by is the relMSE of the evaluation render's expectation
+//! (`image_relmse_expected`, [`crate::job::run::Evaluation::expected`]), not the render's own
+//! relMSE: that one adds the render's variance, which changes with the textures, so it
+//! would keep the quietest state rather than the closest. The evaluation renders use the
+//! same seeds for the whole run, so two states' errors differ by what their textures do,
+//! not by the render's noise. The bench keeps its runs' states with
 //! the same keeper, so that it scores what a run of the task hands back.
 use crate::optim::checkpoint::Kept;
 use crate::optim::Optimizer;
@@ -21,7 +25,7 @@ pub(crate) struct Keeper {
 pub struct HandedBack {
     /// The iteration whose state the outputs hold (0: the start).
     pub iteration: u32,
-    /// Its evaluation image relMSE.
+    /// Its evaluation image error (the relMSE of the render's expectation).
     pub image_relmse: f64,
     /// The last iteration's.
     pub last_image_relmse: f64,
@@ -96,16 +100,16 @@ impl HandedBack {
     pub fn describe(&self, last_iteration: u32) -> String {
         if self.iteration == 0 {
             format!(
-                "the run did not improve on its start: every evaluation's image relMSE was above \
-                 the start's ({:.4e}; the last, iteration {last_iteration}'s, {:.4e}), so the \
+                "the run did not improve on its start: every evaluation's image error (the \
+                 relMSE of the render's expectation, image_relmse_expected) was above the start's ({:.4e}; the last, iteration {last_iteration}'s, {:.4e}), so the \
                  outputs are the initial textures and light (optimizer.keep_best = false \
                  writes the last state). Check the targets, the learning rate and the sampling",
                 self.image_relmse, self.last_image_relmse
             )
         } else {
             format!(
-                "the outputs are iteration {}'s state, the lowest evaluation image relMSE of the \
-                 run ({:.4e}, against {:.4e} at the last iteration, {last_iteration}); \
+                "the outputs are iteration {}'s state, the lowest evaluation image error of the \
+                 run (the relMSE of the render's expectation, image_relmse_expected) ({:.4e}, against {:.4e} at the last iteration, {last_iteration}); \
                  the checkpoint holds the last state, which --resume continues \
                  (optimizer.keep_best = false writes the last state)",
                 self.iteration, self.image_relmse, self.last_image_relmse

@@ -5,7 +5,7 @@
 use super::Problem;
 use crate::image_io::{self, Image};
 use crate::optim::checkpoint::MetricRow;
-use crate::optim::Optimizer;
+use crate::optim::{Optimizer, Seeds};
 use crate::Result;
 use std::path::Path;
 
@@ -36,9 +36,11 @@ impl Metrics<'_> {
         }
     }
 
-    /// Image relMSE of an evaluation render against the targets.
-    pub(super) fn eval(&self, opt: &Optimizer) -> Result<f64> {
-        Ok(evaluate(opt, &self.prep.targets, self.eval_spp, self.seed)?.0)
+    /// Image relMSE of an evaluation render against the targets, and that of its
+    /// expectation ([`Evaluation`]).
+    pub(super) fn eval(&self, opt: &Optimizer) -> Result<(f64, f64)> {
+        let e = evaluate(opt, &self.prep.targets, self.eval_spp, self.seed)?;
+        Ok((e.relmse, e.expected))
     }
 
     /// The row of the iteration `opt` just finished, with texture and image errors where
@@ -49,7 +51,7 @@ impl Metrics<'_> {
         } else {
             (None, None)
         };
-        let image_relmse = if self.eval_every > 0 && opt.iteration % self.eval_every == 0 {
+        let image = if self.eval_every > 0 && opt.iteration % self.eval_every == 0 {
             Some(self.eval(opt)?)
         } else {
             None
@@ -60,22 +62,24 @@ impl Metrics<'_> {
             loss: Some(loss),
             texture_rmse,
             texture_rmse_observed,
-            image_relmse,
+            image_relmse: image.map(|e| e.0),
             learning_rate: opt.last_learning_rates().first().map(|&l| l as f64),
+            image_relmse_expected: image.map(|e| e.1),
         })
     }
     /// The errors of the first row, at the initial textures.
     pub(super) fn start_row(&self, opt: &Optimizer) -> Result<MetricRow> {
         let (texture_rmse, texture_rmse_observed) = self.texture_errors(&self.prep.set.values);
-        let image_relmse = (self.eval_every > 0).then(|| self.eval(opt)).transpose()?;
+        let image = (self.eval_every > 0).then(|| self.eval(opt)).transpose()?;
         Ok(MetricRow {
             iteration: 0,
             elapsed_s: 0.0,
             loss: None,
             texture_rmse,
             texture_rmse_observed,
-            image_relmse,
+            image_relmse: image.map(|e| e.0),
             learning_rate: None,
+            image_relmse_expected: image.map(|e| e.1),
         })
     }
 
@@ -83,7 +87,8 @@ impl Metrics<'_> {
     pub(super) fn complete_last(&self, rows: &mut [MetricRow], opt: &Optimizer) -> Result<()> {
         if let Some(last) = rows.last_mut() {
             if self.eval_every > 0 && last.image_relmse.is_none() {
-                last.image_relmse = Some(self.eval(opt)?);
+                let (e, expected) = self.eval(opt)?;
+                (last.image_relmse, last.image_relmse_expected) = (Some(e), Some(expected));
             }
             if last.texture_rmse.is_none() {
                 (last.texture_rmse, last.texture_rmse_observed) =
@@ -229,30 +234,61 @@ pub(super) fn exposed(mut img: Image, gain: [f32; 3]) -> Image {
     img
 }
 
-/// Image relMSE of an `spp`-sample render of every camera of `opt` against its target
-/// (mean over cameras), with the same seed at every call, so that differences between calls
-/// are the textures', not the noise's; and the renders.
-pub fn evaluate(
-    opt: &Optimizer,
-    targets: &[Image],
-    spp: u32,
-    seed: u32,
-) -> Result<(f64, Vec<Image>)> {
-    let mut sum = 0.0;
+/// An evaluation of the current textures on every camera: see [`evaluate`].
+#[derive(Clone, Debug)]
+pub struct Evaluation {
+    /// The image relMSE of the `spp`-sample renders (mean over cameras): what a user's own
+    /// render at that sample count shows, its noise included.
+    pub relmse: f64,
+    /// The relMSE of the renders' expectation, estimated without their noise (mean over
+    /// cameras): the cross term of the two halves' residuals,
+    /// [`crate::optim::loss::image_relmse_cross`]. What `optimizer.keep_best` ranks states by.
+    pub expected: f64,
+    /// The renders, times the cameras' gains.
+    pub images: Vec<Image>,
+}
+
+/// Image errors of an `spp`-sample render of every camera of `opt` against its target, with
+/// the same seeds at every call, so that differences between calls are the textures', not
+/// the noise's. Each camera is rendered as two independent halves (`spp - spp / 2` and
+/// `spp / 2` samples, at least one each); their weighted mean is the render and gives
+/// [`Evaluation::relmse`], their residuals' product [`Evaluation::expected`].
+///
+/// Why both: a render's relMSE is its expectation's plus its variance's share, and that
+/// share can be most of it (85% at 16 samples on a rough, bounce-lit task of the family) and
+/// change with the textures, so that the relMSE can rise while the textures approach the
+/// truth. A state kept by it is the quietest, not the closest.
+pub fn evaluate(opt: &Optimizer, targets: &[Image], spp: u32, seed: u32) -> Result<Evaluation> {
+    let halves = [(spp - spp / 2).max(1), (spp / 2).max(1)];
+    let (mut relmse, mut expected) = (0.0, 0.0);
     let mut images = Vec::new();
     for (k, target) in targets.iter().enumerate() {
-        let img = exposed(
-            opt.render(
-                k,
-                spp,
-                crate::optim::pass_seed(seed, u32::MAX - 2, k as u32, crate::optim::Seeds::EVAL),
-            )?,
-            opt.fit().gains()[k],
-        );
-        sum += crate::optim::loss::image_relmse(&img, target);
+        let render = |h: u32| -> Result<Image> {
+            let s = crate::optim::pass_seed(seed, u32::MAX - 2 - h, k as u32, Seeds::EVAL);
+            Ok(exposed(
+                opt.render(k, halves[h as usize], s)?,
+                opt.fit().gains()[k],
+            ))
+        };
+        let (a, b) = (render(0)?, render(1)?);
+        let wa = halves[0] as f32 / (halves[0] + halves[1]) as f32;
+        let img = Image {
+            width: a.width,
+            height: a.height,
+            rgb: (a.rgb.iter().zip(&b.rgb))
+                .map(|(x, y)| std::array::from_fn(|c| wa * x[c] + (1.0 - wa) * y[c]))
+                .collect(),
+        };
+        relmse += crate::optim::loss::image_relmse(&img, target);
+        expected += crate::optim::loss::image_relmse_cross(&a, &b, target);
         images.push(img);
     }
-    Ok((sum / targets.len().max(1) as f64, images))
+    let n = targets.len().max(1) as f64;
+    Ok(Evaluation {
+        relmse: relmse / n,
+        expected: expected / n,
+        images,
+    })
 }
 
 /// Root-mean-square difference.
@@ -262,8 +298,8 @@ pub fn rmse(a: &[f32], b: &[f32]) -> f64 {
 }
 
 /// The columns of metrics.csv.
-pub const METRICS_HEADER: &str =
-    "iteration,elapsed_s,loss,texture_rmse,texture_rmse_observed,image_relmse,learning_rate";
+pub const METRICS_HEADER: &str = "iteration,elapsed_s,loss,texture_rmse,texture_rmse_observed,\
+     image_relmse,learning_rate,image_relmse_expected";
 
 /// Write `texture_errors.csv` atomically: per optimized texture, its observed-texel RMSE at
 /// the start and at the end of the run; where a normal map is optimized, two more columns
@@ -303,7 +339,7 @@ pub fn write_metrics(path: &Path, rows: &[MetricRow]) -> Result<()> {
     let mut s = format!("{METRICS_HEADER}\n");
     for r in rows {
         s.push_str(&format!(
-            "{},{:.4},{},{},{},{},{}\n",
+            "{},{:.4},{},{},{},{},{},{}\n",
             r.iteration,
             r.elapsed_s,
             opt(r.loss),
@@ -311,6 +347,7 @@ pub fn write_metrics(path: &Path, rows: &[MetricRow]) -> Result<()> {
             opt(r.texture_rmse_observed),
             opt(r.image_relmse),
             opt(r.learning_rate),
+            opt(r.image_relmse_expected),
         ));
     }
     image_io::write_atomic(path, s.as_bytes())

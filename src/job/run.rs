@@ -3,7 +3,7 @@
 //! `metrics.rs`).
 use super::keep::{HandedBack, Keeper};
 pub use super::metrics::{
-    evaluate, rmse, write_metrics, write_texture_errors, TextureErrors, METRICS_HEADER,
+    evaluate, rmse, write_metrics, write_texture_errors, Evaluation, TextureErrors, METRICS_HEADER,
 };
 use super::metrics::{log_exposures, log_observed, progress_bar, progress_message, Metrics};
 use super::outputs::write_outputs;
@@ -403,7 +403,7 @@ impl Saver {
         elapsed: f64,
     ) -> Result<Option<HandedBack>> {
         self.save(opt, &session.rows, elapsed, session.keeper.kept())?;
-        let last = session.rows.last().and_then(|r| r.image_relmse);
+        let last = session.rows.last().and_then(|r| r.image_relmse_expected);
         let handed_back = session.keeper.hand_back(opt, last)?;
         if let Some(h) = &handed_back {
             h.log(opt.iteration, &mut session.warnings);
@@ -613,7 +613,7 @@ impl Observer for JobWatch<'_> {
             .plateau
             .as_mut()
             .and_then(|p| p.observe(row.iteration, stats.loss, row.image_relmse, progress));
-        clock.aside(|| session.keeper.offer(opt, row.image_relmse))?;
+        clock.aside(|| session.keeper.offer(opt, row.image_relmse_expected))?;
         session.rows.push(row);
         if let Some(b) = &self.bar {
             b.set_position(if self.limits.iterations.is_some() {

@@ -19,7 +19,8 @@ pub struct OptimizerSpec {
     #[serde(default)]
     pub stop_on_plateau: Option<bool>,
     /// Write the state with the lowest evaluation image error the run saw (the start's
-    /// included) instead of the last one (`job::keep`); needs `eval_every` > 0.
+    /// included; the relMSE of the render's expectation, `job::run::Evaluation::expected`)
+    /// instead of the last one (`job::keep`); needs `eval_every` > 0.
     #[serde(default = "yes")]
     pub keep_best: bool,
     /// Samples per pixel of the primal render (independent of the gradient samples).

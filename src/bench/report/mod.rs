@@ -184,7 +184,8 @@ fn reconstruction_markdown(r: &BenchReport) -> String {
          (evaluation renders not counted); image relMSE from {}-spp renders of every camera \
          against its target, texture RMSE against the ground truth over the texels a camera \
          sees, both of the state the run hands back: as `psrestir optimize` does (its task's \
-         `keep_best`), the lowest evaluation's, the start's included (`kept N` in the \
+         `keep_best`), the lowest evaluation's (by the relMSE of its render's expectation, \
+         free of the render's noise), the start's included (`kept N` in the \
          iterations column; bench.json has the last state's errors beside them, and the \
          curve and the 1/3 column follow the run itself). Ratios are over the baseline with \
          Adam. {} {}\n",

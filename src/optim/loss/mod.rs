@@ -349,11 +349,24 @@ impl LossPass {
 
 /// Image relMSE: mean over pixels and channels of (x - t)^2 / (t^2 + 1e-2).
 pub fn image_relmse(img: &crate::image_io::Image, target: &crate::image_io::Image) -> f64 {
+    image_relmse_cross(img, img, target)
+}
+
+/// The relMSE's cross term of two renders: mean over pixels and channels of
+/// (a - t)(b - t) / (t^2 + 1e-2). With `a` and `b` independent renders of the same
+/// textures, its mean is the relMSE of their expectation, without the renders' own variance
+/// (a single render's relMSE adds its variance to it); one estimate may fall below zero
+/// where that expectation matches the target closely.
+pub fn image_relmse_cross(
+    a: &crate::image_io::Image,
+    b: &crate::image_io::Image,
+    target: &crate::image_io::Image,
+) -> f64 {
     let mut s = 0.0;
-    for (a, t) in img.rgb.iter().zip(&target.rgb) {
+    for ((a, b), t) in a.rgb.iter().zip(&b.rgb).zip(&target.rgb) {
         for c in 0..3 {
-            let (a, t) = (a[c] as f64, t[c] as f64);
-            s += (a - t).powi(2) / (t * t + REL_EPS as f64);
+            let (a, b, t) = (a[c] as f64, b[c] as f64, t[c] as f64);
+            s += (a - t) * (b - t) / (t * t + REL_EPS as f64);
         }
     }
     s / (3 * target.rgb.len()).max(1) as f64

@@ -37,6 +37,10 @@ pub struct MetricRow {
     /// Learning rate of the first texture in this iteration's step.
     #[serde(default)]
     pub learning_rate: Option<f64>,
+    /// The relMSE of the evaluation render's expectation, without its noise
+    /// (`crate::job::run::Evaluation::expected`), on the iterations that have an evaluation.
+    #[serde(default)]
+    pub image_relmse_expected: Option<f64>,
 }
 
 /// Small fields, stored as a JSON header.
@@ -186,7 +190,8 @@ struct StoredEstimator {
 /// image error so far.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Kept {
-    /// Its evaluation image relMSE.
+    /// Its evaluation's image error: the relMSE of the render's expectation
+    /// (`crate::job::run::Evaluation::expected`).
     pub image_relmse: f64,
     /// Its textures and groups' values.
     pub values: Values,
@@ -403,6 +408,7 @@ mod tests {
                     texture_rmse: None,
                     texture_rmse_observed: Some(0.5),
                     image_relmse: Some(0.25),
+                    image_relmse_expected: Some(0.125),
                     learning_rate: Some(0.01),
                 }],
             },
