@@ -308,8 +308,7 @@ pub struct RunResult {
     /// The iteration whose state the errors above are of, where the run handed back an
     /// earlier state than its last, as a run of the task does (`optimizer.keep_best`: the
     /// lowest evaluation's relMSE of the render's expectation, the start's included); None:
-    /// the last state. The
-    /// curve, `_third` and `_min` follow the run itself.
+    /// the last state. The curve, `_third` and `_min` follow the run itself.
     #[serde(default)]
     pub kept_iteration: Option<u32>,
     /// Where an earlier state was handed back: the last state's observed-texel RMSE and

@@ -7,8 +7,8 @@
 //! relMSE: that one adds the render's variance, which changes with the textures, so it
 //! would keep the quietest state rather than the closest. The evaluation renders use the
 //! same seeds for the whole run, so two states' errors differ by what their textures do,
-//! not by the render's noise. The bench keeps its runs' states with
-//! the same keeper, so that it scores what a run of the task hands back.
+//! not by the render's noise. The bench keeps its runs' states with the same keeper, so that
+//! it scores what a run of the task hands back.
 use crate::optim::checkpoint::Kept;
 use crate::optim::Optimizer;
 use crate::Result;
@@ -101,7 +101,8 @@ impl HandedBack {
         if self.iteration == 0 {
             format!(
                 "the run did not improve on its start: every evaluation's image error (the \
-                 relMSE of the render's expectation, image_relmse_expected) was above the start's ({:.4e}; the last, iteration {last_iteration}'s, {:.4e}), so the \
+                 relMSE of the render's expectation, image_relmse_expected) was above the \
+                 start's ({:.4e}; the last, iteration {last_iteration}'s, {:.4e}), so the \
                  outputs are the initial textures and light (optimizer.keep_best = false \
                  writes the last state). Check the targets, the learning rate and the sampling",
                 self.image_relmse, self.last_image_relmse
@@ -109,7 +110,8 @@ impl HandedBack {
         } else {
             format!(
                 "the outputs are iteration {}'s state, the lowest evaluation image error of the \
-                 run (the relMSE of the render's expectation, image_relmse_expected) ({:.4e}, against {:.4e} at the last iteration, {last_iteration}); \
+                 run (the relMSE of the render's expectation, image_relmse_expected: {:.4e}, \
+                 against {:.4e} at the last iteration, {last_iteration}); \
                  the checkpoint holds the last state, which --resume continues \
                  (optimizer.keep_best = false writes the last state)",
                 self.iteration, self.image_relmse, self.last_image_relmse
