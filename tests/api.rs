@@ -6,6 +6,7 @@
 //! counted, never stored; passes whose grid is split over two rows (past the device's
 //! workgroups per dimension) still cover every pixel and texel once; invalid ReSTIR options
 //! are refused by name.
+mod common;
 #[path = "../examples/gltf_textures.rs"]
 mod gltf_textures;
 #[path = "../examples/in_memory.rs"]
@@ -990,10 +991,8 @@ fn the_expected_image_error_does_not_depend_on_the_evaluations_samples() {
     let hi = eval(1024, 1);
     let lo: Vec<_> = (1..25).map(|seed| eval(16, seed)).collect();
     let mean_se = |v: Vec<f64>| {
-        let n = v.len() as f64;
-        let m = v.iter().sum::<f64>() / n;
-        let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0);
-        (m, (var / n).sqrt())
+        let (m, sd) = common::mean_sd(&v);
+        (m, sd / (v.len() as f64).sqrt())
     };
     let (e, e_se) = mean_se(lo.iter().map(|l| l.expected).collect());
     let (r, r_se) = mean_se(lo.iter().map(|l| l.relmse).collect());

@@ -282,9 +282,8 @@ pub(super) fn optimization_phase(
     } = watch;
     // The loop ends with an evaluation at the end of the budget. The errors below are those
     // of the state the run hands back.
-    let last_error = last_expected;
     let mut kept = None;
-    let final_image = match (keeper.hand_back(&mut opt, last_error)?, last_image) {
+    let final_image = match (keeper.hand_back(&mut opt, last_expected)?, last_image) {
         (Some(h), _) => {
             let (e, _, img) = evaluate(&opt, prep, task, o.eval_spp)?;
             let p = curve_point(&opt, prep, &observed, f64::NAN, seconds)?;
