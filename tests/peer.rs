@@ -43,7 +43,7 @@ curve = [{"iteration": 0, "seconds": 0.0, "loss": None, "texture_rmse": start,
 row = {"learning_rate_scale": 1.0, "spp": 4, "smoothness": 0.0, "iterations": 10,
        "ms_per_iteration": 100.0, "warmup_s": 2.0, "texture_rmse_observed": start / 2,
        "texture_rmse": start / 2, "texture_rmse_observed_per_texture": [None],
-       "image_relmse": 0.01, "curve": curve}
+       "image_relmse": 0.011, "image_relmse_expected": 0.01, "curve": curve}
 rows = [dict(row, row="plain"), dict(row, row="priors", smoothness=j["smoothness"])]
 fwd = [{"camera": c["name"], "mean_ratio": 1.05, "relmse": 0.002} for c in j["cameras"]]
 json.dump({"mitsuba": "fake", "threads": 2, "forward": fwd, "rows": rows},
@@ -107,6 +107,10 @@ fn a_peers_rows_join_the_report_scored_from_the_same_start() {
         );
         let ratio = m.texture_rmse_observed / o.baseline().texture_rmse_observed;
         assert!((m.texture_rmse_observed_ratio - ratio).abs() < 1e-12);
+        // Scored by its render's expectation, as psrestir's own runs are, not by the
+        // render's relMSE (0.011 in the fake race's rows).
+        assert_eq!(m.image_relmse, 0.01);
+        assert_eq!(report.image_error, psrestir::bench::ImageError::Expectation);
         assert_eq!(o.peer_forward.len(), x.cameras);
         // The default is compared with psrestir's contenders only, never with a peer.
         let d = o.auto.default_run.as_ref().unwrap();

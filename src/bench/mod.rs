@@ -89,6 +89,7 @@ pub fn bench(gpu: &Gpu, tasks: &[PathBuf], o: &BenchOptions) -> Result<BenchRepo
         reference_primal_spp: o.reference_primal_spp,
         protocol: o.protocol,
         eval_spp: o.eval_spp,
+        image_error: ImageError::Expectation,
         estimator_options: o.estimator_options.clone(),
         no_priors: o.no_priors,
         tuned: o.tune,

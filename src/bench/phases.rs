@@ -122,21 +122,22 @@ pub(super) fn time_steps(opt: &mut Optimizer, untimed: u32, n: u32) -> Result<f6
     Ok(1000.0 * t0.elapsed().as_secs_f64() / n.max(1) as f64)
 }
 
-/// Image relMSE of the current textures, mean over the task's cameras; that of the render's
-/// expectation, which the keeper ranks states by; and the render of the first camera (the
-/// same seeds every time: differences are the textures', not the noise's). See
-/// [`crate::job::run::evaluate`].
+/// The bench's image error of the current textures: the relMSE of the render's expectation
+/// against the target, mean over the task's cameras (two independent halves of `spp`, free of
+/// the render's own noise, which at 64 spp is most of a render's relMSE); the keeper ranks
+/// states by it too. With the render of the first camera (the same seeds every time:
+/// differences are the textures', not the noise's). See [`crate::job::run::evaluate`].
 pub(super) fn evaluate(
     opt: &Optimizer,
     prep: &Problem,
     task: &Task,
     spp: u32,
-) -> Result<(f64, f64, Image)> {
+) -> Result<(f64, Image)> {
     let mut e = crate::job::run::evaluate(opt, &prep.targets, spp, task.seed)?;
     if e.images.is_empty() {
         return Err(Error::Invalid("the task has no camera".into()));
     }
-    Ok((e.relmse, e.expected, e.images.swap_remove(0)))
+    Ok((e.expected, e.images.swap_remove(0)))
 }
 
 /// One estimator's equal-time optimization (phase 2).
@@ -241,7 +242,7 @@ pub(super) fn optimization_phase(
     let observed = opt.observed_texels()?.to_vec();
     // A run of the task hands back its lowest evaluation's state, the start's included.
     let mut keeper = crate::job::keep::Keeper::new(task.optimizer.keep_best, None);
-    keeper.offer(&opt, Some(start.image_expected))?;
+    keeper.offer(&opt, Some(start.image))?;
     let mut watch = BenchWatch {
         prep,
         task,
@@ -285,7 +286,7 @@ pub(super) fn optimization_phase(
     let mut kept = None;
     let final_image = match (keeper.hand_back(&mut opt, last_expected)?, last_image) {
         (Some(h), _) => {
-            let (e, _, img) = evaluate(&opt, prep, task, o.eval_spp)?;
+            let (e, img) = evaluate(&opt, prep, task, o.eval_spp)?;
             let p = curve_point(&opt, prep, &observed, f64::NAN, seconds)?;
             let (iteration, image_relmse) = (h.iteration, Some(e));
             kept = Some(CurvePoint {
@@ -296,7 +297,7 @@ pub(super) fn optimization_phase(
             img
         }
         (None, Some(img)) => img,
-        (None, None) => evaluate(&opt, prep, task, o.eval_spp)?.2,
+        (None, None) => evaluate(&opt, prep, task, o.eval_spp)?.1,
     };
     let passes = sampler.mean();
     let iterations = opt.iteration;
@@ -356,11 +357,10 @@ impl crate::optim::run_loop::Observer for BenchWatch<'_> {
         let (o, seconds) = (self.o, clock.seconds());
         let due = seconds >= o.budget_s * self.next_eval as f64 / (self.points - 1) as f64;
         if last || due {
-            let (e, expected, img) =
-                clock.aside(|| evaluate(opt, self.prep, self.task, o.eval_spp))?;
-            clock.aside(|| self.keeper.offer(opt, Some(expected)))?;
+            let (e, img) = clock.aside(|| evaluate(opt, self.prep, self.task, o.eval_spp))?;
+            clock.aside(|| self.keeper.offer(opt, Some(e)))?;
             self.last_image = Some(img);
-            self.last_expected = Some(expected);
+            self.last_expected = Some(e);
             if let Some(p) = self.curve.last_mut() {
                 p.image_relmse = Some(e);
             }
@@ -423,12 +423,10 @@ fn curve_point(
     })
 }
 
-/// The errors every run starts from: the initial textures' image relMSE, texture RMSE over
-/// all and over the observed texels, and which texels are observed.
+/// The errors every run starts from: the initial textures' image error ([`evaluate`]),
+/// texture RMSE over all and over the observed texels, and which texels are observed.
 pub(super) struct Start {
     image: f64,
-    /// The relMSE of the start render's expectation (what the keeper ranks by).
-    image_expected: f64,
     texture: f64,
     texture_observed: f64,
     observed: Vec<bool>,
@@ -437,12 +435,11 @@ pub(super) struct Start {
 impl Start {
     fn measure(gpu: &Gpu, task: &Task, prep: &Problem, o: &BenchOptions) -> Result<Start> {
         let init = Optimizer::for_problem(gpu, prep, settings(prep, task, Method::BASELINE, o))?;
-        let (image, image_expected, _) = evaluate(&init, prep, task, o.eval_spp)?;
+        let (image, _) = evaluate(&init, prep, task, o.eval_spp)?;
         let truth = prep.reference.as_deref();
         let observed = init.observed_texels()?.to_vec();
         Ok(Start {
             image,
-            image_expected,
             texture: prep.texture_rmse(&prep.set.values).unwrap_or(f64::NAN),
             texture_observed: truth
                 .map(|r| rmse_observed(&prep.set, &prep.set.values, r, &observed))

@@ -28,7 +28,7 @@ pub struct CurvePoint {
     pub texture_rmse_observed: f64,
     /// The learning-rate schedule's factor in this iteration.
     pub learning_rate_factor: Option<f64>,
-    /// Image relMSE of a high-spp render against the target, at evaluation points only.
+    /// Image error at evaluation points only ([`BenchReport::image_error`] says which).
     pub image_relmse: Option<f64>,
 }
 
@@ -171,7 +171,7 @@ pub struct TextureGradientErrors {
 /// The equal-time optimization of one scene.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct OptimizationResult {
-    /// Image relMSE at the initial textures.
+    /// Image error at the initial textures ([`BenchReport::image_error`] says which).
     #[serde(deserialize_with = "f64_or_nan")]
     pub image_relmse_initial: f64,
     /// Texture RMSE at the initial textures.
@@ -282,7 +282,7 @@ pub struct RunResult {
     pub key: String,
     /// The gradient estimator's name.
     pub method: String,
-    /// Image relMSE after its budget.
+    /// Image error after its budget ([`BenchReport::image_error`] says which).
     #[serde(deserialize_with = "f64_or_nan")]
     pub image_relmse: f64,
     /// Over the baseline's (with Adam).
@@ -374,6 +374,33 @@ fn one() -> u32 {
     1
 }
 
+/// What a bench's image errors measure.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ImageError {
+    /// The relMSE of one `eval_spp` render against the target: the render's own noise
+    /// included, which at 64 spp is most of it and pulls every ratio towards 1 (what the
+    /// bench measured before it measured [`ImageError::Expectation`]).
+    #[default]
+    Render,
+    /// The relMSE of the render's expectation against the target, from two independent
+    /// halves of `eval_spp` samples (`crate::job::run::Evaluation::expected`).
+    Expectation,
+}
+
+impl ImageError {
+    /// How reports name it, with the evaluation's spp.
+    pub fn describe(self, eval_spp: u32) -> String {
+        match self {
+            ImageError::Render => format!("image relMSE of {eval_spp}-spp renders"),
+            ImageError::Expectation => format!(
+                "image relMSE of the render's expectation (from two independent halves of \
+                 {eval_spp}-spp renders, without the render's own noise)"
+            ),
+        }
+    }
+}
+
 /// The whole benchmark (`bench.json`).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct BenchReport {
@@ -413,6 +440,9 @@ pub struct BenchReport {
     pub protocol: Protocol,
     /// spp of the image-error renders.
     pub eval_spp: u32,
+    /// What the image errors measure (`render` in a `bench.json` of an older psrestir).
+    #[serde(default)]
+    pub image_error: ImageError,
     /// The estimators' options given over the tasks' (`--estimator-option`).
     pub estimator_options: crate::optim::EstimatorOptions,
     /// The tasks' priors (multiscale gradient, smoothness) were switched off (`--no-priors`).
@@ -454,6 +484,7 @@ impl BenchReport {
             reference_primal_spp: 0,
             protocol: Protocol::Default,
             eval_spp: 0,
+            image_error: ImageError::Expectation,
             estimator_options: Default::default(),
             no_priors: false,
             tuned: false,

@@ -90,8 +90,10 @@ struct Row {
     #[serde(deserialize_with = "nan_if_null")]
     texture_rmse: f64,
     texture_rmse_observed_per_texture: Vec<Option<f64>>,
+    /// The relMSE of its render's expectation: the image error the bench scores (the script
+    /// writes its render's relMSE, `image_relmse`, beside it).
     #[serde(deserialize_with = "nan_if_null")]
-    image_relmse: f64,
+    image_relmse_expected: f64,
     curve: Vec<PeerPoint>,
 }
 
@@ -222,8 +224,8 @@ fn run_of(r: &RaceResult, row: &Row, input: &RaceInput) -> RunResult {
         name: name.into(),
         key: key.into(),
         method: MITSUBA.into(),
-        image_relmse: row.image_relmse,
-        image_relmse_ratio: row.image_relmse / b.image_relmse,
+        image_relmse: row.image_relmse_expected,
+        image_relmse_ratio: row.image_relmse_expected / b.image_relmse,
         texture_rmse: row.texture_rmse,
         texture_rmse_observed: row.texture_rmse_observed,
         texture_rmse_observed_ratio: row.texture_rmse_observed / b.texture_rmse_observed,

@@ -181,16 +181,15 @@ fn reconstruction_markdown(r: &BenchReport) -> String {
     let _ = writeln!(
         md,
         "\nEvery estimator optimizes each scene from the same start for {} of step time \
-         (evaluation renders not counted); image relMSE from {}-spp renders of every camera \
-         against its target, texture RMSE against the ground truth over the texels a camera \
-         sees, both of the state the run hands back: as `psrestir optimize` does (its task's \
+         (evaluation renders not counted); {} of every camera against its target, texture \
+         RMSE against the ground truth over the texels a camera sees, both of the state the run hands back: as `psrestir optimize` does (its task's \
          `keep_best`), the lowest evaluation's (by the relMSE of its render's expectation, \
          free of the render's noise), the start's included (`kept N` in the \
          iterations column; bench.json has the last state's errors beside them, and the \
          curve and the 1/3 column follow the run itself). Ratios are over the baseline with \
          Adam. {} {}\n",
         budget_text(r),
-        r.eval_spp,
+        r.image_error.describe(r.eval_spp),
         if r.no_priors {
             "The tasks' priors (multiscale gradient, smoothness) are off (`--no-priors`)."
         } else {
@@ -411,11 +410,12 @@ pub fn headline_table(r: &BenchReport) -> String {
     }
     let _ = write!(
         s,
-        "\npsrestir {} on `{}`, {} of optimization per run and scene, protocol `{:?}`, size \
-         scale {}, {}, {}.\n",
+        "\npsrestir {} on `{}`, {} of optimization per run and scene, {}, protocol `{:?}`, \
+         size scale {}, {}, {}.\n",
         r.version,
         r.adapter,
         budget_text(r),
+        r.image_error.describe(r.eval_spp),
         r.protocol,
         r.scale,
         if r.no_priors {
@@ -517,7 +517,7 @@ pub fn report_markdown(r: &BenchReport) -> String {
          iterations (estimator-only: {} more estimates under the converged adjoint), mean of \
          {} seeds, against a reference of {} gradient spp under a {}-spp converged adjoint; \
          estimators' options over the tasks': {}; {} of optimization per estimator and \
-         scene; image error from {}-spp renders.\n",
+         scene; {}.\n",
         r.version,
         r.adapter,
         r.protocol,
@@ -530,7 +530,7 @@ pub fn report_markdown(r: &BenchReport) -> String {
         r.reference_primal_spp,
         r.estimator_options.summary(),
         budget_text(r),
-        r.eval_spp,
+        r.image_error.describe(r.eval_spp),
     );
     if !r.over_seeds.is_empty() {
         let _ = writeln!(
