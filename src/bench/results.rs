@@ -593,3 +593,23 @@ pub struct PeerOverSeeds {
     /// Seeds in which the default reaches it at all.
     pub reached: u32,
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A `bench.json` written before the bench measured the render's expectation has no
+    /// `image_error`: it reads as the render's relMSE, and its report says so.
+    #[test]
+    fn an_older_bench_json_reads_as_the_renders_relmse() {
+        let mut r = BenchReport::empty();
+        r.eval_spp = 64;
+        let mut v = serde_json::to_value(&r).unwrap();
+        assert_eq!(v["image_error"], "expectation");
+        v.as_object_mut().unwrap().remove("image_error");
+        let old: BenchReport = serde_json::from_value(v).unwrap();
+        assert_eq!(old.image_error, ImageError::Render);
+        let md = super::super::report::report_markdown(&old);
+        assert!(md.contains("image relMSE of 64-spp renders"), "{md}");
+    }
+}

@@ -182,12 +182,12 @@ fn reconstruction_markdown(r: &BenchReport) -> String {
         md,
         "\nEvery estimator optimizes each scene from the same start for {} of step time \
          (evaluation renders not counted); {} of every camera against its target, texture \
-         RMSE against the ground truth over the texels a camera sees, both of the state the run hands back: as `psrestir optimize` does (its task's \
-         `keep_best`), the lowest evaluation's (by the relMSE of its render's expectation, \
-         free of the render's noise), the start's included (`kept N` in the \
-         iterations column; bench.json has the last state's errors beside them, and the \
-         curve and the 1/3 column follow the run itself). Ratios are over the baseline with \
-         Adam. {} {}\n",
+         RMSE against the ground truth over the texels a camera sees, both of the state the \
+         run hands back: as `psrestir optimize` does (its task's `keep_best`), the lowest \
+         evaluation's (by the relMSE of its render's expectation), the start's included \
+         (`kept N` in the iterations column; bench.json has the last state's errors beside \
+         them, and the curve and the 1/3 column follow the run itself). Ratios are over the \
+         baseline with Adam. {} {}\n",
         budget_text(r),
         r.image_error.describe(r.eval_spp),
         if r.no_priors {
