@@ -124,9 +124,9 @@ pub(super) fn time_steps(opt: &mut Optimizer, untimed: u32, n: u32) -> Result<f6
 
 /// The bench's image error of the current textures: the relMSE of the render's expectation
 /// against the target, mean over the task's cameras (two independent halves of `spp`, free of
-/// the render's own noise, which at 64 spp is most of a render's relMSE); the keeper ranks
-/// states by it too. With the render of the first camera (the same seeds every time:
-/// differences are the textures', not the noise's). See [`crate::job::run::evaluate`].
+/// the render's own noise, which on the default task is most of a 64-spp render's relMSE);
+/// the keeper ranks states by it too. With the render of the first camera (the same seeds
+/// every time: differences are the textures', not the noise's). See [`crate::job::run::evaluate`].
 pub(super) fn evaluate(
     opt: &Optimizer,
     prep: &Problem,

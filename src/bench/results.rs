@@ -379,7 +379,7 @@ fn one() -> u32 {
 #[serde(rename_all = "lowercase")]
 pub enum ImageError {
     /// The relMSE of one `eval_spp` render against the target: the render's own noise
-    /// included, which at 64 spp is most of it and pulls every ratio towards 1 (what the
+    /// included (on the default task most of it), which pulls every ratio towards 1 (what the
     /// bench measured before it measured [`ImageError::Expectation`]).
     #[default]
     Render,
