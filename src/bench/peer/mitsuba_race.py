@@ -8,8 +8,9 @@ optimizes the task's textures with `prb` at the task's depth and Adam from psres
 for psrestir's budget of step time, with the task's schedule; a second row adds psrestir's
 smoothness prior to the gradient. Runs are scored as psrestir scores its own: RMSE over the
 texels psrestir's cameras observe against psrestir's ground truth, and image relMSE of the
-expectation of an `eval_spp` render against Mitsuba's own targets. The JIT's compilation is outside the clock
-(two untimed iterations before it starts), as psrestir's pipeline creation is.
+expectation of an `eval_spp` render against Mitsuba's own targets. The JIT's compilation is
+outside the clock (two untimed iterations before it starts), as psrestir's pipeline creation
+is.
 
 Run by `psrestir bench --peers mitsuba`:
     python3 mitsuba_race.py EXCHANGE_DIR OUT_DIR [--tune [--tuned FILE]] [--threads N]
