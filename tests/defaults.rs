@@ -139,3 +139,58 @@ fn a_run_whose_loss_does_not_fall_warns_and_says_what_to_try() {
         s.final_rmse_observed
     );
 }
+
+/// The keeper ranks every state, the start's and the last's included, by the error of the
+/// evaluation render's expectation (`image_relmse_expected`). Here the texture starts at its
+/// answer and drifts on the gradient's noise by less than one evaluation render's own noise
+/// (2 spp): each later state is worse than the start in expectation while its expected error
+/// lies below the start's render relMSE. Ranking the start by that noisier measure would
+/// hand back a drifted state; the run must hand back the start.
+#[test]
+fn a_drift_smaller_than_the_evaluation_noise_still_hands_back_the_start() {
+    let Some(gpu) = common::gpu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let t = task(
+        dir.path(),
+        "iterations = 40\nstep = \"adam\"\nschedule = { kind = \"constant\" }\n\
+         adam = { beta1 = 0.0 }\neval_spp = 2\nstop_on_plateau = false",
+        "learning_rate = 0.04",
+        "scene.glb",
+    );
+    let out = dir.path().join("out");
+    let s = run(
+        &gpu,
+        &t,
+        &RunOptions {
+            out: Some(out.clone()),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let text = std::fs::read_to_string(out.join("metrics.csv")).unwrap();
+    // (iteration, image_relmse, image_relmse_expected) of the evaluated rows.
+    let evaluated: Vec<(u32, f64, f64)> = text
+        .lines()
+        .skip(1)
+        .filter_map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            Some((f[0].parse().ok()?, f[5].parse().ok()?, f[7].parse().ok()?))
+        })
+        .collect();
+    assert!(evaluated.len() >= 5, "{text}");
+    let (start, later) = (evaluated[0], &evaluated[1..]);
+    assert_eq!(start.0, 0, "{text}");
+    // The case this test is about: every later state worse than the start in expectation,
+    // and better than the start's render relMSE.
+    assert!(
+        later.iter().all(|r| start.2 < r.2 && r.2 < start.1),
+        "the drift is not in the regime the test needs:\n{text}"
+    );
+    let h = s.handed_back.as_ref().expect("the start is handed back");
+    assert_eq!(h.iteration, 0, "{h:?}\n{text}");
+    assert!(
+        (h.image_relmse - start.2).abs() <= 1e-5 * start.2.abs(),
+        "{h:?}"
+    );
+    assert!(s.set.values.iter().all(|&v| v == 0.5), "{:?}", s.set.values);
+}

@@ -510,7 +510,7 @@ fn iterate(
     if rows.is_empty() {
         // The start: texture and image errors of the initial textures.
         let start = clock.aside(|| metrics.start_row(opt))?;
-        clock.aside(|| keeper.offer(opt, start.image_relmse))?;
+        clock.aside(|| keeper.offer(opt, start.image_relmse_expected))?;
         rows.push(start);
     }
     let stop_on_plateau = task
@@ -552,7 +552,7 @@ fn iterate(
     // The last row's evaluation render, like every evaluation, is not optimization time.
     clock.aside(|| metrics.complete_last(&mut session.rows, opt))?;
     if let Some(last) = session.rows.last() {
-        clock.aside(|| session.keeper.offer(opt, last.image_relmse))?;
+        clock.aside(|| session.keeper.offer(opt, last.image_relmse_expected))?;
     }
     session.seconds = clock.session_seconds();
     session.iterations = opt.iteration - start_iter;
